@@ -1,0 +1,1 @@
+"""`ideeprl train`: to be written (issue 3)."""

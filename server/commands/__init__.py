@@ -1,0 +1,1 @@
+"""Sub-commands of `ideeprl`: each module here defines `register(subparsers)`."""
