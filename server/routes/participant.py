@@ -1,0 +1,53 @@
+"""What a participant's page calls, with the token from their link (one session only)."""
+
+from fastapi import APIRouter, Query
+from fastapi.responses import Response
+
+from server.db.models import Status
+from server.deps import ManagerDep, ParticipantDep
+from server.schemas.participant import AdviceCreate, AdviceReceipt, ParticipantState
+from server.services.errors import NotFound
+from server.sessions import advising
+
+router = APIRouter(prefix="/api/participant", tags=["participant"])
+MAX_WAIT_S = 30.0
+
+
+@router.get("/state")
+async def get_state(
+    session: ParticipantDep,
+    manager: ManagerDep,
+    after: int | None = Query(
+        default=None, ge=0, description="Long-poll: wait until the version is newer than this."
+    ),
+    timeout: float = Query(default=20.0, ge=0.0, le=MAX_WAIT_S, description="Longest wait (s)."),
+) -> ParticipantState:
+    if after is not None:
+        await manager.wait_change(session.id, after, timeout)
+    return advising.participant_state(manager, session)
+
+
+@router.post("/start")
+async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantState:
+    """Start the session when the participant is ready (after consent and induction);
+    a session already under way is left as it is."""
+    if session.status == Status.created and session.id not in manager.handles:
+        await manager.start(session.id)
+    return advising.participant_state(manager, session)
+
+
+@router.post("/advice")
+async def give_advice(
+    session: ParticipantDep, manager: ManagerDep, body: AdviceCreate
+) -> AdviceReceipt:
+    return await advising.submit_advice(manager, session, body)
+
+
+@router.get(
+    "/observation.png", response_class=Response, responses={200: {"content": {"image/png": {}}}}
+)
+def observation(session: ParticipantDep, manager: ManagerDep) -> Response:
+    png = advising.observation_png(manager, session)
+    if png is None:
+        raise NotFound("there is no observation yet; the session has not asked for advice")
+    return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
