@@ -1,0 +1,45 @@
+"""A simulated participant: what a browser page does, over the participant endpoints."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import httpx
+
+
+class SimulatedParticipant:
+    def __init__(self, base_url: str, token: str) -> None:
+        self.client = httpx.Client(
+            base_url=base_url, headers={"Authorization": f"Bearer {token}"}, timeout=60
+        )
+        self.version: int | None = None
+
+    def state(self) -> dict[str, Any]:
+        response = self.client.get("/api/participant/state")
+        assert response.status_code == 200, response.text
+        data = response.json()
+        self.version = data["version"]
+        return data
+
+    def next_request(self, timeout: float = 180) -> dict[str, Any]:
+        """Long-poll until advice is wanted (or the session no longer runs)."""
+        deadline = time.monotonic() + timeout
+        state = self.state()
+        while not state["advice_wanted"] and state["status"] in ("created", "running", "paused"):
+            assert time.monotonic() < deadline, f"no advice request came: {state}"
+            response = self.client.get(
+                "/api/participant/state", params={"after": self.version, "timeout": 10}
+            )
+            assert response.status_code == 200, response.text
+            state = response.json()
+            self.version = state["version"]
+        return state
+
+    def advise(self, advice_index: int, action: int) -> httpx.Response:
+        return self.client.post(
+            "/api/participant/advice", json={"advice_index": advice_index, "action": action}
+        )
+
+    def close(self) -> None:
+        self.client.close()
