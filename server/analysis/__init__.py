@@ -1,7 +1,8 @@
-"""The paper's analysis over an episode table: R_T, t-tests, correlations.
+"""The paper's analysis over an episode table: R_T, t-tests, correlations, figures, report.
 
 Pure functions over pandas DataFrames; nothing here reads the database. The table is one
-row per (session, episode) — see `server.analysis.episodes.CONTRACT`.
+row per (session, episode) — see `server.analysis.episodes.CONTRACT` — and
+`write_report(episodes_df, out_dir)` is the entry point for the CLI and the dashboard.
 """
 
 from server.analysis.episodes import (
@@ -12,6 +13,14 @@ from server.analysis.episodes import (
     order_methods,
     reward_curves,
     validate_episodes,
+)
+from server.analysis.figures import (
+    plot_correlation,
+    plot_cumulative_reward,
+    plot_epsilon,
+    plot_individual_agents,
+    plot_method_curves,
+    save_figure,
 )
 from server.analysis.paper import paper_comparison
 from server.analysis.stats import (
@@ -38,7 +47,13 @@ __all__ = [
     "method_totals",
     "order_methods",
     "paper_comparison",
+    "plot_correlation",
+    "plot_cumulative_reward",
+    "plot_epsilon",
+    "plot_individual_agents",
+    "plot_method_curves",
     "reward_curves",
+    "save_figure",
     "student_t_test",
     "t_tests",
     "validate_episodes",
