@@ -23,6 +23,7 @@ from server.analysis.figures import (
     save_figure,
 )
 from server.analysis.paper import paper_comparison
+from server.analysis.report import ReportResult, write_report
 from server.analysis.stats import (
     agent_totals,
     correlation_matrix,
@@ -33,12 +34,17 @@ from server.analysis.stats import (
     student_t_test,
     t_tests,
 )
+from server.analysis.summary import Analysis, analyze
+from server.analysis.synthetic import synthetic_episodes
 
 __all__ = [
     "CONTRACT",
     "METHOD_NAMES",
+    "Analysis",
     "EpisodeTableError",
+    "ReportResult",
     "agent_totals",
+    "analyze",
     "correlation_matrix",
     "improvement_pct",
     "method_correlations",
@@ -55,6 +61,8 @@ __all__ = [
     "reward_curves",
     "save_figure",
     "student_t_test",
+    "synthetic_episodes",
     "t_tests",
     "validate_episodes",
+    "write_report",
 ]
