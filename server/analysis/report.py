@@ -297,12 +297,24 @@ def _correlation_summary(analysis: Analysis) -> str:
     return md.table(frame, columns, {"mean_r": md.fixed(3)})
 
 
+def _agent_counts(analysis: Analysis) -> str:
+    return ", ".join(
+        f"{n} {method_name(m)}"
+        for m, n in zip(analysis.methods.method, analysis.methods.agents, strict=True)
+    )
+
+
 def _scale_note(analysis: Analysis) -> str:
     if not len(analysis.paper):
         return "None of the paper's methods (autonomous, agent, human) is in these sessions."
     methods = analysis.methods
     if (methods["episodes"] == PAPER_EPISODES).all() and (methods["agents"] == PAPER_AGENTS).all():
         return "Same scale as the paper: 10 agents per method, 300 episodes each."
+    if analysis.n_episodes == PAPER_EPISODES:
+        return (
+            f"Same number of episodes as the paper ({PAPER_EPISODES}); the paper had "
+            f"{PAPER_AGENTS} agents per method, these runs {_agent_counts(analysis)}."
+        )
     return (
         f"The paper ran {PAPER_AGENTS} agents × {PAPER_EPISODES} episodes per method; these "
         f"runs have {analysis.n_episodes} episodes per agent. R_T grows with the number of "
