@@ -100,12 +100,16 @@ def list_sessions(db: Session, study_id: int) -> list[StudySession]:
 
 
 def session_public(session: StudySession, base_url: str) -> SessionPublic:
-    out = SessionPublic.model_validate(session)
+    data = {
+        name: getattr(session, name)
+        for name in SessionPublic.model_fields
+        if name not in ("participant", "participant_url")
+    }
     if session.participant is not None:
-        out.participant = session.participant.pseudonym
+        data["participant"] = session.participant.pseudonym
     if session.participant_token:
-        out.participant_url = participant_url(base_url, session.participant_token)
-    return out
+        data["participant_url"] = participant_url(base_url, session.participant_token)
+    return SessionPublic(**data)
 
 
 def session_for_token(db: Session, token: str) -> StudySession | None:

@@ -18,7 +18,7 @@ import httpx
 from sqlalchemy import create_engine, text
 from sqlalchemy.engine import make_url
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).absolute().parents[2]
 API_KEY = "test-researcher-key"
 
 
@@ -65,13 +65,13 @@ class LiveServer:
         return f"http://127.0.0.1:{self.port}"
 
     def start(self) -> LiveServer:
-        self.port = free_port()
+        self.port = self.port or free_port()
         env = {
             **os.environ,
             "IDEEPRL_DATABASE_URL": self.database_url,
             "IDEEPRL_API_KEY": API_KEY,
             "IDEEPRL_DATA_DIR": str(self.data_dir),
-            "PYTHONPATH": str(ROOT),
+            "PYTHONPATH": os.pathsep.join(filter(None, [os.environ.get("PYTHONPATH"), str(ROOT)])),
             **{f"IDEEPRL_{k.upper()}": str(v) for k, v in self.settings.items()},
         }
         env.pop("DATABASE_URL", None)
