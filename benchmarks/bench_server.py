@@ -31,9 +31,12 @@ def percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, round(q / 100 * (len(ordered) - 1)))]
 
 
-def advise_loop(participant: SimulatedParticipant, count: int, out: list[float]) -> None:
+def advise_loop(
+    participant: SimulatedParticipant, count: int, out: list[float], ready: threading.Barrier
+) -> None:
     participant.client.post("/api/participant/start")
     state = participant.next_request()
+    ready.wait()  # all workers started: measure advising, not process start-up
     for _ in range(count):
         index = state["advice_index"]
         started = time.perf_counter()
@@ -43,6 +46,14 @@ def advise_loop(participant: SimulatedParticipant, count: int, out: list[float])
             break
         assert state["advice_index"] == index + 1
         out.append(time.perf_counter() - started)
+
+
+def wait_training(api: httpx.Client, ids: list[int]) -> None:
+    """Measure only once the machine sessions are past pretraining, training for real."""
+    deadline = time.monotonic() + 300
+    while any(api.get(f"/api/sessions/{i}/progress").json()["phase"] != "training" for i in ids):
+        assert time.monotonic() < deadline, "the training sessions did not reach training"
+        time.sleep(0.5)
 
 
 def bare_loop(url: str, stop: threading.Event, out: list[float]) -> None:
@@ -61,9 +72,12 @@ def run(participants: int, trainers: int, advice: int, motion: str) -> None:
             with server.client() as api:
                 study = api.post("/api/studies", json={"name": "bench"}).json()["id"]
                 make = f"/api/studies/{study}/sessions"
+                trainer_ids = []
                 for seed in range(trainers):
                     body = {"method": "oracle", "seed": seed, "config": CONFIG, "episodes": 300}
-                    api.post(f"/api/sessions/{api.post(make, json=body).json()['id']}/start")
+                    trainer_ids.append(api.post(make, json=body).json()["id"])
+                    api.post(f"/api/sessions/{trainer_ids[-1]}/start")
+                wait_training(api, trainer_ids)
                 tokens = []
                 for seed in range(participants):
                     body = {
@@ -77,10 +91,11 @@ def run(participants: int, trainers: int, advice: int, motion: str) -> None:
                 round_trips: list[float] = []
                 bare: list[float] = []
                 stop = threading.Event()
+                ready = threading.Barrier(len(tokens))
                 threads = [
                     threading.Thread(
                         target=advise_loop,
-                        args=(SimulatedParticipant(server.url, t), advice, round_trips),
+                        args=(SimulatedParticipant(server.url, t), advice, round_trips, ready),
                     )
                     for t in tokens
                 ]

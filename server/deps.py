@@ -11,8 +11,8 @@ from fastapi import Depends, HTTPException, Request, Security
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
-from server.db.models import StudySession
 from server.services.sessions import session_for_token
+from server.sessions.advising import ParticipantSession
 from server.sessions.hub import Hub
 from server.sessions.manager import SessionManager
 from server.settings import Settings
@@ -61,8 +61,9 @@ def require_researcher(
 
 
 def participant_session(
-    db: DbDep, credentials: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)]
-) -> StudySession:
+    request: Request,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)],
+) -> ParticipantSession:
     if credentials is None or not credentials.credentials:
         raise HTTPException(
             401,
@@ -70,11 +71,21 @@ def participant_session(
             "`Authorization: Bearer TOKEN`",
             headers={"WWW-Authenticate": "Bearer"},
         )
-    session = session_for_token(db, credentials.credentials)
-    if session is None:
-        raise HTTPException(403, "this participant token is not valid; use the link you were given")
-    return session
+    # Known tokens are kept in memory: the advice loop should not query for them each time.
+    token = credentials.credentials
+    known: dict[str, ParticipantSession] = request.app.state.participant_tokens
+    if token in known:
+        return known[token]
+    with request.app.state.session_factory() as db:
+        session = session_for_token(db, token)
+        if session is None:
+            raise HTTPException(
+                403, "this participant token is not valid; use the link you were given"
+            )
+        found = ParticipantSession(session.id, session.advice_budget)
+    known[token] = found
+    return found
 
 
 ResearcherDep = Depends(require_researcher)
-ParticipantDep = Annotated[StudySession, Depends(participant_session)]
+ParticipantDep = Annotated[ParticipantSession, Depends(participant_session)]

@@ -26,6 +26,7 @@ def worker_options(settings: Settings) -> WorkerOptions:
         heartbeat_s=settings.heartbeat_s,
         idle_limit_s=settings.idle_limit_s,
         torch_threads=settings.worker_threads,
+        nice=settings.trainer_nice,
     )
 
 
@@ -58,6 +59,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_factory = factory
     app.state.hub = hub
     app.state.manager = manager
+    app.state.participant_tokens = {}
     for router in ROUTERS:
         app.include_router(router)
 

@@ -60,6 +60,9 @@ class Settings(BaseSettings):
     worker_threads: int = Field(default=1, ge=1)
     """torch threads per session worker; several workers share the machine's cores."""
 
+    trainer_nice: int = Field(default=10, ge=0, le=19)
+    """Niceness of machine-advised workers, so training never slows people's requests."""
+
     @field_validator("database_url")
     @classmethod
     def _driver(cls, url: str | None) -> str | None:

@@ -31,7 +31,7 @@ async def get_state(
 async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantState:
     """Start the session when the participant is ready (after consent and induction);
     a session already under way is left as it is."""
-    if session.status == Status.created and session.id not in manager.handles:
+    if session.id not in manager.handles and manager.status(session.id) == Status.created:
         await manager.start(session.id)
     return advising.participant_state(manager, session)
 

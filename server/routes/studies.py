@@ -1,6 +1,6 @@
 """Studies (researcher key required)."""
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Request, Response
 
 from server.deps import DbDep, ResearcherDep
 from server.routes.params import StudyId
@@ -31,6 +31,7 @@ def update_study(db: DbDep, study_id: StudyId, body: StudyUpdate) -> StudyPublic
 
 
 @router.delete("/{study_id}", status_code=204)
-def delete_study(db: DbDep, study_id: StudyId) -> Response:
+def delete_study(request: Request, db: DbDep, study_id: StudyId) -> Response:
     studies.delete_study(db, study_id)
+    request.app.state.participant_tokens.clear()
     return Response(status_code=204)

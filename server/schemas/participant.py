@@ -17,6 +17,7 @@ class AdviceReceipt(BaseModel):
     action: int
     duplicate: bool = Field(description="True if this advice had been received already.")
     response_time_s: float
+    version: int = Field(description="State version after this advice: long-poll after it.")
 
 
 class HistoryItem(BaseModel):

@@ -25,13 +25,19 @@ class SessionCreate(BaseModel):
     config: dict[str, Any] = Field(
         default_factory=dict, description="Learner config fields overriding the preset."
     )
-    episodes: int | None = Field(default=None, ge=1, le=100_000, description="Training episodes.")
-    max_episode_steps: int = Field(default=250, ge=1, le=10_000)
+    episodes: int | None = Field(
+        default=None, ge=1, le=100_000, description="Training episodes (default: the preset's)."
+    )
+    max_episode_steps: int | None = Field(
+        default=None, ge=1, le=10_000, description="Truncation (default: the preset's)."
+    )
     sort_rule: str | dict[str, str] = Field(
         default="color", description='"color", "shape", or a map {"cube/red": "left", ...}.'
     )
     strategy: Strategy = Field(default="early", description="Advising strategy (advised methods).")
-    advice_budget: int = Field(default=100, ge=0, le=100_000)
+    advice_budget: int | None = Field(
+        default=None, ge=0, le=100_000, description="Advice in all (default: the preset's)."
+    )
     advisor_checkpoint: str | None = Field(
         default=None, description="Path of a trained learner checkpoint (method agent)."
     )

@@ -7,11 +7,11 @@ from typing import Any
 
 from server.services.errors import Invalid
 
-EPISODES_FIELD = "episodes"
 
-
-def build_config(preset: str, overrides: dict[str, Any], episodes: int | None) -> dict[str, Any]:
-    """The full learner config as a dict: preset, then overrides; errors name the field."""
+def build_config(preset: str, overrides: dict[str, Any], **fields: int | None) -> dict[str, Any]:
+    """The full learner config as a dict: preset, then `overrides`, then the session's own
+    fields (`episodes`, `max_episode_steps`, `advice_budget`) where set; errors name the
+    field."""
     from learner import DQNConfig
 
     try:
@@ -19,16 +19,11 @@ def build_config(preset: str, overrides: dict[str, Any], episodes: int | None) -
     except (ValueError, KeyError) as error:
         raise Invalid("preset", str(error).strip("'\"")) from None
     data = {**base.to_dict(), **overrides}
-    if episodes is not None:
-        data[EPISODES_FIELD] = episodes
+    data.update({name: value for name, value in fields.items() if value is not None})
     try:
         return DQNConfig.from_dict(data).to_dict()
     except (ValueError, TypeError) as error:
         raise Invalid("config", str(error)) from None
-
-
-def episodes_of(config: dict[str, Any]) -> int:
-    return int(config[EPISODES_FIELD])
 
 
 def parse_sort_rule(spec: str | dict[str, str]) -> Any:

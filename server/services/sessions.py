@@ -39,9 +39,15 @@ def create_session(db: Session, study_id: int, body: SessionCreate) -> StudySess
     """A new session in `created` state; a human one gets its participant and token."""
     get_study(db, study_id)
     method = Method(body.method)
-    config = learning.build_config(body.preset, body.config, body.episodes)
-    sort_rule = learning.parse_sort_rule(body.sort_rule)
     advised = method not in (Method.autonomous,)
+    config = learning.build_config(
+        body.preset,
+        body.config,
+        episodes=body.episodes,
+        max_episode_steps=body.max_episode_steps,
+        advice_budget=body.advice_budget if advised else 0,
+    )
+    sort_rule = learning.parse_sort_rule(body.sort_rule)
     if method == Method.agent:
         if not body.advisor_checkpoint:
             raise Invalid(
@@ -62,12 +68,12 @@ def create_session(db: Session, study_id: int, body: SessionCreate) -> StudySess
         config=config,
         sort_rule=sort_rule,
         strategy=body.strategy if advised else None,
-        advice_budget=body.advice_budget if advised else 0,
+        advice_budget=config["advice_budget"],
         advisor_checkpoint=body.advisor_checkpoint,
         oracle_error_rate=body.oracle_error_rate if method == Method.oracle else None,
         motion=body.motion or ("physics" if method == Method.human else "fast"),
-        episodes=learning.episodes_of(config),
-        max_episode_steps=body.max_episode_steps,
+        episodes=config["episodes"],
+        max_episode_steps=config["max_episode_steps"],
         idle_limit_s=body.idle_limit_s,
     )
     if method == Method.human:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import time
+from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 
 from sqlalchemy import func, select
@@ -22,11 +23,21 @@ from server.schemas.participant import (
     HistoryItem,
     ParticipantState,
 )
-from server.services.errors import Conflict
+from server.services.errors import Conflict, NotFound
 from server.sessions.manager import HistoryEntry, SessionManager
 from server.sessions.messages import AdviceAnswer
 
 ACTION_NAMES = ("grab", "move right", "move left", "drop")
+
+
+@dataclass(frozen=True)
+class ParticipantSession:
+    """The one session a participant token reaches (what the participant routes need)."""
+
+    id: int
+    advice_budget: int
+
+
 MESSAGES = {
     Status.created: "The session has not started yet.",
     Status.paused: "The session is paused by the researcher; please wait.",
@@ -50,7 +61,7 @@ def _history(entries: list[HistoryEntry]) -> list[HistoryItem]:
     ]
 
 
-def participant_state(manager: SessionManager, session: StudySession) -> ParticipantState:
+def participant_state(manager: SessionManager, session: ParticipantSession) -> ParticipantState:
     """The page's state; showing a pending request starts its response-time clock."""
     version = manager.version(session.id)
     handle = manager.handles.get(session.id)
@@ -58,8 +69,10 @@ def participant_state(manager: SessionManager, session: StudySession) -> Partici
     if handle is None:
         with manager.factory() as db:
             given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
-            status = db.get(StudySession, session.id).status  # type: ignore[union-attr]
-            progress = db.get(StudySession, session.id).progress  # type: ignore[union-attr]
+            row = db.get(StudySession, session.id)
+            if row is None:
+                raise NotFound("this session no longer exists")
+            status, progress = row.status, row.progress
         return ParticipantState(
             session_id=session.id,
             status=status,
@@ -100,7 +113,7 @@ def participant_state(manager: SessionManager, session: StudySession) -> Partici
     )
 
 
-def observation_png(manager: SessionManager, session: StudySession) -> bytes | None:
+def observation_png(manager: SessionManager, session: ParticipantSession) -> bytes | None:
     """The image of the pending request, or of the latest advice given."""
     handle = manager.handles.get(session.id)
     if handle is not None and handle.request is not None:
@@ -132,7 +145,7 @@ def _insert(manager: SessionManager, row: Advice) -> bool:
     return True
 
 
-def _receipt(stored: Advice, body: AdviceCreate) -> AdviceReceipt:
+def _receipt(stored: Advice, body: AdviceCreate, version: int) -> AdviceReceipt:
     if stored.action != body.action:
         raise Conflict(
             f"advice {body.advice_index} was already given as {stored.action} "
@@ -143,25 +156,27 @@ def _receipt(stored: Advice, body: AdviceCreate) -> AdviceReceipt:
         action=stored.action,
         duplicate=True,
         response_time_s=stored.response_time_s,
+        version=version,
     )
 
 
 async def submit_advice(
-    manager: SessionManager, session: StudySession, body: AdviceCreate
+    manager: SessionManager, session: ParticipantSession, body: AdviceCreate
 ) -> AdviceReceipt:
     handle = manager.handles.get(session.id)
     budget = session.advice_budget
     if handle is None:
         stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
         if stored is not None:
-            return _receipt(stored, body)
+            return _receipt(stored, body, manager.version(session.id))
         _refuse_over_budget(body, budget)
-        raise Conflict(f"no advice can be taken now: {MESSAGES.get(Status(session.status), '')}")
+        status = Status(manager.status(session.id))
+        raise Conflict(f"no advice can be taken now: {MESSAGES.get(status, '')}")
     async with handle.advice_lock:
         if body.advice_index in handle.given:
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None, "advice given but not stored"
-            return _receipt(stored, body)
+            return _receipt(stored, body, manager.version(session.id))
         _refuse_over_budget(body, budget)
         if handle.status == Status.paused:
             raise Conflict("the session is paused by the researcher; advise when it resumes")
@@ -194,7 +209,7 @@ async def submit_advice(
         if not await run_in_threadpool(_insert, manager, row):
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None
-            return _receipt(stored, body)
+            return _receipt(stored, body, manager.version(session.id))
         handle.given[body.advice_index] = body.action
         handle.request = None
         handle.moving = True
@@ -209,6 +224,7 @@ async def submit_advice(
             action=body.action,
             duplicate=False,
             response_time_s=response_time,
+            version=manager.version(session.id),
         )
 
 

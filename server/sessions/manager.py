@@ -17,7 +17,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -25,7 +25,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
-from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status
+from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
 from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, mark_dead_interrupted, set_status
 from server.sessions.hub import Hub
@@ -53,6 +53,7 @@ HUB_KINDS: dict[type, str] = {
 }
 HISTORY = 10
 COMMAND_TIMEOUT_S = 120.0
+COALESCE_S = 0.05
 
 
 @dataclass
@@ -150,18 +151,21 @@ class SessionManager:
     async def start(self, session_id: int, resume: bool = False) -> None:
         token = await run_in_threadpool(self._claim, session_id, resume)
         parent, child = self._context.Pipe(duplex=True)
-        process = self._context.Process(
-            target=worker_main,
-            args=(session_id, self.database_url, self.options, token, child),
-            name=f"ideeprl-session-{session_id}",
-            daemon=True,
-        )
         with self.factory() as db:
             session = get_session(db, session_id)
             advice = db.scalars(
                 select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
             ).all()
             budget = session.advice_budget
+            human = session.method == Method.human
+        # People wait on human sessions; machine sessions yield the CPU to them.
+        options = replace(self.options, nice=0) if human else self.options
+        process = self._context.Process(
+            target=worker_main,
+            args=(session_id, self.database_url, options, token, child),
+            name=f"ideeprl-session-{session_id}",
+            daemon=True,
+        )
         handle = WorkerHandle(
             session_id, token, process, parent, budget, {a.advice_index: a.action for a in advice}
         )
@@ -240,6 +244,14 @@ class SessionManager:
             await self.wait_change(session_id, self.version(session_id), 1.0)
         raise Conflict(f"session {session_id} did not answer within {COMMAND_TIMEOUT_S:.0f} s")
 
+    def status(self, session_id: int) -> str:
+        """The live status if a worker runs, else the stored one."""
+        handle = self.handles.get(session_id)
+        if handle is not None:
+            return handle.status
+        with self.factory() as db:
+            return get_session(db, session_id).status
+
     # --- change notification (long-poll) ------------------------------------------------
     def version(self, session_id: int) -> int:
         if session_id not in self._version:
@@ -253,6 +265,18 @@ class SessionManager:
         event = self._changed.setdefault(session_id, asyncio.Event())
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(event.wait(), timeout)
+
+    def _notify_soon(self, session_id: int) -> None:
+        """Notify unless something else does first: the next advice request usually follows
+        an advice's result within milliseconds, and one wake-up then serves both."""
+        assert self._loop is not None
+        version = self.version(session_id)
+
+        def later() -> None:
+            if self.version(session_id) == version:
+                self.notify(session_id)
+
+        self._loop.call_later(COALESCE_S, later)
 
     def notify(self, session_id: int) -> None:
         self._version[session_id] = next(self._versions)
@@ -301,6 +325,8 @@ class SessionManager:
             for entry in handle.history:
                 if entry.advice_index == message.advice_index:
                     entry.reward = message.reward
+            self._notify_soon(handle.session_id)
+            return
         elif isinstance(message, StatusChanged):
             handle.status = message.status
         else:

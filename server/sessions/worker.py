@@ -54,6 +54,8 @@ class WorkerOptions:
     """torch threads for this process; None leaves torch's default."""
     progress_bar: bool = False
     """Show a tqdm bar of training episodes (command line runs)."""
+    nice: int = 0
+    """Added to the process's niceness (the server lowers machine sessions' priority)."""
 
 
 class _Reporter:
@@ -269,6 +271,8 @@ def run_session(
     Without `worker_token` the session is claimed here (created sessions start, stopped or
     interrupted ones resume). Human sessions need `conn`, the channel to the web process."""
     options = options or WorkerOptions()
+    if options.nice:
+        os.nice(options.nice)
     if options.torch_threads:
         import torch
 

@@ -25,8 +25,13 @@ class SimulatedParticipant:
     def next_request(self, timeout: float = 180) -> dict[str, Any]:
         """Long-poll until advice is wanted (or the session no longer runs)."""
         deadline = time.monotonic() + timeout
-        state = self.state()
-        while not state["advice_wanted"] and state["status"] in ("created", "running", "paused"):
+        state = self.state() if self.version is None else {"advice_wanted": False, "status": ""}
+        while not state["advice_wanted"] and state["status"] in (
+            "",
+            "created",
+            "running",
+            "paused",
+        ):
             assert time.monotonic() < deadline, f"no advice request came: {state}"
             response = self.client.get(
                 "/api/participant/state", params={"after": self.version, "timeout": 10}
@@ -37,9 +42,13 @@ class SimulatedParticipant:
         return state
 
     def advise(self, advice_index: int, action: int) -> httpx.Response:
-        return self.client.post(
+        """Send one advice; a stored one makes the next `next_request` wait for news."""
+        response = self.client.post(
             "/api/participant/advice", json={"advice_index": advice_index, "action": action}
         )
+        if response.status_code == 200:
+            self.version = response.json()["version"]
+        return response
 
     def close(self) -> None:
         self.client.close()

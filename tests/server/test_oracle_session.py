@@ -34,7 +34,13 @@ def learner_records(seed: int, budget: int) -> Collect:
     from learner import DQNConfig, Trainer, make_advisor, make_strategy
 
     config = DQNConfig.from_dict(
-        {**DQNConfig.preset("paper").to_dict(), **SMALL_CONFIG, "episodes": EPISODES}
+        {
+            **DQNConfig.preset("paper").to_dict(),
+            **SMALL_CONFIG,
+            "episodes": EPISODES,
+            "max_episode_steps": MAX_EPISODE_STEPS,
+            "advice_budget": budget,
+        }
     )
     env = sim.SortingEnv(motion="fast", max_episode_steps=MAX_EPISODE_STEPS)
     advisor = make_advisor("oracle", sort_rule="color", error_rate=0.0, seed=seed)
