@@ -147,39 +147,50 @@ class Step(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
     global_step: Mapped[int] = mapped_column(Integer)
+    phase: Mapped[str] = mapped_column(String(20))
     episode: Mapped[int] = mapped_column(Integer)
     episode_step: Mapped[int] = mapped_column(Integer)
-    phase: Mapped[str] = mapped_column(String(20))
     action: Mapped[int] = mapped_column(Integer)
-    source: Mapped[str] = mapped_column(String(20))
-    greedy_action: Mapped[int | None] = mapped_column(Integer)
+    action_source: Mapped[str] = mapped_column(String(20))
+    greedy_action: Mapped[int] = mapped_column(Integer)
+    q_grab: Mapped[float] = mapped_column(Float)
+    q_move_right: Mapped[float] = mapped_column(Float)
+    q_move_left: Mapped[float] = mapped_column(Float)
+    q_drop: Mapped[float] = mapped_column(Float)
+    advised_action: Mapped[int | None] = mapped_column(Integer)
+    advice_remaining: Mapped[int] = mapped_column(Integer)
     reward: Mapped[float] = mapped_column(Float)
-    epsilon: Mapped[float] = mapped_column(Float)
     terminated: Mapped[bool] = mapped_column()
     truncated: Mapped[bool] = mapped_column()
+    epsilon: Mapped[float] = mapped_column(Float)
     loss: Mapped[float | None] = mapped_column(Float)
-    time: Mapped[float] = mapped_column(Float)
+    wall_time: Mapped[float] = mapped_column(Float)
 
 
 class Episode(Base):
-    """One episode of the training stage: the learner's `EpisodeRecord`."""
+    """One episode, pretraining or training: the learner's `EpisodeRecord`."""
 
     __tablename__ = "episodes"
-    __table_args__ = (UniqueConstraint("session_id", "episode"),)
+    __table_args__ = (UniqueConstraint("session_id", "phase", "episode"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
-    episode: Mapped[int] = mapped_column(Integer)
     phase: Mapped[str] = mapped_column(String(20))
-    steps: Mapped[int] = mapped_column(Integer)
+    episode: Mapped[int] = mapped_column(Integer)
     collected_reward: Mapped[float] = mapped_column(Float)
-    epsilon: Mapped[float] = mapped_column(Float)
-    success: Mapped[bool] = mapped_column()
+    steps: Mapped[int] = mapped_column(Integer)
     placed_correct: Mapped[int] = mapped_column(Integer)
     misplaced: Mapped[int] = mapped_column(Integer)
     lost: Mapped[int] = mapped_column(Integer)
+    success: Mapped[bool] = mapped_column()
+    terminated: Mapped[bool] = mapped_column()
+    truncated: Mapped[bool] = mapped_column()
     advised_steps: Mapped[int] = mapped_column(Integer)
-    time: Mapped[float] = mapped_column(Float)
+    epsilon: Mapped[float] = mapped_column(Float)
+    mean_loss: Mapped[float | None] = mapped_column(Float)
+    first_global_step: Mapped[int] = mapped_column(Integer)
+    last_global_step: Mapped[int] = mapped_column(Integer)
+    wall_time: Mapped[float] = mapped_column(Float)
 
 
 class Advice(Base):

@@ -1,6 +1,8 @@
 """Sessions of a study: create, read, start/pause/resume/stop, progress, learning curve."""
 
-from fastapi import APIRouter
+from typing import Literal
+
+from fastapi import APIRouter, Query
 from fastapi.responses import Response
 from sqlalchemy import select
 
@@ -104,8 +106,16 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
 
 
 @router.get("/sessions/{session_id}/episodes")
-def list_episodes(db: DbDep, session_id: SessionId) -> list[EpisodePublic]:
-    return [EpisodePublic.model_validate(e) for e in sessions.list_episodes(db, session_id)]
+def list_episodes(
+    db: DbDep,
+    session_id: SessionId,
+    phase: Literal["train", "pretrain", "all"] = Query(
+        default="train", description="train: the learning curve; pretrain; or all."
+    ),
+) -> list[EpisodePublic]:
+    """The learning curve: collected reward (and more) per episode, in order."""
+    found = sessions.list_episodes(db, session_id)
+    return [EpisodePublic.model_validate(e) for e in found if phase in ("all", e.phase)]
 
 
 @router.get("/sessions/{session_id}/advice")

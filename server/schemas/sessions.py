@@ -114,19 +114,24 @@ class Progress(BaseModel):
 
 
 class EpisodePublic(BaseModel):
+    """One episode (the learner's `EpisodeRecord`); the column dictionary explains each."""
+
     model_config = ConfigDict(from_attributes=True)
 
-    episode: int
     phase: str
-    steps: int
+    episode: int
     collected_reward: float
-    epsilon: float
-    success: bool
+    steps: int
     placed_correct: int
     misplaced: int
     lost: int
+    success: bool
     advised_steps: int
-    time: float
+    epsilon: float
+    mean_loss: float | None
+    first_global_step: int
+    last_global_step: int
+    wall_time: float
 
 
 class AdvicePublic(BaseModel):

@@ -35,7 +35,7 @@ SESSION_COLUMNS = {
 ADVICE_COLUMNS = {
     "session_id": "Session the advice belongs to.",
     "advice_index": "Index of the advice in its session, from 0 [count].",
-    "global_step": "Index of the step the advice was for, from 0, pretraining included.",
+    "global_step": "Global step the advice was for (from 1, pretraining included).",
     "advisor": "Who advised: human, agent, oracle or random.",
     "action": "Advised action: 0 grab, 1 move right, 2 move left, 3 drop.",
     "action_name": "The advised action's name.",
@@ -46,7 +46,10 @@ ADVICE_COLUMNS = {
     "answered_at": "When the advice arrived [UTC, ISO 8601].",
     "observation_file": "PNG (64x64 RGB, lossless) of what the advisor saw, in advice/.",
 }
-SESSION_KEY = {"session_id": "Session the record belongs to."}
+SESSION_KEY = {
+    "session_id": "Session the record belongs to.",
+    "wall_time": "When the session's worker logged the record [Unix time, s].",
+}
 
 
 def field_docs(cls: type) -> dict[str, str]:

@@ -147,7 +147,9 @@ def export_study(db: Session, study_id: int, out: Path) -> dict[str, int]:
     counts = {
         "sessions.csv": _write(out / "sessions.csv", SESSION_FIELDS, _session_rows(sessions)),
         "episodes.csv": _write(
-            out / "episodes.csv", EPISODE_COLUMNS, _records(db, Episode, ids, Episode.episode)
+            out / "episodes.csv",
+            EPISODE_COLUMNS,
+            _records(db, Episode, ids, Episode.first_global_step),
         ),
         "steps.csv": _write(
             out / "steps.csv", STEP_COLUMNS, _records(db, Step, ids, Step.global_step)

@@ -3,7 +3,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
+
+import numpy as np
 
 from server.services.errors import Invalid
 
@@ -71,13 +74,26 @@ def make_strategy(session: Any) -> Any:
     return make_strategy(session.strategy, session.advice_budget)
 
 
-def make_trainer(env: Any, session: Any, advisor: Any, strategy: Any, callbacks: list[Any]) -> Any:
+def make_trainer(
+    env: Any,
+    session: Any,
+    advisor: Any,
+    strategy: Any,
+    callbacks: list[Any],
+    torch_threads: int | None,
+) -> Any:
     from learner import DQNConfig, Trainer
 
     config = DQNConfig.from_dict(session.config)
+    if torch_threads:  # a runtime field: a checkpoint resumes under any thread count
+        config = config.replace(torch_threads=torch_threads)
     return Trainer(env, config, advisor, strategy, seed=session.seed, callbacks=callbacks)
 
 
-def greedy_action(trainer: Any) -> Any:
-    """The learner's own choice for an observation, if the trainer can tell."""
-    return lambda obs: None
+def greedy_action(trainer: Any) -> Callable[[np.ndarray], int | None]:
+    """The learner's own choice for an observation (what its StepRecord calls
+    greedy_action), for the advice log."""
+    agent = getattr(trainer, "agent", None)
+    if agent is None or not hasattr(agent, "q_values"):
+        return lambda obs: None
+    return lambda obs: int(np.argmax(agent.q_values(obs)))

@@ -133,7 +133,9 @@ def session_for_token(db: Session, token: str) -> StudySession | None:
 
 def list_episodes(db: Session, session_id: int) -> list[Episode]:
     get_session(db, session_id)
-    query = select(Episode).where(Episode.session_id == session_id).order_by(Episode.episode)
+    query = (
+        select(Episode).where(Episode.session_id == session_id).order_by(Episode.first_global_step)
+    )
     return list(db.scalars(query))
 
 

@@ -55,6 +55,13 @@ class HumanAdvisor:
         self._greedy = greedy_action
         self._answered: int | None = None
 
+    def state_dict(self) -> dict[str, Any]:
+        """Saved in the learner's checkpoint: how many advice were asked for."""
+        return {"count": self.count}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.count = int(state["count"])
+
     def after_step(self, action: int, reward: float, episode_over: bool) -> None:
         """Tell the participant what their last advice earned."""
         if self._answered is not None:
@@ -105,6 +112,15 @@ class RecordingAdvisor:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._inner, name)  # q_values, for importance advising
+
+    def state_dict(self) -> dict[str, Any]:
+        inner = getattr(self._inner, "state_dict", None)
+        return {"count": self.count, "inner": inner() if callable(inner) else None}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.count = int(state["count"])
+        if state["inner"] is not None:
+            self._inner.load_state_dict(state["inner"])
 
     def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         started = time.perf_counter()

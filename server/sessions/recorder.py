@@ -23,6 +23,9 @@ STEP_COLUMNS = frozenset(c.name for c in Step.__table__.columns) - {"id"}
 EPISODE_COLUMNS = frozenset(c.name for c in Episode.__table__.columns) - {"id"}
 
 
+TRAINING = "train"
+
+
 class LeaseLost(Exception):
     """Another worker took over this session (or it was deleted): stop writing at once."""
 
@@ -32,14 +35,15 @@ class Checkpointable(Protocol):
 
 
 def _row(record: Any, columns: frozenset[str], session_id: int) -> dict[str, Any]:
-    data = record.to_dict() if hasattr(record, "to_dict") else dict(record)
-    row = {k: v for k, v in data.items() if k in columns}
+    row = {k: v for k, v in record.to_dict().items() if k in columns}
     row["session_id"] = session_id
+    row["wall_time"] = time.time()
     return row
 
 
 class Recorder:
-    """The trainer's callback that logs; `steps`, `episodes`, `advice` count what was logged."""
+    """The trainer's callback that logs. `steps`: the last step logged (global steps count
+    from 1); `episodes`: training episodes logged."""
 
     def __init__(
         self,
@@ -70,14 +74,15 @@ class Recorder:
     # --- learner callbacks -------------------------------------------------------------
     def on_step(self, record: Any) -> None:
         self._steps.append(_row(record, STEP_COLUMNS, self.session_id))
-        self.steps += 1
+        self.steps = record.global_step
         if len(self._steps) >= self._flush_every:
             self.flush()
 
     def on_episode(self, record: Any) -> None:
         self._episodes.append(_row(record, EPISODE_COLUMNS, self.session_id))
-        self.episodes += 1
-        self.episodes_since_checkpoint += 1
+        if record.phase == TRAINING:
+            self.episodes += 1
+            self.episodes_since_checkpoint += 1
         self.flush()
 
     def add_advice(self, row: dict[str, Any]) -> None:
@@ -128,15 +133,18 @@ class Recorder:
         return path
 
     def rewind(self, session: StudySession) -> None:
-        """Forget every row written after the checkpoint we resume from."""
+        """Forget every row written after the checkpoint we resume from: steps and episodes
+        past its global step, machine advice past its advice count."""
         self.steps = session.checkpoint_step
         self.episodes = session.checkpoint_episodes
         self.advice = session.checkpoint_advice
         sid = self.session_id
         with self._factory() as db:
-            db.execute(delete(Step).where(Step.session_id == sid, Step.global_step >= self.steps))
+            db.execute(delete(Step).where(Step.session_id == sid, Step.global_step > self.steps))
             db.execute(
-                delete(Episode).where(Episode.session_id == sid, Episode.episode >= self.episodes)
+                delete(Episode).where(
+                    Episode.session_id == sid, Episode.last_global_step > self.steps
+                )
             )
             if session.method != Method.human:
                 db.execute(

@@ -29,7 +29,7 @@ from server.services.sessions import claim, get_session, set_status
 from server.sessions.advisors import HumanAdvisor, RecordingAdvisor
 from server.sessions.link import ParentGone, WorkerExit, WorkerLink
 from server.sessions.messages import EpisodeDone, Progress, StatusChanged
-from server.sessions.recorder import LeaseLost, Recorder
+from server.sessions.recorder import TRAINING, LeaseLost, Recorder
 from server.sessions.scene import SceneBroadcast
 
 log = logging.getLogger(__name__)
@@ -69,15 +69,18 @@ class _Reporter:
         self.last_episode_reward: float | None = None
 
     def on_step(self, record: Any) -> None:
-        self.phase = str(getattr(record, "phase", self.phase))
-        self.epsilon = float(getattr(record, "epsilon", self.epsilon))
+        self.phase = "training" if record.phase == TRAINING else "pretraining"
+        self.epsilon = float(record.epsilon)
         if time.monotonic() - self._sent >= PROGRESS_EVERY_S:
             self._run.send_progress()
             self._sent = time.monotonic()
 
     def on_episode(self, record: Any) -> None:
-        self.last_episode_reward = float(getattr(record, "collected_reward", 0.0))
         self._run.send(EpisodeDone(record.to_dict()))
+        if record.phase != TRAINING:
+            return
+        self.last_episode_reward = float(record.collected_reward)
+        self._run.env.episode = self._run.recorder.episodes
         self._run.send_progress()
         self._sent = time.monotonic()
         if self._run.bar is not None:
@@ -134,7 +137,7 @@ class _Run:
                 start_advice,
                 s.advice_budget,
                 s.idle_limit_s or options.idle_limit_s,
-                lambda: self.recorder.steps,
+                lambda: self.recorder.steps + 1,
                 greedy,
             )
             self.env.after_step.append(self.advisor.after_step)
@@ -144,11 +147,16 @@ class _Run:
                 s.method,
                 start_advice,
                 self.recorder.add_advice,
-                lambda: self.recorder.steps,
+                lambda: self.recorder.steps + 1,
                 greedy,
             )
         self.trainer = learning.make_trainer(
-            self.env, s, self.advisor, learning.make_strategy(s), [self.recorder, self.reporter]
+            self.env,
+            s,
+            self.advisor,
+            learning.make_strategy(s),
+            [self.recorder, self.reporter],
+            options.torch_threads,
         )
         self._greedy = learning.greedy_action(self.trainer)
         if resume:
