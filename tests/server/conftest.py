@@ -1,7 +1,6 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from pathlib import Path
 
 import httpx
 import pytest
@@ -9,9 +8,10 @@ import pytest
 from tests.server.live import LiveServer, fresh_database
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    """One live server per test module, on its own fresh database."""
+    """One live server for the API tests, on a fresh database (tests make their own
+    studies); the crash tests start their own."""
     data_dir = tmp_path_factory.mktemp("study_data")
     with fresh_database(data_dir) as url:
         live = LiveServer(data_dir, url, checkpoint_every_episodes=2, heartbeat_s=1).start()
@@ -25,8 +25,3 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
 def api(server: LiveServer) -> Iterator[httpx.Client]:
     with server.client() as client:
         yield client
-
-
-@pytest.fixture
-def tmp_data(tmp_path: Path) -> Path:
-    return tmp_path

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import tempfile
 
 import httpx
 import pytest
@@ -17,9 +18,11 @@ PUBLIC = {"/api/health"}
 def researcher_routes() -> list[tuple[str, str]]:
     """Every (method, path) of the app's schema outside the public and participant ones:
     a new endpoint is checked here without anybody listing it."""
-    app = create_app(Settings(api_key="unused", data_dir="/nonexistent"))
+    with tempfile.TemporaryDirectory() as data_dir:
+        app = create_app(Settings(api_key="unused", data_dir=data_dir))
+        paths = app.openapi()["paths"]
     routes = []
-    for template, operations in app.openapi()["paths"].items():
+    for template, operations in paths.items():
         if template in PUBLIC or template.startswith("/api/participant"):
             continue
         path = re.sub(r"\{[^}]+\}", "1", template)

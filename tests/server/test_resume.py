@@ -20,7 +20,7 @@ from tests.server.participant import SimulatedParticipant
 from tests.server.scale import NONDETERMINISTIC, export, session_body, wait_for_status
 
 pytestmark = pytest.mark.slow
-EPISODES = 6
+EPISODES = 4
 
 
 @pytest.fixture
@@ -66,7 +66,7 @@ def test_a_killed_worker_resumes_to_exactly_the_uninterrupted_records(live: Live
         reference = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
 
         api.post(f"/api/sessions/{crashed['id']}/start")
-        wait_progress(api, crashed["id"], 3)
+        wait_progress(api, crashed["id"], 2)
         pid = api.get(f"/api/sessions/{crashed['id']}").json()["worker_pid"]
         os.kill(pid, signal.SIGKILL)
         interrupted = wait_for_status(api, crashed["id"], {"interrupted"}, timeout=30)
@@ -82,7 +82,7 @@ def test_a_killed_worker_resumes_to_exactly_the_uninterrupted_records(live: Live
         wait_for_status(api, reference["id"], {"finished"})
         files = export(api, study["id"])
     resumed, uninterrupted = records(files, crashed["id"]), records(files, reference["id"])
-    assert len(resumed["episodes.csv"]) == EPISODES
+    assert len([e for e in resumed["episodes.csv"] if e["phase"] == "train"]) == EPISODES
     for name in resumed:
         assert resumed[name] == uninterrupted[name], name
 
