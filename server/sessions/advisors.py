@@ -45,7 +45,9 @@ class HumanAdvisor:
         idle_limit_s: float,
         step_index: Callable[[], int],
         greedy_action: Callable[[np.ndarray], int | None],
+        before_waiting: Callable[[], None] = lambda: None,
     ) -> None:
+        self._before_waiting = before_waiting
         self._link = link
         self._given = given
         self.count = start_index
@@ -82,6 +84,7 @@ class HumanAdvisor:
                 info=dict(info),
                 advice_budget=self._budget,
             )
+            self._before_waiting()
             self._link.send(request)
             action = self._link.wait_for_answer(index, self._idle_limit_s)
             self._given[index] = action

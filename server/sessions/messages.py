@@ -88,7 +88,7 @@ class SceneStep:
     poses: dict[str, Any]
     """`sim.Pose` of every body after the step."""
     global_step: int
-    """The step's index."""
+    """The step's global step (from 1, as the learner's StepRecord)."""
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,7 @@ class SceneBroadcast(gym.Wrapper):
                     reward=float(reward),
                     frames=list(getattr(scene, "last_motion", None) or []),
                     poses=dict(scene.body_poses()),
-                    global_step=self.steps - 1,
+                    global_step=self.steps,
                 )
             )
         return obs, reward, terminated, truncated, info

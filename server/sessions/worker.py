@@ -139,6 +139,7 @@ class _Run:
                 s.idle_limit_s or options.idle_limit_s,
                 lambda: self.recorder.steps + 1,
                 greedy,
+                self.send_progress,  # the live view shows where it waits
             )
             self.env.after_step.append(self.advisor.after_step)
         elif s.method != Method.autonomous:
