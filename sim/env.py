@@ -41,18 +41,21 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         render_mode: str | None = None,
     ) -> None:
         if motion not in MOTIONS:
-            raise ValueError(f"motion must be 'physics' or 'fast', got {motion!r}")
+            raise ValueError(
+                f"motion must be 'physics' (the arm moves through simulated steps, for people "
+                f"to watch) or 'fast' (the same poses set directly, for batch runs), got {motion!r}"
+            )
         if (
             isinstance(max_episode_steps, bool)
-            or not isinstance(max_episode_steps, int)
-            or (max_episode_steps < 1)
+            or not isinstance(max_episode_steps, int | np.integer)
+            or max_episode_steps < 1
         ):
             raise ValueError(f"max_episode_steps must be a positive int, got {max_episode_steps!r}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.motion = motion
         self.sort_rule = SortRule.parse(sort_rule)
-        self.max_episode_steps = max_episode_steps
+        self.max_episode_steps = int(max_episode_steps)
         self.record_motion = record_motion
         self.render_mode = render_mode
         self.observation_space = spaces.Box(0, 255, (IMAGE_SIZE, IMAGE_SIZE, 3), np.uint8)
@@ -151,7 +154,6 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         """How many of the camera's pixels each named body covers now (for checking the
         camera setup; renders once more)."""
         by_part = {(part.body, part.link): name for name, part in self._world.parts.items()}
-        by_part[(self._arm.body, -1)] = "arm/link_0"
         counts = self._camera.visible_pixels()
         return {name: counts.get(key, 0) for key, name in by_part.items()}
 

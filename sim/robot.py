@@ -130,7 +130,7 @@ class SuctionArm:
     def _register_parts(self) -> None:
         self.world.add_part(
             "arm/link_0",
-            Part(self.body, -1, frame_offset=Pose(self.base_position, (1.0, 0.0, 0.0, 0.0))),
+            Part(self.body, -1, fixed_pose=Pose(self.base_position, (1.0, 0.0, 0.0, 0.0))),
             Mesh(*meshes.read_obj(meshes.link_mesh_path(0))),
             LINK_RGBA[0],
             moving=False,

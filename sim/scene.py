@@ -20,7 +20,9 @@ class SceneObject:
     name: str
     """Scene path, `objects/{shape}_{color}`."""
     shape: str
+    """`cube`, `cylinder` or `disk`."""
     color: str
+    """`red` or `blue`."""
     body: int
     """PyBullet body id."""
     half_height: float

@@ -42,12 +42,19 @@ class SortingTask:
     kinds: dict[str, tuple[str, str]]
     """(shape, color) of each object, by name, in a fixed order."""
     remaining: list[str] = field(default_factory=list)
+    """Objects still on the center table, in `kinds` order."""
     held: str | None = None
+    """The object in the suction cup."""
     placed_correct: int = 0
+    """Objects put on the side table they belong on."""
     misplaced: int = 0
+    """Objects put on the wrong side table (at most one: it ends the episode)."""
     lost: int = 0
+    """Objects that left the center table other than by the cup (knocked off)."""
     episode_step: int = 0
+    """Steps taken in this episode."""
     succeeded: bool = False
+    """The center table is empty, nothing is held and nothing was misplaced."""
 
     def reset(self) -> None:
         self.remaining = list(self.kinds)

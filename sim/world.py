@@ -24,20 +24,19 @@ RECORD_EVERY = 4
 
 @dataclass(frozen=True)
 class Part:
-    """Where PyBullet keeps a named body: a base (`link == -1`) or a link of a multibody."""
+    """Where a named body is kept: a PyBullet base or link, or a fixed pose."""
 
     body: int
+    """PyBullet body id, or -1 for a prop only the viewer shows (the camera)."""
     link: int
-    frame_offset: Pose | None = None
-    """For a base whose mesh frame is not its centre of mass (PyBullet reports the latter)."""
+    """Link index, -1 for the base."""
+    fixed_pose: Pose | None = None
+    """The pose of a body that never moves, when PyBullet cannot tell it: a prop, or the
+    arm's base, whose mesh frame is not the centre of mass PyBullet reports."""
 
 
 def wxyz(xyzw: tuple[float, ...] | list[float]) -> tuple[float, float, float, float]:
     return (float(xyzw[3]), float(xyzw[0]), float(xyzw[1]), float(xyzw[2]))
-
-
-def xyzw(q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    return (q[1], q[2], q[3], q[0])
 
 
 class Client:
@@ -161,8 +160,8 @@ class World:
             part = self.parts[name]
             if part.link >= 0:
                 links.setdefault(part.body, []).append((name, part.link))
-            elif part.frame_offset is not None:
-                poses[name] = part.frame_offset
+            elif part.fixed_pose is not None:
+                poses[name] = part.fixed_pose
             else:
                 position, orientation = self.p.getBasePositionAndOrientation(part.body)
                 poses[name] = Pose(tuple(position), wxyz(orientation))
@@ -202,9 +201,9 @@ class World:
         `pause` (simulated seconds) stamps the final frame when nothing was simulated, so a
         viewer still animates a move that the fast mode made in one jump.
         """
-        frames = self.recording or []
-        self.recording = None
-        final_time = max(self.time, frames[-1].time + pause if frames else 0.0)
-        if not frames or frames[-1].time < final_time or self._steps % RECORD_EVERY != 0:
+        assert self.recording, "stop_recording without start_recording"
+        frames, self.recording = self.recording, None
+        final_time = max(self.time, frames[-1].time + pause)
+        if frames[-1].time < final_time:
             frames.append(MotionFrame(final_time, self.poses(self.moving_names())))
         return frames

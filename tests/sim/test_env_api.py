@@ -111,7 +111,7 @@ def test_stepping_after_the_end_without_reset_raises_and_changes_nothing(motion:
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"motion": "slow"}, "motion must be 'physics' or 'fast'"),
+        ({"motion": "slow"}, r"motion must be .physics. \(the arm moves"),
         ({"max_episode_steps": 0}, "max_episode_steps must be a positive int"),
         ({"sort_rule": "colour"}, 'sort rule is "color"'),
         ({"render_mode": "human"}, "render_mode must be None or 'rgb_array'"),
