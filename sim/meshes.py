@@ -23,26 +23,24 @@ ARM_LINKS = 8
 """Links of the iiwa with a mesh: `lbr_iiwa_link_0` (the base) to `lbr_iiwa_link_7`."""
 
 
+_VERTEX = re.compile(r"^v\s+(\S+)\s+(\S+)\s+(\S+)", re.MULTILINE)
+_TRIANGLE = re.compile(r"^f\s+(\d+)\S*\s+(\d+)\S*\s+(\d+)\S*\s*$", re.MULTILINE)
+_FACE = re.compile(r"^f\s", re.MULTILINE)
+
+
 @functools.cache
 def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (N, 3) float64 and triangles (M, 3) int32 (0-based) of a triangulated OBJ.
 
-    Cached: the arrays are shared, callers must not change them."""
-    vertices: list[list[float]] = []
-    faces: list[list[int]] = []
-    for line in path.read_text().splitlines():
-        if line.startswith("v "):
-            vertices.append([float(x) for x in line.split()[1:4]])
-        elif line.startswith("f "):
-            corners = [int(token.split("/")[0]) - 1 for token in line.split()[1:]]
-            faces.extend(
-                [corners[0], corners[i], corners[i + 1]] for i in range(1, len(corners) - 1)
-            )
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int32).reshape(-1, 3)
-    v.flags.writeable = False
-    f.flags.writeable = False
-    return v, f
+    Cached, so the arrays are shared and read-only.
+    """
+    text = path.read_text()
+    vertices = np.array(_VERTEX.findall(text), dtype=np.float64)
+    faces = np.array(_TRIANGLE.findall(text), dtype=np.int32).reshape(-1, 3) - 1
+    assert len(faces) == len(_FACE.findall(text)), f"{path} has faces that are not triangles"
+    vertices.flags.writeable = False
+    faces.flags.writeable = False
+    return vertices, faces
 
 
 def farthest_points(vertices: np.ndarray, count: int) -> np.ndarray:
