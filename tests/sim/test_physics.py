@@ -74,3 +74,17 @@ def test_an_object_knocked_off_the_table_is_lost_without_reward(
             break
     assert info["is_success"] and info["placed_correct"] == 5
     assert total == pytest.approx(2.6) and steps == 16
+
+
+def test_objects_pushed_aside_on_the_table_are_still_picked(physics_env: sim.SortingEnv) -> None:
+    _, info = physics_env.reset(seed=4)
+    world = physics_env._world
+    for obj in physics_env._objects.values():  # all 3 cm towards the robot: off the grid
+        (x, y, z), orientation = world.p.getBasePositionAndOrientation(obj.body)
+        world.p.resetBasePositionAndOrientation(obj.body, (x - 0.03, y, z), orientation)
+    for placed in range(3):
+        _, _, _, _, info = physics_env.step(GRAB)
+        assert info["held"] is not None and len(info["remaining"]) == 5 - placed
+        physics_env.step(sim.oracle_action(info, "color"))
+        _, reward, _, _, info = physics_env.step(DROP)
+        assert (reward, info["lost"]) == (0.4, 0)
