@@ -1,8 +1,9 @@
 """Where everything stands: tables, the 3x3 grid, the objects' sizes, the camera.
 
-The numbers are chosen together: objects large enough that a held one covers dozens of
-pixels of the 64x64 image at every station, tables within the iiwa's comfortable reach,
-and a camera that sees the arm, the held object and all three tables at once.
+The numbers are chosen together: objects large enough that a held one covers at least 25
+pixels of the 64x64 image at every station, every grid position and drop slot within the
+iiwa's reach, and a camera that sees the arm and the held object at every station with no
+link in the way (docs/images/observations.png shows the result).
 World frame: z up, the robot's base at the origin facing +x, its left is +y.
 """
 

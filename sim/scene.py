@@ -3,6 +3,7 @@
 Objects are dynamic bodies in both motion modes; only the physics mode ever steps them.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,7 +11,7 @@ import numpy as np
 from sim.bodies import Box, Pose
 from sim.layout import OBJECT_COLORS, Layout, Table
 from sim.rules import COLORS
-from sim.world import Part, World
+from sim.world import Part, World, wxyz
 
 
 @dataclass(frozen=True)
@@ -60,10 +61,13 @@ class Scene:
 
     def _add_camera_props(self) -> None:
         """The camera and its mast, for the viewer only: PyBullet's camera needs no body."""
-        eye = self.layout.camera.eye
+        eye, target = self.layout.camera.eye, self.layout.camera.target
         top = self.layout.table_height
         mast_height = eye[2] - top
         identity = (1.0, 0.0, 0.0, 0.0)
+        dx, dy, dz = (t - e for t, e in zip(target, eye, strict=True))
+        pitch, yaw = math.atan2(-dz, math.hypot(dx, dy)), math.atan2(dy, dx)
+        facing = wxyz(self.world.p.getQuaternionFromEuler((0.0, pitch, yaw)))
         self.world.add_part(
             "camera/mast",
             Part(-1, -1, Pose((eye[0], eye[1], top + mast_height / 2), identity)),
@@ -73,8 +77,8 @@ class Scene:
         )
         self.world.add_part(
             "camera/body",
-            Part(-1, -1, Pose(eye, identity)),
-            Box(np.array([0.04, 0.05, 0.035])),
+            Part(-1, -1, Pose(eye, facing)),  # its x axis looks at the target
+            Box(np.array([0.05, 0.04, 0.035])),
             (0.1, 0.1, 0.1, 1.0),
             moving=False,
         )
