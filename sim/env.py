@@ -27,7 +27,8 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
 
     `motion="physics"` moves the arm through simulated steps (people watch it);
     `motion="fast"` sets the same poses directly (batch training). Both obey the same
-    rules and render through the same camera.
+    rules and render through the same camera. An episode is truncated after
+    `max_episode_steps` steps (made by `gym.make`, Gymnasium's TimeLimit does that).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -113,13 +114,20 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         )
         events = StepEvents(events.grabbed, events.placed, lost)
         reward, terminated = self._task.update(events)
-        truncated = not terminated and self._task.episode_step >= self.max_episode_steps
+        limit = self._step_limit()
+        truncated = not terminated and limit is not None and self._task.episode_step >= limit
         self._needs_reset = terminated or truncated
         if self.record_motion:
             pause = FAST_MOVE_SECONDS if moved and self.motion == "fast" else 0.0
             self.last_motion = self._world.stop_recording(pause)
         self._obs = self._camera.image()
         return self._obs.copy(), reward, terminated, truncated, self._info()
+
+    def _step_limit(self) -> int | None:
+        """The constructor's `max_episode_steps`, unless `gym.make` made this env: then its
+        TimeLimit wrapper truncates (after 250 steps, or its own `max_episode_steps`, which
+        `gym.make` keeps from the env), so the two limits never disagree."""
+        return None if self.spec is not None else self.max_episode_steps
 
     def _build(self) -> None:
         """The whole scene, from an empty simulation."""

@@ -1,5 +1,6 @@
 """The task's rules and rewards, played through the fast mode (SPEC 1)."""
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -73,14 +74,18 @@ def test_an_episode_is_truncated_not_terminated_after_250_steps(
     assert info["episode_step"] == 250 and len(info["remaining"]) == 6
 
 
-def test_a_shorter_limit_truncates_sooner() -> None:
-    env = sim.SortingEnv(motion="fast", max_episode_steps=20)
-    try:
-        env.reset(seed=0)
-        results = [env.step(GRAB)[3] for _ in range(20)]
-        assert results == [False] * 19 + [True]
-    finally:
-        env.close()
+@pytest.mark.parametrize("limit", [20, 300])
+def test_the_step_limit_can_be_changed_directly_or_through_gym_make(limit: int) -> None:
+    for env in (
+        sim.SortingEnv(motion="fast", max_episode_steps=limit),
+        gym.make(sim.ENV_ID, motion="fast", max_episode_steps=limit),
+    ):
+        try:
+            env.reset(seed=0)
+            results = [env.step(LEFT if i % 2 else RIGHT)[3] for i in range(limit)]
+            assert results == [False] * (limit - 1) + [True]
+        finally:
+            env.close()
 
 
 def test_grab_while_holding_returns_above_the_center_still_holding(
