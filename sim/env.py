@@ -124,9 +124,10 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         return self._obs.copy(), reward, terminated, truncated, self._info()
 
     def _step_limit(self) -> int | None:
-        """The constructor's `max_episode_steps`, unless `gym.make` made this env: then its
-        TimeLimit wrapper truncates (after 250 steps, or its own `max_episode_steps`, which
-        `gym.make` keeps from the env), so the two limits never disagree."""
+        """The constructor's `max_episode_steps`, unless `gym.make` made this env (it sets
+        `spec`): then Gymnasium's TimeLimit truncates, after the registered 250 steps or
+        gym.make's own `max_episode_steps` (never passed on to the env), and the env must
+        not cut an episode shorter."""
         return None if self.spec is not None else self.max_episode_steps
 
     def _build(self) -> None:
