@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import io
+import time
 from typing import Any
 
 import httpx
@@ -73,6 +74,7 @@ def test_oracle_session_runs_to_the_end_and_exports_the_learners_records(
     seen: list[dict[str, Any]] = []
     while not seen or seen[-1]["status"] not in ("finished", "failed"):
         seen.append(api.get(f"/api/sessions/{session['id']}/progress").json())
+        time.sleep(0.05)
     assert seen[-1]["status"] == "finished", api.get(f"/api/sessions/{session['id']}").json()
     assert seen[-1]["episode"] == EPISODES and seen[-1]["advice_given"] == 20
     assert seen[-1]["advice_left"] == 0
