@@ -1,0 +1,61 @@
+"""`python -m server.analysis EPISODES.csv OUT`: the report from an exported episode CSV.
+
+The `ideeprl report --study ID` command reads the database; this one needs only a CSV
+that follows the episode contract, or `--demo` for made-up curves.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+import pandas as pd
+
+from server.analysis.episodes import CONTRACT, EpisodeTableError
+from server.analysis.report import write_report
+from server.analysis.synthetic import synthetic_episodes
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m server.analysis",
+        description="Write the paper's analysis (figures, CSV tables, report.md) for episodes.",
+        epilog=f"The CSV has {CONTRACT}.",
+    )
+    parser.add_argument("episodes", nargs="?", help="episode CSV (omit with --demo)")
+    parser.add_argument("out_dir", help="folder for the report")
+    parser.add_argument("--demo", action="store_true", help="use made-up curves, not a CSV")
+    parser.add_argument("--baseline", default="autonomous", help="method to improve on")
+    parser.add_argument("--episodes", type=int, dest="n_episodes", help="keep the first N")
+    parser.add_argument("--smoothing", type=int, default=1, help="moving average for plots")
+    parser.add_argument("--title", default="IDeepRL study: the paper's analysis")
+    args = parser.parse_args(argv)
+    if args.demo == (args.episodes is not None):
+        parser.error("give an episode CSV, or --demo without one")
+    if args.demo:
+        episodes = synthetic_episodes()
+        notes = ["Made-up curves (server.analysis.synthetic): a demonstration, not a result."]
+    else:
+        episodes = pd.read_csv(args.episodes)
+        notes = [f"Episodes from `{args.episodes}`."]
+    try:
+        result = write_report(
+            episodes,
+            args.out_dir,
+            title=args.title,
+            baseline=args.baseline,
+            notes=notes,
+            n_episodes=args.n_episodes,
+            smoothing=args.smoothing,
+        )
+    except EpisodeTableError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    for path in result.files:
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,515 @@
+"""One call that writes the paper's analysis: PNG figures, CSV tables, `report.md`.
+
+`write_report` is what `ideeprl report` and the dashboard call. Everything is computed
+before the first file is written, so a bad episode table leaves the folder untouched.
+The Markdown links its images and tables by relative path: copy the folder anywhere.
+"""
+
+from __future__ import annotations
+
+import platform
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+import pandas as pd
+import scipy
+
+from server.analysis import markdown as md
+from server.analysis.episodes import EpisodeTableError, agents_of, method_name
+from server.analysis.figures import (
+    example_agents,
+    pick_reference_agent,
+    plot_correlation,
+    plot_cumulative_reward,
+    plot_epsilon,
+    plot_individual_agents,
+    plot_method_curves,
+    save_figure,
+)
+from server.analysis.paper import PAPER_AGENTS, PAPER_EPISODES
+from server.analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
+from server.analysis.summary import Analysis, analyze
+
+REPORT_FILE = "report.md"
+FIGURE_FILES: dict[str, str] = {
+    "reward_per_method": "figure5_reward_per_method.png",
+    "individual_agents": "figure6_individual_agents.png",
+    "correlation": "figure7_correlation.png",
+    "cumulative_reward": "cumulative_reward.png",
+    "epsilon": "epsilon.png",
+}
+TABLE_FILES: dict[str, str] = {
+    "methods": "r_t_per_method.csv",
+    "agents": "r_t_per_agent.csv",
+    "t_tests": "t_tests.csv",
+    "correlation": "correlation.csv",
+    "method_correlations": "correlation_per_method.csv",
+    "curves": "reward_per_episode.csv",
+    "paper": "paper_comparison.csv",
+}
+MAX_HEATMAP_AGENTS = 24
+"""Above this many agents Figure 7 shows the paper's selection; the CSV keeps them all."""
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    """What `write_report` wrote, by name, and what it left out and why."""
+
+    out_dir: Path
+    """The folder holding everything below."""
+    report: Path
+    """The Markdown report."""
+    figures: dict[str, Path]
+    """PNG files by name (keys of `FIGURE_FILES` that were drawn)."""
+    tables: dict[str, Path]
+    """CSV files by name (keys of `TABLE_FILES`)."""
+    notes: tuple[str, ...]
+    """Sentences on what the report left out or chose, also printed in it."""
+    analysis: Analysis
+    """The statistics behind the files, for callers that show them another way."""
+
+    @property
+    def files(self) -> list[Path]:
+        """Every file written, the report first."""
+        return [self.report, *self.figures.values(), *self.tables.values()]
+
+
+MAX_INDIVIDUAL_AGENTS = 5
+"""Above this many agents Figure 6 shows three examples, as the paper does."""
+
+Plan = tuple[str, str, list[str]]
+"""Figure 6's method, reference agent label, and the labels of the agents drawn."""
+
+
+def _individual_plan(
+    analysis: Analysis,
+    method: str,
+    reference_label: str | None,
+    labels: Sequence[str] | None,
+) -> tuple[Plan | None, list[str]]:
+    """Which agents Figure 6 shows, against which reference agent, and notes on the choice."""
+    order, notes = analysis.method_order, []
+    method_of = dict(zip(analysis.agents["label"], analysis.agents["method"], strict=True))
+    unknown = [
+        x for x in [*(labels or []), reference_label] if x is not None and x not in method_of
+    ]
+    if unknown:
+        raise EpisodeTableError(
+            f"no agent labelled {', '.join(map(repr, unknown))} for Figure 6; pick from "
+            f"{', '.join(method_of)}, or leave it out for the default choice"
+        )
+    if labels:
+        method = method_of[labels[0]]
+    elif method not in order:
+        others = [m for m in order if m != analysis.baseline]
+        if not others:
+            return None, ["Figure 6 is left out: it needs a method besides the baseline."]
+        notes.append(
+            f"Figure 6 shows {method_name(others[0])} agents: there are no "
+            f"{method_name(method)} sessions."
+        )
+        method = others[0]
+    if reference_label is None:
+        candidates = [m for m in [analysis.baseline, *order] if m is not None and m != method]
+        if not candidates:
+            return None, ["Figure 6 is left out: it needs a reference agent of another method."]
+        reference_label = pick_reference_agent(analysis.episodes, candidates[0])
+        notes.append(
+            f"Figure 6's reference is {reference_label}, the {method_name(candidates[0])} "
+            "agent with the median R_T."
+        )
+    if not labels:
+        labels = [x for x, m in method_of.items() if m == method]
+        if len(labels) > MAX_INDIVIDUAL_AGENTS:
+            notes.append(
+                f"Figure 6 draws 3 of the {len(labels)} {method_name(method)} agents, those "
+                "with the lowest, median and highest R_T; its table lists them all."
+            )
+            labels = example_agents(analysis.episodes, method, 3)
+    return (method, reference_label, list(labels)), notes
+
+
+def _heatmap_labels(analysis: Analysis, focus: str) -> tuple[list[str], list[str]]:
+    """Figure 7's agents: all of them, or like the paper one agent per method plus the focus."""
+    agents = agents_of(analysis.episodes)
+    labels = list(agents["label"])
+    if len(labels) <= MAX_HEATMAP_AGENTS:
+        return labels, []
+    chosen = [
+        label
+        for method, group in agents.groupby("method", sort=False)
+        for label in (group["label"] if method == focus else group["label"].iloc[:1])
+    ][:MAX_HEATMAP_AGENTS]
+    which = f"all {method_name(focus)} agents and " if focus in set(agents["method"]) else ""
+    note = (
+        f"Figure 7 shows {len(chosen)} of {len(labels)} agents ({which}the first agent of "
+        f"each other method, as the paper does); {TABLE_FILES['correlation']} has them all."
+    )
+    return chosen, [note]
+
+
+def _describe_test(row: pd.Series, alpha: float) -> str:
+    if np.isnan(row["p"]):
+        return f"t-test undefined (n = {row['n_a']} + {row['n_b']}: needs 2+ varying values)"
+    verdict = "significant" if row["p"] < alpha else "not significant"
+    return f"t = {row['t']:.2f}, p = {md.p_value(row['p'])}, {verdict} at α = {alpha:g}"
+
+
+def _summary(analysis: Analysis, alpha: float) -> list[str]:
+    """The report's first section: each method's R_T and tests in one sentence."""
+    methods = analysis.methods.set_index("method")
+    tests = analysis.t_tests.set_index(["method_a", "method_b", "sample"])
+    base = analysis.baseline
+    lines = []
+    for method in analysis.method_order:
+        row = methods.loc[method]
+        spread = "" if np.isnan(row["R_T_std"]) else f", ± {row['R_T_std']:.2f} across agents"
+        head = (
+            f"- **{row['name']}** ({'baseline, ' if method == base else ''}"
+            f"{row['agents']} agents × {row['episodes']} episodes): R_T = {row['R_T']:.2f}"
+            f"{spread}"
+        )
+        if method == base or base is None:
+            lines.append(head + ".")
+            continue
+        more = "more" if row["R_T"] >= methods.loc[base, "R_T"] else "less"
+        lines.append(
+            f"{head}; it collects {md.signed_pct(row['improvement_pct'])} ({more} reward) "
+            f"compared with {method_name(base)}. Average curves: "
+            f"{_describe_test(tests.loc[(method, base, EPISODE_MEANS)], alpha)}; agents' R_T: "
+            f"{_describe_test(tests.loc[(method, base, AGENT_TOTALS)], alpha)}."
+        )
+    for (a, b, sample), row in tests.iterrows():
+        if base not in (a, b) and sample == EPISODE_MEANS:
+            per_agent = tests.loc[(a, b, AGENT_TOTALS)]
+            lines.append(
+                f"- {method_name(a)} vs {method_name(b)}: average curves "
+                f"{_describe_test(row, alpha)}; agents' R_T {_describe_test(per_agent, alpha)}."
+            )
+    if base is not None and methods.loc[base, "R_T"] <= 0:
+        lines.append(
+            f"- {method_name(base)}'s R_T is not positive, so percentages relative to it "
+            "are hard to read: compare the R_T values themselves."
+        )
+    if analysis.epsilon_reached is not None:
+        reached = ", ".join(
+            f"{method_name(m)} at episode {int(e)}"
+            if not np.isnan(e)
+            else f"{method_name(m)} never"
+            for m, e in analysis.epsilon_reached.items()
+        )
+        lines.append(f"- Mean epsilon reaches 1 %: {reached} (the paper: near episode 150).")
+    return lines
+
+
+def _methods_table(analysis: Analysis) -> str:
+    columns = {
+        "name": "method",
+        "agents": "agents",
+        "episodes": "episodes",
+        "R_T": "R_T",
+        "R_T_std": "std of agents' R_T",
+        "R_T_min": "min",
+        "R_T_max": "max",
+        "improvement_pct": "improvement",
+    }
+    for column in analysis.methods.columns:
+        if column.endswith("_per_episode"):
+            columns[column] = column.removesuffix("_per_episode").replace("_", " ") + " / episode"
+    formats = {c: md.fixed(2) for c in columns if c not in ("name", "agents", "episodes")}
+    formats["improvement_pct"] = md.signed_pct
+    return md.table(analysis.methods, columns, formats)
+
+
+def _tests_table(analysis: Analysis, alpha: float) -> str:
+    frame = analysis.t_tests.copy()
+    frame["pair"] = [
+        f"{method_name(a)} vs {method_name(b)}"
+        for a, b in zip(frame.method_a, frame.method_b, strict=True)
+    ]
+    frame["what"] = frame["sample"].map(
+        {EPISODE_MEANS: "average curves (Table 2)", AGENT_TOTALS: "agents' R_T"}
+    )
+    frame["n"] = [f"{a} + {b}" for a, b in zip(frame.n_a, frame.n_b, strict=True)]
+    frame["significant"] = [
+        "–" if np.isnan(p) else ("yes" if p < alpha else "no") for p in frame["p"]
+    ]
+    columns = {
+        "pair": "pair (a vs b)",
+        "what": "samples compared",
+        "n": "n",
+        "mean_a": "mean a",
+        "mean_b": "mean b",
+        "t": "t",
+        "df": "df",
+        "p": "p",
+        "significant": f"p < {alpha:g}",
+    }
+    formats = {
+        "mean_a": md.fixed(3),
+        "mean_b": md.fixed(3),
+        "t": md.fixed(4),
+        "df": md.fixed(0),
+        "p": md.p_value,
+    }
+    return md.table(frame, columns, formats)
+
+
+def _paper_table(analysis: Analysis) -> str:
+    frame = analysis.paper.copy()
+    for column in ("paper", "ours"):
+        frame[column] = [
+            md.p_value(v)
+            if q.startswith("p ")
+            else (md.fixed(4)(v) if q.startswith("|t|") else md.fixed(2)(v))
+            for q, v in zip(frame["quantity"], frame[column], strict=True)
+        ]
+    columns = {"quantity": "quantity", "paper": "paper", "ours": "ours", "sample": "our sample"}
+    return md.table(frame, columns)
+
+
+def _agents_table(analysis: Analysis, labels: Sequence[str], reference: str | None) -> str:
+    frame = analysis.agents.set_index("label").loc[list(labels)].reset_index()
+    frame["name"] = frame["method"].map(method_name)
+    columns = {"label": "agent", "name": "method"}
+    if "seed" in frame:
+        columns["seed"] = "seed"
+    columns |= {"R_T": "R_T", "improvement_pct": "vs baseline method"}
+    formats = {"R_T": md.fixed(2), "improvement_pct": md.signed_pct, "seed": md.whole}
+    if reference is not None:
+        base = float(analysis.agents.set_index("label").loc[reference, "R_T"])
+        frame["vs_reference"] = [improvement_pct(r, base) for r in frame["R_T"]]
+        columns["vs_reference"] = f"vs {reference}"
+        formats["vs_reference"] = md.signed_pct
+    return md.table(frame, columns, formats)
+
+
+def _correlation_summary(analysis: Analysis) -> str:
+    frame = analysis.method_correlations.copy()
+    frame["pair"] = [
+        f"{method_name(a)} – {method_name(b)}"
+        for a, b in zip(frame.method_a, frame.method_b, strict=True)
+    ]
+    columns = {"pair": "agents of", "pairs": "pairs of agents", "mean_r": "mean Pearson's r"}
+    return md.table(frame, columns, {"mean_r": md.fixed(3)})
+
+
+def _agent_counts(analysis: Analysis) -> str:
+    return ", ".join(
+        f"{n} {method_name(m)}"
+        for m, n in zip(analysis.methods.method, analysis.methods.agents, strict=True)
+    )
+
+
+def _scale_note(analysis: Analysis) -> str:
+    if not len(analysis.paper):
+        return "None of the paper's methods (autonomous, agent, human) is in these sessions."
+    methods = analysis.methods
+    if (methods["episodes"] == PAPER_EPISODES).all() and (methods["agents"] == PAPER_AGENTS).all():
+        return "Same scale as the paper: 10 agents per method, 300 episodes each."
+    if analysis.n_episodes == PAPER_EPISODES:
+        return (
+            f"Same number of episodes as the paper ({PAPER_EPISODES}); the paper had "
+            f"{PAPER_AGENTS} agents per method, these runs {_agent_counts(analysis)}."
+        )
+    return (
+        f"The paper ran {PAPER_AGENTS} agents × {PAPER_EPISODES} episodes per method; these "
+        f"runs have {analysis.n_episodes} episodes per agent. R_T grows with the number of "
+        "episodes, so compare the improvement in percent and the direction and significance "
+        "of the tests, not R_T itself."
+    )
+
+
+def write_report(
+    episodes_df: pd.DataFrame,
+    out_dir: str | Path,
+    *,
+    title: str = "IDeepRL study: the paper's analysis",
+    baseline: str | None = "autonomous",
+    notes: str | Sequence[str] | None = None,
+    n_episodes: int | None = None,
+    individual_method: str = "human",
+    individual_labels: Sequence[str] | None = None,
+    reference_label: str | None = None,
+    smoothing: int = 1,
+    alpha: float = 0.05,
+    equal_var: bool = True,
+) -> ReportResult:
+    """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
+
+    `episodes_df` follows the contract in `server.analysis.episodes` (one row per session
+    and episode). `notes` (text or a list of lines: the command, versions, wall time) go
+    under the title. `n_episodes` cuts every agent to its first N episodes;
+    `individual_method`, `individual_labels` and `reference_label` choose Figure 6's
+    agents (by default up to three human-IDeepRL examples against the median autonomous
+    agent); `smoothing` is a moving-average window for Figures 5 and 6 only. Existing
+    files of the same names are replaced; nothing is written if the table is invalid.
+    """
+    analysis = analyze(episodes_df, baseline=baseline, n_episodes=n_episodes, equal_var=equal_var)
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise EpisodeTableError(f"{out} is a file; pass a folder for the report")
+    plan, plan_notes = _individual_plan(
+        analysis, individual_method, reference_label, individual_labels
+    )
+    heatmap_labels, heatmap_notes = _heatmap_labels(analysis, plan[0] if plan else "")
+    report_notes = [*plan_notes, *heatmap_notes]
+    out.mkdir(parents=True, exist_ok=True)
+
+    tables = {
+        "methods": analysis.methods,
+        "agents": analysis.agents,
+        "t_tests": analysis.t_tests,
+        "correlation": analysis.correlation,
+        "method_correlations": analysis.method_correlations,
+        "curves": analysis.curves,
+        "paper": analysis.paper,
+    }
+    table_paths = {}
+    for name, frame in tables.items():
+        table_paths[name] = out / TABLE_FILES[name]
+        frame.to_csv(table_paths[name], index=name == "correlation")
+
+    figures = {
+        "reward_per_method": plot_method_curves(
+            analysis.episodes, baseline=baseline, smoothing=smoothing
+        ),
+        "correlation": plot_correlation(analysis.correlation.loc[heatmap_labels, heatmap_labels]),
+        "cumulative_reward": plot_cumulative_reward(analysis.episodes, baseline=baseline),
+    }
+    if plan is not None:
+        figures["individual_agents"] = plot_individual_agents(
+            analysis.episodes,
+            method=plan[0],
+            labels=plan[2],
+            reference_label=plan[1],
+            smoothing=smoothing,
+        )
+    if "epsilon" in analysis.episodes:
+        figures["epsilon"] = plot_epsilon(analysis.episodes, baseline=baseline)
+    figure_paths = {
+        name: save_figure(figures[name], out / FIGURE_FILES[name])
+        for name in FIGURE_FILES
+        if name in figures
+    }
+
+    report = out / REPORT_FILE
+    report.write_text(
+        _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var),
+        encoding="utf-8",
+    )
+    return ReportResult(out, report, figure_paths, table_paths, tuple(report_notes), analysis)
+
+
+def _markdown(
+    analysis: Analysis,
+    title: str,
+    notes: str | Sequence[str] | None,
+    plan: Plan | None,
+    report_notes: list[str],
+    alpha: float,
+    smoothing: int,
+    equal_var: bool,
+) -> str:
+    agents = agents_of(analysis.episodes)
+    out = [f"# {title}", ""]
+    if notes:
+        out += [notes if isinstance(notes, str) else "\n".join(f"- {n}" for n in notes), ""]
+    out += [
+        f"{len(agents)} agents in {len(analysis.method_order)} methods, "
+        f"{analysis.n_episodes} episodes each. Baseline: "
+        f"{method_name(analysis.baseline) if analysis.baseline else 'none'}. "
+        "R_T is the total collected reward over all episodes.",
+        "",
+        "## In short",
+        "",
+        *_summary(analysis, alpha),
+        *(f"- {n}" for n in report_notes),
+        "",
+        "## Average collected reward per method (the paper's Figure 5)",
+        "",
+        "![Figure 5: average collected reward per episode per method]"
+        f"({FIGURE_FILES['reward_per_method']})",
+        "",
+        "Lines: the mean over a method's agents of the reward collected in each episode; "
+        "shaded: ±1 sample standard deviation across those agents"
+        + (f"; smoothed by a moving average over {smoothing} episodes." if smoothing > 1 else ".")
+        + " A method's R_T is the sum of its line over the episodes, which is also the mean of "
+        "its agents' R_T.",
+        "",
+        _methods_table(analysis),
+        "",
+        f"![Cumulative collected reward per method]({FIGURE_FILES['cumulative_reward']})",
+        "",
+    ]
+    if plan is not None:
+        method, reference, _ = plan
+        labels = [*agents.loc[agents["method"] == method, "label"], reference]
+        out += [
+            "## Individual agents against a reference (the paper's Figure 6)",
+            "",
+            f"![Figure 6: {method_name(method)} agents against {reference}]"
+            f"({FIGURE_FILES['individual_agents']})",
+            "",
+            _agents_table(analysis, labels, reference),
+            "",
+        ]
+    out += [
+        "## Student's t-tests between methods (the paper's Table 2)",
+        "",
+        "Each pair of methods is compared twice, with the independent two-sample "
+        + (
+            "Student t-test (two-sided, equal variances, `scipy.stats.ttest_ind`):"
+            if equal_var
+            else "Welch t-test (two-sided, unequal variances, `scipy.stats.ttest_ind`):"
+        ),
+        "",
+        "1. **Average curves** — the paper's Table 2: each method's average collected reward "
+        f"per episode, one value per episode ({analysis.n_episodes} per method). The paper's "
+        "t = 7.6829, p = 6.3947e-14 is this test with 300 + 300 values (598 degrees of "
+        "freedom). Successive episodes of a learning curve are not independent, so these "
+        "p-values are smaller than a test across runs would give.",
+        "2. **Agents' R_T** — one value per agent: the test across independent runs.",
+        "",
+        "t > 0 means the first method's sample (a) has the larger mean; against the "
+        "baseline, t > 0 means more reward than the baseline (the paper prints |t|).",
+        "",
+        _tests_table(analysis, alpha),
+        "",
+        "## Correlation between agents (the paper's Figure 7)",
+        "",
+        f"![Figure 7: Pearson's correlation between agents]({FIGURE_FILES['correlation']})",
+        "",
+        "Pearson's r between two agents' collected reward per episode over the episodes. "
+        "Mean r between the agents of two methods:",
+        "",
+        _correlation_summary(analysis),
+        "",
+    ]
+    if analysis.epsilon_reached is not None:
+        out += [
+            "## Exploration",
+            "",
+            f"![Epsilon per episode]({FIGURE_FILES['epsilon']})",
+            "",
+        ]
+    out += ["## Compared with the paper", "", _scale_note(analysis), ""]
+    if len(analysis.paper):
+        out += [_paper_table(analysis), ""]
+    out += [
+        "## R_T per agent",
+        "",
+        _agents_table(analysis, list(agents["label"]), None),
+        "",
+        "## Files",
+        "",
+        *(f"- [{f}]({f})" for f in TABLE_FILES.values()),
+        "",
+        f"numpy {np.__version__}, pandas {pd.__version__}, scipy {scipy.__version__}, "
+        f"matplotlib {matplotlib.__version__}, Python {platform.python_version()}.",
+        "",
+    ]
+    return "\n".join(out)
