@@ -1,0 +1,206 @@
+"""The Gymnasium environment: thin glue between the arm, the scene, the task and the camera."""
+
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.error import ResetNeeded
+
+from sim.actions import ACTION_NAMES, Action
+from sim.bodies import BodySpec, MotionFrame, Pose
+from sim.camera import IMAGE_SIZE, Camera
+from sim.layout import Layout
+from sim.robot import SuctionArm
+from sim.rules import SortRule, SortRuleSpec
+from sim.scene import Scene
+from sim.task import SortingTask, StepEvents
+from sim.world import World
+
+MOTIONS = ("physics", "fast")
+FAST_MOVE_SECONDS = 0.5
+"""Playback time a viewer gets for a fast-mode move (which takes no simulated time)."""
+
+
+class SortingEnv(gym.Env[np.ndarray, np.int64]):
+    """The paper's sorting task: a 64x64 RGB image in, one of four actions out.
+
+    `motion="physics"` moves the arm through simulated steps (people watch it);
+    `motion="fast"` sets the same poses directly (batch training). Both obey the same
+    rules and render through the same camera.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(
+        self,
+        motion: str = "physics",
+        sort_rule: SortRuleSpec | SortRule = "color",
+        max_episode_steps: int = 250,
+        record_motion: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        if motion not in MOTIONS:
+            raise ValueError(f"motion must be 'physics' or 'fast', got {motion!r}")
+        if (
+            isinstance(max_episode_steps, bool)
+            or not isinstance(max_episode_steps, int)
+            or (max_episode_steps < 1)
+        ):
+            raise ValueError(f"max_episode_steps must be a positive int, got {max_episode_steps!r}")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.motion = motion
+        self.sort_rule = SortRule.parse(sort_rule)
+        self.max_episode_steps = max_episode_steps
+        self.record_motion = record_motion
+        self.render_mode = render_mode
+        self.observation_space = spaces.Box(0, 255, (IMAGE_SIZE, IMAGE_SIZE, 3), np.uint8)
+        self.action_space = spaces.Discrete(len(Action))
+
+        self.layout = Layout()
+        self._world = World()
+        self._build()
+        self._camera = Camera(self._world, self.layout.camera)
+        self._task = SortingTask(
+            self.sort_rule, {obj.name: (obj.shape, obj.color) for obj in self._scene.objects}
+        )
+        self._slots_used = {"left": 0, "right": 0}
+        self._needs_reset = True
+        self._obs = np.zeros(self.observation_space.shape, np.uint8)
+        self.last_motion: list[MotionFrame] = []
+        """With `record_motion=True`: the moving bodies along the last step (or reset)."""
+
+    # -- Gymnasium API ------------------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        if self.motion == "physics":
+            # Contact caches, sleeping timers and solver warm starts survive PyBullet's
+            # saveState/restoreState; only a rebuilt world continues exactly as a new one.
+            self._build()
+        else:
+            self._arm.reset()
+        self._scene.place_objects(self.np_random)
+        self._task.reset()
+        self._slots_used = {"left": 0, "right": 0}
+        self._needs_reset = False
+        if self.record_motion:
+            self._world.start_recording()
+            self.last_motion = self._world.stop_recording()
+        self._obs = self._camera.image()
+        return self._obs.copy(), self._info()
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        action = _parse_action(action)
+        if self._needs_reset:
+            raise ResetNeeded(
+                "the episode has ended (or never started): call env.reset() before env.step()"
+            )
+        if self.record_motion:
+            self._world.start_recording()
+        events, moved = self._act(action)
+        lost = tuple(
+            name
+            for name in self._task.remaining
+            if name != events.grabbed
+            and not self._scene.is_on(self._objects[name], self.layout.center_table)
+        )
+        events = StepEvents(events.grabbed, events.placed, lost)
+        reward, terminated = self._task.update(events)
+        truncated = not terminated and self._task.episode_step >= self.max_episode_steps
+        self._needs_reset = terminated or truncated
+        if self.record_motion:
+            pause = FAST_MOVE_SECONDS if moved and self.motion == "fast" else 0.0
+            self.last_motion = self._world.stop_recording(pause)
+        self._obs = self._camera.image()
+        return self._obs.copy(), reward, terminated, truncated, self._info()
+
+    def _build(self) -> None:
+        """The whole scene, from an empty simulation."""
+        self._world.reset()
+        self._scene = Scene(self._world, self.layout)
+        self._objects = {obj.name: obj for obj in self._scene.objects}
+        self._arm = SuctionArm(
+            self._world,
+            self.layout,
+            physics=self.motion == "physics",
+            half_heights={obj.body: obj.half_height for obj in self._scene.objects},
+        )
+
+    def render(self) -> np.ndarray | None:
+        """The agent's last observation, for `render_mode="rgb_array"`."""
+        return self._obs.copy() if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        self._world.close()
+
+    # -- scene mirroring ----------------------------------------------------------------
+
+    def scene_bodies(self) -> list[BodySpec]:
+        """Every body's name, shape and colour (the same for the env's whole life)."""
+        return list(self._world.specs)
+
+    def body_poses(self) -> dict[str, Pose]:
+        """Every body's current world pose, by name."""
+        return self._world.poses()
+
+    def visible_pixels(self) -> dict[str, int]:
+        """How many of the camera's pixels each named body covers now (for checking the
+        camera setup; renders once more)."""
+        by_part = {(part.body, part.link): name for name, part in self._world.parts.items()}
+        by_part[(self._arm.body, -1)] = "arm/link_0"
+        counts = self._camera.visible_pixels()
+        return {name: counts.get(key, 0) for key, name in by_part.items()}
+
+    # -- the actions --------------------------------------------------------------------
+
+    def _act(self, action: Action) -> tuple[StepEvents, bool]:
+        """Carry out one action (SPEC 1); returns what happened and whether the arm moved."""
+        arm = self._arm
+        held = None if arm.held is None else self._scene.by_body[arm.held].name
+        if action == Action.GRAB:
+            if held is not None:
+                if arm.station == "center":
+                    return StepEvents(), False
+                arm.go_to("center")
+                return StepEvents(), True
+            if not self._task.remaining:
+                return StepEvents(), False
+            remaining = self._task.remaining
+            target = remaining[int(self.np_random.integers(len(remaining)))]
+            picked = arm.grab(
+                self._objects[target].body, [self._objects[name].body for name in remaining]
+            )
+            grabbed = None if picked is None else self._scene.by_body[picked].name
+            return StepEvents(grabbed=grabbed), True
+        if action in (Action.MOVE_RIGHT, Action.MOVE_LEFT):
+            station = "right" if action == Action.MOVE_RIGHT else "left"
+            if arm.station == station:
+                return StepEvents(), False
+            arm.go_to(station)
+            return StepEvents(), True
+        if held is None or arm.station == "center":
+            return StepEvents(), False
+        side = arm.station
+        arm.drop(side, self._slots_used[side])
+        self._slots_used[side] += 1
+        return StepEvents(placed=(held, side)), True  # type: ignore[arg-type]
+
+    def _info(self) -> dict[str, Any]:
+        return {"station": self._arm.station, **self._task.info()}
+
+
+def _parse_action(action: Any) -> Action:
+    """The action as an `Action`, or a `ValueError` that says what is allowed."""
+    value = action
+    if isinstance(value, np.ndarray) and value.shape == ():
+        value = value.item()
+    valid = ", ".join(f"{i} ({name})" for i, name in enumerate(ACTION_NAMES))
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer):
+        raise ValueError(f"action must be an integer, one of {valid}; got {action!r}")
+    if not 0 <= int(value) < len(Action):
+        raise ValueError(f"action must be one of {valid}; got {action!r}")
+    return Action(int(value))

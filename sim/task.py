@@ -1,0 +1,99 @@
+"""The sorting task's bookkeeping and reward (the paper's Eq. "reward", SPEC 1).
+
+Knows objects by name and (shape, color) only, never PyBullet: the env reports what the
+arm did in a step (`StepEvents`), the task says what it earned.
+"""
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from sim.rules import Side, SortRule
+
+REWARD_COMPLETE = 1.0
+"""The placement that completes the task: center empty, every placement correct."""
+REWARD_CORRECT = 0.4
+"""Any other correct placement."""
+REWARD_WRONG = -1.0
+"""An incorrect placement; it ends the episode."""
+STEP_PENALTY = -0.01
+"""A step with no placement after the `MIN_STEPS`-th."""
+MIN_STEPS = 18
+"""6 objects x 3 actions: the shortest episode that sorts everything."""
+
+
+@dataclass(frozen=True)
+class StepEvents:
+    """What happened to the objects during one step."""
+
+    grabbed: str | None = None
+    """The object picked from the center table."""
+    placed: tuple[str, Side] | None = None
+    """The object put down and the side table it went to."""
+    lost: tuple[str, ...] = ()
+    """Objects that left the center table other than by being grabbed."""
+
+
+@dataclass
+class SortingTask:
+    """Which objects are where, and the reward for each step."""
+
+    rule: SortRule
+    """Where each object belongs."""
+    kinds: dict[str, tuple[str, str]]
+    """(shape, color) of each object, by name, in a fixed order."""
+    remaining: list[str] = field(default_factory=list)
+    held: str | None = None
+    placed_correct: int = 0
+    misplaced: int = 0
+    lost: int = 0
+    episode_step: int = 0
+    succeeded: bool = False
+
+    def reset(self) -> None:
+        self.remaining = list(self.kinds)
+        self.held = None
+        self.placed_correct = self.misplaced = self.lost = self.episode_step = 0
+        self.succeeded = False
+
+    def update(self, events: StepEvents) -> tuple[float, bool]:
+        """Book one step's events; returns (reward, terminated)."""
+        self.episode_step += 1
+        if events.grabbed is not None:
+            assert self.held is None and events.grabbed in self.remaining
+            self.remaining.remove(events.grabbed)
+            self.held = events.grabbed
+        for name in events.lost:
+            assert name in self.remaining
+            self.remaining.remove(name)
+            self.lost += 1
+        reward = STEP_PENALTY if self.episode_step > MIN_STEPS else 0.0
+        if events.placed is not None:
+            name, side = events.placed
+            assert name == self.held
+            self.held = None
+            if self.rule.side(*self.kinds[name]) != side:
+                self.misplaced += 1
+                return REWARD_WRONG, True
+            self.placed_correct += 1
+            reward = REWARD_COMPLETE if self._complete() else REWARD_CORRECT
+        self.succeeded = self._complete()
+        return reward, self.succeeded
+
+    def _complete(self) -> bool:
+        return not self.remaining and self.held is None and self.misplaced == 0
+
+    def _kind(self, name: str) -> dict[str, str]:
+        shape, color = self.kinds[name]
+        return {"shape": shape, "color": color}
+
+    def info(self) -> dict[str, Any]:
+        """The ground truth the env reports in `info` (fresh objects, safe to keep)."""
+        return {
+            "held": None if self.held is None else self._kind(self.held),
+            "remaining": [self._kind(name) for name in self.remaining],
+            "placed_correct": self.placed_correct,
+            "misplaced": self.misplaced,
+            "lost": self.lost,
+            "episode_step": self.episode_step,
+            "is_success": self.succeeded,
+        }
