@@ -90,6 +90,9 @@ class ReplayMemory:
         truncated: bool,
     ) -> None:
         """Store one transition; `truncated` means the episode was cut and s' is needed."""
+        for image in (state, next_state):
+            if image.shape != self.frame_shape:
+                raise ValueError(f"frames must have shape {self.frame_shape}, got {image.shape}")
         t = self.added
         row = t % self.capacity
         slot = t % self._ring
@@ -110,11 +113,11 @@ class ReplayMemory:
         self.added = t + 1
 
     def _spare_slot(self, t: int) -> int:
-        spares = len(self.spare_owner)
-        index = self._spares_used % spares
-        if self.spare_owner[index] > t - self.capacity:
+        index = self._spares_used % len(self.spare_owner)
+        owner = self.spare_owner[index]
+        if owner >= 0 and owner > t - self.capacity:  # still holds a live transition's s'
+            index = len(self.spare_owner)
             self._grow_spares()
-            spares, index = len(self.spare_owner), len(self.spare_owner) // 2
         self.spare_owner[index] = t
         self._spares_used = index + 1
         return self._ring + index

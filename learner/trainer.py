@@ -259,12 +259,15 @@ class Trainer:
             if handler is not None and handler(record) is False:
                 self._stopped = True
 
-    def save_checkpoint(self, path: str | Path) -> None:
-        """Everything needed to continue exactly as if never stopped."""
+    def save_checkpoint(self, path: str | Path, metadata: dict[str, Any] | None = None) -> None:
+        """Everything needed to continue exactly as if never stopped; `metadata` (plain
+        JSON-like values) is stored alongside for the caller, e.g. how to rebuild the
+        advisor."""
         episode = self._episode
         write_checkpoint(
             path,
             {
+                "metadata": metadata or {},
                 "config": self.config.to_dict(),
                 "seed": self.seed,
                 "agent": self.agent.state_dict(),
