@@ -10,7 +10,7 @@ from fastapi.responses import JSONResponse
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
-from server.routes import ROUTERS
+from server.routes import ROUTERS, reports
 from server.services.errors import Invalid, ServiceError
 from server.sessions.hub import Hub
 from server.sessions.manager import SessionManager
@@ -62,6 +62,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.participant_tokens = {}
     for router in ROUTERS:
         app.include_router(router)
+    app.include_router(reports.router)  # issue 6: a study's report
 
     @app.exception_handler(ServiceError)
     async def service_error(_: Request, error: ServiceError) -> JSONResponse:
