@@ -38,9 +38,22 @@ async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantStat
 
 @router.post("/advice")
 async def give_advice(
-    session: ParticipantDep, manager: ManagerDep, body: AdviceCreate
+    session: ParticipantDep,
+    manager: ManagerDep,
+    body: AdviceCreate,
+    wait: float = Query(
+        default=0.0,
+        ge=0.0,
+        le=MAX_WAIT_S,
+        description="Seconds to wait for what happens next (the next request, usually) and "
+        "return it as `state`: one round trip per advice.",
+    ),
 ) -> AdviceReceipt:
-    return await advising.submit_advice(manager, session, body)
+    receipt = await advising.submit_advice(manager, session, body)
+    if wait > 0:
+        await manager.wait_change(session.id, receipt.version, wait)
+        receipt.state = advising.participant_state(manager, session)
+    return receipt
 
 
 @router.get(
