@@ -205,6 +205,7 @@ class _Run:
     def _on_pause(self, paused: bool, at_step_boundary: bool) -> None:
         if paused and at_step_boundary:
             self.checkpoint()
+        self.send_progress()
         with self.factory() as db:
             set_status(
                 db, self.session_id, Status.paused if paused else Status.running, token=self.token
