@@ -1,12 +1,14 @@
 """What a participant's page calls, with the token from their link (one session only)."""
 
+import contextlib
+
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
 from server.db.models import Status
 from server.deps import ManagerDep, ParticipantDep
 from server.schemas.participant import AdviceCreate, AdviceReceipt, ParticipantState
-from server.services.errors import NotFound
+from server.services.errors import Conflict, NotFound
 from server.sessions import advising
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
@@ -32,7 +34,8 @@ async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantStat
     """Start the session when the participant is ready (after consent and induction);
     a session already under way is left as it is."""
     if session.id not in manager.handles and manager.status(session.id) == Status.created:
-        await manager.start(session.id)
+        with contextlib.suppress(Conflict):  # started by a second click meanwhile
+            await manager.start(session.id)
     return advising.participant_state(manager, session)
 
 
