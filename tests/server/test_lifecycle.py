@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 
 import httpx
@@ -82,3 +84,17 @@ def test_an_idle_participant_abandons_the_session_which_resumes(
         assert participant.advise(index, 0).status_code == 200
     wait_for_status(api, session["id"], {"finished"})
     participant.close()
+
+
+def test_a_killed_worker_is_noticed_at_once(server: LiveServer, api: httpx.Client) -> None:
+    study = api.post("/api/studies", json={"name": "killed worker"}).json()
+    session = api.post(
+        f"/api/studies/{study['id']}/sessions",
+        json=session_body("random", advice_budget=20, episodes=500),
+    ).json()
+    api.post(f"/api/sessions/{session['id']}/start")
+    wait_step(api, session["id"], 0)
+    os.kill(api.get(f"/api/sessions/{session['id']}").json()["worker_pid"], signal.SIGKILL)
+    interrupted = wait_for_status(api, session["id"], {"interrupted"}, timeout=30)
+    assert "exited unexpectedly" in interrupted["status_detail"]
+    assert api.post(f"/api/sessions/{session['id']}/stop").json()["status"] == "stopped"
