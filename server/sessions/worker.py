@@ -284,8 +284,12 @@ def run_session(
     factory = make_session_factory(make_engine(database_url))
     if worker_token is None:
         with factory() as db:
-            status = get_session(db, session_id).status
-            worker_token = claim(db, session_id, resume=status != Status.created)
+            session = get_session(db, session_id)
+            if session.method == Method.human and conn is None:
+                raise Conflict(
+                    f"session {session_id} is a human session: start it through the server"
+                )
+            worker_token = claim(db, session_id, resume=session.status != Status.created)
     try:
         run = _Run(session_id, database_url, options, worker_token, conn)
         return run.run().value
