@@ -58,7 +58,7 @@ class Status(enum.StrEnum):
 
 
 LIVE_STATUSES = (Status.running, Status.paused)
-RESUMABLE_STATUSES = (Status.stopped, Status.interrupted, Status.abandoned)
+RESUMABLE_STATUSES = (Status.stopped, Status.interrupted, Status.abandoned, Status.failed)
 
 
 class Study(Base):

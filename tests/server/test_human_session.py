@@ -69,6 +69,8 @@ def test_a_participant_gives_100_advice_each_stored_once_and_the_101st_is_refuse
 
     wait_for_status(api, created["id"], {"finished"})
     assert participant.advise(BUDGET, 0).status_code == 409
+    stored = api.get(f"/api/sessions/{created['id']}/advice").json()
+    assert all(a["greedy_action"] in range(4) for a in stored), "the learner's own choice"
     participant.close()
 
 

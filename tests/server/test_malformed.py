@@ -76,6 +76,13 @@ def test_invalid_session_bodies_say_which_field_and_why(server: LiveServer, stud
         )
         assert response.status_code == 422
         assert response.json()["detail"][0]["loc"] == ["body", "advisor_checkpoint"]
+        response = api.post(
+            f"/api/studies/{study}/sessions",
+            json={"method": "oracle", "advice_budget": 500, "config": {"pretraining_steps": 100}},
+        )
+        assert response.status_code == 422
+        [error] = response.json()["detail"]
+        assert error["loc"] == ["body", "advice_budget"] and "pretraining" in error["msg"]
 
 
 def test_participant_endpoints_reject_bad_queries(server: LiveServer) -> None:
