@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from sqlalchemy import select
@@ -22,7 +22,6 @@ from server.batch.progress import BatchProgress
 from server.batch.sessions import (
     body_identity,
     ensure_session,
-    failed_sessions,
     find_session,
     take_back,
 )
@@ -82,8 +81,6 @@ class RunState:
     """Why it failed or stopped."""
     done_before: bool = False
     """It had finished before this invocation."""
-    failed_before: list[int] = field(default_factory=list)
-    """Sessions of this run that failed earlier (kept; a new session runs)."""
 
 
 @dataclass(frozen=True)
@@ -146,7 +143,6 @@ class BatchRunner:
     # --- the runs' sessions ------------------------------------------------------------
     def _ensure(self, db: Session, state: RunState) -> None:
         body = session_body(self.spec, state.run, self.advisor_checkpoint)
-        state.failed_before = failed_sessions(db, self.study_id, body)
         session, _ = ensure_session(db, self.study_id, body)
         state.session_id, state.status = session.id, session.status
         state.done_before = session.status == Status.finished.value
@@ -194,7 +190,15 @@ class BatchRunner:
         """Every run's config checked before any starts: an `agent` run's session is only
         created after the advisor has trained, which should not be when a typo shows."""
         for state in self.states:
-            body_identity(session_body(self.spec, state.run, self.advisor_checkpoint or "-"))
+            body = session_body(self.spec, state.run, self.advisor_checkpoint or "-")
+            config = body_identity(body)["config"]
+            early = body.method != "autonomous" and body.strategy == "early"
+            if early and config["advice_budget"] > config["pretraining_steps"]:
+                raise BatchError(
+                    f"early advising gives its {config['advice_budget']} advice at the end of "
+                    f"pretraining, which has only {config['pretraining_steps']} steps; lower "
+                    "--advice-budget or raise --pretraining-steps"
+                )
 
     def prepare(self) -> None:
         """Find or create every run's session; take back the ones whose worker died."""
@@ -345,11 +349,10 @@ class BatchRunner:
             f"({methods}{advisor}): {parts}"
         )
         for state in self.states:
-            if state.failed_before:
-                ids = ", ".join(map(str, state.failed_before))
+            if state.status == Status.failed.value:
                 self.log(
-                    f"  {state.run.name} seed {state.run.seed}: session(s) {ids} failed "
-                    "before; a new session runs (see their status_detail)"
+                    f"  {state.run.name} seed {state.run.seed}: session {state.session_id} "
+                    "failed before; it resumes from its last checkpoint"
                 )
 
 

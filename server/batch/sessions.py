@@ -31,7 +31,8 @@ _RANK = {
     **{s.value: 2 for s in RESUMABLE_STATUSES},
     Status.created.value: 3,
 }
-"""Which of several matching sessions a run is: the furthest along; failed ones never."""
+"""Which of several matching sessions a run is: the furthest along (a failed one resumes
+from its last checkpoint, like an interrupted one)."""
 
 
 def _plain(value: Any) -> Any:
@@ -80,7 +81,7 @@ def session_identity(session: StudySession) -> dict[str, Any]:
 
 def find_session(db: Session, study_id: int, body: SessionCreate) -> StudySession | None:
     """The study's session for this run, the furthest along if several match; None if the
-    run has none yet (or only failed ones)."""
+    run has none yet."""
     wanted = body_identity(body)
     query = select(StudySession).where(
         StudySession.study_id == study_id,
@@ -101,18 +102,6 @@ def ensure_session(db: Session, study_id: int, body: SessionCreate) -> tuple[Stu
     if body.advisor_checkpoint is not None:
         body = body.model_copy(update={"advisor_checkpoint": _path(body.advisor_checkpoint)})
     return create_session(db, study_id, body), True
-
-
-def failed_sessions(db: Session, study_id: int, body: SessionCreate) -> list[int]:
-    """Ids of this run's sessions that failed (kept for their error; a new one runs)."""
-    wanted = body_identity(body)
-    query = select(StudySession).where(
-        StudySession.study_id == study_id,
-        StudySession.method == str(body.method),
-        StudySession.seed == body.seed,
-        StudySession.status == Status.failed.value,
-    )
-    return [s.id for s in db.scalars(query) if session_identity(s) == wanted]
 
 
 def _pid_alive(pid: int) -> bool:

@@ -25,6 +25,7 @@ from tests.server.batch.helpers import in_process as run
         (["--advisor-checkpoint", "/no/such.pt"], "no advisor checkpoint at /no/such.pt"),
         (["--set", "no_such_field=1"], "unknown config field(s) no_such_field"),
         (["--address", "ray://x:1"], "--address is for the Ray backend"),
+        (["--advice-budget", "30"], "early advising gives its 30 advice at the end of pretraining"),
     ],
 )
 def test_bad_batch_options_are_refused_with_a_reason(
