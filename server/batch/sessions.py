@@ -66,11 +66,22 @@ def body_identity(body: SessionCreate) -> dict[str, Any]:
     }
 
 
+def _stored_config(config: dict[str, Any]) -> dict[str, Any]:
+    """A stored learner config as the learner reads it back: fields added to the learner
+    since it was stored take their defaults (as when a checkpoint is resumed)."""
+    from learner import DQNConfig
+
+    try:
+        return _plain(DQNConfig.from_dict(config).to_dict())
+    except (ValueError, TypeError):  # a field the learner no longer has: never the same run
+        return _plain(config)
+
+
 def session_identity(session: StudySession) -> dict[str, Any]:
     return {
         "method": session.method,
         "seed": session.seed,
-        "config": _plain(session.config),
+        "config": _stored_config(session.config),
         "sort_rule": _plain(session.sort_rule),
         "strategy": session.strategy,
         "advisor_checkpoint": _path(session.advisor_checkpoint),
