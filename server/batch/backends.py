@@ -26,6 +26,8 @@ ROOT = Path(__file__).absolute().parents[2]
 STOP_WAIT_S = 60.0
 KNOWN_ENDINGS = ("finished", "failed", "stopped", "interrupted", "abandoned", "lost")
 """What `run_session` returns; anything else is a problem to report."""
+NOT_RUN = "not run: "
+"""How a worker reports a session it could not claim (another runner has it)."""
 
 
 def usable_cores() -> int:
@@ -92,7 +94,7 @@ def _worker_loop(database_url: str, options: WorkerOptions, conn: Connection) ->
         try:
             status = run_session(message.session_id, database_url, options, conn=conn)
         except Exception as error:  # could not even claim it (e.g. someone else runs it)
-            status = f"not run: {error}"
+            status = f"{NOT_RUN}{error}"
         gc.collect()  # the last run's memory and PyBullet world, before the next
         try:
             conn.send(RunEnded(message.session_id, status))
@@ -192,7 +194,10 @@ class LocalBackend:
 
 
 def _run_on_ray(session_id: int, database_url: str, options: WorkerOptions) -> str:
-    return run_session(session_id, database_url, options)
+    try:
+        return run_session(session_id, database_url, options)
+    except Exception as error:  # could not even claim it
+        return f"{NOT_RUN}{error}"
 
 
 class RayBackend:
@@ -248,8 +253,8 @@ class RayBackend:
         for ref in ready:
             session_id = self._tasks.pop(ref)
             try:
-                self._ray.get(ref)
-                done[session_id] = ""
+                status = self._ray.get(ref)
+                done[session_id] = "" if status in KNOWN_ENDINGS else status
             except Exception as error:
                 done[session_id] = f"its Ray task failed: {error}"
         return done

@@ -17,7 +17,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
-from server.batch.backends import Backend, LocalBackend, RayBackend, usable_cores
+from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.progress import BatchProgress
 from server.batch.sessions import (
     body_identity,
@@ -255,6 +255,9 @@ class BatchRunner:
         rows = self._refresh(db)
         for session_id, problem in ended.items():
             state = self._state(session_id)
+            if problem.startswith(NOT_RUN) and state.status in LIVE:
+                self.elsewhere.append(state)  # someone else claimed it first: watch it
+                continue
             if state.status in LIVE:  # the worker died without saying so (killed, crashed)
                 row = rows[session_id]
                 set_interrupted(db, row, problem or "its worker stopped without finishing")

@@ -51,6 +51,13 @@ def register(subparsers: Any) -> None:
         "--n-episodes", type=int, help="first N episodes of every agent (runs of unequal length)"
     )
     parser.add_argument("--title", help="report title (default: the study's name)")
+    parser.add_argument(
+        "--note",
+        action="append",
+        default=[],
+        metavar="TEXT",
+        help="a line under the title (how the sessions were run, ...), repeatable",
+    )
     add_database_options(parser)
     parser.set_defaults(func=report)
 
@@ -85,6 +92,7 @@ def report(args: argparse.Namespace) -> int:
         baseline=args.baseline,
         n_episodes=args.n_episodes,
         title=args.title,
+        notes=tuple(args.note),
     )
     with make_session_factory(engine)() as db:
         try:

@@ -54,7 +54,9 @@ def test_report_tables_match_the_database(
     engine = place.engine()
     study = study_id(engine, "baselines")
     out = tmp_path / "report"
-    code, printed = in_process(place, capsys, "report", "--study", str(study), "--out", str(out))
+    code, printed = in_process(
+        place, capsys, "report", "--study", str(study), "--out", str(out), "--note", "pilot run"
+    )
     assert code == 0, printed
     assert f"report: {out / 'report.md'}" in printed
 
@@ -91,7 +93,7 @@ def test_report_tables_match_the_database(
         ("agent", "autonomous", "agent_totals"),
     }
     report = (out / "report.md").read_text()
-    assert f"Left out session(s) {advisor.id}" in report
+    assert f"Left out session(s) {advisor.id}" in report and "- pilot run" in report
     assert "![Figure 5" in report and "figure7_correlation.png" in report
 
 
