@@ -8,10 +8,13 @@ checkpoint, and only the missing ones are created.
 
 from __future__ import annotations
 
+import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.engine import make_url
@@ -301,6 +304,7 @@ class BatchRunner:
         pending = bool(self.queue or self.elsewhere)
         backend = self.make_backend() if pending else None
         bar = BatchProgress(self.states, enabled=self.options.progress)
+        previous = _stop_on_sigterm()
         try:
             while backend is not None:
                 while self.queue and len(backend.running()) < backend.capacity:
@@ -326,6 +330,8 @@ class BatchRunner:
                 take_back(db, running, 0.0)
                 bar.update(self._refresh(db))
         finally:
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
             bar.close()
             if backend is not None:
                 backend.close()
@@ -357,6 +363,18 @@ class BatchRunner:
                     f"  {state.run.name} seed {state.run.seed}: session {state.session_id} "
                     "failed before; it resumes from its last checkpoint"
                 )
+
+
+def _stop_on_sigterm() -> Any:
+    """SIGTERM stops the batch like Ctrl-C (running runs checkpoint); returns the handler
+    it replaced, None when signals cannot be handled here (not the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def stop(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    return signal.signal(signal.SIGTERM, stop)
 
 
 def set_interrupted(db: Session, row: StudySession, detail: str) -> None:

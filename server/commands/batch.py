@@ -175,7 +175,15 @@ def command_line(args: argparse.Namespace, spec: Any) -> str:
         parts += ["--address", args.address]
     if args.workers:
         parts += ["--workers", str(args.workers)]
-    parts += ["--threads", str(args.threads)]
+    parts += ["--threads", str(args.threads), "--checkpoint-every", str(args.checkpoint_every)]
+    if args.nice:
+        parts += ["--nice", str(args.nice)]
+    if args.data_dir:
+        parts += ["--data-dir", str(args.data_dir)]
+    if args.database_url:
+        from sqlalchemy.engine import make_url
+
+        parts += ["--database-url", make_url(args.database_url).render_as_string()]
     if args.report:
         parts += ["--report", str(args.report)]
     return shlex.join(parts)
