@@ -220,6 +220,12 @@ class BatchRunner:
         self.queue = [s for s in self.states if s.status in TO_RUN]
         self.elsewhere = [s for s in self.states if s.status in LIVE]
 
+    def _enqueue(self, states: list[RunState]) -> None:
+        """Runs wait in plan order (agent by agent), so a batch cut short, or read while it
+        runs, has its methods' runs in pairs rather than one method's all first."""
+        order = {id(s): i for i, s in enumerate(self.states)}
+        self.queue = sorted(self.queue + states, key=lambda s: order[id(s)])
+
     def _state(self, session_id: int) -> RunState:
         return next(s for s in self.states if s.session_id == session_id)
 
@@ -273,7 +279,7 @@ class BatchRunner:
             self._advisor_ready(db, advisor)
             created = self._create_agent_runs(db)
             fresh = [s for s in created if s.status in TO_RUN]
-            self.queue = fresh + self.queue  # the paired runs catch up first
+            self._enqueue(fresh)
             self.elsewhere += [s for s in created if s.status in LIVE]
         else:
             for state in self.states:
@@ -290,7 +296,7 @@ class BatchRunner:
         for session_id in take_back(db, ids, self.options.stale_after_s):  # type: ignore[arg-type]
             state = self._state(session_id)
             state.status = Status.interrupted.value
-            self.queue.append(state)
+            self._enqueue([state])
         for state in [s for s in self.elsewhere if s.status not in LIVE]:
             self.elsewhere.remove(state)
             if state.run.is_advisor:
