@@ -164,6 +164,7 @@ class _Run:
         self.recorder.rewind(s)
         self.env.steps = self.recorder.steps
         self.env.episode = self.recorder.episodes
+        self.reporter.phase = str(getattr(self.trainer, "stage", "pretraining"))
         self.bar: Any = None
 
     @property

@@ -55,7 +55,7 @@ class SimulatedParticipant:
             params={"wait": wait},
             json={"advice_index": advice_index, "action": action},
         )
-        if response.status_code == 200:
+        if response.status_code == 200 and not response.json()["duplicate"]:
             receipt = response.json()
             self.version = receipt["version"]
             self.pending = receipt["state"]

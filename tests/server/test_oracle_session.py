@@ -45,6 +45,7 @@ def learner_records(seed: int, budget: int) -> Collect:
             "episodes": EPISODES,
             "max_episode_steps": MAX_EPISODE_STEPS,
             "advice_budget": budget,
+            "torch_threads": 1,  # as the server's workers: bit-identical needs the same count
         }
     )
     env = sim.SortingEnv(motion="fast", max_episode_steps=MAX_EPISODE_STEPS)

@@ -20,7 +20,7 @@ from tests.server.participant import SimulatedParticipant
 from tests.server.scale import NONDETERMINISTIC, export, session_body, wait_for_status
 
 pytestmark = pytest.mark.slow
-EPISODES = 4
+EPISODES = 3
 
 
 @pytest.fixture
@@ -92,7 +92,7 @@ def test_a_human_session_survives_a_server_crash_without_asking_again(live: Live
     actions = [0, 1, 3, 0, 2, 3, 0, 1, 3, 0]
     with live.client() as api:
         study = api.post("/api/studies", json={"name": "human crash"}).json()
-        body = session_body("human", advice_budget=budget, episodes=2)
+        body = session_body("human", advice_budget=budget, episodes=1)
         crashed = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
         reference = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
         participant = SimulatedParticipant(live.url, crashed["participant_token"])
