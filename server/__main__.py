@@ -1,3 +1,5 @@
 from server.cli import main
 
-raise SystemExit(main())
+# Spawned session workers import this module as __mp_main__: only run the CLI as a script.
+if __name__ == "__main__":
+    raise SystemExit(main())

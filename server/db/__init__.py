@@ -1,0 +1,1 @@
+"""The study database: typed models, the engine, and the Alembic migrations."""

@@ -1,0 +1,228 @@
+"""The study database's tables, as SQLAlchemy 2.0 typed models.
+
+One study has many sessions; a session (one learner's run) has its step, episode and
+advice records. Records carry unique (session, index) keys so a resumed worker can never
+write a row twice.
+"""
+
+from __future__ import annotations
+
+import enum
+from datetime import UTC, datetime
+from typing import Any, ClassVar
+
+from sqlalchemy import (
+    JSON,
+    DateTime,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    String,
+    Text,
+    TypeDecorator,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class UTCDateTime(TypeDecorator[datetime]):
+    """Timestamps in UTC on every backend (SQLite forgets the zone; we put it back)."""
+
+    impl = DateTime(timezone=True)
+    cache_ok = True
+
+    def process_result_value(self, value: datetime | None, dialect: Any) -> datetime | None:
+        if value is not None and value.tzinfo is None:
+            return value.replace(tzinfo=UTC)
+        return value
+
+
+class Base(DeclarativeBase):
+    type_annotation_map: ClassVar[dict[Any, Any]] = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+class Method(enum.StrEnum):
+    """Who advises the learner (the paper's DeepRL, agent-IDeepRL, human-IDeepRL, and more)."""
+
+    autonomous = "autonomous"
+    agent = "agent"
+    human = "human"
+    oracle = "oracle"
+    random = "random"
+
+
+class Status(enum.StrEnum):
+    """Where a session is in its life; see docs/api.md for the transitions."""
+
+    created = "created"
+    running = "running"
+    paused = "paused"
+    finished = "finished"
+    stopped = "stopped"
+    interrupted = "interrupted"
+    abandoned = "abandoned"
+    failed = "failed"
+
+
+LIVE_STATUSES = (Status.running, Status.paused)
+RESUMABLE_STATUSES = (Status.stopped, Status.interrupted, Status.abandoned, Status.failed)
+
+
+class Study(Base):
+    __tablename__ = "studies"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    description: Mapped[str] = mapped_column(Text, default="")
+    texts: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+    sessions: Mapped[list[StudySession]] = relationship(
+        back_populates="study", cascade="all, delete-orphan", passive_deletes=True
+    )
+    participants: Mapped[list[Participant]] = relationship(
+        back_populates="study", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+
+class Participant(Base):
+    """A person who advises, known only by a pseudonym (never a name, never in a path)."""
+
+    __tablename__ = "participants"
+    __table_args__ = (UniqueConstraint("study_id", "pseudonym"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"))
+    pseudonym: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+    study: Mapped[Study] = relationship(back_populates="participants")
+
+
+class StudySession(Base):
+    """One learner's run: its full configuration, its status and where it can resume from."""
+
+    __tablename__ = "sessions"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
+    participant_id: Mapped[int | None] = mapped_column(
+        ForeignKey("participants.id", ondelete="SET NULL")
+    )
+    label: Mapped[str] = mapped_column(String(200), default="")
+    method: Mapped[str] = mapped_column(String(20))
+    seed: Mapped[int] = mapped_column(Integer)
+    config: Mapped[dict[str, Any]] = mapped_column()
+    sort_rule: Mapped[Any] = mapped_column(JSON)
+    strategy: Mapped[str | None] = mapped_column(String(40))
+    advice_budget: Mapped[int] = mapped_column(Integer, default=0)
+    advisor_checkpoint: Mapped[str | None] = mapped_column(Text)
+    oracle_error_rate: Mapped[float | None] = mapped_column(Float)
+    motion: Mapped[str] = mapped_column(String(20))
+    episodes: Mapped[int] = mapped_column(Integer)
+    max_episode_steps: Mapped[int] = mapped_column(Integer, default=250)
+    idle_limit_s: Mapped[float | None] = mapped_column(Float)
+    participant_token: Mapped[str | None] = mapped_column(String(100), unique=True)
+
+    status: Mapped[str] = mapped_column(String(20), default=Status.created.value, index=True)
+    status_detail: Mapped[str] = mapped_column(Text, default="")
+    progress: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+
+    worker_token: Mapped[str | None] = mapped_column(String(40))
+    worker_pid: Mapped[int | None] = mapped_column(Integer)
+    worker_host: Mapped[str | None] = mapped_column(String(255))
+    heartbeat_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+
+    checkpoint_path: Mapped[str | None] = mapped_column(Text)
+    checkpoint_step: Mapped[int] = mapped_column(Integer, default=0)
+    checkpoint_episodes: Mapped[int] = mapped_column(Integer, default=0)
+    checkpoint_advice: Mapped[int] = mapped_column(Integer, default=0)
+
+    study: Mapped[Study] = relationship(back_populates="sessions")
+    participant: Mapped[Participant | None] = relationship()
+
+
+class Step(Base):
+    """One environment step: the learner's `StepRecord` (columns documented there)."""
+
+    __tablename__ = "steps"
+    __table_args__ = (UniqueConstraint("session_id", "global_step"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
+    global_step: Mapped[int] = mapped_column(Integer)
+    phase: Mapped[str] = mapped_column(String(20))
+    episode: Mapped[int] = mapped_column(Integer)
+    episode_step: Mapped[int] = mapped_column(Integer)
+    action: Mapped[int] = mapped_column(Integer)
+    action_source: Mapped[str] = mapped_column(String(20))
+    greedy_action: Mapped[int] = mapped_column(Integer)
+    q_grab: Mapped[float] = mapped_column(Float)
+    q_move_right: Mapped[float] = mapped_column(Float)
+    q_move_left: Mapped[float] = mapped_column(Float)
+    q_drop: Mapped[float] = mapped_column(Float)
+    advised_action: Mapped[int | None] = mapped_column(Integer)
+    advice_remaining: Mapped[int] = mapped_column(Integer)
+    reward: Mapped[float] = mapped_column(Float)
+    terminated: Mapped[bool] = mapped_column()
+    truncated: Mapped[bool] = mapped_column()
+    epsilon: Mapped[float] = mapped_column(Float)
+    loss: Mapped[float | None] = mapped_column(Float)
+    wall_time: Mapped[float] = mapped_column(Float)
+
+
+class Episode(Base):
+    """One episode, pretraining or training: the learner's `EpisodeRecord`."""
+
+    __tablename__ = "episodes"
+    __table_args__ = (UniqueConstraint("session_id", "phase", "episode"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
+    phase: Mapped[str] = mapped_column(String(20))
+    episode: Mapped[int] = mapped_column(Integer)
+    collected_reward: Mapped[float] = mapped_column(Float)
+    steps: Mapped[int] = mapped_column(Integer)
+    placed_correct: Mapped[int] = mapped_column(Integer)
+    misplaced: Mapped[int] = mapped_column(Integer)
+    lost: Mapped[int] = mapped_column(Integer)
+    success: Mapped[bool] = mapped_column()
+    terminated: Mapped[bool] = mapped_column()
+    truncated: Mapped[bool] = mapped_column()
+    advised_steps: Mapped[int] = mapped_column(Integer)
+    epsilon: Mapped[float] = mapped_column(Float)
+    mean_loss: Mapped[float | None] = mapped_column(Float)
+    first_global_step: Mapped[int] = mapped_column(Integer)
+    last_global_step: Mapped[int] = mapped_column(Integer)
+    wall_time: Mapped[float] = mapped_column(Float)
+
+
+class Advice(Base):
+    """One piece of advice: what the advisor saw, chose, and how long it took."""
+
+    __tablename__ = "advice"
+    __table_args__ = (
+        UniqueConstraint("session_id", "advice_index"),
+        Index("ix_advice_session_step", "session_id", "global_step"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
+    advice_index: Mapped[int] = mapped_column(Integer)
+    global_step: Mapped[int] = mapped_column(Integer)
+    advisor: Mapped[str] = mapped_column(String(20))
+    action: Mapped[int] = mapped_column(Integer)
+    greedy_action: Mapped[int | None] = mapped_column(Integer)
+    observation_png: Mapped[bytes] = mapped_column(LargeBinary)
+    response_time_s: Mapped[float] = mapped_column(Float)
+    requested_at: Mapped[datetime] = mapped_column(UTCDateTime())
+    answered_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)

@@ -1,0 +1,77 @@
+"""The FastAPI app: `create_app(settings)`; `uvicorn --factory server.main:app_from_env`."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+
+from server.db.engine import make_engine, make_session_factory
+from server.db.migrate import upgrade
+from server.routes import ROUTERS
+from server.services.errors import Invalid, ServiceError
+from server.sessions.hub import Hub
+from server.sessions.manager import SessionManager
+from server.sessions.worker import WorkerOptions
+from server.settings import Settings
+
+
+def worker_options(settings: Settings) -> WorkerOptions:
+    return WorkerOptions(
+        data_dir=settings.data_dir,
+        checkpoint_every_episodes=settings.checkpoint_every_episodes,
+        flush_every_steps=settings.flush_every_steps,
+        heartbeat_s=settings.heartbeat_s,
+        idle_limit_s=settings.idle_limit_s,
+        torch_threads=settings.worker_threads,
+        nice=settings.trainer_nice,
+    )
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+    settings.ensure_api_key()
+    engine = make_engine(settings.db_url)
+    hub = Hub()
+    factory = make_session_factory(engine)
+    manager = SessionManager(
+        factory, settings.db_url, hub, worker_options(settings), settings.stale_after_s
+    )
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        upgrade(engine)
+        await manager.open()
+        yield
+        await manager.close()
+        engine.dispose()
+
+    app = FastAPI(
+        title="IDeepRL study platform",
+        summary="Human advising studies in interactive deep reinforcement learning.",
+        version="0.1.0",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.engine = engine
+    app.state.session_factory = factory
+    app.state.hub = hub
+    app.state.manager = manager
+    app.state.participant_tokens = {}
+    for router in ROUTERS:
+        app.include_router(router)
+
+    @app.exception_handler(ServiceError)
+    async def service_error(_: Request, error: ServiceError) -> JSONResponse:
+        if isinstance(error, Invalid):
+            detail = [{"loc": ["body", error.field], "msg": error.message, "type": "value_error"}]
+            return JSONResponse({"detail": detail}, status_code=422)
+        return JSONResponse({"detail": error.message}, status_code=error.status_code)
+
+    return app
+
+
+def app_from_env() -> FastAPI:
+    return create_app(Settings())

@@ -1,0 +1,10 @@
+"""Path parameters shared by the routers (bounded, so no id can overflow a database int)."""
+
+from typing import Annotated
+
+from fastapi import Path
+
+MAX_ID = 2**31 - 1
+StudyId = Annotated[int, Path(ge=1, le=MAX_ID, description="Study id.")]
+SessionId = Annotated[int, Path(ge=1, le=MAX_ID, description="Session id.")]
+AdviceIndex = Annotated[int, Path(ge=0, le=MAX_ID, description="Advice index (0-based).")]

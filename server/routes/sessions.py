@@ -1,0 +1,142 @@
+"""Sessions of a study: create, read, start/pause/resume/stop, progress, learning curve."""
+
+from typing import Literal
+
+from fastapi import APIRouter, Query
+from fastapi.responses import Response
+from sqlalchemy import select
+
+from server.db.models import Advice
+from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
+from server.routes.params import AdviceIndex, SessionId, StudyId
+from server.schemas.sessions import (
+    AdvicePublic,
+    EpisodePublic,
+    Progress,
+    SessionCreate,
+    SessionCreated,
+    SessionPublic,
+)
+from server.services import sessions
+from server.services.errors import NotFound
+
+router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
+
+
+@router.post("/studies/{study_id}/sessions", status_code=201)
+def create_session(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, body: SessionCreate
+) -> SessionCreated:
+    session = sessions.create_session(db, study_id, body)
+    public = sessions.session_public(session, settings.base_url)
+    return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
+
+
+@router.get("/studies/{study_id}/sessions")
+def list_sessions(db: DbDep, settings: SettingsDep, study_id: StudyId) -> list[SessionPublic]:
+    found = sessions.list_sessions(db, study_id)
+    return [sessions.session_public(s, settings.base_url) for s in found]
+
+
+@router.get("/sessions/{session_id}")
+def get_session(db: DbDep, settings: SettingsDep, session_id: SessionId) -> SessionPublic:
+    return sessions.session_public(sessions.get_session(db, session_id), settings.base_url)
+
+
+def _fresh(db: DbDep, settings: SettingsDep, session_id: int) -> SessionPublic:
+    db.expire_all()
+    return sessions.session_public(sessions.get_session(db, session_id), settings.base_url)
+
+
+@router.post("/sessions/{session_id}/start")
+async def start_session(
+    db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
+) -> SessionPublic:
+    await manager.start(session_id)
+    return _fresh(db, settings, session_id)
+
+
+@router.post("/sessions/{session_id}/pause")
+async def pause_session(
+    db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
+) -> SessionPublic:
+    await manager.pause(session_id)
+    return _fresh(db, settings, session_id)
+
+
+@router.post("/sessions/{session_id}/resume")
+async def resume_session(
+    db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
+) -> SessionPublic:
+    await manager.resume(session_id)
+    return _fresh(db, settings, session_id)
+
+
+@router.post("/sessions/{session_id}/stop")
+async def stop_session(
+    db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
+) -> SessionPublic:
+    await manager.stop(session_id)
+    return _fresh(db, settings, session_id)
+
+
+@router.get("/sessions/{session_id}/progress")
+def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progress:
+    session = sessions.get_session(db, session_id)
+    handle = manager.handles.get(session_id)
+    live = handle.progress if handle is not None and handle.progress is not None else None
+    data = vars(live) if live is not None else dict(session.progress)
+    status = handle.status if handle is not None else session.status
+    given = int(data.get("advice_given", 0))
+    return Progress(
+        session_id=session_id,
+        status=status,
+        phase=data.get("phase"),
+        global_step=int(data.get("global_step", 0)),
+        episode=int(data.get("episode", 0)),
+        episodes=session.episodes,
+        epsilon=data.get("epsilon"),
+        collected_reward=float(data.get("collected_reward", 0.0)),
+        last_episode_reward=data.get("last_episode_reward"),
+        advice_given=given,
+        advice_budget=session.advice_budget,
+        advice_left=max(0, session.advice_budget - given),
+        advice_wanted=handle is not None and handle.request is not None,
+    )
+
+
+@router.get("/sessions/{session_id}/episodes")
+def list_episodes(
+    db: DbDep,
+    session_id: SessionId,
+    phase: Literal["train", "pretrain", "all"] = Query(
+        default="train", description="train: the learning curve; pretrain; or all."
+    ),
+) -> list[EpisodePublic]:
+    """The learning curve: collected reward (and more) per episode, in order."""
+    found = sessions.list_episodes(db, session_id)
+    return [EpisodePublic.model_validate(e) for e in found if phase in ("all", e.phase)]
+
+
+@router.get("/sessions/{session_id}/advice")
+def list_advice(db: DbDep, session_id: SessionId) -> list[AdvicePublic]:
+    sessions.get_session(db, session_id)
+    query = select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
+    return [AdvicePublic.model_validate(a) for a in db.scalars(query)]
+
+
+@router.get(
+    "/sessions/{session_id}/advice/{advice_index}.png",
+    response_class=Response,
+    responses={200: {"content": {"image/png": {}}}},
+)
+def advice_observation(db: DbDep, session_id: SessionId, advice_index: AdviceIndex) -> Response:
+    sessions.get_session(db, session_id)
+    png = db.scalar(
+        select(Advice.observation_png).where(
+            Advice.session_id == session_id, Advice.advice_index == advice_index
+        )
+    )
+    if png is None:
+        raise NotFound(f"session {session_id} has no advice {advice_index}")
+    return Response(png, media_type="image/png")

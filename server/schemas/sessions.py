@@ -1,0 +1,149 @@
+"""Bodies of the sessions resource: what a researcher sets, and what they read back."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from server.db.models import Method
+
+Strategy = Literal["early", "alternating", "importance", "mistake_correcting"]
+Motion = Literal["physics", "fast"]
+
+
+class SessionCreate(BaseModel):
+    """One learner's run. Unset fields take the paper's defaults."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    method: Method = Field(description="Who advises: autonomous, agent, human, oracle, random.")
+    seed: int = Field(default=0, ge=0, le=2**31 - 1, description="Fixes scene, network, sampling.")
+    label: str = Field(default="", max_length=200, description="Free text, e.g. a batch name.")
+    preset: str = Field(default="paper", description="Learner config preset (paper, modern).")
+    config: dict[str, Any] = Field(
+        default_factory=dict, description="Learner config fields overriding the preset."
+    )
+    episodes: int | None = Field(
+        default=None, ge=1, le=100_000, description="Training episodes (default: the preset's)."
+    )
+    max_episode_steps: int | None = Field(
+        default=None, ge=1, le=10_000, description="Truncation (default: the preset's)."
+    )
+    sort_rule: str | dict[str, str] = Field(
+        default="color", description='"color", "shape", or a map {"cube/red": "left", ...}.'
+    )
+    strategy: Strategy = Field(default="early", description="Advising strategy (advised methods).")
+    advice_budget: int | None = Field(
+        default=None, ge=0, le=100_000, description="Advice in all (default: the preset's)."
+    )
+    advisor_checkpoint: str | None = Field(
+        default=None, description="Path of a trained learner checkpoint (method agent)."
+    )
+    oracle_error_rate: float = Field(
+        default=0.0, ge=0.0, le=1.0, description="Chance that the oracle advises wrongly."
+    )
+    motion: Motion | None = Field(
+        default=None, description="physics (default for human) or fast (default otherwise)."
+    )
+    participant: str | None = Field(
+        default=None,
+        min_length=1,
+        max_length=64,
+        pattern=r"^[A-Za-z0-9_-]+$",
+        description="Pseudonym of the participant (human); generated when omitted.",
+    )
+    idle_limit_s: float | None = Field(
+        default=None, gt=0, description="Seconds without advice before abandoning (human)."
+    )
+
+
+class SessionPublic(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+    id: int
+    study_id: int
+    label: str
+    method: str
+    seed: int
+    config: dict[str, Any]
+    sort_rule: Any
+    strategy: str | None
+    advice_budget: int
+    advisor_checkpoint: str | None
+    oracle_error_rate: float | None
+    motion: str
+    episodes: int
+    max_episode_steps: int
+    idle_limit_s: float | None
+    participant: str | None = None
+    participant_url: str | None = None
+    status: str
+    status_detail: str
+    progress: dict[str, Any]
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    worker_pid: int | None
+    checkpoint_step: int
+
+
+class SessionCreated(SessionPublic):
+    participant_token: str | None = Field(
+        default=None, description="The participant's secret; their link is participant_url."
+    )
+
+
+class Progress(BaseModel):
+    """Live progress of a session (from its worker while it runs, else the last saved)."""
+
+    session_id: int
+    status: str
+    phase: str | None = None
+    global_step: int = 0
+    episode: int = 0
+    episodes: int = 0
+    epsilon: float | None = None
+    collected_reward: float = 0.0
+    last_episode_reward: float | None = None
+    advice_given: int = 0
+    advice_budget: int = 0
+    advice_left: int = 0
+    advice_wanted: bool = False
+
+
+class EpisodePublic(BaseModel):
+    """One episode (the learner's `EpisodeRecord`); the column dictionary explains each."""
+
+    model_config = ConfigDict(from_attributes=True)
+
+    phase: str
+    episode: int
+    collected_reward: float
+    steps: int
+    placed_correct: int
+    misplaced: int
+    lost: int
+    success: bool
+    advised_steps: int
+    epsilon: float
+    mean_loss: float | None
+    first_global_step: int
+    last_global_step: int
+    wall_time: float
+
+
+class AdvicePublic(BaseModel):
+    """One advice, without its image (GET .../advice/INDEX.png has it)."""
+
+    model_config = ConfigDict(from_attributes=True)
+
+    advice_index: int
+    global_step: int
+    advisor: str
+    action: int
+    greedy_action: int | None
+    response_time_s: float
+    requested_at: datetime
+    answered_at: datetime

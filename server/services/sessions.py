@@ -1,0 +1,246 @@
+"""Sessions: create (validated against the learner and the scenario), read, claim for a
+worker, and find the ones whose worker died."""
+
+from __future__ import annotations
+
+import os
+import secrets
+import socket
+import uuid
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session
+
+from server.db.models import (
+    LIVE_STATUSES,
+    RESUMABLE_STATUSES,
+    Episode,
+    Method,
+    Participant,
+    Status,
+    StudySession,
+    utcnow,
+)
+from server.schemas.sessions import SessionCreate, SessionPublic
+from server.services import learning
+from server.services.errors import Conflict, Invalid, NotFound
+from server.services.studies import get_study
+
+HOST = socket.gethostname()
+VALUE_STRATEGIES = ("importance", "mistake_correcting")
+
+
+def participant_url(base_url: str, token: str) -> str:
+    return f"{base_url}/p/{token}"
+
+
+def create_session(db: Session, study_id: int, body: SessionCreate) -> StudySession:
+    """A new session in `created` state; a human one gets its participant and token."""
+    get_study(db, study_id)
+    method = Method(body.method)
+    advised = method not in (Method.autonomous,)
+    config = learning.build_config(
+        body.preset,
+        body.config,
+        episodes=body.episodes,
+        max_episode_steps=body.max_episode_steps,
+        advice_budget=body.advice_budget if advised else 0,
+    )
+    sort_rule = learning.parse_sort_rule(body.sort_rule)
+    if advised and body.strategy in VALUE_STRATEGIES and method != Method.agent:
+        raise Invalid(
+            "strategy",
+            f"the {body.strategy} strategy weighs the advisor's Q-values, which only an "
+            "'agent' advisor has; use early or alternating advising",
+        )
+    if (
+        advised
+        and body.strategy == "early"
+        and config["advice_budget"] > config["pretraining_steps"]
+    ):
+        raise Invalid(
+            "advice_budget",
+            f"early advising gives its {config['advice_budget']} advice at the end of "
+            f"pretraining, which has only {config['pretraining_steps']} steps; lower "
+            "advice_budget or raise config.pretraining_steps",
+        )
+    if method == Method.agent:
+        if not body.advisor_checkpoint:
+            raise Invalid(
+                "advisor_checkpoint",
+                "method 'agent' needs advisor_checkpoint: the path of a trained learner checkpoint",
+            )
+        if not Path(body.advisor_checkpoint).is_file():
+            raise Invalid("advisor_checkpoint", f"no file at {body.advisor_checkpoint!r}")
+    elif body.advisor_checkpoint:
+        raise Invalid("advisor_checkpoint", "only method 'agent' takes an advisor_checkpoint")
+    if body.participant and method != Method.human:
+        raise Invalid("participant", "only method 'human' has a participant")
+    session = StudySession(
+        study_id=study_id,
+        label=body.label,
+        method=method.value,
+        seed=body.seed,
+        config=config,
+        sort_rule=sort_rule,
+        strategy=body.strategy if advised else None,
+        advice_budget=config["advice_budget"],
+        advisor_checkpoint=body.advisor_checkpoint,
+        oracle_error_rate=body.oracle_error_rate if method == Method.oracle else None,
+        motion=body.motion or ("physics" if method == Method.human else "fast"),
+        episodes=config["episodes"],
+        max_episode_steps=config["max_episode_steps"],
+        idle_limit_s=body.idle_limit_s,
+    )
+    if method == Method.human:
+        pseudonym = body.participant or f"p-{secrets.token_hex(4)}"
+        participant = db.scalar(
+            select(Participant).where(
+                Participant.study_id == study_id, Participant.pseudonym == pseudonym
+            )
+        )
+        if participant is None:
+            participant = Participant(study_id=study_id, pseudonym=pseudonym)
+        session.participant = participant
+        session.participant_token = secrets.token_urlsafe(32)
+    db.add(session)
+    db.commit()
+    return session
+
+
+def get_session(db: Session, session_id: int) -> StudySession:
+    session = db.get(StudySession, session_id)
+    if session is None:
+        raise NotFound(f"no session with id {session_id}; GET /api/studies/ID/sessions lists them")
+    return session
+
+
+def list_sessions(db: Session, study_id: int) -> list[StudySession]:
+    get_study(db, study_id)
+    query = select(StudySession).where(StudySession.study_id == study_id)
+    return list(db.scalars(query.order_by(StudySession.id)))
+
+
+def session_public(session: StudySession, base_url: str) -> SessionPublic:
+    data = {
+        name: getattr(session, name)
+        for name in SessionPublic.model_fields
+        if name not in ("participant", "participant_url")
+    }
+    if session.participant is not None:
+        data["participant"] = session.participant.pseudonym
+    if session.participant_token:
+        data["participant_url"] = participant_url(base_url, session.participant_token)
+    return SessionPublic(**data)
+
+
+def session_for_token(db: Session, token: str) -> StudySession | None:
+    """The one session a participant token reaches, or None.
+
+    Tokens are 256-bit random strings, so looking one up by equality reveals nothing an
+    attacker could use; we still compare the stored value in constant time."""
+    if not token or len(token) > 100:
+        return None
+    session = db.scalar(select(StudySession).where(StudySession.participant_token == token))
+    if session is None or not secrets.compare_digest(session.participant_token or "", token):
+        return None
+    return session
+
+
+def list_episodes(db: Session, session_id: int) -> list[Episode]:
+    get_session(db, session_id)
+    query = (
+        select(Episode).where(Episode.session_id == session_id).order_by(Episode.first_global_step)
+    )
+    return list(db.scalars(query))
+
+
+def claim(db: Session, session_id: int, resume: bool) -> str:
+    """Mark the session running under a new worker token, or say why it cannot run.
+
+    The conditional UPDATE makes the claim atomic: two starts of one session (two clicks,
+    a server and a batch runner) cannot both get it."""
+    session = get_session(db, session_id)
+    allowed = [Status.created] if not resume else list(RESUMABLE_STATUSES)
+    if session.status not in [s.value for s in allowed]:
+        if session.status in [s.value for s in LIVE_STATUSES]:
+            raise Conflict(f"session {session_id} is {session.status} already")
+        if session.status == Status.finished:
+            raise Conflict(f"session {session_id} has finished; create a new session to rerun it")
+        if not resume:
+            raise Conflict(f"session {session_id} is {session.status}; resume it instead of start")
+        raise Conflict(f"session {session_id} is {session.status} and cannot be resumed")
+    token = uuid.uuid4().hex
+    now = utcnow()
+    result = db.execute(
+        update(StudySession)
+        .where(StudySession.id == session_id, StudySession.status == session.status)
+        .values(
+            status=Status.running.value,
+            status_detail="",
+            worker_token=token,
+            worker_host=HOST,
+            worker_pid=None,
+            heartbeat_at=now,
+            started_at=session.started_at or now,
+        )
+    )
+    db.commit()
+    if result.rowcount != 1:  # type: ignore[attr-defined]
+        raise Conflict(f"session {session_id} was started by someone else just now")
+    return token
+
+
+def set_status(
+    db: Session, session_id: int, status: Status, detail: str = "", token: str | None = None
+) -> bool:
+    """Set the status, only if `token` (when given) still owns the session."""
+    query = update(StudySession).where(StudySession.id == session_id)
+    if token is not None:
+        query = query.where(StudySession.worker_token == token)
+    values: dict[str, object] = {"status": status.value, "status_detail": detail}
+    if status == Status.finished:
+        values["finished_at"] = utcnow()
+    result = db.execute(query.values(**values))
+    db.commit()
+    return result.rowcount == 1  # type: ignore[attr-defined]
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def mark_dead_interrupted(db: Session, stale_after_s: float, owned: set[int]) -> list[int]:
+    """Sessions marked running/paused whose worker is gone become `interrupted` (resumable).
+
+    Gone: on this host and its pid is dead, or silent for `stale_after_s` (other hosts,
+    e.g. a Ray batch). Sessions whose worker this process owns are left alone."""
+    stale = datetime.now(UTC) - timedelta(seconds=stale_after_s)
+    query = select(StudySession).where(StudySession.status.in_([s.value for s in LIVE_STATUSES]))
+    marked = []
+    for session in db.scalars(query):
+        if session.id in owned:
+            continue
+        heartbeat = session.heartbeat_at
+        if heartbeat is not None and heartbeat.tzinfo is None:
+            heartbeat = heartbeat.replace(tzinfo=UTC)
+        dead_here = (
+            session.worker_host == HOST
+            and session.worker_pid is not None
+            and not _pid_alive(session.worker_pid)
+        )
+        silent = heartbeat is None or heartbeat < stale
+        if dead_here or silent:
+            session.status = Status.interrupted.value
+            session.status_detail = "its worker stopped without finishing; resume it"
+            marked.append(session.id)
+    db.commit()
+    return marked

@@ -1,0 +1,236 @@
+"""The participant's side of a human session: what their page shows, and their advice.
+
+An advice is written to the database before it is forwarded to the worker, so nothing a
+participant gave is lost if the tab closes or the worker dies; a resumed worker replays
+it. Submitting the same advice twice is acknowledged but stored once.
+"""
+
+from __future__ import annotations
+
+import base64
+import time
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+
+from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
+from starlette.concurrency import run_in_threadpool
+
+from server.db.models import Advice, Status, StudySession
+from server.schemas.participant import (
+    AdviceCreate,
+    AdviceReceipt,
+    HistoryItem,
+    ParticipantState,
+)
+from server.services.errors import Conflict, NotFound
+from server.sessions.manager import HistoryEntry, SessionManager
+from server.sessions.messages import AdviceAnswer
+
+ACTION_NAMES = ("grab", "move right", "move left", "drop")
+
+
+@dataclass(frozen=True)
+class ParticipantSession:
+    """The one session a participant token reaches (what the participant routes need)."""
+
+    id: int
+    advice_budget: int
+
+
+MESSAGES = {
+    Status.created: "The session has not started yet.",
+    Status.paused: "The session is paused by the researcher; please wait.",
+    Status.finished: "The session has finished. Thank you!",
+    Status.stopped: "The session was stopped by the researcher.",
+    Status.interrupted: "The session was interrupted; the researcher can resume it.",
+    Status.abandoned: "The session waited too long for advice; the researcher can resume it.",
+    Status.failed: "The session failed; please tell the researcher.",
+}
+
+
+def _history(entries: list[HistoryEntry]) -> list[HistoryItem]:
+    return [
+        HistoryItem(
+            advice_index=e.advice_index,
+            action=e.action,
+            action_name=ACTION_NAMES[e.action],
+            reward=e.reward,
+        )
+        for e in entries
+    ]
+
+
+def participant_state(manager: SessionManager, session: ParticipantSession) -> ParticipantState:
+    """The page's state; showing a pending request starts its response-time clock."""
+    version = manager.version(session.id)
+    handle = manager.handles.get(session.id)
+    budget = session.advice_budget
+    if handle is None:
+        with manager.factory() as db:
+            given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+            row = db.get(StudySession, session.id)
+            if row is None:
+                raise NotFound("this session no longer exists")
+            status, progress = row.status, row.progress
+        return ParticipantState(
+            session_id=session.id,
+            status=status,
+            message=MESSAGES.get(Status(status), ""),
+            version=version,
+            advice_wanted=False,
+            robot_moving=False,
+            advice_budget=budget,
+            advice_given=given,
+            advice_left=max(0, budget - given),
+            episode=int(progress.get("episode", 0)),
+            phase=progress.get("phase"),
+        )
+    request = handle.request
+    wanted = request is not None and handle.status == Status.running
+    if wanted and handle.shown_at is None:
+        handle.shown_at = time.monotonic()
+    progress = handle.progress
+    given = len(handle.given)
+    return ParticipantState(
+        session_id=session.id,
+        status=handle.status,
+        message=MESSAGES.get(Status(handle.status), ""),
+        version=version,
+        advice_wanted=wanted,
+        advice_index=request.advice_index if request is not None else None,
+        observation_png=(
+            base64.b64encode(request.observation_png).decode() if request is not None else None
+        ),
+        robot_moving=handle.moving,
+        advice_budget=budget,
+        advice_given=given,
+        advice_left=max(0, budget - given),
+        last_reward=handle.last_reward,
+        episode=progress.episode if progress else 0,
+        phase=progress.phase if progress else None,
+        history=_history(list(handle.history)),
+    )
+
+
+def observation_png(manager: SessionManager, session: ParticipantSession) -> bytes | None:
+    """The image of the pending request, or of the latest advice given."""
+    handle = manager.handles.get(session.id)
+    if handle is not None and handle.request is not None:
+        return handle.request.observation_png
+    with manager.factory() as db:
+        return db.scalar(
+            select(Advice.observation_png)
+            .where(Advice.session_id == session.id)
+            .order_by(Advice.advice_index.desc())
+            .limit(1)
+        )
+
+
+def _stored(manager: SessionManager, session_id: int, index: int) -> Advice | None:
+    with manager.factory() as db:
+        return db.scalar(
+            select(Advice).where(Advice.session_id == session_id, Advice.advice_index == index)
+        )
+
+
+def _insert(manager: SessionManager, row: Advice) -> bool:
+    with manager.factory() as db:
+        db.add(row)
+        try:
+            db.commit()
+        except IntegrityError:
+            db.rollback()
+            return False
+    return True
+
+
+def _receipt(stored: Advice, body: AdviceCreate, version: int) -> AdviceReceipt:
+    if stored.action != body.action:
+        raise Conflict(
+            f"advice {body.advice_index} was already given as {stored.action} "
+            f"({ACTION_NAMES[stored.action]}); it cannot be changed"
+        )
+    return AdviceReceipt(
+        advice_index=stored.advice_index,
+        action=stored.action,
+        duplicate=True,
+        response_time_s=stored.response_time_s,
+        version=version,
+    )
+
+
+async def submit_advice(
+    manager: SessionManager, session: ParticipantSession, body: AdviceCreate
+) -> AdviceReceipt:
+    handle = manager.handles.get(session.id)
+    budget = session.advice_budget
+    if handle is None:
+        stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
+        if stored is not None:
+            return _receipt(stored, body, manager.version(session.id))
+        _refuse_over_budget(body, budget)
+        status = Status(manager.status(session.id))
+        raise Conflict(f"no advice can be taken now: {MESSAGES.get(status, '')}")
+    async with handle.advice_lock:
+        if body.advice_index in handle.given:
+            stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
+            assert stored is not None, "advice given but not stored"
+            return _receipt(stored, body, manager.version(session.id))
+        _refuse_over_budget(body, budget)
+        if handle.status == Status.paused:
+            raise Conflict("the session is paused by the researcher; advise when it resumes")
+        request = handle.request
+        if request is None or handle.status != Status.running:
+            raise Conflict(
+                "no advice is wanted right now (the robot is moving or the learner is on its "
+                "own); wait for the next observation from GET /api/participant/state"
+            )
+        if request.advice_index != body.advice_index:
+            raise Conflict(
+                f"advice {request.advice_index} is wanted now, not {body.advice_index}; "
+                "send advice_index from the latest state"
+            )
+        now = time.monotonic()
+        response_time = now - (handle.shown_at or handle.request_arrived)
+        answered_at = datetime.now(UTC)
+        row = Advice(
+            session_id=session.id,
+            advice_index=body.advice_index,
+            global_step=request.global_step,
+            advisor="human",
+            action=body.action,
+            greedy_action=None,  # the worker fills it in from its step record
+            observation_png=request.observation_png,
+            response_time_s=response_time,
+            requested_at=answered_at - timedelta(seconds=response_time),
+            answered_at=answered_at,
+        )
+        if not await run_in_threadpool(_insert, manager, row):
+            stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
+            assert stored is not None
+            return _receipt(stored, body, manager.version(session.id))
+        handle.given[body.advice_index] = body.action
+        handle.request = None
+        handle.moving = True
+        handle.history.append(HistoryEntry(body.advice_index, body.action))
+        handle.send(AdviceAnswer(body.advice_index, body.action))
+        manager.hub.publish(
+            session.id, "advice_given", {"advice_index": body.advice_index, "action": body.action}
+        )
+        manager.notify(session.id)
+        return AdviceReceipt(
+            advice_index=body.advice_index,
+            action=body.action,
+            duplicate=False,
+            response_time_s=response_time,
+            version=manager.version(session.id),
+        )
+
+
+def _refuse_over_budget(body: AdviceCreate, budget: int) -> None:
+    if body.advice_index >= budget:
+        raise Conflict(
+            f"the advice budget of {budget} is spent (advice_index {body.advice_index} is "
+            f"beyond it); the learner continues on its own, thank you"
+        )

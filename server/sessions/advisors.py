@@ -1,0 +1,142 @@
+"""Advisors as the worker sees them: the participant behind the channel, and machine
+advisors whose advice is logged like a person's."""
+
+from __future__ import annotations
+
+import io
+import logging
+import time
+from collections.abc import Callable
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+import numpy as np
+from PIL import Image
+
+from server.sessions.link import WorkerLink
+from server.sessions.messages import AdviceRequest, AdviceResult
+
+log = logging.getLogger(__name__)
+
+
+def encode_png(obs: np.ndarray) -> bytes:
+    """The observation exactly as the learner sees it (PNG is lossless)."""
+    buffer = io.BytesIO()
+    Image.fromarray(np.asarray(obs, dtype=np.uint8)).save(buffer, format="PNG", compress_level=1)
+    return buffer.getvalue()
+
+
+def decode_png(data: bytes) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
+
+
+class HumanAdvisor:
+    """`learner.Advisor` for a person: publishes a request and blocks until they answer.
+
+    Advice already given (`given`, from the database) is replayed without asking, so a
+    resumed session reaches the same point without troubling the participant again."""
+
+    def __init__(
+        self,
+        link: WorkerLink,
+        given: dict[int, int],
+        start_index: int,
+        advice_budget: int,
+        idle_limit_s: float,
+        step_index: Callable[[], int],
+        before_waiting: Callable[[], None] = lambda: None,
+    ) -> None:
+        self._before_waiting = before_waiting
+        self._link = link
+        self._given = given
+        self.count = start_index
+        self._budget = advice_budget
+        self._idle_limit_s = idle_limit_s
+        self._step_index = step_index
+        self._answered: int | None = None
+
+    def state_dict(self) -> dict[str, Any]:
+        """Saved in the learner's checkpoint: how many advice were asked for."""
+        return {"count": self.count}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.count = int(state["count"])
+
+    def after_step(self, action: int, reward: float, episode_over: bool) -> None:
+        """Tell the participant what their last advice earned."""
+        if self._answered is not None:
+            self._link.send(AdviceResult(self._answered, action, reward, episode_over))
+            self._answered = None
+
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+        index = self.count
+        self._answered = None
+        if index in self._given:
+            action = self._given[index]
+        else:
+            request = AdviceRequest(
+                advice_index=index,
+                global_step=self._step_index(),
+                observation_png=encode_png(obs),
+                info=dict(info),
+                advice_budget=self._budget,
+            )
+            self._before_waiting()
+            self._link.send(request)
+            action = self._link.wait_for_answer(index, self._idle_limit_s)
+            self._given[index] = action
+            self._answered = index
+        self.count += 1
+        return action
+
+
+class RecordingAdvisor:
+    """Wraps a machine advisor (agent, oracle, random): same advice, logged with the
+    observation and the time it took, as the study's exports treat every advisor alike."""
+
+    def __init__(
+        self,
+        inner: Any,
+        kind: str,
+        start_index: int,
+        record: Callable[[dict[str, Any]], None],
+        step_index: Callable[[], int],
+    ) -> None:
+        self._inner = inner
+        self._kind = kind
+        self.count = start_index
+        self._record = record
+        self._step_index = step_index
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)  # q_values, for importance advising
+
+    def state_dict(self) -> dict[str, Any]:
+        inner = getattr(self._inner, "state_dict", None)
+        return {"count": self.count, "inner": inner() if callable(inner) else None}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.count = int(state["count"])
+        if state["inner"] is not None:
+            self._inner.load_state_dict(state["inner"])
+
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+        started = time.perf_counter()
+        requested_at = datetime.now(UTC)
+        action = int(self._inner.advise(obs, info))
+        elapsed = time.perf_counter() - started
+        self._record(
+            {
+                "advice_index": self.count,
+                "global_step": self._step_index(),
+                "advisor": self._kind,
+                "action": action,
+                "greedy_action": None,  # filled in from the step record at flush
+                "observation_png": encode_png(obs),
+                "response_time_s": elapsed,
+                "requested_at": requested_at,
+                "answered_at": requested_at + timedelta(seconds=elapsed),
+            }
+        )
+        self.count += 1
+        return action

@@ -1,0 +1,344 @@
+"""The web process's side of the running sessions: starts worker processes, talks to them
+over their pipes, publishes what they say on the hub, and notices when one dies.
+
+State that the participant endpoints read (the pending advice request, whether the robot
+moves, recent history) lives on a `WorkerHandle` and changes only on the event loop's
+thread; each pipe has a reader thread that publishes to the hub and hands messages over.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import multiprocessing
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from multiprocessing.connection import Connection
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+from starlette.concurrency import run_in_threadpool
+
+from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
+from server.services.errors import Conflict
+from server.services.sessions import claim, get_session, mark_dead_interrupted, set_status
+from server.sessions.hub import Hub
+from server.sessions.messages import (
+    AdviceRequest,
+    AdviceResult,
+    Command,
+    EpisodeDone,
+    Progress,
+    SceneReset,
+    SceneStep,
+    StatusChanged,
+)
+from server.sessions.worker import WorkerOptions, worker_main
+
+log = logging.getLogger(__name__)
+HUB_KINDS: dict[type, str] = {
+    Progress: "progress",
+    AdviceRequest: "advice_request",
+    AdviceResult: "advice_result",
+    EpisodeDone: "episode",
+    SceneReset: "scene_reset",
+    SceneStep: "scene_step",
+    StatusChanged: "status",
+}
+HISTORY = 10
+COMMAND_TIMEOUT_S = 120.0
+COALESCE_S = 0.05
+
+
+@dataclass
+class HistoryEntry:
+    advice_index: int
+    action: int
+    reward: float | None = None
+
+
+@dataclass
+class WorkerHandle:
+    session_id: int
+    token: str
+    process: Any
+    conn: Connection
+    advice_budget: int
+    given: dict[int, int]
+    status: str = Status.running.value
+    progress: Progress | None = None
+    request: AdviceRequest | None = None
+    request_arrived: float = 0.0
+    shown_at: float | None = None
+    moving: bool = False
+    last_reward: float | None = None
+    history: deque[HistoryEntry] = field(default_factory=lambda: deque(maxlen=HISTORY))
+    advice_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
+    send_lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def send(self, message: Any) -> bool:
+        with self.send_lock:
+            try:
+                self.conn.send(message)
+                return True
+            except (BrokenPipeError, EOFError, OSError):
+                return False
+
+
+class SessionManager:
+    def __init__(
+        self,
+        factory: sessionmaker[Session],
+        database_url: str,
+        hub: Hub,
+        options: WorkerOptions,
+        stale_after_s: float,
+    ) -> None:
+        self.factory = factory
+        self.database_url = database_url
+        self.hub = hub
+        self.options = options
+        self.stale_after_s = stale_after_s
+        self.handles: dict[int, WorkerHandle] = {}
+        self._context = multiprocessing.get_context("spawn")
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._versions = itertools.count(int(time.time() * 1000))
+        self._version: dict[int, int] = {}
+        self._changed: dict[int, asyncio.Event] = {}
+        self._reaper: asyncio.Task[None] | None = None
+        hub.on_watchers_changed(self._watch)
+
+    # --- lifecycle ---------------------------------------------------------------------
+    async def open(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        await run_in_threadpool(self._reap)
+        self._reaper = asyncio.create_task(self._reap_forever())
+
+    async def close(self) -> None:
+        """Server shutdown: workers checkpoint and become `interrupted` (resumable)."""
+        if self._reaper is not None:
+            self._reaper.cancel()
+        handles = list(self.handles.values())
+        for handle in handles:
+            handle.send(Command("shutdown"))
+        for handle in handles:
+            await run_in_threadpool(handle.process.join, 60)
+            if handle.process.is_alive():
+                handle.process.terminate()
+
+    def _reap(self) -> list[int]:
+        with self.factory() as db:
+            marked = mark_dead_interrupted(db, self.stale_after_s, set(self.handles))
+        for session_id in marked:
+            self.hub.publish(session_id, "status", StatusChanged(Status.interrupted.value))
+        return marked
+
+    async def _reap_forever(self) -> None:
+        while True:
+            await asyncio.sleep(max(1.0, self.options.heartbeat_s * 2))
+            try:
+                await run_in_threadpool(self._reap)
+            except Exception:
+                log.exception("checking for dead workers failed")
+
+    # --- researcher commands -----------------------------------------------------------
+    async def start(self, session_id: int, resume: bool = False) -> None:
+        token = await run_in_threadpool(self._claim, session_id, resume)
+        parent, child = self._context.Pipe(duplex=True)
+        with self.factory() as db:
+            session = get_session(db, session_id)
+            advice = db.scalars(
+                select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
+            ).all()
+            budget = session.advice_budget
+            human = session.method == Method.human
+        # People wait on human sessions; machine sessions yield the CPU to them.
+        options = replace(self.options, nice=0) if human else self.options
+        process = self._context.Process(
+            target=worker_main,
+            args=(session_id, self.database_url, options, token, child),
+            name=f"ideeprl-session-{session_id}",
+            daemon=True,
+        )
+        handle = WorkerHandle(
+            session_id, token, process, parent, budget, {a.advice_index: a.action for a in advice}
+        )
+        handle.history.extend(HistoryEntry(a.advice_index, a.action) for a in advice)
+        try:
+            process.start()
+        except Exception as error:
+            await run_in_threadpool(self._set_status, session_id, Status.failed, str(error), token)
+            raise
+        child.close()
+        self.handles[session_id] = handle
+        threading.Thread(
+            target=self._read, args=(handle,), name=f"session-{session_id}-reader", daemon=True
+        ).start()
+        if self.hub.watchers(session_id):
+            handle.send(Command("watch"))
+        self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
+        self.notify(session_id)
+
+    def _claim(self, session_id: int, resume: bool) -> str:
+        with self.factory() as db:
+            return claim(db, session_id, resume)
+
+    def _set_status(self, session_id: int, status: Status, detail: str, token: str) -> None:
+        with self.factory() as db:
+            set_status(db, session_id, status, detail, token=token)
+
+    async def pause(self, session_id: int) -> None:
+        handle = self._live(session_id, "pause")
+        if handle.status != Status.paused:
+            handle.send(Command("pause"))
+            await self._until(session_id, lambda h: h.status != Status.running)
+
+    async def resume(self, session_id: int) -> None:
+        handle = self.handles.get(session_id)
+        if handle is not None and handle.status in LIVE_STATUSES:
+            if handle.status == Status.paused:
+                handle.send(Command("resume"))
+                await self._until(session_id, lambda h: h.status != Status.paused)
+            return
+        with self.factory() as db:
+            status = get_session(db, session_id).status
+        if status == Status.created:
+            raise Conflict(f"session {session_id} has not started; start it instead")
+        await self.start(session_id, resume=True)
+
+    async def stop(self, session_id: int) -> None:
+        handle = self.handles.get(session_id)
+        if handle is None or handle.status not in LIVE_STATUSES:
+            with self.factory() as db:
+                session = get_session(db, session_id)
+                if session.status in (Status.created, *RESUMABLE_STATUSES):
+                    set_status(db, session_id, Status.stopped, "stopped by the researcher")
+                    self.notify(session_id)
+                    return
+            raise Conflict(f"session {session_id} is {session.status}; there is nothing to stop")
+        handle.send(Command("stop"))
+        await run_in_threadpool(handle.process.join, COMMAND_TIMEOUT_S)
+        if handle.process.is_alive():
+            handle.process.terminate()
+
+    def _live(self, session_id: int, verb: str) -> WorkerHandle:
+        handle = self.handles.get(session_id)
+        if handle is None or handle.status not in LIVE_STATUSES:
+            with self.factory() as db:
+                status = get_session(db, session_id).status
+            raise Conflict(f"session {session_id} is {status}; only a running session can {verb}")
+        return handle
+
+    async def _until(self, session_id: int, done: Callable[[WorkerHandle], bool]) -> None:
+        deadline = time.monotonic() + COMMAND_TIMEOUT_S
+        while time.monotonic() < deadline:
+            handle = self.handles.get(session_id)
+            if handle is None or done(handle):
+                return
+            await self.wait_change(session_id, self.version(session_id), 1.0)
+        raise Conflict(f"session {session_id} did not answer within {COMMAND_TIMEOUT_S:.0f} s")
+
+    def status(self, session_id: int) -> str:
+        """The live status if a worker runs, else the stored one."""
+        handle = self.handles.get(session_id)
+        if handle is not None:
+            return handle.status
+        with self.factory() as db:
+            return get_session(db, session_id).status
+
+    # --- change notification (long-poll) ------------------------------------------------
+    def version(self, session_id: int) -> int:
+        if session_id not in self._version:
+            self._version[session_id] = next(self._versions)
+        return self._version[session_id]
+
+    async def wait_change(self, session_id: int, after: int, timeout: float) -> None:
+        """Return when the session's participant-visible state is newer than `after`."""
+        if self.version(session_id) > after:
+            return
+        event = self._changed.setdefault(session_id, asyncio.Event())
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(event.wait(), timeout)
+
+    def _notify_soon(self, session_id: int) -> None:
+        """Notify unless something else does first: the next advice request usually follows
+        an advice's result within milliseconds, and one wake-up then serves both."""
+        assert self._loop is not None
+        version = self.version(session_id)
+
+        def later() -> None:
+            if self.version(session_id) == version:
+                self.notify(session_id)
+
+        self._loop.call_later(COALESCE_S, later)
+
+    def notify(self, session_id: int) -> None:
+        self._version[session_id] = next(self._versions)
+        event = self._changed.pop(session_id, None)
+        if event is not None:
+            event.set()
+
+    # --- messages from workers ---------------------------------------------------------
+    def _read(self, handle: WorkerHandle) -> None:
+        """Reader thread: one per worker, until its pipe closes."""
+        assert self._loop is not None
+        while True:
+            try:
+                message = handle.conn.recv()
+            except (EOFError, OSError):
+                break
+            kind = HUB_KINDS.get(type(message))
+            if kind is not None:
+                self.hub.publish(handle.session_id, kind, message)
+            self._loop.call_soon_threadsafe(self._apply, handle, message)
+        handle.process.join(10)
+        code = handle.process.exitcode
+        with self.factory() as db:
+            session = get_session(db, handle.session_id)
+            died = session.status in LIVE_STATUSES and session.worker_token == handle.token
+            if died:
+                detail = f"its worker exited unexpectedly (exit code {code}); resume it"
+                set_status(db, handle.session_id, Status.interrupted, detail, token=handle.token)
+            final = session.status
+        if died:
+            self.hub.publish(handle.session_id, "status", StatusChanged(final, detail))
+        self._loop.call_soon_threadsafe(self._drop, handle)
+
+    def _apply(self, handle: WorkerHandle, message: Any) -> None:
+        if isinstance(message, Progress):
+            handle.progress = message
+            return
+        if isinstance(message, AdviceRequest):
+            handle.request = message
+            handle.request_arrived = time.monotonic()
+            handle.shown_at = None
+            handle.moving = False
+        elif isinstance(message, AdviceResult):
+            handle.moving = False
+            handle.last_reward = message.reward
+            for entry in handle.history:
+                if entry.advice_index == message.advice_index:
+                    entry.reward = message.reward
+            self._notify_soon(handle.session_id)
+            return
+        elif isinstance(message, StatusChanged):
+            handle.status = message.status
+        else:
+            return
+        self.notify(handle.session_id)
+
+    def _drop(self, handle: WorkerHandle) -> None:
+        if self.handles.get(handle.session_id) is handle:
+            del self.handles[handle.session_id]
+        self.notify(handle.session_id)
+
+    def _watch(self, session_id: int, watched: bool) -> None:
+        handle = self.handles.get(session_id)
+        if handle is not None:
+            handle.send(Command("watch" if watched else "unwatch"))

@@ -1,0 +1,61 @@
+"""A Gymnasium wrapper that tells the web process what the scene does, for the viewer,
+and keeps the current episode's collected reward for progress reports."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+
+from server.sessions.link import WorkerLink
+from server.sessions.messages import SceneReset, SceneStep
+
+
+class SceneBroadcast(gym.Wrapper):
+    def __init__(self, env: gym.Env, link: WorkerLink | None) -> None:
+        super().__init__(env)
+        self._link = link
+        self.collected_reward = 0.0
+        self.steps = 0
+        self.episode = -1
+        self.after_step: list[Callable[[int, float, bool], None]] = []
+        """Called with (action, reward, episode_over) after every step."""
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self.collected_reward = 0.0
+        if self._link is not None and self._link.watching:
+            self.announce()
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.collected_reward += float(reward)
+        self.steps += 1
+        for hook in self.after_step:
+            hook(int(action), float(reward), bool(terminated or truncated))
+        if self._link is not None and self._link.watching:
+            scene = self.env.unwrapped
+            self._link.send(
+                SceneStep(
+                    action=int(action),
+                    reward=float(reward),
+                    frames=list(getattr(scene, "last_motion", None) or []),
+                    poses=dict(scene.body_poses()),
+                    global_step=self.steps,
+                )
+            )
+        return obs, reward, terminated, truncated, info
+
+    def announce(self) -> None:
+        """Send the whole scene (bodies and poses): on reset, and when a viewer arrives."""
+        assert self._link is not None
+        scene = self.env.unwrapped
+        self._link.send(
+            SceneReset(
+                bodies=list(scene.scene_bodies()),
+                poses=dict(scene.body_poses()),
+                episode=self.episode,
+            )
+        )

@@ -1,0 +1,321 @@
+"""One session's run, in the process that owns its environment and learner.
+
+The web process starts `worker_main` in a spawned process per running session; the batch
+runner (issue 6) calls `run_session` directly, in its own processes or Ray tasks. Either
+way the worker claims the session, resumes from its last checkpoint when there is one,
+logs every record, checkpoints every few episodes and at pause/stop, and writes its own
+final status.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+import traceback
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select, update
+
+from server.db.engine import make_engine, make_session_factory
+from server.db.models import Advice, Method, Status, StudySession
+from server.services import learning
+from server.services.errors import Conflict
+from server.services.sessions import claim, get_session, set_status
+from server.sessions.advisors import HumanAdvisor, RecordingAdvisor
+from server.sessions.link import ParentGone, WorkerExit, WorkerLink
+from server.sessions.messages import EpisodeDone, Progress, StatusChanged
+from server.sessions.recorder import TRAINING, LeaseLost, Recorder
+from server.sessions.scene import SceneBroadcast
+
+log = logging.getLogger(__name__)
+PROGRESS_EVERY_S = 0.2
+
+
+@dataclass(frozen=True)
+class WorkerOptions:
+    """How a worker runs; the server fills it from its settings."""
+
+    data_dir: Path = Path("study_data")
+    """Checkpoints go to `data_dir/checkpoints/session-ID/`."""
+    checkpoint_every_episodes: int = 10
+    """Training episodes between periodic checkpoints."""
+    flush_every_steps: int = 500
+    """Step records buffered before a batched insert."""
+    heartbeat_s: float = 5.0
+    """Longest time between two writes that mark the worker alive."""
+    idle_limit_s: float = 1800.0
+    """Default idle limit of human sessions (a session's own limit wins)."""
+    torch_threads: int | None = None
+    """torch threads for this process; None leaves torch's default."""
+    progress_bar: bool = False
+    """Show a tqdm bar of training episodes (command line runs)."""
+    nice: int = 0
+    """Added to the process's niceness (the server lowers machine sessions' priority)."""
+
+
+class _Reporter:
+    """Learner callback that sends live progress over the channel, a few times a second."""
+
+    def __init__(self, run: _Run) -> None:
+        self._run = run
+        self._sent = 0.0
+        self.phase = "pretraining"
+        self.epsilon = 1.0
+        self.last_episode_reward: float | None = None
+
+    def on_step(self, record: Any) -> None:
+        self.phase = "training" if record.phase == TRAINING else "pretraining"
+        self.epsilon = float(record.epsilon)
+        if time.monotonic() - self._sent >= PROGRESS_EVERY_S:
+            self._run.send_progress()
+            self._sent = time.monotonic()
+
+    def on_episode(self, record: Any) -> None:
+        self._run.send(EpisodeDone(record.to_dict()))
+        if record.phase != TRAINING:
+            return
+        self.last_episode_reward = float(record.collected_reward)
+        self._run.env.episode = self._run.recorder.episodes
+        self._run.send_progress()
+        self._sent = time.monotonic()
+        if self._run.bar is not None:
+            self._run.bar.update(1)
+
+
+class _Run:
+    def __init__(
+        self,
+        session_id: int,
+        database_url: str,
+        options: WorkerOptions,
+        token: str,
+        conn: Connection | None,
+    ) -> None:
+        self.session_id, self.options, self.token = session_id, options, token
+        self.factory = make_session_factory(make_engine(database_url))
+        with self.factory() as db:
+            self.session = get_session(db, session_id)
+            self.given = {
+                a.advice_index: a.action
+                for a in db.scalars(select(Advice).where(Advice.session_id == session_id))
+                if self.session.method == Method.human
+            }
+            db.execute(
+                update(StudySession)
+                .where(StudySession.id == session_id, StudySession.worker_token == token)
+                .values(worker_pid=os.getpid())
+            )
+            db.commit()
+        s = self.session
+        self.link = WorkerLink(conn, self._on_pause, self._on_watch) if conn else None
+        self.env = SceneBroadcast(learning.make_env(s, record_motion=conn is not None), self.link)
+        self.reporter = _Reporter(self)
+        self.recorder = Recorder(
+            self.factory,
+            session_id,
+            token,
+            options.data_dir / "checkpoints" / f"session-{session_id}",
+            options.flush_every_steps,
+            options.heartbeat_s,
+            self.progress_dict,
+            advice_written_elsewhere=s.method == Method.human,
+        )
+        resume = bool(s.checkpoint_path) and Path(s.checkpoint_path or "").is_file()
+        start_advice = s.checkpoint_advice if resume else 0
+        self.advisor: Any = None
+        if s.method == Method.human:
+            if self.link is None:
+                raise Conflict("a human session needs the server: start it through the API")
+            self.advisor = HumanAdvisor(
+                self.link,
+                self.given,
+                start_advice,
+                s.advice_budget,
+                s.idle_limit_s or options.idle_limit_s,
+                lambda: self.recorder.steps + 1,
+                self.send_progress,  # the live view shows where it waits
+            )
+            self.env.after_step.append(self.advisor.after_step)
+        elif s.method != Method.autonomous:
+            self.advisor = RecordingAdvisor(
+                learning.make_machine_advisor(s, self.env),
+                s.method,
+                start_advice,
+                self.recorder.add_advice,
+                lambda: self.recorder.steps + 1,
+            )
+        self.trainer = learning.make_trainer(
+            self.env,
+            s,
+            self.advisor,
+            learning.make_strategy(s),
+            [self.recorder, self.reporter],
+            options.torch_threads,
+        )
+        if resume:
+            self.trainer.load_checkpoint(s.checkpoint_path)
+        else:
+            s.checkpoint_step = s.checkpoint_episodes = s.checkpoint_advice = 0
+        self.recorder.rewind(s)
+        self.env.steps = self.recorder.steps
+        self.env.episode = self.recorder.episodes
+        self.reporter.phase = str(getattr(self.trainer, "stage", "pretraining"))
+        self.bar: Any = None
+
+    @property
+    def advice_given(self) -> int:
+        return int(getattr(self.advisor, "count", 0))
+
+    def progress(self) -> Progress:
+        return Progress(
+            phase=self.reporter.phase,
+            global_step=self.recorder.steps,
+            episode=self.recorder.episodes,
+            episodes=self.session.episodes,
+            epsilon=self.reporter.epsilon,
+            collected_reward=self.env.collected_reward,
+            last_episode_reward=self.reporter.last_episode_reward,
+            advice_given=self.advice_given,
+            advice_budget=self.session.advice_budget,
+        )
+
+    def progress_dict(self) -> dict[str, Any]:
+        return vars(self.progress())
+
+    def send(self, message: Any) -> None:
+        if self.link is not None:
+            self.link.send(message)
+
+    def send_progress(self) -> None:
+        self.send(self.progress())
+
+    def set_status(self, status: Status, detail: str = "") -> None:
+        with self.factory() as db:
+            if not set_status(db, self.session_id, status, detail, token=self.token):
+                raise LeaseLost(f"session {self.session_id} is no longer this worker's")
+        self.send(StatusChanged(status.value, detail))
+
+    def checkpoint(self, name: str = "") -> None:
+        self.recorder.checkpoint(self.trainer, self.advice_given, name)
+
+    def _on_pause(self, paused: bool, at_step_boundary: bool) -> None:
+        if paused and at_step_boundary:
+            self.checkpoint()
+        self.send_progress()
+        with self.factory() as db:
+            set_status(
+                db, self.session_id, Status.paused if paused else Status.running, token=self.token
+            )
+
+    def _on_watch(self) -> None:
+        self.env.announce()
+
+    def run(self) -> Status:
+        self.send(StatusChanged(Status.running.value))
+        self.send_progress()
+        if self.options.progress_bar:
+            from tqdm import tqdm
+
+            self.bar = tqdm(
+                total=self.session.episodes,
+                initial=self.recorder.episodes,
+                desc=f"session {self.session_id}",
+                unit="episode",
+            )
+        try:
+            while not self.trainer.done:
+                try:
+                    if self.link is not None:
+                        self.link.poll()
+                    self.recorder.tick()
+                    if self.recorder.episodes_since_checkpoint >= (
+                        self.options.checkpoint_every_episodes
+                    ):
+                        self.checkpoint()
+                except WorkerExit as exit_:
+                    return self._exit(exit_, at_step_boundary=True)
+                try:
+                    self.trainer.step()
+                except WorkerExit as exit_:
+                    return self._exit(exit_, at_step_boundary=False)
+            self.checkpoint("final.pt")
+            self.set_status(Status.finished)
+            self.send_progress()
+            return Status.finished
+        finally:
+            if self.bar is not None:
+                self.bar.close()
+
+    def _exit(self, exit_: WorkerExit, at_step_boundary: bool) -> Status:
+        if at_step_boundary:
+            self.checkpoint()
+        else:
+            self.recorder.flush()
+        status = Status(exit_.status)
+        if isinstance(exit_, ParentGone):
+            self.link = None  # nobody is listening any more
+        self.set_status(status, str(exit_))
+        return status
+
+
+def run_session(
+    session_id: int,
+    database_url: str,
+    options: WorkerOptions | None = None,
+    *,
+    worker_token: str | None = None,
+    conn: Connection | None = None,
+) -> str:
+    """Run one session to its end in this process; returns its final status.
+
+    Without `worker_token` the session is claimed here (created sessions start, stopped or
+    interrupted ones resume). Human sessions need `conn`, the channel to the web process."""
+    options = options or WorkerOptions()
+    if options.nice:
+        os.nice(options.nice)
+    if options.torch_threads:
+        import torch
+
+        torch.set_num_threads(options.torch_threads)
+    factory = make_session_factory(make_engine(database_url))
+    if worker_token is None:
+        with factory() as db:
+            session = get_session(db, session_id)
+            if session.method == Method.human and conn is None:
+                raise Conflict(
+                    f"session {session_id} is a human session: start it through the server"
+                )
+            worker_token = claim(db, session_id, resume=session.status != Status.created)
+    try:
+        run = _Run(session_id, database_url, options, worker_token, conn)
+        return run.run().value
+    except LeaseLost as error:
+        log.warning("%s", error)
+        return "lost"
+    except Exception as error:
+        detail = "".join(traceback.format_exception(error))
+        log.error("session %s failed:\n%s", session_id, detail)
+        with factory() as db:
+            set_status(db, session_id, Status.failed, detail[-4000:], token=worker_token)
+        if conn is not None:
+            with contextlib.suppress(OSError):
+                conn.send(StatusChanged(Status.failed.value, str(error)))
+        return Status.failed.value
+
+
+def worker_main(
+    session_id: int,
+    database_url: str,
+    options: WorkerOptions,
+    worker_token: str,
+    conn: Connection,
+) -> None:
+    """Entry point of a spawned worker process."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s worker %(process)d %(message)s")
+    run_session(session_id, database_url, options, worker_token=worker_token, conn=conn)
+    conn.close()

@@ -1,0 +1,106 @@
+"""The server's one settings object: the only place that reads the environment.
+
+Values come from environment variables prefixed `IDEEPRL_` (or a `.env` file in the
+working directory); `DATABASE_URL` is accepted without the prefix because CI and most
+hosting set that plain name.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+from pathlib import Path
+
+from pydantic import AliasChoices, Field, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+API_KEY_FILE = "api_key"
+
+
+class Settings(BaseSettings):
+    """Everything the web process and its session workers need to know about this install."""
+
+    model_config = SettingsConfigDict(env_prefix="IDEEPRL_", env_file=".env", extra="ignore")
+
+    data_dir: Path = Path("study_data")
+    """Where the database (by default), checkpoints, exports and the generated key live."""
+
+    database_url: str | None = Field(
+        default=None, validation_alias=AliasChoices("IDEEPRL_DATABASE_URL", "DATABASE_URL")
+    )
+    """Any SQLAlchemy URL; default: SQLite file `ideeprl.sqlite3` in `data_dir`."""
+
+    api_key: str | None = None
+    """Researcher key (header `X-API-Key`). Unset: generated once and kept in `data_dir`."""
+
+    host: str = "127.0.0.1"
+    """Interface the HTTP server listens on."""
+
+    port: int = Field(default=8000, ge=0, le=65535)
+    """HTTP port."""
+
+    public_url: str | None = None
+    """Base URL participants reach the server at (for links); default `http://host:port`."""
+
+    idle_limit_s: float = Field(default=1800.0, gt=0)
+    """Seconds without advice while advice is wanted before a human session is abandoned."""
+
+    checkpoint_every_episodes: int = Field(default=10, ge=1)
+    """Training episodes between periodic checkpoints (also taken at pause and stop)."""
+
+    flush_every_steps: int = Field(default=500, ge=1)
+    """Step records a worker buffers before one batched insert (also flushed per episode)."""
+
+    heartbeat_s: float = Field(default=5.0, gt=0)
+    """How often a worker marks itself alive in the database."""
+
+    stale_after_s: float = Field(default=60.0, gt=0)
+    """A running session whose worker has not marked itself alive for this long is dead."""
+
+    worker_threads: int = Field(default=1, ge=1)
+    """torch threads per session worker; several workers share the machine's cores."""
+
+    trainer_nice: int = Field(default=10, ge=0, le=19)
+    """Niceness of machine-advised workers, so training never slows people's requests."""
+
+    @field_validator("database_url")
+    @classmethod
+    def _driver(cls, url: str | None) -> str | None:
+        # psycopg (v3) is the PostgreSQL driver we ship; a bare postgresql:// means psycopg2.
+        if url is not None and url.startswith(("postgresql://", "postgres://")):
+            return "postgresql+psycopg://" + url.split("://", 1)[1]
+        return url
+
+    @property
+    def db_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{self.data_dir / 'ideeprl.sqlite3'}"
+
+    @property
+    def checkpoint_dir(self) -> Path:
+        return self.data_dir / "checkpoints"
+
+    @property
+    def export_dir(self) -> Path:
+        return self.data_dir / "exports"
+
+    @property
+    def base_url(self) -> str:
+        return (self.public_url or f"http://{self.host}:{self.port}").rstrip("/")
+
+    def ensure_api_key(self) -> tuple[str, bool]:
+        """The researcher key, generating and saving one on first use; True if new."""
+        if self.api_key:
+            return self.api_key, False
+        path = self.data_dir / API_KEY_FILE
+        if path.exists():
+            self.api_key = path.read_text().strip()
+            return self.api_key, False
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        key = secrets.token_urlsafe(24)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "w") as f:
+            f.write(key + "\n")
+        self.api_key = key
+        return key, True

@@ -1,0 +1,141 @@
+"""Kill a worker, or the whole server, in the middle of a session; restart; resume: the
+finished session holds exactly the records of an uninterrupted one with the same seed."""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import signal
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from tests.server.live import LiveServer, fresh_database
+from tests.server.participant import SimulatedParticipant
+from tests.server.scale import NONDETERMINISTIC, export, session_body, wait_for_status
+
+pytestmark = pytest.mark.slow
+EPISODES = 3
+
+
+@pytest.fixture
+def live(tmp_path: Path) -> Iterator[LiveServer]:
+    with fresh_database(tmp_path) as url:
+        server = LiveServer(
+            tmp_path, url, checkpoint_every_episodes=1, heartbeat_s=0.5, stale_after_s=3
+        ).start()
+        try:
+            yield server
+        finally:
+            server.stop()
+
+
+def records(files: dict[str, bytes], session_id: int) -> dict[str, list[dict[str, Any]]]:
+    out = {}
+    for name in ("steps.csv", "episodes.csv", "advice.csv"):
+        rows = csv.DictReader(io.StringIO(files[name].decode()))
+        out[name] = [
+            {
+                k: v
+                for k, v in r.items()
+                if k not in NONDETERMINISTIC | {"session_id", "observation_file"}
+            }
+            for r in rows
+            if int(r["session_id"]) == session_id
+        ]
+    return out
+
+
+def wait_progress(api: httpx.Client, session_id: int, episode: int) -> None:
+    deadline = time.monotonic() + 180
+    while api.get(f"/api/sessions/{session_id}/progress").json()["episode"] < episode:
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+
+
+def test_a_session_killed_with_its_server_resumes_to_exactly_the_uninterrupted_records(
+    live: LiveServer,
+) -> None:
+    with live.client() as api:
+        study = api.post("/api/studies", json={"name": "crash"}).json()
+        body = session_body("oracle", advice_budget=30, episodes=EPISODES)
+        crashed = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+        reference = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+
+        api.post(f"/api/sessions/{crashed['id']}/start")
+        wait_progress(api, crashed["id"], 2)
+        pid = api.get(f"/api/sessions/{crashed['id']}").json()["worker_pid"]
+    os.kill(pid, signal.SIGKILL)  # worker and server at once: nobody marks the session
+    live.stop(kill=True)
+    live.start()
+    with live.client() as api:
+        interrupted = wait_for_status(api, crashed["id"], {"interrupted"}, timeout=30)
+        assert "resume" in interrupted["status_detail"] and interrupted["checkpoint_step"] > 0
+        assert api.post(f"/api/sessions/{crashed['id']}/resume").json()["status"] == "running"
+        api.post(f"/api/sessions/{reference['id']}/start")
+        wait_for_status(api, crashed["id"], {"finished"})
+        wait_for_status(api, reference["id"], {"finished"})
+        files = export(api, study["id"])
+    resumed, uninterrupted = records(files, crashed["id"]), records(files, reference["id"])
+    assert len([e for e in resumed["episodes.csv"] if e["phase"] == "train"]) == EPISODES
+    for name in resumed:
+        assert resumed[name] == uninterrupted[name], name
+
+
+def test_a_human_session_survives_a_server_crash_without_asking_again(live: LiveServer) -> None:
+    budget, before_crash = 10, 6
+    actions = [0, 1, 3, 0, 2, 3, 0, 1, 3, 0]
+    with live.client() as api:
+        study = api.post("/api/studies", json={"name": "human crash"}).json()
+        body = session_body("human", advice_budget=budget, episodes=1)
+        crashed = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+        reference = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+        participant = SimulatedParticipant(live.url, crashed["participant_token"])
+        participant.client.post("/api/participant/start")
+        for index in range(before_crash):
+            state = participant.next_request()
+            assert participant.advise(state["advice_index"], actions[index]).status_code == 200
+        worker = api.get(f"/api/sessions/{crashed['id']}").json()["worker_pid"]
+
+    live.stop(kill=True)
+    deadline = time.monotonic() + 30
+    while _alive(worker):
+        assert time.monotonic() < deadline, "the worker outlived its server"
+        time.sleep(0.1)
+    live.start()
+    with live.client() as api:
+        assert wait_for_status(api, crashed["id"], {"interrupted"}, timeout=30)
+        api.post(f"/api/sessions/{crashed['id']}/resume")
+        state = participant.next_request()
+        assert state["advice_index"] == before_crash and state["advice_given"] == before_crash
+        for index in range(before_crash, budget):
+            state = participant.next_request()
+            assert participant.advise(state["advice_index"], actions[index]).status_code == 200
+        other = SimulatedParticipant(live.url, reference["participant_token"])
+        other.client.post("/api/participant/start")
+        for index in range(budget):
+            state = other.next_request()
+            assert other.advise(state["advice_index"], actions[index]).status_code == 200
+        wait_for_status(api, crashed["id"], {"finished"})
+        wait_for_status(api, reference["id"], {"finished"})
+        files = export(api, study["id"])
+    resumed, uninterrupted = records(files, crashed["id"]), records(files, reference["id"])
+    assert len(resumed["advice.csv"]) == budget
+    for name in resumed:
+        assert resumed[name] == uninterrupted[name], name
+    participant.close()
+    other.close()
+
+
+def _alive(pid: int) -> bool:
+    """Running (a zombie nobody has reaped yet counts as gone)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+    return "\nState:\tZ" not in status
