@@ -1,0 +1,125 @@
+"""Who gives advice: the protocol, and the advisors the learner ships.
+
+The server plugs in its own `human` advisor (a person in a browser) by implementing the
+same protocol: `advise` may block as long as the person takes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from learner.config import DQNConfig
+from learner.device import resolve_device
+
+ADVISOR_KINDS = ("agent", "oracle", "random")
+
+
+@runtime_checkable
+class Advisor(Protocol):
+    """Anything that, shown what the learner sees, names an action (0..3)."""
+
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+        """The advised action for the uint8 image `obs`; `info` is the environment's
+        ground truth, which only simulated advisors may look at. May block."""
+        ...
+
+
+@runtime_checkable
+class ValueAdvisor(Advisor, Protocol):
+    """An advisor with its own value estimate, which importance advising needs."""
+
+    def q_values(self, obs: np.ndarray) -> np.ndarray: ...
+
+
+class RandomAdvisor:
+    """Advises uniformly at random: the baseline for advice that carries no knowledge."""
+
+    def __init__(self, seed: int | None = None, n_actions: int = 4) -> None:
+        self.n_actions = n_actions
+        self.rng = np.random.default_rng(seed)
+
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+        return int(self.rng.integers(self.n_actions))
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"rng": self.rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.rng.bit_generator.state = state["rng"]
+
+
+class OracleAdvisor:
+    """The correct action from the simulator's ground truth, wrong with probability
+    `error_rate` (then one of the other actions at random): a stand-in for a person of
+    known reliability."""
+
+    def __init__(
+        self,
+        sort_rule: Any = "color",
+        error_rate: float = 0.0,
+        seed: int | None = None,
+        n_actions: int = 4,
+    ) -> None:
+        import sim
+
+        if not 0.0 <= error_rate <= 1.0:
+            raise ValueError(f"error_rate must be between 0 and 1, got {error_rate}")
+        self.sort_rule = sim.SortRule.parse(sort_rule)
+        self.error_rate = float(error_rate)
+        self.n_actions = n_actions
+        self.rng = np.random.default_rng(seed)
+        self._oracle_action = sim.oracle_action
+
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+        correct = int(self._oracle_action(info, self.sort_rule))
+        wrong = self.rng.random() < self.error_rate
+        other = int(self.rng.integers(self.n_actions - 1))
+        if not wrong:
+            return correct
+        return other if other < correct else other + 1
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"rng": self.rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.rng.bit_generator.state = state["rng"]
+
+
+class AgentAdvisor:
+    """A previously trained learner acting greedily on the same image (agent-IDeepRL)."""
+
+    def __init__(self, checkpoint: str | Path, device: str = "auto") -> None:
+        from learner.agent import DQNAgent
+        from learner.checkpoint import read_checkpoint
+
+        state = read_checkpoint(checkpoint)
+        config = DQNConfig.from_dict({**state["config"], "device": device})
+        self.agent = DQNAgent(config, resolve_device(device))
+        self.agent.network.load_state_dict(state["agent"]["network"])
+        self.checkpoint = str(checkpoint)
+
+    def q_values(self, obs: np.ndarray) -> np.ndarray:
+        return self.agent.q_values(obs)
+
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+        return int(np.argmax(self.q_values(obs)))
+
+
+def make_advisor(kind: str, **options: Any) -> Advisor:
+    """`agent` (checkpoint=PATH, device=...), `oracle` (sort_rule=..., error_rate=...,
+    seed=...) or `random` (seed=...)."""
+    factories = {"agent": AgentAdvisor, "oracle": OracleAdvisor, "random": RandomAdvisor}
+    if kind not in factories:
+        raise ValueError(
+            f"unknown advisor {kind!r}; valid advisors: {', '.join(ADVISOR_KINDS)} "
+            "(the server provides 'human')"
+        )
+    if kind == "agent" and "checkpoint" not in options:
+        raise ValueError("the agent advisor needs checkpoint=PATH of a trained learner")
+    try:
+        return factories[kind](**options)  # type: ignore[no-any-return]
+    except TypeError as error:
+        raise ValueError(f"bad options for the {kind} advisor: {error}") from error

@@ -1,0 +1,151 @@
+"""The deep Q-learning agent: its network(s), optimizer, greedy values and the update.
+
+Separate from the training loop (`learner.trainer`), which decides when to act, ask for
+advice and update; this file decides how.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from learner.config import DQNConfig
+from learner.device import conv_dtype
+from learner.network import QNetwork
+from learner.phase_conv import PhaseConvForward, pack_frame
+from learner.replay import ReplaySample
+
+
+class DQNAgent:
+    """Q-values of images and one gradient step on a replay batch, per `DQNConfig`."""
+
+    def __init__(
+        self,
+        config: DQNConfig,
+        device: torch.device,
+        n_actions: int = 4,
+        image_shape: tuple[int, int, int] = (64, 64, 3),
+        init_seed: int = 0,
+    ) -> None:
+        self.config = config
+        self.device = device
+        self.n_actions = n_actions
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(init_seed)
+            self.network = QNetwork(n_actions, image_shape, config.head)
+        self.network.to(device)
+        self.target = copy.deepcopy(self.network) if config.target_network else None
+        self.updates = 0
+        """Gradient steps taken so far."""
+        params = self.network.parameters()
+        if config.optimizer == "rmsprop":
+            self.optimizer: torch.optim.Optimizer = torch.optim.RMSprop(
+                params,
+                lr=config.learning_rate,
+                alpha=config.rmsprop_alpha,
+                eps=config.optimizer_eps,
+                foreach=True,
+            )
+        else:
+            self.optimizer = torch.optim.Adam(
+                params, lr=config.learning_rate, eps=config.optimizer_eps, foreach=True
+            )
+        self.dtype = conv_dtype(config.precision, device)
+        self._fast = PhaseConvForward(self.network, self.dtype)
+        self._fast_target = PhaseConvForward(self.target, self.dtype) if self.target else None
+
+    @property
+    def frame_shape(self) -> tuple[int, ...]:
+        """Shape of a frame as the replay memory stores it (see `encode`)."""
+        h, w, c = self.network.image_shape
+        return (h // 2, w // 2, 4 * c) if self.config.update == "fast" else (h, w, c)
+
+    def encode(self, image: np.ndarray) -> np.ndarray:
+        """An observation as the replay memory stores it: packed for the fast update."""
+        if image.shape != self.network.image_shape or image.dtype != np.uint8:
+            raise ValueError(
+                f"observations must be uint8 images of shape {self.network.image_shape}, "
+                f"got {image.dtype} {image.shape}"
+            )
+        return pack_frame(image) if self.config.update == "fast" else image
+
+    def q_values(self, image: np.ndarray) -> np.ndarray:
+        """The network's values for one uint8 image (H, W, C), as the update computes them."""
+        frames = torch.from_numpy(self.encode(image)).to(self.device).unsqueeze(0)
+        with torch.inference_mode():
+            q = self._forward(self.network, self._fast, frames, grad=False)
+        return q[0].float().cpu().numpy()
+
+    def update(self, batch: ReplaySample) -> float:
+        """One gradient step on the batch's TD error; returns the loss. The batch's frames
+        are stored as `encode` makes them."""
+        config = self.config
+        n = len(batch.actions)
+        weights = self._fast.weights() if config.update == "fast" else None
+        with torch.no_grad():
+            next_frames = batch.next_states
+            if self.target is None:
+                detached = [(k.detach(), b.detach()) for k, b in weights] if weights else None
+                next_q = self._forward(self.network, self._fast, next_frames, False, detached)
+                next_value = next_q.max(1).values
+            else:
+                target_q = self._forward(self.target, self._fast_target, next_frames, False)
+                if config.double_dqn:
+                    detached = [(k.detach(), b.detach()) for k, b in weights] if weights else None
+                    online = self._forward(self.network, self._fast, next_frames, False, detached)
+                    choice = online.argmax(1, keepdim=True)
+                    next_value = target_q.gather(1, choice).squeeze(1)
+                else:
+                    next_value = target_q.max(1).values
+            targets = batch.rewards + config.gamma * (1.0 - batch.terminated) * next_value
+        q = self._forward(self.network, self._fast, batch.frames[:n], True, weights)
+        taken = q.gather(1, batch.actions.unsqueeze(1)).squeeze(1)
+        if config.loss == "mse":
+            loss = F.mse_loss(taken, targets)
+        else:
+            loss = F.smooth_l1_loss(taken, targets)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        if config.grad_clip_norm is not None:
+            torch.nn.utils.clip_grad_norm_(self.network.parameters(), config.grad_clip_norm)
+        self.optimizer.step()
+        self.updates += 1
+        if self.target is not None and self.updates % config.target_update_interval == 0:
+            self.target.load_state_dict(self.network.state_dict())
+        return float(loss.detach())
+
+    def _forward(
+        self,
+        network: QNetwork,
+        fast: PhaseConvForward | None,
+        frames: torch.Tensor,
+        grad: bool,
+        weights: list[tuple[torch.Tensor, torch.Tensor]] | None = None,
+    ) -> torch.Tensor:
+        if self.config.update == "plain":
+            return network(frames.permute(0, 3, 1, 2).contiguous().float().div(255.0))
+        assert fast is not None
+        if weights is None:
+            weights = fast.weights()
+            if not grad:
+                weights = [(k.detach(), b.detach()) for k, b in weights]
+        return fast(frames, weights)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "network": self.network.state_dict(),
+            "target": self.target.state_dict() if self.target is not None else None,
+            "optimizer": self.optimizer.state_dict(),
+            "updates": self.updates,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.network.load_state_dict(state["network"])
+        if self.target is not None:
+            self.target.load_state_dict(state["target"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.updates = int(state["updates"])

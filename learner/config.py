@@ -1,0 +1,200 @@
+"""Every hyperparameter of the learner, in one JSON-able dataclass.
+
+The server stores a config per session and accepts overrides from a REST body, so
+`from_dict` checks every field and raises a `ValueError` that names the field and
+its valid values instead of failing somewhere deep in a training run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import types
+import typing
+from dataclasses import dataclass, fields
+from typing import Any, Literal
+
+from learner.docstrings import field_docstrings
+
+Head = Literal["linear", "softmax"]
+Loss = Literal["mse", "huber"]
+Optimizer = Literal["rmsprop", "adam"]
+UpdateImpl = Literal["fast", "plain"]
+Precision = Literal["auto", "bf16", "fp32"]
+
+PRESETS = ("paper", "modern")
+_DEVICE = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    """The paper's deep Q-learning (Algorithms 1 and 2) and the few choices it leaves open.
+
+    Defaults are the `paper` preset: the paper's numbers, and the authors' public Keras
+    code (IthanMoreira/DeppRL) where the paper is silent (no target network, MSE, RMSprop).
+    """
+
+    episodes: int = 300
+    """Training episodes (the paper's 300); pretraining episodes are not counted."""
+    max_episode_steps: int = 250
+    """An episode is truncated after this many steps (the paper's 250)."""
+    pretraining_steps: int = 1000
+    """Actions taken to fill the memory before training (Algorithm 1): all random for
+    the autonomous agent; the last `advice_budget` of them advised under early advising."""
+    advice_budget: int = 100
+    """Advised actions a strategy may use when none is given explicitly (the paper's 100)."""
+    batch_size: int = 128
+    """Transitions <s, a, r, s'> sampled from memory for each update (the paper's 128)."""
+    learning_rate: float = 1e-3
+    """Optimizer step size (the paper's 1e-3)."""
+    gamma: float = 0.9
+    """Discount factor (the paper's 0.9)."""
+    epsilon_start: float = 1.0
+    """Exploration rate at the first training step (the paper's 1.0)."""
+    epsilon_decay: float = 0.9995
+    """Epsilon is multiplied by this after every training update (the paper's 0.9995,
+    which reaches 1 % after about 9,200 updates: near episode 150 in the paper)."""
+    epsilon_min: float = 0.01
+    """Floor of epsilon (1 %)."""
+    memory_size: int = 20_000
+    """Replay memory capacity in transitions (not in the paper; the authors' code keeps
+    20,000). Frames are stored once as uint8: about 246 MB at 64x64x3."""
+    head: Head = "linear"
+    """Output layer: `linear` Q-values (default), or the paper's `softmax`. A softmax
+    squeezes the outputs into [0, 1] summing to 1, so they cannot be Q-values whose
+    returns reach 3; the authors used it, we offer it to reproduce them."""
+    loss: Loss = "mse"
+    """TD loss on the taken action: `mse` (the authors' Keras code) or `huber`."""
+    optimizer: Optimizer = "rmsprop"
+    """`rmsprop` (the authors' code) or `adam`."""
+    rmsprop_alpha: float = 0.9
+    """RMSprop's moving-average factor; 0.9 is Keras' `rho`, which the authors used."""
+    optimizer_eps: float = 1e-7
+    """Optimizer epsilon; 1e-7 is Keras' default."""
+    target_network: bool = False
+    """Compute targets with a periodically synchronised copy of the network."""
+    target_update_interval: int = 500
+    """Updates between target-network synchronisations (when `target_network`)."""
+    double_dqn: bool = False
+    """Double DQN: the online network picks the next action, the target network values it
+    (needs `target_network`)."""
+    grad_clip_norm: float | None = None
+    """Clip the gradient's global L2 norm to this value; None: no clipping."""
+    update: UpdateImpl = "fast"
+    """`fast`: convolution and pooling fused by space-to-depth, bfloat16 convolutions,
+    uint8 frames converted inside the step (same network, same function); `plain`: the
+    textbook float32 path, kept to show that the fast update learns the same."""
+    precision: Precision = "auto"
+    """Convolution precision of the fast update: `bf16` where the device supports it
+    natively (`auto`), else `fp32`. Dense layers and the loss stay float32."""
+    device: str = "auto"
+    """`auto` (CUDA when available, else CPU), `cpu`, `cuda` or `cuda:N`."""
+    torch_threads: int = 0
+    """Torch CPU threads for this process; 0 picks min(4, cores), which suits the small
+    convolutions here and a 2-core machine."""
+
+    def __post_init__(self) -> None:
+        hints = typing.get_type_hints(DQNConfig)
+        for field in fields(self):
+            value = getattr(self, field.name)
+            _check_type(field.name, value, hints[field.name])
+            if hints[field.name] in (float, float | None) and isinstance(value, int):
+                object.__setattr__(self, field.name, float(value))
+        positive = ("episodes", "max_episode_steps", "batch_size", "memory_size")
+        for name in positive:
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        for name in ("pretraining_steps", "advice_budget", "torch_threads"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be 0 or more, got {getattr(self, name)}")
+        if self.target_update_interval < 1:
+            raise ValueError("target_update_interval must be at least 1")
+        if self.pretraining_steps < self.batch_size:
+            raise ValueError(
+                f"pretraining_steps ({self.pretraining_steps}) must be at least batch_size "
+                f"({self.batch_size}): the first update samples a full batch from memory"
+            )
+        if self.memory_size < self.batch_size:
+            raise ValueError(f"memory_size must be at least batch_size ({self.batch_size})")
+        for name in ("gamma", "epsilon_start", "epsilon_min", "rmsprop_alpha"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
+        if not 0.0 < self.epsilon_decay <= 1.0:
+            raise ValueError(f"epsilon_decay must be in (0, 1], got {self.epsilon_decay}")
+        if self.learning_rate < 0 or self.optimizer_eps <= 0:
+            raise ValueError("learning_rate must be >= 0 and optimizer_eps > 0")
+        if self.grad_clip_norm is not None and self.grad_clip_norm <= 0:
+            raise ValueError("grad_clip_norm must be positive, or None for no clipping")
+        if self.double_dqn and not self.target_network:
+            raise ValueError("double_dqn needs target_network=True")
+        if not _DEVICE.match(self.device):
+            raise ValueError(
+                f"device must be 'auto', 'cpu', 'cuda' or 'cuda:N', got {self.device!r}"
+            )
+
+    @classmethod
+    def preset(cls, name: str, **overrides: Any) -> DQNConfig:
+        """`paper` (the default fields) or `modern` (target network, Double DQN, Huber
+        loss, gradient clipping); keyword overrides are checked like `from_dict`."""
+        if name == "paper":
+            base: dict[str, Any] = {}
+        elif name == "modern":
+            base = {
+                "target_network": True,
+                "double_dqn": True,
+                "loss": "huber",
+                "grad_clip_norm": 10.0,
+            }
+        else:
+            raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
+        return cls.from_dict({**base, **overrides})
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> DQNConfig:
+        """Build from JSON values; unknown fields raise a `ValueError` listing valid ones."""
+        if not isinstance(values, dict):
+            raise ValueError(f"a config must be a JSON object, got {type(values).__name__}")
+        known = [f.name for f in fields(cls)]
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ValueError(
+                f"unknown config field(s) {', '.join(unknown)}; valid fields: {', '.join(known)}"
+            )
+        return cls(**values)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: Any) -> DQNConfig:
+        return self.from_dict({**self.to_dict(), **changes})
+
+
+def field_docs() -> dict[str, str]:
+    """Each field's docstring, for help texts and the server's API documentation."""
+    return field_docstrings(DQNConfig)
+
+
+def _check_type(name: str, value: Any, hint: Any) -> None:
+    origin = typing.get_origin(hint)
+    if origin is Literal:
+        choices = typing.get_args(hint)
+        if value not in choices:
+            raise ValueError(
+                f"{name} must be one of {', '.join(repr(c) for c in choices)}, got {value!r}"
+            )
+        return
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(hint)
+        if value is None and type(None) in args:
+            return
+        hint = next(a for a in args if a is not type(None))
+    if hint is bool:
+        ok = isinstance(value, bool)
+    elif hint is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif hint is float:
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+    else:
+        ok = isinstance(value, hint)
+    if not ok:
+        raise ValueError(f"{name} must be {hint.__name__}, got {value!r}")

@@ -1,0 +1,48 @@
+"""Where the learner computes: the torch device, its threads, its convolution precision."""
+
+from __future__ import annotations
+
+import os
+
+import torch
+
+
+def resolve_device(name: str) -> torch.device:
+    """`auto` is CUDA when available, else the CPU; an explicit CUDA device must exist."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    device = torch.device(name)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device {name!r} asked for, but torch sees no CUDA device; use 'auto'")
+    return device
+
+
+def configure_threads(threads: int) -> int:
+    """Set torch's CPU threads for this process (0: min(4, cores)) and return the count.
+
+    The network's convolutions are small: beyond a few threads the synchronisation
+    costs more than it gains, and other processes share the cores.
+    """
+    if threads == 0:
+        threads = min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+    if torch.get_num_threads() != threads:
+        torch.set_num_threads(threads)
+    return threads
+
+
+def bf16_native(device: torch.device) -> bool:
+    """Whether bfloat16 convolutions run natively (not emulated) on this device."""
+    if device.type == "cuda":
+        return torch.cuda.is_bf16_supported()
+    if device.type == "cpu":
+        cpu = torch.cpu
+        checks = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+        return any(getattr(cpu, check, lambda: False)() for check in checks)
+    return False
+
+
+def conv_dtype(precision: str, device: torch.device) -> torch.dtype:
+    """The dtype of the fast update's convolutions for a config's `precision`."""
+    if precision == "fp32" or (precision == "auto" and not bf16_native(device)):
+        return torch.float32
+    return torch.bfloat16

@@ -1,0 +1,70 @@
+"""The paper's convolutional Q-network, written plainly.
+
+Three convolutions (8x8/4, 4x4/8, 2x2/16 filters), each followed by ReLU and a 2x2
+max-pool, then a dense layer of 256 and one output per action. As in the authors' Keras
+code the convolutions pad "same" (so 16x8x8 features reach the dense layer); for even
+kernels that pads one pixel more after than before, exactly like Keras and TensorFlow.
+
+`forward` is the definition of the function. The fast update (`learner.phase_conv`)
+computes the same function from the same parameters in another way.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+CONV_LAYERS = ((4, 8), (8, 4), (16, 2))
+"""(filters, kernel size) of the three convolutions."""
+DENSE_UNITS = 256
+
+
+def same_padding(kernel: int) -> tuple[int, int]:
+    """Pixels padded (before, after) for a stride-1 "same" convolution, as Keras does."""
+    total = kernel - 1
+    return total // 2, total - total // 2
+
+
+class QNetwork(nn.Module):
+    """Maps a batch of images (B, 3, H, W) in [0, 1] to one value per action."""
+
+    def __init__(
+        self,
+        n_actions: int = 4,
+        image_shape: tuple[int, int, int] = (64, 64, 3),
+        head: str = "linear",
+    ) -> None:
+        super().__init__()
+        height, width, channels = image_shape
+        if height % 8 or width % 8:
+            raise ValueError(f"image height and width must be multiples of 8, got {image_shape}")
+        if head not in ("linear", "softmax"):
+            raise ValueError(f"head must be 'linear' or 'softmax', got {head!r}")
+        self.image_shape = image_shape
+        self.head = head
+        convs = []
+        in_channels = channels
+        for filters, kernel in CONV_LAYERS:
+            convs.append(nn.Conv2d(in_channels, filters, kernel))
+            in_channels = filters
+        self.conv1, self.conv2, self.conv3 = convs
+        self.dense = nn.Linear(in_channels * (height // 8) * (width // 8), DENSE_UNITS)
+        self.out = nn.Linear(DENSE_UNITS, n_actions)
+
+    @property
+    def convs(self) -> tuple[nn.Conv2d, nn.Conv2d, nn.Conv2d]:
+        return self.conv1, self.conv2, self.conv3
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        x = images
+        for conv in self.convs:
+            before, after = same_padding(conv.kernel_size[0])
+            x = conv(F.pad(x, (before, after, before, after)))
+            x = F.max_pool2d(F.relu(x), 2)
+        return self.output(x.flatten(1))
+
+    def output(self, features: torch.Tensor) -> torch.Tensor:
+        """The dense layers on flattened (C, H, W) features, always in float32."""
+        logits = self.out(F.relu(self.dense(features.float())))
+        return torch.softmax(logits, dim=1) if self.head == "softmax" else logits

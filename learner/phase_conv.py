@@ -1,0 +1,177 @@
+"""The Q-network's forward pass made fast: each convolution and its 2x2 max-pool at once.
+
+Why: the network's convolutions have 3-16 channels, a shape that vectorised kernels
+handle badly, and a 2x2 max-pool over small channel counts is slower still. Rearranging
+each layer's input by space-to-depth (every 2x2 block of pixels becomes 4x the channels)
+turns "conv k x k then pool 2x2" into one convolution with 4x the input and output
+channels on a quarter of the pixels, followed by an element-wise max over the four
+output phases (the four pixels a pool window covers). The kernel of that convolution is
+the original kernel scattered into a larger, partly zero one: the parameters, and so the
+network and its checkpoints, are exactly `QNetwork`'s, and the function is the same (up
+to float rounding; in float32 the outputs agree to ~1e-8, gradients included).
+
+The convolutions run in bfloat16 where the device supports it; the input's scaling by
+1/255 is folded into the first kernel, so uint8 frames go straight in. The replay memory
+keeps frames already rearranged (`pack_frame`), so the first layer's input is a copy of
+long contiguous runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from learner.network import QNetwork, same_padding
+
+
+@dataclass(frozen=True)
+class PhaseLayout:
+    """How one "same" k x k convolution plus 2x2 max-pool maps onto space-to-depth."""
+
+    kernel_index: torch.Tensor
+    """(4*out, 4*in, ks, ks) indices into the flattened kernel; the last index is a zero."""
+    pad_before: int
+    """Zero pixels before the image in the original resolution (even)."""
+    s2d_kernel: int
+    """The kernel size `ks` of the space-to-depth convolution."""
+
+
+def phase_layout(out_channels: int, in_channels: int, kernel: int) -> PhaseLayout:
+    """Output phase (py, px) at pooled pixel i reads input phase (ry, rx) at i + d, d in
+    [dmin, dmax], with original kernel tap k = 2 d + r - p + pad_before."""
+    before, _ = same_padding(kernel)
+    dmin, dmax = -before // 2, (kernel - before) // 2
+    ks = dmax - dmin + 1
+    p = np.arange(2)
+    o, c, d = np.arange(out_channels), np.arange(in_channels), np.arange(ks)
+    # axes: py, px, o, ry, rx, c, dy, dx
+    py, px, oo, ry, rx, cc, dy, dx = np.ix_(p, p, o, p, p, c, d, d)
+    ky = 2 * (dy + dmin) + ry - py + before
+    kx = 2 * (dx + dmin) + rx - px + before
+    valid = (ky >= 0) & (ky < kernel) & (kx >= 0) & (kx < kernel)
+    flat = ((oo * in_channels + cc) * kernel + ky) * kernel + kx
+    zero = out_channels * in_channels * kernel * kernel
+    index = np.where(valid, flat, zero).reshape(4 * out_channels, 4 * in_channels, ks, ks)
+    return PhaseLayout(torch.from_numpy(index.astype(np.int64)), -2 * dmin, ks)
+
+
+def pack_frame(image: np.ndarray) -> np.ndarray:
+    """(H, W, C) -> (H/2, W/2, 4C), channels (ry, rx, c): the layout the replay memory keeps,
+    the same bytes once, so that the first layer reads long contiguous runs."""
+    h, w, c = image.shape
+    return np.ascontiguousarray(
+        image.reshape(h // 2, 2, w // 2, 2, c)
+        .transpose(0, 2, 1, 3, 4)
+        .reshape(h // 2, w // 2, 4 * c)
+    )
+
+
+def unpack_frames(packed: torch.Tensor) -> torch.Tensor:
+    """(B, H/2, W/2, 4C) -> (B, H, W, C), the inverse of `pack_frame` on a batch."""
+    b, h2, w2, c4 = packed.shape
+    c = c4 // 4
+    return packed.view(b, h2, w2, 2, 2, c).permute(0, 1, 3, 2, 4, 5).reshape(b, 2 * h2, 2 * w2, c)
+
+
+def space_to_depth(
+    x: torch.Tensor, packed: bool, layout: PhaseLayout, dtype: torch.dtype
+) -> torch.Tensor:
+    """Pad and rearrange to (B, 4C, H/2 + ks - 1, W/2 + ks - 1), channels (ry, rx, c), in
+    channels-last memory: one zero fill and one strided copy that also converts dtype.
+    `x` is packed frames (B, H/2, W/2, 4C) or activations (B, C, H, W)."""
+    if packed:
+        b, h2, w2, c4 = x.shape
+        c = c4 // 4
+        src = x.view(b, h2, w2, 2, 2, c)
+    else:
+        b, c, h, w = x.shape
+        h2, w2 = h // 2, w // 2
+        src = x.view(b, c, h2, 2, w2, 2).permute(0, 2, 4, 3, 5, 1)
+    sh, sw = h2 + layout.s2d_kernel - 1, w2 + layout.s2d_kernel - 1
+    out = torch.zeros(b, sh, sw, 2, 2, c, dtype=dtype, device=x.device)
+    a = layout.pad_before // 2
+    out[:, a : a + h2, a : a + w2].copy_(src)
+    return out.view(b, sh, sw, 4 * c).permute(0, 3, 1, 2)
+
+
+class _PhaseMaxBiasRelu(torch.autograd.Function):
+    """relu(max over the 4 phases + bias) on (B, 4*o, h, w) NCHW. The gradient goes to the
+    first maximal phase in row-major window order, as `max_pool2d`'s does; masks are built
+    from signs of differences, which are exact and much faster on the CPU than `where`."""
+
+    @staticmethod
+    def forward(ctx, y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
+        m01, m23 = torch.maximum(y0, y1), torch.maximum(y2, y3)
+        out = torch.maximum(m01, m23).add_(bias.to(y.dtype).view(1, -1, 1, 1)).relu_()
+        ctx.save_for_backward(y, m01, m23, out)
+        return out
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:  # type: ignore[override]
+        y, m01, m23, out = ctx.saved_tensors
+        grad = torch.ops.aten.threshold_backward(grad, out, 0)
+        grad_bias = grad.sum((0, 2, 3), dtype=torch.float32)
+        y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
+        grad_hi = grad * _greater(m23, m01)
+        grad_lo = grad - grad_hi
+        grad_y = torch.empty_like(y).unflatten(1, (4, -1))
+        torch.mul(grad_lo, _greater(y1, y0), out=grad_y[:, 1])
+        torch.sub(grad_lo, grad_y[:, 1], out=grad_y[:, 0])
+        torch.mul(grad_hi, _greater(y3, y2), out=grad_y[:, 3])
+        torch.sub(grad_hi, grad_y[:, 3], out=grad_y[:, 2])
+        return grad_y.flatten(1, 2), grad_bias
+
+
+def _greater(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """1 where a > b else 0, in a's dtype."""
+    return (a - b).sign_().relu_()
+
+
+def phase_max_bias_relu(y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+    if torch.is_grad_enabled() and (y.requires_grad or bias.requires_grad):
+        return _PhaseMaxBiasRelu.apply(y, bias)  # type: ignore[no-any-return]
+    y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
+    m = torch.maximum(torch.maximum(y0, y1), torch.maximum(y2, y3))
+    return m.add_(bias.to(m.dtype).view(1, -1, 1, 1)).relu_()
+
+
+class PhaseConvForward:
+    """The fast forward of one `QNetwork`: `weights()` once per update, then `__call__`
+    on packed uint8 frames as many times as needed with those weights."""
+
+    def __init__(self, network: QNetwork, dtype: torch.dtype) -> None:
+        self.network = network
+        self.dtype = dtype
+        device = network.out.weight.device
+        self.layouts = []
+        for conv in network.convs:
+            out_channels, in_channels, kernel, _ = conv.weight.shape
+            layout = phase_layout(out_channels, in_channels, kernel)
+            index = layout.kernel_index.to(device)
+            self.layouts.append(PhaseLayout(index, layout.pad_before, layout.s2d_kernel))
+
+    def weights(self) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """Space-to-depth kernels (compute dtype) and float32 biases; differentiable."""
+        result = []
+        for i, (conv, layout) in enumerate(zip(self.network.convs, self.layouts, strict=True)):
+            flat = torch.cat((conv.weight.reshape(-1), conv.weight.new_zeros(1)))
+            kernel = flat[layout.kernel_index]
+            if i == 0:
+                kernel = kernel * (1.0 / 255.0)
+            kernel = kernel.to(self.dtype).contiguous(memory_format=torch.channels_last)
+            result.append((kernel, conv.bias))
+        return result
+
+    def __call__(
+        self, frames: torch.Tensor, weights: list[tuple[torch.Tensor, torch.Tensor]]
+    ) -> torch.Tensor:
+        """Q-values of packed uint8 frames (B, H/2, W/2, 4C), see `pack_frame`."""
+        x = frames
+        for i, (layout, (kernel, bias)) in enumerate(zip(self.layouts, weights, strict=True)):
+            y = F.conv2d(space_to_depth(x, i == 0, layout, self.dtype), kernel)
+            x = phase_max_bias_relu(y.contiguous(), bias)
+        return self.network.output(x.flatten(1))

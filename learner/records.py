@@ -1,0 +1,119 @@
+"""What the learner reports: one record per environment step and one per episode.
+
+The field docstrings are the column dictionary of the exports (`column_docs`).
+
+Numbering. Global steps count every environment step of a run from 1: pretraining is
+steps 1..pretraining_steps, training follows. Episodes are numbered from 1 within their
+stage: pretraining episodes (`phase` "pretrain" in `EpisodeRecord`) and training episodes
+(`phase` "train", 1..`episodes`) each start at 1, so a step's `episode` refers to the
+pretraining episode of that number when its phase is "pretrain" or "advice", and to the
+training episode when it is "train". Pretraining episodes are recorded for completeness
+(they show the advisor's effect on the memory) but are not among the training episodes
+whose collected reward the paper reports; the last one is cut when pretraining ends.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from learner.docstrings import field_docstrings
+
+StepPhase = Literal["pretrain", "advice", "train"]
+EpisodePhase = Literal["pretrain", "train"]
+ActionSource = Literal["random", "advisor", "greedy", "exploration"]
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """One environment step."""
+
+    global_step: int
+    """Step number in the whole run, from 1 (pretraining, then training)."""
+    phase: StepPhase
+    """`pretrain` (random pretraining step), `advice` (pretraining step taken on advice:
+    early advising), `train` (training stage, including advice given during training)."""
+    episode: int
+    """Episode number within the stage, from 1: a pretraining episode for phases
+    `pretrain` and `advice`, a training episode for `train`."""
+    episode_step: int
+    """Step number within the episode, from 1."""
+    action: int
+    """The action executed (0 grab, 1 move right, 2 move left, 3 drop)."""
+    action_source: ActionSource
+    """Who chose the executed action: `random` (pretraining), `advisor` (advice is policy
+    shaping: the advised action is executed), `greedy` (the learner's best action) or
+    `exploration` (epsilon-greedy's random action)."""
+    greedy_action: int
+    """The learner's own greedy choice before this step (argmax of its Q-values)."""
+    q_grab: float
+    """The learner's Q-value of grab in the observed state."""
+    q_move_right: float
+    """The learner's Q-value of move right."""
+    q_move_left: float
+    """The learner's Q-value of move left."""
+    q_drop: float
+    """The learner's Q-value of drop."""
+    advised_action: int | None
+    """The advisor's action when advice was given at this step, else empty."""
+    advice_remaining: int
+    """Advice budget left after this step (0 without an advisor)."""
+    reward: float
+    """Reward of this step."""
+    terminated: bool
+    """The episode ended in a terminal state (task complete, or a misplacement)."""
+    truncated: bool
+    """The episode was cut without a terminal state: the step limit, or the end of
+    pretraining."""
+    epsilon: float
+    """Exploration rate used to choose this step's action."""
+    loss: float | None
+    """Loss of the update made after this step (training stage only)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """One episode, pretraining or training."""
+
+    phase: EpisodePhase
+    """`pretrain` or `train`; the paper's curves and R_T use the `train` episodes only."""
+    episode: int
+    """Episode number within its stage, from 1."""
+    collected_reward: float
+    """Sum of the episode's rewards (the paper's collected reward; 3.0 at best)."""
+    steps: int
+    """Steps in the episode."""
+    placed_correct: int
+    """Objects placed on the correct table."""
+    misplaced: int
+    """Objects placed on the wrong table (a misplacement ends the episode)."""
+    lost: int
+    """Objects knocked off a table."""
+    success: bool
+    """The episode ended with the task complete (terminated without a misplacement)."""
+    terminated: bool
+    """The episode ended in a terminal state."""
+    truncated: bool
+    """The episode was cut: the step limit, or the end of pretraining."""
+    advised_steps: int
+    """Steps whose action came from the advisor."""
+    epsilon: float
+    """Exploration rate at the end of the episode."""
+    mean_loss: float | None
+    """Mean update loss over the episode's steps (training episodes only)."""
+    first_global_step: int
+    """Global step of the episode's first step."""
+    last_global_step: int
+    """Global step of the episode's last step."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def column_docs(record_type: type) -> dict[str, str]:
+    """Field name -> docstring of a record class: the export's column dictionary."""
+    return field_docstrings(record_type)

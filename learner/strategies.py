@@ -1,0 +1,214 @@
+"""When to ask the advisor: teaching on a budget.
+
+The paper uses early advising (its advisor's 100 actions close the pretraining stage).
+The others come from the teaching-on-a-budget literature it cites (Torrey and Taylor,
+2013) and act during training. Every strategy counts the advice it gives and never
+exceeds its budget; an advised action is executed (policy shaping).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from learner.advisors import Advisor
+
+STRATEGY_NAMES = ("early", "alternating", "importance", "mistake_correcting")
+
+
+@dataclass(frozen=True)
+class AdviceMoment:
+    """What a strategy may look at when deciding to ask for advice."""
+
+    obs: np.ndarray
+    """The image the learner sees."""
+    info: dict[str, Any]
+    """The environment's ground truth (for simulated advisors)."""
+    stage: str
+    """`pretraining` or `training`."""
+    global_step: int
+    """The step about to be taken, from 1."""
+    pretraining_steps: int
+    """Length of the pretraining stage."""
+    intended_action: int
+    """The action the learner would take without advice (random in pretraining,
+    epsilon-greedy in training)."""
+    greedy_action: int
+    """The learner's greedy action."""
+
+    @property
+    def training_step(self) -> int:
+        """The step's number within the training stage, from 1 (<= 0 in pretraining)."""
+        return self.global_step - self.pretraining_steps
+
+
+class AdvisingStrategy:
+    """Base: budget bookkeeping; subclasses decide in `_advise`."""
+
+    name: ClassVar[str] = ""
+    needs_values: ClassVar[bool] = False
+    """Whether the advisor must offer `q_values` (importance)."""
+
+    def __init__(self, budget: int = 100) -> None:
+        if isinstance(budget, bool) or not isinstance(budget, int) or budget < 0:
+            raise ValueError(f"budget must be a whole number >= 0, got {budget!r}")
+        self.budget = budget
+        self.used = 0
+
+    @property
+    def remaining(self) -> int:
+        return self.budget - self.used
+
+    def advise(self, moment: AdviceMoment, advisor: Advisor, n_actions: int = 4) -> int | None:
+        """The advised action to execute, or None; counts the advice against the budget."""
+        if self.remaining <= 0:
+            return None
+        action = self._advise(moment, advisor)
+        if action is None:
+            return None
+        if isinstance(action, bool) or not isinstance(action, int | np.integer):
+            raise ValueError(
+                f"advisor returned {action!r}; an action is an int in 0..{n_actions - 1}"
+            )
+        if not 0 <= action < n_actions:
+            raise ValueError(
+                f"advisor returned action {action}; valid actions are 0..{n_actions - 1}"
+            )
+        self.used += 1
+        return int(action)
+
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+        raise NotImplementedError
+
+    def check(self, pretraining_steps: int, advisor: Advisor) -> None:
+        """Raise a `ValueError` if this strategy cannot work with this run."""
+        if self.needs_values and not callable(getattr(advisor, "q_values", None)):
+            raise ValueError(
+                f"the {self.name} strategy needs an advisor with q_values (the agent advisor); "
+                f"{type(advisor).__name__} has none"
+            )
+
+    def options(self) -> dict[str, Any]:
+        """Constructor arguments besides the budget (for checkpoints and logs)."""
+        return {}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "budget": self.budget, "used": self.used, **self.options()}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        mine = self.state_dict()
+        for key in mine:
+            if key != "used" and state.get(key) != mine[key]:
+                raise ValueError(
+                    f"checkpoint strategy has {key}={state.get(key)!r}, this one {mine[key]!r}"
+                )
+        self.used = int(state["used"])
+
+    def __repr__(self) -> str:
+        options = "".join(f", {k}={v!r}" for k, v in self.options().items())
+        return f"{type(self).__name__}(budget={self.budget}{options}, used={self.used})"
+
+
+class EarlyAdvising(AdvisingStrategy):
+    """The paper's: the advisor takes the last `budget` steps of pretraining, consecutively
+    (global steps 901..1000 with the defaults)."""
+
+    name = "early"
+
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+        if moment.stage != "pretraining":
+            return None
+        if moment.global_step <= moment.pretraining_steps - self.budget:
+            return None
+        return advisor.advise(moment.obs, moment.info)
+
+    def check(self, pretraining_steps: int, advisor: Advisor) -> None:
+        super().check(pretraining_steps, advisor)
+        if self.budget > pretraining_steps:
+            raise ValueError(
+                f"early advising's budget ({self.budget}) cannot exceed pretraining_steps "
+                f"({pretraining_steps}): the advice closes the pretraining stage"
+            )
+
+
+class AlternatingAdvising(AdvisingStrategy):
+    """From the first training step, advice on every `interval`-th step (advised, own,
+    advised, own, ... with 2) until the budget is spent."""
+
+    name = "alternating"
+
+    def __init__(self, budget: int = 100, interval: int = 2) -> None:
+        super().__init__(budget)
+        if isinstance(interval, bool) or not isinstance(interval, int) or interval < 1:
+            raise ValueError(f"interval must be a whole number >= 1, got {interval!r}")
+        self.interval = interval
+
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+        if moment.stage != "training" or (moment.training_step - 1) % self.interval:
+            return None
+        return advisor.advise(moment.obs, moment.info)
+
+    def options(self) -> dict[str, Any]:
+        return {"interval": self.interval}
+
+
+class ImportanceAdvising(AdvisingStrategy):
+    """During training, advice in states the advisor finds important: the spread of its
+    Q-values (max - min) is at least `threshold`."""
+
+    name = "importance"
+    needs_values = True
+
+    def __init__(self, budget: int = 100, threshold: float = 0.1) -> None:
+        super().__init__(budget)
+        if isinstance(threshold, bool) or not isinstance(threshold, int | float) or threshold < 0:
+            raise ValueError(f"threshold must be a number >= 0, got {threshold!r}")
+        self.threshold = float(threshold)
+
+    def _important(self, moment: AdviceMoment, advisor: Advisor) -> bool:
+        if moment.stage != "training":
+            return False
+        values = np.asarray(advisor.q_values(moment.obs))  # type: ignore[attr-defined]
+        return float(values.max() - values.min()) >= self.threshold
+
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+        if not self._important(moment, advisor):
+            return None
+        return advisor.advise(moment.obs, moment.info)
+
+    def options(self) -> dict[str, Any]:
+        return {"threshold": self.threshold}
+
+
+class MistakeCorrecting(ImportanceAdvising):
+    """Importance advising that spends advice only where the learner's intended action
+    differs from the advisor's; where they agree the learner acts on its own."""
+
+    name = "mistake_correcting"
+
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+        if not self._important(moment, advisor):
+            return None
+        action = advisor.advise(moment.obs, moment.info)
+        return None if action == moment.intended_action else action
+
+
+_STRATEGIES: dict[str, type[AdvisingStrategy]] = {
+    cls.name: cls
+    for cls in (EarlyAdvising, AlternatingAdvising, ImportanceAdvising, MistakeCorrecting)
+}
+
+
+def make_strategy(name: str, budget: int = 100, **options: Any) -> AdvisingStrategy:
+    """`early`, `alternating` (interval=2), `importance` (threshold=0.1) or
+    `mistake_correcting` (threshold=0.1), each with an advice budget."""
+    if name not in _STRATEGIES:
+        raise ValueError(
+            f"unknown strategy {name!r}; valid strategies: {', '.join(STRATEGY_NAMES)}"
+        )
+    try:
+        return _STRATEGIES[name](budget, **options)
+    except TypeError as error:
+        raise ValueError(f"bad options for the {name} strategy: {error}") from error

@@ -1,0 +1,381 @@
+"""The training loop: the paper's Algorithms 1 and 2, one environment step at a time.
+
+Pretraining (Algorithm 1) takes `pretraining_steps` actions to fill the memory: random,
+except that an advising strategy may take some (early advising takes the last
+`advice_budget` of them). Training (Algorithm 2) runs `episodes` episodes of
+epsilon-greedy action with one update on a sampled batch after every action; strategies
+other than early advising may replace an action by the advisor's.
+
+`step()` does one environment step and returns its record, so a server can interleave
+its own work (pause, stop, progress) between steps; `run()` steps until done.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from learner.advisors import Advisor
+from learner.agent import DQNAgent
+from learner.checkpoint import read_checkpoint, write_checkpoint
+from learner.config import DQNConfig
+from learner.device import configure_threads, resolve_device
+from learner.exploration import EpsilonSchedule
+from learner.records import EpisodeRecord, StepRecord
+from learner.replay import ReplayMemory
+from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
+
+N_ACTIONS = 4
+RUNTIME_FIELDS = ("device", "torch_threads", "episodes")
+"""Config fields a resumed run may change: where it computes, and how long it goes on."""
+
+
+@dataclass
+class _Episode:
+    """The episode in progress, with what it takes to rebuild it: its reset seed and
+    actions (the environment is replayed from them on resume)."""
+
+    stage: str
+    number: int
+    reset_seed: int
+    obs: np.ndarray
+    info: dict[str, Any]
+    first_global_step: int
+    actions: list[int] = field(default_factory=list)
+    collected_reward: float = 0.0
+    advised_steps: int = 0
+    loss_sum: float = 0.0
+    loss_count: int = 0
+
+
+class Trainer:
+    """Trains one learner on one environment; see the module docstring.
+
+    `callbacks` are objects with `on_step(StepRecord)` and/or `on_episode(EpisodeRecord)`;
+    a callback returning False stops the trainer after the current step.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        config: DQNConfig | None = None,
+        advisor: Advisor | None = None,
+        strategy: AdvisingStrategy | str | None = None,
+        seed: int = 0,
+        callbacks: Iterable[Any] = (),
+    ) -> None:
+        self.config = config = config or DQNConfig()
+        self.env = env
+        _check_spaces(env)
+        self.device = resolve_device(config.device)
+        self.threads = configure_threads(config.torch_threads)
+        if isinstance(strategy, str):
+            strategy = make_strategy(strategy, config.advice_budget)
+        if advisor is not None and strategy is None:
+            strategy = make_strategy("early", config.advice_budget)
+        if strategy is not None:
+            if advisor is None:
+                raise ValueError(f"the {strategy.name} strategy needs an advisor; pass advisor=")
+            strategy.check(config.pretraining_steps, advisor)
+        self.advisor = advisor
+        self.strategy = strategy
+        self.callbacks = list(callbacks)
+        self.seed = seed
+        init, env_seeds, actions, memory = np.random.SeedSequence(seed).spawn(4)
+        image_shape = env.observation_space.shape
+        self.agent = DQNAgent(
+            config, self.device, N_ACTIONS, image_shape, int(init.generate_state(1)[0])
+        )
+        self.memory = ReplayMemory(config.memory_size, self.agent.frame_shape, self.device)
+        self.epsilon = EpsilonSchedule(
+            config.epsilon_start, config.epsilon_decay, config.epsilon_min
+        )
+        self._env_rng = np.random.default_rng(env_seeds)
+        self._action_rng = np.random.default_rng(actions)
+        self._memory_rng = np.random.default_rng(memory)
+        self.global_step = 0
+        """Environment steps taken so far."""
+        self.episodes_done = {"pretraining": 0, "training": 0}
+        self.episode_record: EpisodeRecord | None = None
+        """The record of the episode the last step ended, else None."""
+        self._episode: _Episode | None = None
+        self._stopped = False
+
+    @property
+    def stage(self) -> str:
+        """`pretraining` or `training`: the stage of the next step."""
+        return "pretraining" if self.global_step < self.config.pretraining_steps else "training"
+
+    @property
+    def done(self) -> bool:
+        return self._stopped or self.episodes_done["training"] >= self.config.episodes
+
+    @property
+    def observation(self) -> np.ndarray | None:
+        """The image the learner sees now; None between episodes."""
+        return None if self._episode is None else self._episode.obs
+
+    def stop(self) -> None:
+        """Make `done` true; `run` returns after the current step."""
+        self._stopped = True
+
+    def run(self) -> list[EpisodeRecord]:
+        """Step until done; returns the training episodes finished in this call."""
+        finished = []
+        while not self.done:
+            self.step()
+            if self.episode_record is not None and self.episode_record.phase == "train":
+                finished.append(self.episode_record)
+        return finished
+
+    def step(self) -> StepRecord:
+        """Take one environment step (resetting first if no episode is in progress)."""
+        if self.done:
+            raise RuntimeError("the trainer is done (all episodes run, or stopped)")
+        if self._episode is None:
+            self._begin_episode()
+        episode = self._episode
+        assert episode is not None
+        config = self.config
+        global_step = self.global_step + 1
+        pretraining = episode.stage == "pretraining"
+        q_values = self.agent.q_values(episode.obs)
+        greedy = int(np.argmax(q_values))
+        rng_state = self._action_rng.bit_generator.state
+        if pretraining:
+            phase, source = "pretrain", "random"
+            intended = int(self._action_rng.integers(N_ACTIONS))
+        else:
+            explore = bool(self._action_rng.random() < self.epsilon.value)
+            random_action = int(self._action_rng.integers(N_ACTIONS))
+            phase, source = "train", ("exploration" if explore else "greedy")
+            intended = random_action if explore else greedy
+        advised = None
+        if self.strategy is not None and self.advisor is not None:
+            moment = AdviceMoment(
+                episode.obs, episode.info, episode.stage, global_step,
+                config.pretraining_steps, intended, greedy,
+            )  # fmt: skip
+            try:
+                advised = self.strategy.advise(moment, self.advisor, N_ACTIONS)
+            except BaseException:
+                self._action_rng.bit_generator.state = rng_state  # the step never happened
+                raise
+        action = intended if advised is None else advised
+        if advised is not None:
+            source = "advisor"
+            phase = "advice" if pretraining else phase
+
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        reward, terminated = float(reward), bool(terminated)
+        self.global_step = global_step
+        episode.actions.append(action)
+        truncated = bool(truncated) or len(episode.actions) >= config.max_episode_steps
+        if pretraining and global_step == config.pretraining_steps:
+            truncated = truncated or not terminated  # pretraining ends: cut its last episode
+        self.memory.add(
+            self.agent.encode(episode.obs), action, reward,
+            self.agent.encode(obs), terminated, truncated,
+        )  # fmt: skip
+        epsilon = self.epsilon.value
+        loss = None
+        if not pretraining:
+            loss = self.agent.update(self.memory.sample(config.batch_size, self._memory_rng))
+            self.epsilon.step()
+            episode.loss_sum += loss
+            episode.loss_count += 1
+        episode.collected_reward += reward
+        episode.advised_steps += advised is not None
+        record = StepRecord(
+            global_step=global_step,
+            phase=phase,  # type: ignore[arg-type]
+            episode=episode.number,
+            episode_step=len(episode.actions),
+            action=action,
+            action_source=source,  # type: ignore[arg-type]
+            greedy_action=greedy,
+            q_grab=float(q_values[0]),
+            q_move_right=float(q_values[1]),
+            q_move_left=float(q_values[2]),
+            q_drop=float(q_values[3]),
+            advised_action=advised,
+            advice_remaining=self.strategy.remaining if self.strategy else 0,
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            epsilon=epsilon,
+            loss=loss,
+        )
+        self.episode_record = None
+        if terminated or truncated:
+            self.episode_record = self._finish_episode(info, terminated, truncated)
+        else:
+            episode.obs, episode.info = obs, info
+        self._notify("on_step", record)
+        if self.episode_record is not None:
+            self._notify("on_episode", self.episode_record)
+        return record
+
+    def _begin_episode(self) -> None:
+        stage = self.stage
+        reset_seed = int(self._env_rng.integers(2**31 - 1))
+        obs, info = self.env.reset(seed=reset_seed)
+        number = self.episodes_done[stage] + 1
+        self._episode = _Episode(stage, number, reset_seed, obs, info, self.global_step + 1)
+
+    def _finish_episode(self, info: dict[str, Any], terminated: bool, truncated: bool):
+        episode = self._episode
+        assert episode is not None
+        self._episode = None
+        self.episodes_done[episode.stage] += 1
+        misplaced = int(info.get("misplaced", 0))
+        return EpisodeRecord(
+            phase="pretrain" if episode.stage == "pretraining" else "train",
+            episode=episode.number,
+            collected_reward=episode.collected_reward,
+            steps=len(episode.actions),
+            placed_correct=int(info.get("placed_correct", 0)),
+            misplaced=misplaced,
+            lost=int(info.get("lost", 0)),
+            success=terminated and misplaced == 0,
+            terminated=terminated,
+            truncated=truncated,
+            advised_steps=episode.advised_steps,
+            epsilon=self.epsilon.value,
+            mean_loss=episode.loss_sum / episode.loss_count if episode.loss_count else None,
+            first_global_step=episode.first_global_step,
+            last_global_step=self.global_step,
+        )
+
+    def _notify(self, method: str, record: StepRecord | EpisodeRecord) -> None:
+        for callback in self.callbacks:
+            handler = getattr(callback, method, None)
+            if handler is not None and handler(record) is False:
+                self._stopped = True
+
+    def save_checkpoint(self, path: str | Path, metadata: dict[str, Any] | None = None) -> None:
+        """Everything needed to continue exactly as if never stopped; `metadata` (plain
+        JSON-like values) is stored alongside for the caller, e.g. how to rebuild the
+        advisor."""
+        episode = self._episode
+        write_checkpoint(
+            path,
+            {
+                "metadata": metadata or {},
+                "config": self.config.to_dict(),
+                "seed": self.seed,
+                "agent": self.agent.state_dict(),
+                "memory": self.memory.state_dict(),
+                "epsilon": self.epsilon.value,
+                "global_step": self.global_step,
+                "episodes_done": dict(self.episodes_done),
+                "rngs": {
+                    "env": self._env_rng.bit_generator.state,
+                    "action": self._action_rng.bit_generator.state,
+                    "memory": self._memory_rng.bit_generator.state,
+                },
+                "episode": None if episode is None else _episode_state(episode),
+                "strategy": self.strategy.state_dict() if self.strategy else None,
+                "advisor": _advisor_state(self.advisor),
+            },
+        )
+
+    def load_checkpoint(self, path: str | Path) -> None:
+        """Continue from a checkpoint of a run with the same config (except the
+        `RUNTIME_FIELDS`), strategy and advisor kind. A partial episode is rebuilt by
+        resetting the environment with its seed and replaying its actions."""
+        state = read_checkpoint(path)
+        saved = DQNConfig.from_dict(state["config"]).to_dict()
+        mine = self.config.to_dict()
+        differ = [k for k in mine if k not in RUNTIME_FIELDS and saved[k] != mine[k]]
+        if differ:
+            changes = ", ".join(f"{k}: {saved[k]!r} (checkpoint) vs {mine[k]!r}" for k in differ)
+            raise ValueError(f"the checkpoint was made with another config: {changes}")
+        if (state["strategy"] is None) != (self.strategy is None):
+            raise ValueError(
+                "the checkpoint was made "
+                + ("without" if state["strategy"] is None else "with")
+                + " an advising strategy; create the Trainer the same way"
+            )
+        if self.strategy is not None:
+            self.strategy.load_state_dict(state["strategy"])
+        if state["advisor"] is not None and hasattr(self.advisor, "load_state_dict"):
+            self.advisor.load_state_dict(state["advisor"])  # type: ignore[union-attr]
+        self.seed = int(state["seed"])
+        self.agent.load_state_dict(state["agent"])
+        self.memory.load_state_dict(state["memory"])
+        self.epsilon.value = float(state["epsilon"])
+        self.global_step = int(state["global_step"])
+        self.episodes_done = dict(state["episodes_done"])
+        self._env_rng.bit_generator.state = state["rngs"]["env"]
+        self._action_rng.bit_generator.state = state["rngs"]["action"]
+        self._memory_rng.bit_generator.state = state["rngs"]["memory"]
+        self._episode = None if state["episode"] is None else self._replay(state["episode"])
+        self.episode_record = None
+        self._stopped = False
+
+    def _replay(self, saved: dict[str, Any]) -> _Episode:
+        obs, info = self.env.reset(seed=int(saved["reset_seed"]))
+        actions = [int(a) for a in saved["actions"]]
+        for action in actions:
+            obs, _, _, _, info = self.env.step(action)
+        if not np.array_equal(obs, saved["obs"].numpy()):
+            raise RuntimeError(
+                "replaying the checkpoint's episode from its reset seed and actions did not "
+                "give the saved image: the environment is not deterministic, or not the one "
+                "(or not configured as the one) the checkpoint was made with"
+            )
+        return _Episode(
+            stage=saved["stage"],
+            number=int(saved["number"]),
+            reset_seed=int(saved["reset_seed"]),
+            obs=obs,
+            info=info,
+            first_global_step=int(saved["first_global_step"]),
+            actions=actions,
+            collected_reward=float(saved["collected_reward"]),
+            advised_steps=int(saved["advised_steps"]),
+            loss_sum=float(saved["loss_sum"]),
+            loss_count=int(saved["loss_count"]),
+        )
+
+
+def _episode_state(episode: _Episode) -> dict[str, Any]:
+    return {
+        "stage": episode.stage,
+        "number": episode.number,
+        "reset_seed": episode.reset_seed,
+        "actions": list(episode.actions),
+        "obs": torch.from_numpy(np.array(episode.obs)),
+        "first_global_step": episode.first_global_step,
+        "collected_reward": episode.collected_reward,
+        "advised_steps": episode.advised_steps,
+        "loss_sum": episode.loss_sum,
+        "loss_count": episode.loss_count,
+    }
+
+
+def _advisor_state(advisor: Advisor | None) -> dict[str, Any] | None:
+    state_dict = getattr(advisor, "state_dict", None)
+    return state_dict() if callable(state_dict) else None
+
+
+def _check_spaces(env: gym.Env) -> None:
+    obs_space, action_space = env.observation_space, env.action_space
+    if not (
+        isinstance(obs_space, gym.spaces.Box)
+        and obs_space.dtype == np.uint8
+        and len(obs_space.shape) == 3
+        and obs_space.shape[2] == 3
+    ):
+        raise ValueError(
+            f"the learner needs uint8 RGB image observations (H, W, 3), got {obs_space}"
+        )
+    if not (isinstance(action_space, gym.spaces.Discrete) and action_space.n == N_ACTIONS):
+        raise ValueError(f"the learner needs Discrete({N_ACTIONS}) actions, got {action_space}")

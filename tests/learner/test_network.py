@@ -1,0 +1,76 @@
+import numpy as np
+import pytest
+import torch
+
+from learner.network import QNetwork
+from learner.phase_conv import PhaseConvForward, pack_frame, unpack_frames
+
+
+def frames_with_flat_regions(count: int, seed: int = 0) -> np.ndarray:
+    """Random images with flat patches: pooling windows with tied maxima, as in renders."""
+    rng = np.random.default_rng(seed)
+    images = rng.integers(0, 256, (count, 64, 64, 3), dtype=np.uint8)
+    images[:, :24] = 200
+    images[:, 40:, 10:50] = rng.integers(0, 256, 3, dtype=np.uint8)
+    return images
+
+
+def test_network_has_the_papers_layers_and_parameter_count() -> None:
+    network = QNetwork()
+    shapes = {name: tuple(p.shape) for name, p in network.named_parameters()}
+    assert shapes == {
+        "conv1.weight": (4, 3, 8, 8), "conv1.bias": (4,),
+        "conv2.weight": (8, 4, 4, 4), "conv2.bias": (8,),
+        "conv3.weight": (16, 8, 2, 2), "conv3.bias": (16,),
+        "dense.weight": (256, 1024), "dense.bias": (256,),  # "same" padding: 16x8x8 in
+        "out.weight": (4, 256), "out.bias": (4,),
+    }  # fmt: skip
+    assert sum(p.numel() for p in network.parameters()) == 265_248
+    assert network(torch.rand(5, 3, 64, 64)).shape == (5, 4)
+
+
+def test_softmax_head_outputs_a_distribution() -> None:
+    out = QNetwork(head="softmax")(torch.rand(3, 3, 64, 64))
+    assert torch.allclose(out.sum(1), torch.ones(3)) and (out >= 0).all()
+
+
+def test_packing_a_frame_is_a_lossless_rearrangement() -> None:
+    images = frames_with_flat_regions(3)
+    packed = np.stack([pack_frame(image) for image in images])
+    assert packed.shape == (3, 32, 32, 12) and packed.nbytes == images.nbytes
+    assert np.array_equal(unpack_frames(torch.from_numpy(packed)).numpy(), images)
+
+
+@pytest.mark.parametrize("head", ["linear", "softmax"])
+def test_fast_forward_computes_the_same_function_and_gradient_in_float32(head: str) -> None:
+    torch.manual_seed(0)
+    network = QNetwork(head=head)
+    images = frames_with_flat_regions(8)
+    plain_input = torch.from_numpy(images).permute(0, 3, 1, 2).float() / 255
+    packed = torch.from_numpy(np.stack([pack_frame(image) for image in images]))
+    target = torch.randn(8, 4)
+
+    plain = network(plain_input)
+    (plain - target).square().mean().backward()
+    plain_grads = [p.grad.clone() for p in network.parameters()]
+    network.zero_grad()
+    fast = PhaseConvForward(network, torch.float32)
+    quick = fast(packed, fast.weights())
+    (quick - target).square().mean().backward()
+
+    assert torch.allclose(quick, plain, atol=1e-6)
+    for (name, param), expected in zip(network.named_parameters(), plain_grads, strict=True):
+        assert torch.allclose(param.grad, expected, rtol=1e-4, atol=1e-7), name
+
+
+def test_fast_forward_in_bfloat16_stays_close() -> None:
+    torch.manual_seed(1)
+    network = QNetwork()
+    images = frames_with_flat_regions(16, seed=1)
+    plain = network(torch.from_numpy(images).permute(0, 3, 1, 2).float() / 255)
+    fast = PhaseConvForward(network, torch.bfloat16)
+    packed = torch.from_numpy(np.stack([pack_frame(image) for image in images]))
+    with torch.no_grad():
+        quick = fast(packed, fast.weights())
+    assert quick.dtype == torch.float32
+    assert (quick - plain).abs().max() < 0.02 * plain.abs().max() + 1e-3
