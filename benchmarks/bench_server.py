@@ -40,7 +40,7 @@ def advise_loop(
     for _ in range(count):
         index = state["advice_index"]
         started = time.perf_counter()
-        assert participant.advise(index, index % 4).status_code == 200
+        assert participant.advise(index, index % 4, wait=20).status_code == 200
         state = participant.next_request()
         if not state["advice_wanted"]:
             break

@@ -68,9 +68,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="override a config field (VALUE as JSON, else a string); repeatable",
     )
     parser.add_argument("--device", help="auto, cpu, cuda, cuda:N (default: the config's, auto)")
-    parser.add_argument("--threads", type=int, help="torch CPU threads (default: min(4, cores))")
+    parser.add_argument("--threads", type=int, help="torch threads (default: half the cores, 1-4)")
     parser.add_argument("--checkpoint-every", type=int, default=25, metavar="EPISODES")
-    parser.add_argument("--resume", type=Path, metavar="CHECKPOINT", help="continue a run")
+    parser.add_argument(
+        "--resume",
+        type=Path,
+        metavar="CHECKPOINT",
+        help="continue a run; its settings come from the checkpoint (only --episodes, "
+        "--device, --threads and --out may change)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 

@@ -90,8 +90,9 @@ class DQNConfig:
     device: str = "auto"
     """`auto` (CUDA when available, else CPU), `cpu`, `cuda` or `cuda:N`."""
     torch_threads: int = 0
-    """Torch CPU threads for this process; 0 picks min(4, cores), which suits the small
-    convolutions here and a 2-core machine."""
+    """Torch CPU threads for this process; 0 picks half the cores (1 to 4), leaving the
+    rest to the simulator and other workers: 1 on a 2-core machine. Results are
+    bit-identical only for the same thread count."""
 
     def __post_init__(self) -> None:
         hints = typing.get_type_hints(DQNConfig)

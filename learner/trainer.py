@@ -323,9 +323,13 @@ class Trainer:
     def _replay(self, saved: dict[str, Any]) -> _Episode:
         obs, info = self.env.reset(seed=int(saved["reset_seed"]))
         actions = [int(a) for a in saved["actions"]]
+        ended = False
         for action in actions:
-            obs, _, _, _, info = self.env.step(action)
-        if not np.array_equal(obs, saved["obs"].numpy()):
+            if ended:
+                break
+            obs, _, terminated, truncated, info = self.env.step(action)
+            ended = terminated or truncated
+        if ended or not np.array_equal(obs, saved["obs"].numpy()):
             raise RuntimeError(
                 "replaying the checkpoint's episode from its reset seed and actions did not "
                 "give the saved image: the environment is not deterministic, or not the one "

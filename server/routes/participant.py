@@ -1,12 +1,14 @@
 """What a participant's page calls, with the token from their link (one session only)."""
 
+import contextlib
+
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
 from server.db.models import Status
 from server.deps import ManagerDep, ParticipantDep
 from server.schemas.participant import AdviceCreate, AdviceReceipt, ParticipantState
-from server.services.errors import NotFound
+from server.services.errors import Conflict, NotFound
 from server.sessions import advising
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
@@ -32,15 +34,29 @@ async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantStat
     """Start the session when the participant is ready (after consent and induction);
     a session already under way is left as it is."""
     if session.id not in manager.handles and manager.status(session.id) == Status.created:
-        await manager.start(session.id)
+        with contextlib.suppress(Conflict):  # started by a second click meanwhile
+            await manager.start(session.id)
     return advising.participant_state(manager, session)
 
 
 @router.post("/advice")
 async def give_advice(
-    session: ParticipantDep, manager: ManagerDep, body: AdviceCreate
+    session: ParticipantDep,
+    manager: ManagerDep,
+    body: AdviceCreate,
+    wait: float = Query(
+        default=0.0,
+        ge=0.0,
+        le=MAX_WAIT_S,
+        description="Seconds to wait for what happens next (the next request, usually) and "
+        "return it as `state`: one round trip per advice.",
+    ),
 ) -> AdviceReceipt:
-    return await advising.submit_advice(manager, session, body)
+    receipt = await advising.submit_advice(manager, session, body)
+    if wait > 0:
+        await manager.wait_change(session.id, receipt.version, wait)
+        receipt.state = advising.participant_state(manager, session)
+    return receipt
 
 
 @router.get(

@@ -12,14 +12,6 @@ class AdviceCreate(BaseModel):
     action: int = Field(ge=0, le=3, description="0 grab, 1 move right, 2 move left, 3 drop.")
 
 
-class AdviceReceipt(BaseModel):
-    advice_index: int
-    action: int
-    duplicate: bool = Field(description="True if this advice had been received already.")
-    response_time_s: float
-    version: int = Field(description="State version after this advice: long-poll after it.")
-
-
 class HistoryItem(BaseModel):
     advice_index: int
     action: int
@@ -49,4 +41,15 @@ class ParticipantState(BaseModel):
     history: list[HistoryItem] = Field(default_factory=list)
     action_names: list[str] = Field(
         default_factory=lambda: ["grab", "move right", "move left", "drop"]
+    )
+
+
+class AdviceReceipt(BaseModel):
+    advice_index: int
+    action: int
+    duplicate: bool = Field(description="True if this advice had been received already.")
+    response_time_s: float
+    version: int = Field(description="State version after this advice: long-poll after it.")
+    state: ParticipantState | None = Field(
+        default=None, description="With ?wait=S: the state after what happened next."
     )

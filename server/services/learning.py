@@ -3,10 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
-
-import numpy as np
 
 from server.services.errors import Invalid
 
@@ -88,12 +85,3 @@ def make_trainer(
     if torch_threads:  # a runtime field: a checkpoint resumes under any thread count
         config = config.replace(torch_threads=torch_threads)
     return Trainer(env, config, advisor, strategy, seed=session.seed, callbacks=callbacks)
-
-
-def greedy_action(trainer: Any) -> Callable[[np.ndarray], int | None]:
-    """The learner's own choice for an observation (what its StepRecord calls
-    greedy_action), for the advice log."""
-    agent = getattr(trainer, "agent", None)
-    if agent is None or not hasattr(agent, "q_values"):
-        return lambda obs: None
-    return lambda obs: int(np.argmax(agent.q_values(obs)))

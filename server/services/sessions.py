@@ -29,6 +29,7 @@ from server.services.errors import Conflict, Invalid, NotFound
 from server.services.studies import get_study
 
 HOST = socket.gethostname()
+VALUE_STRATEGIES = ("importance", "mistake_correcting")
 
 
 def participant_url(base_url: str, token: str) -> str:
@@ -48,6 +49,23 @@ def create_session(db: Session, study_id: int, body: SessionCreate) -> StudySess
         advice_budget=body.advice_budget if advised else 0,
     )
     sort_rule = learning.parse_sort_rule(body.sort_rule)
+    if advised and body.strategy in VALUE_STRATEGIES and method != Method.agent:
+        raise Invalid(
+            "strategy",
+            f"the {body.strategy} strategy weighs the advisor's Q-values, which only an "
+            "'agent' advisor has; use early or alternating advising",
+        )
+    if (
+        advised
+        and body.strategy == "early"
+        and config["advice_budget"] > config["pretraining_steps"]
+    ):
+        raise Invalid(
+            "advice_budget",
+            f"early advising gives its {config['advice_budget']} advice at the end of "
+            f"pretraining, which has only {config['pretraining_steps']} steps; lower "
+            "advice_budget or raise config.pretraining_steps",
+        )
     if method == Method.agent:
         if not body.advisor_checkpoint:
             raise Invalid(

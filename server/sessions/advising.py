@@ -200,7 +200,7 @@ async def submit_advice(
             global_step=request.global_step,
             advisor="human",
             action=body.action,
-            greedy_action=request.greedy_action,
+            greedy_action=None,  # the worker fills it in from its step record
             observation_png=request.observation_png,
             response_time_s=response_time,
             requested_at=answered_at - timedelta(seconds=response_time),

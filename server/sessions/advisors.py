@@ -22,7 +22,7 @@ log = logging.getLogger(__name__)
 def encode_png(obs: np.ndarray) -> bytes:
     """The observation exactly as the learner sees it (PNG is lossless)."""
     buffer = io.BytesIO()
-    Image.fromarray(np.asarray(obs, dtype=np.uint8)).save(buffer, format="PNG")
+    Image.fromarray(np.asarray(obs, dtype=np.uint8)).save(buffer, format="PNG", compress_level=1)
     return buffer.getvalue()
 
 
@@ -44,7 +44,6 @@ class HumanAdvisor:
         advice_budget: int,
         idle_limit_s: float,
         step_index: Callable[[], int],
-        greedy_action: Callable[[np.ndarray], int | None],
         before_waiting: Callable[[], None] = lambda: None,
     ) -> None:
         self._before_waiting = before_waiting
@@ -54,7 +53,6 @@ class HumanAdvisor:
         self._budget = advice_budget
         self._idle_limit_s = idle_limit_s
         self._step_index = step_index
-        self._greedy = greedy_action
         self._answered: int | None = None
 
     def state_dict(self) -> dict[str, Any]:
@@ -80,7 +78,6 @@ class HumanAdvisor:
                 advice_index=index,
                 global_step=self._step_index(),
                 observation_png=encode_png(obs),
-                greedy_action=self._greedy(obs),
                 info=dict(info),
                 advice_budget=self._budget,
             )
@@ -104,14 +101,12 @@ class RecordingAdvisor:
         start_index: int,
         record: Callable[[dict[str, Any]], None],
         step_index: Callable[[], int],
-        greedy_action: Callable[[np.ndarray], int | None],
     ) -> None:
         self._inner = inner
         self._kind = kind
         self.count = start_index
         self._record = record
         self._step_index = step_index
-        self._greedy = greedy_action
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._inner, name)  # q_values, for importance advising
@@ -136,7 +131,7 @@ class RecordingAdvisor:
                 "global_step": self._step_index(),
                 "advisor": self._kind,
                 "action": action,
-                "greedy_action": self._greedy(obs),
+                "greedy_action": None,  # filled in from the step record at flush
                 "observation_png": encode_png(obs),
                 "response_time_s": elapsed,
                 "requested_at": requested_at,

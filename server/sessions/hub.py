@@ -121,11 +121,6 @@ class Hub:
         """`listener(session_id, watched)` when the first subscriber comes or the last goes."""
         self._watch_listeners.append(listener)
 
-    def forget(self, session_id: int, kinds: Collection[str] = REPLAYED) -> None:
-        with self._lock:
-            for kind in kinds:
-                self._latest.pop((session_id, kind), None)
-
     async def stream(
         self, session_id: int, kinds: Collection[str] = KINDS
     ) -> AsyncIterator[HubEvent]:

@@ -41,8 +41,6 @@ class AdviceRequest:
     """The step the advice is for."""
     observation_png: bytes
     """The 64x64 image the learner sees, PNG (lossless)."""
-    greedy_action: int | None
-    """The learner's own greedy choice for this observation."""
     info: dict[str, Any]
     """The environment's ground truth at this step (not shown to participants)."""
     advice_budget: int

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
-from sqlalchemy import delete, insert, update
+from sqlalchemy import bindparam, delete, insert, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from server.db.models import Advice, Episode, Method, Step, StudySession, utcnow
@@ -54,7 +54,11 @@ class Recorder:
         flush_every_steps: int,
         heartbeat_s: float,
         progress: Callable[[], dict[str, Any]],
+        advice_written_elsewhere: bool = False,
     ) -> None:
+        """`advice_written_elsewhere`: a person's advice rows come from the web process;
+        this recorder only completes them."""
+        self._advice_written_elsewhere = advice_written_elsewhere
         self._factory = factory
         self.session_id = session_id
         self._token = worker_token
@@ -96,7 +100,25 @@ class Recorder:
             self.flush()
 
     def flush(self, **session_values: Any) -> None:
+        # Advice rows get the learner's greedy choice from the step they advised.
+        greedy = {
+            s["global_step"]: s["greedy_action"]
+            for s in self._steps
+            if s["action_source"] == "advisor"
+        }
+        for row in self._advice:
+            row["greedy_action"] = greedy.get(row["global_step"], row["greedy_action"])
         with self._factory() as db:
+            if greedy and self._advice_written_elsewhere:
+                db.execute(
+                    update(Advice.__table__)
+                    .where(
+                        Advice.__table__.c.session_id == self.session_id,
+                        Advice.__table__.c.global_step == bindparam("step"),
+                    )
+                    .values(greedy_action=bindparam("greedy")),
+                    [{"step": k, "greedy": v} for k, v in greedy.items()],
+                )
             if self._steps:
                 db.execute(insert(Step), self._steps)
             if self._episodes:

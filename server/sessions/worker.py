@@ -123,11 +123,11 @@ class _Run:
             options.flush_every_steps,
             options.heartbeat_s,
             self.progress_dict,
+            advice_written_elsewhere=s.method == Method.human,
         )
         resume = bool(s.checkpoint_path) and Path(s.checkpoint_path or "").is_file()
         start_advice = s.checkpoint_advice if resume else 0
         self.advisor: Any = None
-        greedy = lambda obs: self.greedy(obs)  # noqa: E731 (trainer made below)
         if s.method == Method.human:
             if self.link is None:
                 raise Conflict("a human session needs the server: start it through the API")
@@ -138,7 +138,6 @@ class _Run:
                 s.advice_budget,
                 s.idle_limit_s or options.idle_limit_s,
                 lambda: self.recorder.steps + 1,
-                greedy,
                 self.send_progress,  # the live view shows where it waits
             )
             self.env.after_step.append(self.advisor.after_step)
@@ -149,7 +148,6 @@ class _Run:
                 start_advice,
                 self.recorder.add_advice,
                 lambda: self.recorder.steps + 1,
-                greedy,
             )
         self.trainer = learning.make_trainer(
             self.env,
@@ -159,7 +157,6 @@ class _Run:
             [self.recorder, self.reporter],
             options.torch_threads,
         )
-        self._greedy = learning.greedy_action(self.trainer)
         if resume:
             self.trainer.load_checkpoint(s.checkpoint_path)
         else:
@@ -167,10 +164,8 @@ class _Run:
         self.recorder.rewind(s)
         self.env.steps = self.recorder.steps
         self.env.episode = self.recorder.episodes
+        self.reporter.phase = str(getattr(self.trainer, "stage", "pretraining"))
         self.bar: Any = None
-
-    def greedy(self, obs: Any) -> int | None:
-        return self._greedy(obs)
 
     @property
     def advice_given(self) -> int:
@@ -211,6 +206,7 @@ class _Run:
     def _on_pause(self, paused: bool, at_step_boundary: bool) -> None:
         if paused and at_step_boundary:
             self.checkpoint()
+        self.send_progress()
         with self.factory() as db:
             set_status(
                 db, self.session_id, Status.paused if paused else Status.running, token=self.token
@@ -289,8 +285,12 @@ def run_session(
     factory = make_session_factory(make_engine(database_url))
     if worker_token is None:
         with factory() as db:
-            status = get_session(db, session_id).status
-            worker_token = claim(db, session_id, resume=status != Status.created)
+            session = get_session(db, session_id)
+            if session.method == Method.human and conn is None:
+                raise Conflict(
+                    f"session {session_id} is a human session: start it through the server"
+                )
+            worker_token = claim(db, session_id, resume=session.status != Status.created)
     try:
         run = _Run(session_id, database_url, options, worker_token, conn)
         return run.run().value

@@ -14,6 +14,7 @@ class SimulatedParticipant:
             base_url=base_url, headers={"Authorization": f"Bearer {token}"}, timeout=60
         )
         self.version: int | None = None
+        self.pending: dict[str, Any] | None = None
 
     def state(self) -> dict[str, Any]:
         response = self.client.get("/api/participant/state")
@@ -25,7 +26,12 @@ class SimulatedParticipant:
     def next_request(self, timeout: float = 180) -> dict[str, Any]:
         """Long-poll until advice is wanted (or the session no longer runs)."""
         deadline = time.monotonic() + timeout
-        state = self.state() if self.version is None else {"advice_wanted": False, "status": ""}
+        state = self.pending or (
+            self.state() if self.version is None else {"advice_wanted": False, "status": ""}
+        )
+        self.pending = None
+        if state.get("version"):
+            self.version = state["version"]
         while not state["advice_wanted"] and state["status"] in (
             "",
             "created",
@@ -41,13 +47,18 @@ class SimulatedParticipant:
             self.version = state["version"]
         return state
 
-    def advise(self, advice_index: int, action: int) -> httpx.Response:
-        """Send one advice; a stored one makes the next `next_request` wait for news."""
+    def advise(self, advice_index: int, action: int, wait: float = 0.0) -> httpx.Response:
+        """Send one advice; a stored one makes the next `next_request` wait for news (or,
+        with `wait`, return the state that came with the receipt)."""
         response = self.client.post(
-            "/api/participant/advice", json={"advice_index": advice_index, "action": action}
+            "/api/participant/advice",
+            params={"wait": wait},
+            json={"advice_index": advice_index, "action": action},
         )
-        if response.status_code == 200:
-            self.version = response.json()["version"]
+        if response.status_code == 200 and not response.json()["duplicate"]:
+            receipt = response.json()
+            self.version = receipt["version"]
+            self.pending = receipt["state"]
         return response
 
     def close(self) -> None:

@@ -42,7 +42,7 @@ def test_a_participant_gives_100_advice_each_stored_once_and_the_101st_is_refuse
             assert wrong.status_code == 409 and f"advice {index} is wanted" in wrong.text
             bad = participant.advise(index, 7)
             assert bad.status_code == 422 and "action" in bad.text
-        receipt = participant.advise(index, action)
+        receipt = participant.advise(index, action, wait=10)
         assert receipt.status_code == 200, receipt.text
         assert receipt.json()["duplicate"] is False
         if index % 10 == 0:
@@ -69,6 +69,8 @@ def test_a_participant_gives_100_advice_each_stored_once_and_the_101st_is_refuse
 
     wait_for_status(api, created["id"], {"finished"})
     assert participant.advise(BUDGET, 0).status_code == 409
+    stored = api.get(f"/api/sessions/{created['id']}/advice").json()
+    assert all(a["greedy_action"] in range(4) for a in stored), "the learner's own choice"
     participant.close()
 
 

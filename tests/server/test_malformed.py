@@ -11,6 +11,7 @@ from tests.server.live import LiveServer
 from tests.server.test_access import researcher_routes
 
 BAD_BODIES: list[object] = [
+    {"method": "human", "strategy": "importance"},
     None,
     [],
     "text",
@@ -76,6 +77,19 @@ def test_invalid_session_bodies_say_which_field_and_why(server: LiveServer, stud
         )
         assert response.status_code == 422
         assert response.json()["detail"][0]["loc"] == ["body", "advisor_checkpoint"]
+        response = api.post(
+            f"/api/studies/{study}/sessions",
+            json={"method": "oracle", "advice_budget": 500, "config": {"pretraining_steps": 100}},
+        )
+        assert response.status_code == 422
+        [error] = response.json()["detail"]
+        # refused by the server's check or by the learner's config, naming the field either way
+        assert error["loc"][-1] in ("advice_budget", "config") and "pretraining" in error["msg"]
+        response = api.post(
+            f"/api/studies/{study}/sessions", json={"method": "human", "strategy": "importance"}
+        )
+        assert response.status_code == 422
+        assert response.json()["detail"][0]["loc"] == ["body", "strategy"]
 
 
 def test_participant_endpoints_reject_bad_queries(server: LiveServer) -> None:

@@ -5,7 +5,11 @@ from __future__ import annotations
 
 import csv
 import io
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -41,6 +45,7 @@ def learner_records(seed: int, budget: int) -> Collect:
             "episodes": EPISODES,
             "max_episode_steps": MAX_EPISODE_STEPS,
             "advice_budget": budget,
+            "torch_threads": 1,  # as the server's workers: bit-identical needs the same count
         }
     )
     env = sim.SortingEnv(motion="fast", max_episode_steps=MAX_EPISODE_STEPS)
@@ -57,7 +62,7 @@ def rows(data: bytes) -> list[dict[str, str]]:
 
 
 def test_oracle_session_runs_to_the_end_and_exports_the_learners_records(
-    server: LiveServer, api: httpx.Client
+    server: LiveServer, api: httpx.Client, tmp_path: Path
 ) -> None:
     study = api.post("/api/studies", json={"name": "oracle end to end"}).json()
     created = api.post(
@@ -99,6 +104,15 @@ def test_oracle_session_runs_to_the_end_and_exports_the_learners_records(
     advice = rows(files["advice.csv"])
     assert len(advice) == 20 and {r["advisor"] for r in advice} == {"oracle"}
     assert all(files[r["observation_file"]].startswith(b"\x89PNG") for r in advice)
+
+    out = tmp_path / "export"
+    command = [sys.executable, "-m", "server", "export", "--study", str(study["id"]), "--out"]
+    env = {**os.environ, "IDEEPRL_DATABASE_URL": server.database_url}
+    done = subprocess.run([*command, str(out)], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert f"steps.csv: {len(steps)} rows" in done.stdout
+    for name in ("sessions.csv", "episodes.csv", "steps.csv", "advice.csv", "columns.csv"):
+        assert (out / name).read_bytes() == files[name], name
 
     dictionary = rows(files["columns.csv"])
     documented = {(r["file"], r["column"]) for r in dictionary if r["description"]}

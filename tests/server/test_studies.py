@@ -12,7 +12,9 @@ def test_study_lifecycle(api: httpx.Client) -> None:
 
     changed = api.patch(f"/api/studies/{study['id']}", json={"texts": {"consent": "Hello"}})
     assert changed.status_code == 200
-    assert api.get(f"/api/studies/{study['id']}").json()["texts"] == {"consent": "Hello"}
+    stored = api.get(f"/api/studies/{study['id']}").json()
+    assert stored["texts"] == {"consent": "Hello"}
+    assert stored["created_at"].endswith(("Z", "+00:00")), "timestamps say they are UTC"
 
     assert api.delete(f"/api/studies/{study['id']}").status_code == 204
     missing = api.get(f"/api/studies/{study['id']}")

@@ -1,0 +1,306 @@
+"""How fast the learner's update is, what a paper-scale run costs, and its memory.
+
+    python -m benchmarks.bench_learner                  # update speed, run time, memory
+    python -m benchmarks.bench_learner --curves 60      # + fast vs plain learning curves
+
+1. The update: the learner's (`DQNConfig(update="fast")`) against a reference written the
+   way the common DQN references write it (a replay deque of numpy frames, float32
+   tensors built from numpy each step, default NCHW layout, `padding="same"` convs and
+   `MaxPool2d`, no tricks), same network, batch 128, RMSprop. Blocks of updates of each
+   alternate, so both see the same machine load; the ratio is taken per block pair and
+   its median reported. Other processes share the CPUs: compare ratios, not times.
+2. A paper-scale run (300 episodes) on the fast simulator, extrapolated from measured
+   pretraining and >= 2,000 training steps to 15,000 training steps (about what 300
+   episodes take: epsilon reaches 1 % after 9,200 updates, near episode 150).
+3. Resident memory with a full 20,000-transition replay memory (in a fresh process).
+4. With --curves N: collected reward of N training episodes, the fast update against the
+   trainer's plain float32 update (`update="plain"`: NCHW convs and max-pools, like the
+   reference), same seeds and everything else, drawn to
+   docs/images/learner_fast_vs_plain.png (takes a while: the plain update is the slow one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import statistics
+import subprocess
+import sys
+import time
+import warnings
+from collections import deque
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+BATCH = 128
+PAPER_TRAINING_STEPS = 15_000
+CURVES_PNG = Path("docs/images/learner_fast_vs_plain.png")
+
+
+class ReferenceDQN:
+    """The DQN update in the plain style of the common references."""
+
+    def __init__(self, capacity: int = 20_000, seed: int = 0) -> None:
+        torch.manual_seed(seed)
+        self.net = nn.Sequential(
+            nn.Conv2d(3, 4, 8, padding="same"), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Conv2d(4, 8, 4, padding="same"), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Conv2d(8, 16, 2, padding="same"), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Flatten(), nn.Linear(1024, 256), nn.ReLU(), nn.Linear(256, 4),
+        )  # fmt: skip
+        self.optimizer = torch.optim.RMSprop(self.net.parameters(), lr=1e-3, alpha=0.9, eps=1e-7)
+        self.memory: deque = deque(maxlen=capacity)
+        self.gamma = 0.9
+
+    def remember(self, state, action, reward, next_state, done) -> None:
+        self.memory.append((state, action, reward, next_state, done))
+
+    def update(self) -> float:
+        batch = random.sample(self.memory, BATCH)
+        states, actions, rewards, next_states, dones = zip(*batch, strict=True)
+        states = torch.tensor(np.array(states), dtype=torch.float32)
+        states = states.permute(0, 3, 1, 2).contiguous() / 255.0
+        next_states = torch.tensor(np.array(next_states), dtype=torch.float32)
+        next_states = next_states.permute(0, 3, 1, 2).contiguous() / 255.0
+        actions = torch.tensor(actions, dtype=torch.int64)
+        rewards = torch.tensor(rewards, dtype=torch.float32)
+        dones = torch.tensor(dones, dtype=torch.float32)
+        with torch.no_grad():
+            targets = rewards + self.gamma * self.net(next_states).max(1).values * (1 - dones)
+        q = self.net(states).gather(1, actions.unsqueeze(1)).squeeze(1)
+        loss = F.mse_loss(q, targets)
+        self.optimizer.zero_grad()
+        loss.backward()
+        self.optimizer.step()
+        return loss.item()
+
+
+def real_frames(count: int, seed: int = 0) -> list[np.ndarray]:
+    """Observations of random play in the fast simulator (content does not change speed,
+    but these are what the learner sees)."""
+    import sim
+
+    env = sim.SortingEnv(motion="fast")
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    frames = [obs]
+    while len(frames) < count:
+        obs, _, terminated, truncated, _ = env.step(int(rng.integers(4)))
+        frames.append(obs)
+        if terminated or truncated:
+            obs, _ = env.reset(seed=int(rng.integers(2**31)))
+            frames.append(obs)
+    env.close()
+    return frames[:count]
+
+
+def bench_update(threads: int, repeats: int, block: int, frames: list[np.ndarray]) -> dict:
+    from learner.agent import DQNAgent
+    from learner.config import DQNConfig
+    from learner.replay import ReplayMemory
+
+    torch.set_num_threads(threads)
+    rng = np.random.default_rng(0)
+    random.seed(0)
+    reference = ReferenceDQN()
+    agent = DQNAgent(DQNConfig(torch_threads=threads), torch.device("cpu"))
+    memory = ReplayMemory(len(frames), agent.frame_shape)
+    for t in range(len(frames) - 1):
+        done = t % 40 == 39
+        reward = float(rng.choice([0.0, 0.4, -0.01, -1.0]))
+        reference.remember(frames[t], t % 4, reward, frames[t + 1], done)
+        memory.add(agent.encode(frames[t]), t % 4, reward, agent.encode(frames[t + 1]), done, False)
+
+    def learner_update() -> float:
+        return agent.update(memory.sample(BATCH, rng))
+
+    times: dict[str, list[float]] = {"reference": [], "learner": []}
+    ratios = []
+    for update in (reference.update, learner_update):
+        for _ in range(3):
+            update()  # warm-up: allocator, oneDNN kernels
+    for _ in range(repeats):
+        ref = _time_block(reference.update, block)
+        fast = _time_block(learner_update, block)
+        times["reference"].append(ref)
+        times["learner"].append(fast)
+        ratios.append(ref / fast)
+    return {
+        "threads": threads,
+        "reference_ms": 1000 * statistics.median(times["reference"]),
+        "learner_ms": 1000 * statistics.median(times["learner"]),
+        "speedup": statistics.median(ratios),
+        "speedup_range": (min(ratios), max(ratios)),
+        "conv_dtype": str(agent.dtype).replace("torch.", ""),
+    }
+
+
+def _time_block(update: Callable[[], float], block: int) -> float:
+    start = time.perf_counter()
+    for _ in range(block):
+        update()
+    return (time.perf_counter() - start) / block
+
+
+def bench_run(threads: int, training_steps: int) -> dict:
+    """Time a paper-config autonomous run: all of pretraining, then `training_steps`."""
+    import sim
+    from learner import DQNConfig, Trainer
+
+    env = sim.SortingEnv(motion="fast")
+    trainer = Trainer(env, DQNConfig(torch_threads=threads), seed=0)
+    start = time.perf_counter()
+    while trainer.stage == "pretraining":
+        trainer.step()
+    pretraining = time.perf_counter() - start
+    start = time.perf_counter()
+    for _ in range(training_steps):
+        trainer.step()
+    per_step = (time.perf_counter() - start) / training_steps
+    env.close()
+    return {
+        "threads": threads,
+        "pretraining_s": pretraining,
+        "training_step_ms": 1000 * per_step,
+        "episodes_seen": trainer.episodes_done["training"],
+        "paper_run_min": (pretraining + per_step * PAPER_TRAINING_STEPS) / 60,
+    }
+
+
+def footprint() -> dict:
+    """Resident memory of a trainer before and after filling its replay memory."""
+    import sim
+    from learner import DQNConfig, Trainer
+
+    frames = real_frames(500)
+    env = sim.SortingEnv(motion="fast")
+    trainer = Trainer(env, DQNConfig(), seed=0)
+    before = _rss()
+    agent, memory = trainer.agent, trainer.memory
+    packed = [agent.encode(frame) for frame in frames]
+    for t in range(memory.capacity):
+        done = t % 50 == 49
+        memory.add(packed[t % 499], t % 4, 0.0, packed[t % 499 + 1], done, t % 250 == 249)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        agent.update(memory.sample(BATCH, rng))
+    after = _rss()
+    return {
+        "before_mb": before["rss"],
+        "after_mb": after["rss"],
+        "anon_after_mb": after["anon"],
+        "memory_mb": memory.nbytes / 2**20,
+        "transitions": len(memory),
+    }
+
+
+def _rss() -> dict[str, float]:
+    fields = {}
+    with open("/proc/self/status") as status:
+        for line in status:
+            key, _, value = line.partition(":")
+            if key in ("VmRSS", "RssAnon"):
+                fields[key] = int(value.split()[0]) / 1024
+    return {"rss": fields.get("VmRSS", 0.0), "anon": fields.get("RssAnon", 0.0)}
+
+
+def curves(episodes: int, seeds: Sequence[int]) -> Path:
+    """Fast vs plain update, the same oracle-advised runs otherwise, to a PNG."""
+    import sim
+    from learner import DQNConfig, Trainer, make_advisor
+    from learner.recording import learning_curve_figure
+
+    # the paper's hyperparameters (batch 128, memory 20,000, 1,000 pretraining steps, the
+    # last 100 advised), but exploration ends after ~460 updates instead of ~9,200 and
+    # episodes stop at 60 steps, so that a short run shows the whole learning curve
+    results: dict[str, list[list[float]]] = {"fast": [], "plain": []}
+    for seed in seeds:
+        for update in ("fast", "plain"):
+            config = DQNConfig(
+                episodes=episodes, epsilon_decay=0.99, max_episode_steps=60, update=update
+            )
+            env = sim.SortingEnv(motion="fast", max_episode_steps=60)
+            trainer = Trainer(env, config, make_advisor("oracle", seed=seed), seed=seed)
+            start = time.perf_counter()
+            rewards = [e.collected_reward for e in trainer.run()]
+            results[update].append(rewards)
+            print(
+                f"  seed {seed} {update:5}: {time.perf_counter() - start:6.0f} s, "
+                f"R_T {sum(rewards):7.2f}, last 10 mean {np.mean(rewards[-10:]):.2f}",
+                flush=True,
+            )
+            env.close()
+    figure = learning_curve_figure(
+        {
+            f"{name} update (mean of {len(runs)} seeds)": list(np.mean(runs, axis=0))
+            for name, runs in results.items()
+        },
+        title=f"Fast vs plain float32 update, oracle early advising, {episodes} episodes",
+    )
+    CURVES_PNG.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(CURVES_PNG, dpi=120)
+    (CURVES_PNG.with_suffix(".json")).write_text(json.dumps(results) + "\n")
+    return CURVES_PNG
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_learner")
+    parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--repeats", type=int, default=7, help="block pairs for the update")
+    parser.add_argument("--block", type=int, default=5, help="updates per timed block")
+    parser.add_argument("--run-steps", type=int, default=2000, help="training steps timed")
+    parser.add_argument("--curves", type=int, default=0, metavar="EPISODES")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--footprint", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    warnings.filterwarnings("ignore", message="Using padding='same' with even kernel")
+    if args.footprint:
+        print(json.dumps(footprint()))
+        return
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs", flush=True)
+
+    frames = real_frames(5000)
+    print(f"\nupdate, batch {BATCH} (median of {args.repeats} pairs of {args.block}-update blocks)")
+    for threads in args.threads:
+        r = bench_update(threads, args.repeats, args.block, frames)
+        low, high = r["speedup_range"]
+        print(
+            f"  {threads} thread(s): reference {r['reference_ms']:6.1f} ms, learner "
+            f"{r['learner_ms']:5.1f} ms ({r['conv_dtype']} convs): {r['speedup']:.2f}x "
+            f"faster (pairs {low:.2f}x-{high:.2f}x)",
+            flush=True,
+        )
+
+    print(f"\npaper-scale run: 1,000 pretraining + {PAPER_TRAINING_STEPS:,} training steps")
+    for threads in args.threads:
+        r = bench_run(threads, args.run_steps)
+        print(
+            f"  {threads} thread(s): pretraining {r['pretraining_s']:.0f} s, "
+            f"{r['training_step_ms']:.1f} ms per training step (env + act + update, "
+            f"{args.run_steps} steps): about {r['paper_run_min']:.0f} min per run",
+            flush=True,
+        )
+
+    command = [sys.executable, "-m", "benchmarks.bench_learner", "--footprint"]
+    result = subprocess.run(command, capture_output=True, text=True, check=True)
+    r = json.loads(result.stdout.strip().splitlines()[-1])
+    print(
+        f"\nresident memory: {r['before_mb']:.0f} MB with torch, simulator and an empty "
+        f"memory; {r['after_mb']:.0f} MB with {r['transitions']:,} transitions "
+        f"(+{r['after_mb'] - r['before_mb']:.0f} MB; the memory holds {r['memory_mb']:.0f} MB, "
+        "each uint8 frame once)"
+    )
+    if args.curves:
+        print(f"\nlearning curves, {args.curves} episodes, seeds {args.seeds}:", flush=True)
+        print(f"  wrote {curves(args.curves, args.seeds)}")
+
+
+if __name__ == "__main__":
+    main()

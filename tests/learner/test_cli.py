@@ -1,0 +1,74 @@
+"""`ideeprl train` as a person runs it: a real process writing real files."""
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from learner.checkpoint import read_checkpoint
+from learner.cli import main
+
+SMALL = [
+    "--set", "pretraining_steps=60", "--set", "batch_size=16", "--set", "memory_size=500",
+    "--set", "max_episode_steps=30", "--set", "advice_budget=20", "--no-progress",
+]  # fmt: skip
+
+
+def train(*args: str) -> subprocess.CompletedProcess[str]:
+    command = [sys.executable, "-m", "learner", "train", *args]
+    return subprocess.run(command, capture_output=True, text=True, timeout=300)
+
+
+def rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+@pytest.mark.slow
+def test_train_writes_records_plot_and_checkpoint_and_resumes(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    done = train("--out", str(out), "--episodes", "2", "--advisor", "oracle", *SMALL)
+    assert done.returncode == 0, done.stderr
+    assert "R_T" in done.stdout
+    steps, episodes = rows(out / "steps.csv"), rows(out / "episodes.csv")
+    assert [r["episode"] for r in episodes if r["phase"] == "train"] == ["1", "2"]
+    assert [int(r["global_step"]) for r in steps] == list(range(1, len(steps) + 1))
+    assert sum(r["action_source"] == "advisor" for r in steps) == 20
+    assert (out / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
+    state = read_checkpoint(out / "checkpoint.pt")
+    assert state["global_step"] == len(steps) and state["metadata"]["advisor"] == "oracle"
+
+    more = train("--resume", str(out / "checkpoint.pt"), "--episodes", "3", "--no-progress")
+    assert more.returncode == 0, more.stderr
+    steps_after = rows(out / "steps.csv")
+    assert steps_after[: len(steps)] == steps
+    assert [int(r["global_step"]) for r in steps_after] == list(range(1, len(steps_after) + 1))
+    assert [r["episode"] for r in rows(out / "episodes.csv") if r["phase"] == "train"] == [
+        "1", "2", "3",
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--set", "gamma=2"], "gamma must be in [0, 1]"),
+        (["--set", "epsilon=0.1"], "unknown config field(s) epsilon"),
+        (["--advisor", "agent"], "--advisor-checkpoint"),
+        (["--resume", "no-such-file.pt"], "no checkpoint at no-such-file.pt"),
+    ],
+)
+def test_train_explains_bad_arguments(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    assert main(["train", "--out", str(tmp_path), *args]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "steps.csv").exists()
+
+
+def test_ideeprl_lists_the_train_command() -> None:
+    from server.cli import build_parser
+
+    args = build_parser().parse_args(["train", "--episodes", "5", "--advisor", "random"])
+    assert args.command == "train" and args.episodes == 5 and args.func.__module__ == "learner.cli"
