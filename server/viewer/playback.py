@@ -183,5 +183,7 @@ class Player:
         self._apply(message.poses)
 
     def _apply(self, poses: Mapping[str, Any]) -> None:
+        if self._closed:
+            return  # the client has gone: viser would only warn
         self.mirror.apply(poses)
         self.updates += 1

@@ -49,15 +49,30 @@ def distances(view: ClientView, poses: Mapping[str, Any]) -> dict[str, float]:
 
 
 def canvas_pixels(page: Any) -> np.ndarray:
-    """The 3-D view as the participant sees it (RGB)."""
+    """The middle of the 3-D view as the participant sees it (RGB), clear of viser's
+    overlays (connection panel, notices)."""
     png = page.locator("#scene").screenshot(timeout=120_000, animations="disabled")
-    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
+    image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
+    h, w, _ = image.shape
+    return image[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4]
 
 
-def dismiss_notices(page: Any) -> None:
+def colored(pixels: np.ndarray) -> dict[str, int]:
+    """How many pixels look like the red and the blue objects."""
+    r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
+    return {
+        "red": int(((r > 150) & (g < 110) & (b < 110)).sum()),
+        "blue": int(((b > 150) & (r < 130) & (g < 130)).sum()),
+    }
+
+
+def dismiss_notices(page: Any, wait_s: float = 8.0) -> None:
     """Close viser's notices (headless Chromium renders WebGL in software and says so)."""
-    frame = page.frame_locator("#scene")
-    closers = frame.locator("[class*='Notification-close'], button[class*='CloseButton']")
-    for i in range(closers.count()):
-        with contextlib.suppress(Exception):  # a notice that closed itself meanwhile
-            closers.nth(i).click(timeout=2000)
+    closers = page.frame_locator("#scene").locator("[class*='Notification-closeButton']")
+    with contextlib.suppress(Exception):  # no notice: a GPU, or it closed itself
+        closers.first.wait_for(timeout=wait_s * 1000)
+    for i in reversed(range(closers.count())):
+        with contextlib.suppress(Exception):  # it closed itself meanwhile
+            closers.nth(i).evaluate("button => button.click()", timeout=10_000)
+    with contextlib.suppress(Exception):
+        closers.first.wait_for(state="detached", timeout=10_000)

@@ -15,7 +15,7 @@ from sqlalchemy import select
 
 from server.db.models import Advice
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
-from tests.e2e.scene import canvas_pixels, dismiss_notices, wait_for_scene
+from tests.e2e.scene import canvas_pixels, colored, dismiss_notices, wait_for_scene
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -63,11 +63,13 @@ def test_a_participant_gives_all_advice_and_is_thanked(live: Live, browser) -> N
     dismiss_notices(page)
     pixels = canvas_pixels(page)
     assert pixels.std() > 12, "the 3-D view is blank"
+    assert min(colored(pixels).values()) > 50, "the red and blue objects are drawn"
     expect(page.locator("#advice-left")).to_have_text(str(BUDGET))
     image = page.locator("#observation")
     expect(image).to_be_visible()
     assert image.evaluate("i => [i.naturalWidth, i.naturalHeight]") == [64, 64]
     assert image.evaluate("i => getComputedStyle(i).imageRendering") == "pixelated"
+    dismiss_notices(page, wait_s=1)
     save_screenshot(page, "advice")
 
     given: list[int] = []
