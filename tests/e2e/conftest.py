@@ -71,7 +71,7 @@ class Live:
             return response.json()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
     data_dir = tmp_path_factory.mktemp("e2e_data")
     port = free_port()
@@ -106,7 +106,9 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
         thread.join(120)
 
 
-@pytest.fixture(scope="session")
+# Package scope: Playwright's sync API leaves an event loop running on the main thread
+# while it lives, which would break asyncio.run() in the tests that come after these.
+@pytest.fixture(scope="package")
 def browser() -> Iterator[Any]:
     if not CHROMIUM.exists():
         pytest.skip(f"{CHROMIUM} not found: install Debian's chromium (apt-get install chromium)")
