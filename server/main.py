@@ -10,12 +10,13 @@ from fastapi.responses import JSONResponse
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
-from server.routes import ROUTERS, reports
+from server.routes import ROUTERS, dashboard, pages, reports, viewing
 from server.services.errors import Invalid, ServiceError
 from server.sessions.hub import Hub
 from server.sessions.manager import SessionManager
 from server.sessions.worker import WorkerOptions
 from server.settings import Settings
+from server.viewer import viewer_from_settings
 
 
 def worker_options(settings: Settings) -> WorkerOptions:
@@ -39,12 +40,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     manager = SessionManager(
         factory, settings.db_url, hub, worker_options(settings), settings.stale_after_s
     )
+    viewer = viewer_from_settings(settings, hub, factory)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         upgrade(engine)
         await manager.open()
+        viewer.start()
         yield
+        viewer.stop()
         await manager.close()
         engine.dispose()
 
@@ -59,10 +63,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_factory = factory
     app.state.hub = hub
     app.state.manager = manager
+    app.state.viewer = viewer
     app.state.participant_tokens = {}
     for router in ROUTERS:
         app.include_router(router)
-    app.include_router(reports.router)  # issue 6: a study's report
+    for router in (reports.router, pages.router, viewing.router, dashboard.router):
+        app.include_router(router)
+    app.mount("/static", pages.static_files(), name="static")
 
     @app.exception_handler(ServiceError)
     async def service_error(_: Request, error: ServiceError) -> JSONResponse:

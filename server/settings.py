@@ -63,6 +63,19 @@ class Settings(BaseSettings):
     trainer_nice: int = Field(default=10, ge=0, le=19)
     """Niceness of machine-advised workers, so training never slows people's requests."""
 
+    viser_host: str = "127.0.0.1"
+    """Interface the participants' 3-D view (viser) listens on."""
+
+    viser_port: int = Field(default=8080, ge=0, le=65535)
+    """Port of the 3-D view; 0 picks a free one, and a taken one is skipped upwards."""
+
+    viser_public_url: str | None = None
+    """Base URL browsers reach the 3-D view at (e.g. behind a proxy); default: the host the
+    participant's page was loaded from, on the view's port."""
+
+    viewer_playback_speed: float = Field(default=1.0, gt=0)
+    """How fast the 3-D view replays the robot's motion; 1 is real time."""
+
     @field_validator("database_url")
     @classmethod
     def _driver(cls, url: str | None) -> str | None:

@@ -39,6 +39,7 @@ def serve(args: argparse.Namespace) -> int:
     saved = f" (new, saved in {settings.data_dir / 'api_key'})" if new else ""
     print(
         f"IDeepRL study server\n"
+        f"  dashboard:       {base}/dashboard (log in with the researcher key)\n"
         f"  API docs:        {base}/docs\n"
         f"  API:             {base}/api\n"
         f"  participant URL: {base}/p/TOKEN (each human session has its own link)\n"

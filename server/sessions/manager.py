@@ -296,7 +296,7 @@ class SessionManager:
             kind = HUB_KINDS.get(type(message))
             if kind is not None:
                 self.hub.publish(handle.session_id, kind, message)
-            self._loop.call_soon_threadsafe(self._apply, handle, message)
+            self._call_soon(self._apply, handle, message)
         handle.process.join(10)
         code = handle.process.exitcode
         with self.factory() as db:
@@ -308,7 +308,15 @@ class SessionManager:
             final = session.status
         if died:
             self.hub.publish(handle.session_id, "status", StatusChanged(final, detail))
-        self._loop.call_soon_threadsafe(self._drop, handle)
+        self._call_soon(self._drop, handle)
+
+    def _call_soon(self, callback: Any, *args: Any) -> None:
+        """Hand work to the event loop, unless the server has already shut it down."""
+        assert self._loop is not None
+        # RuntimeError: the loop closed between the check and the call.
+        with contextlib.suppress(RuntimeError):
+            if not self._loop.is_closed():
+                self._loop.call_soon_threadsafe(callback, *args)
 
     def _apply(self, handle: WorkerHandle, message: Any) -> None:
         if isinstance(message, Progress):

@@ -1,0 +1,208 @@
+"""The researchers' dashboard: a login form that sets an HttpOnly cookie (the key never
+goes in a URL), a page of studies and sessions with live learning curves, and the JSON
+the page polls. Behind the same researcher key as the REST API, whose routes these reuse.
+
+Requests that change something need the `X-Requested-With` header (a form on another
+site cannot send it) on top of the SameSite=Strict cookie.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import secrets
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, BackgroundTasks, Depends, Form, HTTPException, Request
+from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
+from pydantic import BaseModel, Field, ValidationError
+from sqlalchemy import select
+
+from server.db.models import Episode, StudySession
+from server.deps import DbDep, ManagerDep, SettingsDep
+from server.routes import exports as export_routes
+from server.routes import sessions as session_routes
+from server.routes.pages import templates
+from server.routes.params import SessionId, StudyId
+from server.schemas.sessions import SessionCreate
+from server.schemas.studies import StudyCreate
+from server.services import sessions, studies
+from server.settings import Settings
+
+COOKIE = "ideeprl_dashboard"
+CSRF_HEADER = "X-Requested-With"
+router = APIRouter(include_in_schema=False)
+
+
+def cookie_value(settings: Settings) -> str:
+    """What the cookie holds: derived from the key, so it is not the key itself and
+    becomes invalid when the key changes."""
+    assert settings.api_key, "the app always has a key"
+    return hmac.new(settings.api_key.encode(), b"ideeprl-dashboard", hashlib.sha256).hexdigest()
+
+
+def _logged_in(request: Request) -> bool:
+    given = request.cookies.get(COOKIE, "")
+    return secrets.compare_digest(given.encode(), cookie_value(request.app.state.settings).encode())
+
+
+def require_login(request: Request) -> None:
+    if not _logged_in(request):
+        raise HTTPException(401, "log in to the dashboard first: /dashboard/login")
+    if request.method != "GET" and not request.headers.get(CSRF_HEADER):
+        raise HTTPException(403, f"changes need the {CSRF_HEADER} header (send them from the page)")
+
+
+LoginDep = Depends(require_login)
+
+
+# --- pages -------------------------------------------------------------------------------
+def _login_page(request: Request, error: str = "", status: int = 200) -> HTMLResponse:
+    response = templates.TemplateResponse(
+        request, "dashboard/login.html", {"site_title": "IDeepRL dashboard", "error": error}
+    )
+    response.status_code = status
+    return response
+
+
+@router.get("/dashboard/login")
+def login_form(request: Request) -> Response:
+    return _login_page(request)
+
+
+@router.post("/dashboard/login")
+def login(request: Request, settings: SettingsDep, key: Annotated[str, Form()] = "") -> Response:
+    assert settings.api_key, "the app always has a key"
+    if not key or not secrets.compare_digest(key.encode(), settings.api_key.encode()):
+        message = "That is not the researcher key. `ideeprl serve` prints it when it starts."
+        return _login_page(request, message, 401)
+    response = RedirectResponse("/dashboard", status_code=303)
+    response.set_cookie(
+        COOKIE,
+        cookie_value(settings),
+        httponly=True,
+        samesite="strict",
+        secure=request.url.scheme == "https",
+        path="/dashboard",
+    )
+    return response
+
+
+@router.post("/dashboard/logout")
+def logout() -> Response:
+    response = RedirectResponse("/dashboard/login", status_code=303)
+    response.delete_cookie(COOKIE, path="/dashboard")
+    return response
+
+
+@router.get("/dashboard")
+def dashboard(request: Request) -> Response:
+    if not _logged_in(request):
+        return RedirectResponse("/dashboard/login", status_code=303)
+    return templates.TemplateResponse(
+        request, "dashboard/dashboard.html", {"site_title": "IDeepRL dashboard"}
+    )
+
+
+# --- what the page polls and sends ------------------------------------------------------
+class SessionRow(BaseModel):
+    id: int
+    label: str
+    method: str
+    seed: int
+    motion: str
+    participant: str | None
+    participant_url: str | None
+    status: str
+    status_detail: str
+    progress: dict[str, Any]
+
+
+class StudyRow(BaseModel):
+    id: int
+    name: str
+    description: str
+    sessions: list[SessionRow]
+
+
+class NewStudy(BaseModel):
+    name: str = Field(min_length=1, max_length=200)
+
+
+class NewParticipant(BaseModel):
+    participant: str | None = Field(default=None, max_length=64)
+    """Pseudonym; generated when empty."""
+
+
+@router.get("/dashboard/api/overview", dependencies=[LoginDep])
+def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[StudyRow]:
+    rows = []
+    for study in studies.list_studies(db):
+        found = []
+        for session in sessions.list_sessions(db, study.id):
+            public = sessions.session_public(session, settings.base_url)
+            progress = session_routes.get_progress(db, manager, session.id)
+            fields = public.model_dump(include=set(SessionRow.model_fields))
+            fields.update(status=progress.status, progress=progress.model_dump())
+            found.append(SessionRow(**fields))
+        rows.append(
+            StudyRow(id=study.id, name=study.name, description=study.description, sessions=found)
+        )
+    return rows
+
+
+@router.get("/dashboard/api/studies/{study_id}/curves", dependencies=[LoginDep])
+def curves(db: DbDep, study_id: StudyId) -> dict[int, list[tuple[int, float]]]:
+    """Every session's learning curve: (episode, collected reward) per training episode."""
+    studies.get_study(db, study_id)
+    query = (
+        select(Episode.session_id, Episode.episode, Episode.collected_reward)
+        .join(StudySession, StudySession.id == Episode.session_id)
+        .where(StudySession.study_id == study_id, Episode.phase == "train")
+        .order_by(Episode.session_id, Episode.episode)
+    )
+    found: dict[int, list[tuple[int, float]]] = {}
+    for session_id, episode, reward in db.execute(query):
+        found.setdefault(session_id, []).append((episode, reward))
+    return found
+
+
+@router.post("/dashboard/api/sessions/{session_id}/{command}", dependencies=[LoginDep])
+async def command(
+    db: DbDep,
+    settings: SettingsDep,
+    manager: ManagerDep,
+    session_id: SessionId,
+    command: Literal["start", "pause", "resume", "stop"],
+) -> dict[str, str]:
+    sessions.get_session(db, session_id)
+    await getattr(manager, command)(session_id)
+    return {"status": manager.status(session_id)}
+
+
+@router.post("/dashboard/api/studies", dependencies=[LoginDep], status_code=201)
+def new_study(db: DbDep, body: NewStudy) -> dict[str, int]:
+    return {"id": studies.create_study(db, StudyCreate(name=body.name)).id}
+
+
+@router.post(
+    "/dashboard/api/studies/{study_id}/participants", dependencies=[LoginDep], status_code=201
+)
+def new_participant(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, body: NewParticipant
+) -> dict[str, Any]:
+    """A human session with the paper's settings, and its link to hand out."""
+    try:
+        body_ = SessionCreate(method="human", participant=body.participant or None)
+    except ValidationError as error:
+        raise HTTPException(422, f"pseudonym: {error.errors()[0]['msg']}") from None
+    created = sessions.create_session(db, study_id, body_)
+    public = sessions.session_public(created, settings.base_url)
+    return {"id": created.id, "participant_url": public.participant_url}
+
+
+@router.get("/dashboard/api/studies/{study_id}/export", dependencies=[LoginDep])
+def export(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, background: BackgroundTasks
+) -> FileResponse:
+    return export_routes.export_study(db, settings, study_id, background)

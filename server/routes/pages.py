@@ -1,0 +1,261 @@
+"""The participant's pages: entry link, consent, the paper's three-step induction, the
+advice page with the live 3-D view, and the thank-you page.
+
+Where a participant is comes from the session itself, so a reload or a new tab returns
+to the same point: before the session starts they read consent and induction (the page
+in the URL); once started they advise until the budget is spent; then they are thanked.
+Page texts come from the study's `texts` (keys in `TEXT_KEYS`), else from `web/texts/`.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import quote
+
+from fastapi import APIRouter, Request
+from fastapi.responses import HTMLResponse, RedirectResponse, Response
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+from markupsafe import Markup
+from sqlalchemy import func, select
+
+import sim
+from server.db.models import Advice, Status
+from server.services.sessions import session_for_token
+
+WEB_DIR = Path(__file__).resolve().parents[2] / "web"
+templates = Jinja2Templates(directory=WEB_DIR / "templates")
+router = APIRouter(include_in_schema=False)
+
+TEXT_KEYS = ("title", "consent", "induction_1", "induction_2", "induction_3", "thanks")
+"""Keys of a study's `texts` that replace the default page texts (web/texts/KEY.txt)."""
+INDUCTION_TITLES = ("The robot and the experiment", "The task, and how to solve it", "Your screen")
+CAMERA = {  # above and behind the robot, so its left is the screen's left
+    "initialCameraPosition": "-0.12,-0.5,1.72",
+    "initialCameraLookAt": "0.42,0.02,0.4",
+    "initialCameraUp": "0,0,1",
+}
+
+
+def static_files() -> StaticFiles:
+    return StaticFiles(directory=WEB_DIR / "static")
+
+
+@dataclass(frozen=True)
+class Visit:
+    """The session behind a participant link, as the pages need it."""
+
+    token: str
+    session_id: int
+    status: str
+    advice_budget: int
+    advice_given: int
+    texts: dict[str, str]
+    sort_rule: Any
+
+    @property
+    def started(self) -> bool:
+        return self.status != Status.created
+
+    @property
+    def done(self) -> bool:
+        return self.advice_given >= self.advice_budget or self.status == Status.finished
+
+    def text(self, key: str) -> Markup:
+        assert key in TEXT_KEYS, key
+        raw = self.texts.get(key) or (WEB_DIR / "texts" / f"{key}.txt").read_text()
+        raw = raw.replace("{advice_budget}", str(self.advice_budget))
+        raw = raw.replace("{sorting_rule}", describe_rule(self.sort_rule))
+        return render_text(raw)
+
+
+def _visit(request: Request, token: str) -> Visit | None:
+    with request.app.state.session_factory() as db:
+        session = session_for_token(db, token)
+        if session is None:
+            return None
+        given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+        return Visit(
+            token=token,
+            session_id=session.id,
+            status=request.app.state.manager.status(session.id),
+            advice_budget=session.advice_budget,
+            advice_given=int(given),
+            texts={k: str(v) for k, v in (session.study.texts or {}).items()},
+            sort_rule=session.sort_rule,
+        )
+
+
+def _page(request: Request, name: str, visit: Visit | None, **context: Any) -> HTMLResponse:
+    title = visit.text("title") if visit is not None else Markup("IDeepRL")
+    return templates.TemplateResponse(
+        request, name, {"visit": visit, "site_title": title.striptags(), **context}
+    )
+
+
+def _error(request: Request) -> HTMLResponse:
+    response = _page(request, "participant/error.html", None)
+    response.status_code = 403
+    return response
+
+
+def _go(visit: Visit, where: str) -> RedirectResponse:
+    return RedirectResponse(f"/p/{visit.token}/{where}", status_code=303)
+
+
+def _resume_point(visit: Visit) -> str:
+    if not visit.started:
+        return "consent"
+    return "thanks" if visit.done else "advise"
+
+
+@router.get("/p/{token}")
+def entry(request: Request, token: str) -> Response:
+    """The participant link: continue where this participant is."""
+    visit = _visit(request, token)
+    return _error(request) if visit is None else _go(visit, _resume_point(visit))
+
+
+@router.get("/p/{token}/consent")
+def consent(request: Request, token: str) -> Response:
+    visit = _visit(request, token)
+    if visit is None:
+        return _error(request)
+    if visit.started:
+        return _go(visit, _resume_point(visit))
+    return _page(request, "participant/consent.html", visit, body=visit.text("consent"))
+
+
+@router.get("/p/{token}/declined")
+def declined(request: Request, token: str) -> Response:
+    visit = _visit(request, token)
+    return _error(request) if visit is None else _page(request, "participant/declined.html", visit)
+
+
+@router.get("/p/{token}/induction/{step}")
+def induction(request: Request, token: str, step: int) -> Response:
+    visit = _visit(request, token)
+    if visit is None:
+        return _error(request)
+    if not 1 <= step <= 3:
+        return _go(visit, "induction/1")
+    return _page(
+        request,
+        "participant/induction.html",
+        visit,
+        step=step,
+        titles=INDUCTION_TITLES,
+        body=visit.text(f"induction_{step}"),
+    )
+
+
+@router.get("/p/{token}/advise")
+def advise(request: Request, token: str) -> Response:
+    visit = _visit(request, token)
+    if visit is None:
+        return _error(request)
+    if not visit.started or visit.done:
+        return _go(visit, _resume_point(visit))
+    return _page(
+        request,
+        "participant/advise.html",
+        visit,
+        scene_url=scene_url(request, token),
+        action_names=sim.ACTION_NAMES,
+    )
+
+
+@router.get("/p/{token}/thanks")
+def thanks(request: Request, token: str) -> Response:
+    visit = _visit(request, token)
+    if visit is None:
+        return _error(request)
+    if not visit.done:
+        return _go(visit, _resume_point(visit))
+    return _page(request, "participant/thanks.html", visit, body=visit.text("thanks"))
+
+
+def scene_url(request: Request, token: str) -> str:
+    """viser's client, its websocket at /p/TOKEN on the viewer's port."""
+    settings = request.app.state.settings
+    base = settings.viser_public_url
+    if not base:
+        host = request.url.hostname or settings.viser_host
+        if ":" in host:
+            host = f"[{host}]"
+        base = f"{request.url.scheme}://{host}:{request.app.state.viewer.port}"
+    base = base.rstrip("/")
+    websocket = re.sub(r"^http", "ws", base) + f"/p/{token}"
+    params = "&".join(f"{k}={v}" for k, v in CAMERA.items())
+    return f"{base}/?websocket={quote(websocket, safe=':/')}&hideViserLogo&{params}"
+
+
+def describe_rule(spec: Any) -> str:
+    """The sorting rule in words, e.g. 'put the blue objects on the right table and the red
+    objects on the left table'."""
+    rule = sim.SortRule.parse(spec)
+    objects = [(shape, color) for shape in sim.SHAPES for color in sim.COLORS]
+    parts = []
+    for side in ("right", "left"):
+        chosen = {o for o in objects if rule.side(*o) == side}
+        if chosen:
+            parts.append(f"{_describe_group(chosen, objects)} on the {side} table")
+    return "put " + " and ".join(parts)
+
+
+def _describe_group(chosen: set[tuple[str, str]], objects: list[tuple[str, str]]) -> str:
+    for color in sim.COLORS:
+        if chosen == {o for o in objects if o[1] == color}:
+            return f"the {color} objects"
+    shapes = [s for s in sim.SHAPES if {(s, c) for c in sim.COLORS} <= chosen]
+    if chosen == {o for o in objects if o[0] in shapes}:
+        return "the " + _join([f"{s}s" for s in shapes])
+    return "the " + _join([f"{color} {shape}" for shape, color in sorted(chosen)])
+
+
+def _join(words: list[str]) -> str:
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
+
+
+def render_text(text: str) -> Markup:
+    """Plain text with a little structure: blank lines between paragraphs, `- ` bullets,
+    `## ` headings, `**bold**`. Everything is escaped; nothing else is interpreted."""
+    out: list[str] = []
+    paragraph: list[str] = []
+    bullets: list[str] = []
+
+    def flush() -> None:
+        if paragraph:
+            out.append(f"<p>{_inline(' '.join(paragraph))}</p>")
+            paragraph.clear()
+        if bullets:
+            out.append("<ul>" + "".join(f"<li>{_inline(b)}</li>" for b in bullets) + "</ul>")
+            bullets.clear()
+
+    for raw in text.strip().splitlines():
+        line = raw.strip()
+        if not line:
+            flush()
+        elif line.startswith("## "):
+            flush()
+            out.append(f"<h2>{_inline(line[3:])}</h2>")
+        elif line.startswith("- "):
+            if paragraph:
+                flush()
+            bullets.append(line[2:])
+        elif bullets and raw[:1].isspace():
+            bullets[-1] += " " + line  # a bullet continued on an indented line
+        else:
+            if bullets:
+                flush()
+            paragraph.append(line)
+    flush()
+    return Markup("\n".join(out))
+
+
+def _inline(text: str) -> str:
+    return re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", html.escape(text))

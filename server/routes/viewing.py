@@ -1,0 +1,55 @@
+"""What the participant's pages need beside the participant API: whether the 3-D view
+is still playing the last move, and the learner's curve for the thank-you page."""
+
+from fastapi import APIRouter, Request
+from pydantic import BaseModel, Field
+from sqlalchemy import select
+
+from server.db.models import Episode, StudySession
+from server.deps import DbDep, ManagerDep, ParticipantDep
+
+router = APIRouter(prefix="/api/participant", tags=["participant"])
+
+
+class Playback(BaseModel):
+    remaining_s: float = Field(description="Seconds until the 3-D view has shown the last move.")
+    viewers: int = Field(description="Open 3-D views of this session.")
+
+
+class CurvePoint(BaseModel):
+    episode: int
+    collected_reward: float
+
+
+class LearningCurve(BaseModel):
+    status: str
+    episodes: int = Field(description="Training episodes the session will run.")
+    curve: list[CurvePoint] = Field(description="Collected reward per finished episode.")
+
+
+@router.get("/playback")
+def playback(session: ParticipantDep, request: Request) -> Playback:
+    """Whether the participant's 3-D view still shows the robot moving: the page keeps
+    the action buttons off until it has finished."""
+    viewer = request.app.state.viewer
+    return Playback(
+        remaining_s=round(viewer.playback_remaining_s(session.id), 3),
+        viewers=len(viewer.views(session.id)),
+    )
+
+
+@router.get("/learning-curve")
+def learning_curve(session: ParticipantDep, db: DbDep, manager: ManagerDep) -> LearningCurve:
+    """The learner's collected reward per training episode, as it trains on its own."""
+    row = db.get(StudySession, session.id)
+    assert row is not None, "a participant token reaches an existing session"
+    episodes = db.execute(
+        select(Episode.episode, Episode.collected_reward)
+        .where(Episode.session_id == session.id, Episode.phase == "train")
+        .order_by(Episode.episode)
+    ).all()
+    return LearningCurve(
+        status=manager.status(session.id),
+        episodes=row.episodes,
+        curve=[CurvePoint(episode=e, collected_reward=r) for e, r in episodes],
+    )

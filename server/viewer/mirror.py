@@ -1,0 +1,127 @@
+"""The scene of one viser client: the simulation's bodies as client-scoped viser nodes.
+
+Bodies are built once per scene (`sim.BodySpec`: boxes, cylinders, meshes in their
+colours) under their stable names as scene paths (`/tables/left`, `/arm/link_3`), and
+then only moved. Nothing goes into viser's shared scene, so a client without a session
+sees nothing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import viser
+
+import sim
+
+POSITION_EPS = 1e-5
+"""Metres: a body that moved less than this is not sent again."""
+SHADOWS = False
+"""Shadows cost a second render pass; browsers without a GPU (software WebGL) then lag."""
+LABELS = {"tables/left": "left table", "tables/right": "right table"}
+"""Names shown above bodies, so a participant knows which side is which from any angle."""
+
+
+def _rgb(rgba: tuple[float, float, float, float]) -> tuple[int, int, int]:
+    return (round(rgba[0] * 255), round(rgba[1] * 255), round(rgba[2] * 255))
+
+
+def _opacity(rgba: tuple[float, float, float, float]) -> float | None:
+    return None if rgba[3] >= 1.0 else float(rgba[3])
+
+
+def add_body(scene: viser.SceneApi, body: sim.BodySpec) -> Any:
+    """One body as a viser node at the world origin (its pose is set afterwards)."""
+    name, geometry = f"/{body.name}", body.geometry
+    color, opacity = _rgb(body.rgba), _opacity(body.rgba)
+    if isinstance(geometry, sim.Box):
+        return scene.add_box(
+            name,
+            color=color,
+            dimensions=tuple(float(x) * 2 for x in geometry.half_extents),
+            opacity=opacity,
+            cast_shadow=SHADOWS,
+            receive_shadow=SHADOWS,
+        )
+    if isinstance(geometry, sim.Cylinder):
+        return scene.add_cylinder(
+            name,
+            radius=float(geometry.radius),
+            height=float(geometry.length),
+            color=color,
+            opacity=opacity,
+            cast_shadow=SHADOWS,
+            receive_shadow=SHADOWS,
+        )
+    assert isinstance(geometry, sim.Mesh), f"unknown geometry {type(geometry).__name__}"
+    return scene.add_mesh_simple(
+        name,
+        np.asarray(geometry.vertices, dtype=np.float32),
+        np.asarray(geometry.faces, dtype=np.uint32),
+        color=color,
+        opacity=opacity,
+        flat_shading=False,
+        cast_shadow=SHADOWS,
+        receive_shadow=SHADOWS,
+    )
+
+
+class SceneMirror:
+    """The bodies of one client's scene, by name; `apply` moves them."""
+
+    def __init__(self, client: viser.ClientHandle) -> None:
+        self.client = client
+        self.handles: dict[str, Any] = {}
+        self._sent: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
+        self._names: tuple[str, ...] = ()
+
+    def build(self, bodies: list[sim.BodySpec]) -> None:
+        """Create the bodies; a scene with the same bodies is kept as it is."""
+        names = tuple(body.name for body in bodies)
+        if names == self._names:
+            return
+        for handle in self.handles.values():
+            handle.remove()
+        self.handles.clear()
+        self._sent.clear()
+        with self.client.atomic():
+            for body in bodies:
+                self.handles[body.name] = add_body(self.client.scene, body)
+                if body.name in LABELS and isinstance(body.geometry, sim.Box):
+                    top = float(body.geometry.half_extents[2]) + 0.03
+                    self.client.scene.add_label(
+                        f"/{body.name}/label", LABELS[body.name], position=(0.0, 0.0, top)
+                    )
+        self._names = names
+
+    def apply(self, poses: Mapping[str, sim.Pose]) -> int:
+        """Move the bodies to `poses` in one atomic update; returns how many moved."""
+        moved = 0
+        with self.client.atomic():
+            for name, pose in poses.items():
+                handle = self.handles.get(name)
+                if handle is None:
+                    continue
+                position = tuple(float(x) for x in pose.position)
+                wxyz = tuple(float(x) for x in pose.orientation)
+                last = self._sent.get(name)
+                if last is not None and _close(last[0], position) and _close(last[1], wxyz):
+                    continue
+                handle.position = position
+                handle.wxyz = wxyz
+                self._sent[name] = (position, wxyz)
+                moved += 1
+        return moved
+
+    def positions(self) -> dict[str, np.ndarray]:
+        """Where each body's node is now (what this client is shown), in metres."""
+        return {name: np.asarray(h.position, dtype=float) for name, h in self.handles.items()}
+
+    def orientations(self) -> dict[str, np.ndarray]:
+        return {name: np.asarray(h.wxyz, dtype=float) for name, h in self.handles.items()}
+
+
+def _close(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
+    return max(abs(x - y) for x, y in zip(a, b, strict=True)) < POSITION_EPS

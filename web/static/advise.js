@@ -1,0 +1,234 @@
+// The advice page: follows the session's state by long-polling, enables the action
+// buttons when the robot waits for advice and the 3-D view has finished showing its last
+// move, and sends one advice per click or key press.
+"use strict";
+(() => {
+  const config = JSON.parse(document.getElementById("page-config").textContent);
+  const $ = (id) => document.getElementById(id);
+  const buttons = [...document.querySelectorAll("button.action")];
+  const KEYS = { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
+  const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+
+  let version = null;
+  let enabledFor = null; // the advice index the buttons answer, or null
+  let generation = 0; // bumps on every state, so stale waits give up
+  let finished = false;
+  let sentIndex = null;
+
+  function api(path, options = {}) {
+    const headers = { Authorization: `Bearer ${config.token}` };
+    if (options.body) headers["Content-Type"] = "application/json";
+    return fetch(path, { ...options, headers, cache: "no-store" });
+  }
+
+  function setStatus(text, mood) {
+    $("status-text").textContent = text;
+    $("status").dataset.mood = mood;
+  }
+
+  function setButtons(on) {
+    for (const b of buttons) b.disabled = !on;
+    document.body.classList.toggle("your-turn", on);
+  }
+
+  function rewardWords(reward) {
+    if (reward === null || reward === undefined) return ["—", "", ""];
+    const shown = (reward > 0 ? "+" : "") + String(Math.round(reward * 100) / 100);
+    if (reward >= 0.99) return [shown, "all objects sorted: round complete!", "good"];
+    if (reward > 0) return [shown, "correct placement", "good"];
+    if (reward <= -0.99) return [shown, "wrong table: the objects are laid out again", "bad"];
+    if (reward < 0) return [shown, "a small cost: the round is getting long", "neutral"];
+    return [shown, "no points this time", "neutral"];
+  }
+
+  function showCounter(s) {
+    $("advice-left").textContent = s.advice_left;
+    $("advice-budget").textContent = s.advice_budget;
+    const done = s.advice_budget ? (100 * s.advice_given) / s.advice_budget : 100;
+    $("meter-fill").style.width = `${done.toFixed(1)}%`;
+  }
+
+  function showReward(s) {
+    const [shown, words, mood] = rewardWords(s.last_reward);
+    $("last-reward").textContent = shown;
+    $("last-reward").dataset.mood = mood;
+    $("last-reward-text").textContent = s.last_reward === null ? "No choice yet." : words;
+  }
+
+  function showHistory(s) {
+    const list = $("history");
+    list.replaceChildren();
+    const items = [...s.history].reverse();
+    if (!items.length) {
+      const li = document.createElement("li");
+      li.className = "muted";
+      li.textContent = "None yet.";
+      list.append(li);
+    }
+    for (const item of items) {
+      const li = document.createElement("li");
+      const [shown, , mood] = rewardWords(item.reward);
+      li.innerHTML = `<span class="history-index"></span><span class="history-action"></span><span class="reward small"></span>`;
+      li.children[0].textContent = `#${item.advice_index + 1}`;
+      li.children[1].textContent = item.action_name;
+      li.children[2].textContent = item.reward === null ? "…" : shown;
+      li.children[2].dataset.mood = mood;
+      list.append(li);
+    }
+  }
+
+  function showObservation(s) {
+    if (!s.observation_png) return;
+    $("observation").src = `data:image/png;base64,${s.observation_png}`;
+    $("observation").hidden = false;
+    $("observation-empty").hidden = true;
+  }
+
+  async function waitForPlayback(gen) {
+    for (let i = 0; i < 600 && gen === generation; i++) {
+      const response = await api("/api/participant/playback").catch(() => null);
+      if (!response || !response.ok) return;
+      const { remaining_s: left } = await response.json();
+      if (left <= 0) return;
+      await sleep(Math.min(1000, left * 1000 + 20));
+    }
+  }
+
+  async function render(s) {
+    const gen = ++generation;
+    showCounter(s);
+    showReward(s);
+    showHistory(s);
+    if (s.advice_budget > 0 && s.advice_left === 0) return finish(gen);
+    const ready =
+      s.status === "running" && s.advice_wanted && !s.robot_moving && s.advice_index !== sentIndex;
+    if (!ready) {
+      enabledFor = null;
+      setButtons(false);
+      if (s.status !== "running") setStatus(s.message || `The session is ${s.status}.`, "paused");
+      else if (s.robot_moving || sentIndex !== null) setStatus("The robot is moving…", "busy");
+      else setStatus("The robot is exploring on its own. Your first turn comes in a moment…", "busy");
+      return;
+    }
+    if (enabledFor === s.advice_index) return;
+    setButtons(false);
+    setStatus("The robot is moving…", "busy");
+    await waitForPlayback(gen);
+    if (gen !== generation) return;
+    showObservation(s);
+    enabledFor = s.advice_index;
+    sentIndex = null;
+    setButtons(true);
+    setStatus("Your turn: what should the robot do?", "turn");
+  }
+
+  async function finish(gen) {
+    if (finished) return;
+    finished = true;
+    enabledFor = null;
+    setButtons(false);
+    setStatus("That was your last choice. Thank you!", "turn");
+    await waitForPlayback(gen);
+    await sleep(800);
+    window.location.assign(`/p/${config.token}/thanks`);
+  }
+
+  async function send(action) {
+    if (enabledFor === null) return;
+    const index = enabledFor;
+    enabledFor = null;
+    sentIndex = index;
+    setButtons(false);
+    const button = buttons.find((b) => Number(b.dataset.action) === action);
+    button.classList.add("chosen");
+    setTimeout(() => button.classList.remove("chosen"), 900);
+    const name = config.actionNames[action];
+    $("feedback").textContent = `Sending “${name}”…`;
+    setStatus("The robot is moving…", "busy");
+    for (let attempt = 0; attempt < 5; attempt++) {
+      let response;
+      try {
+        response = await api("/api/participant/advice", {
+          method: "POST",
+          body: JSON.stringify({ advice_index: index, action }),
+        });
+      } catch {
+        await sleep(1000 * (attempt + 1));
+        continue; // the same advice again is stored once
+      }
+      if (response.ok) {
+        $("feedback").textContent = `✓ Sent: ${name}`;
+        $("feedback").dataset.mood = "good";
+        return;
+      }
+      const body = await response.json().catch(() => ({}));
+      $("feedback").textContent = typeof body.detail === "string" ? body.detail : `Not sent (error ${response.status}).`;
+      $("feedback").dataset.mood = "bad";
+      sentIndex = null;
+      version = null; // fetch the state afresh
+      return;
+    }
+    $("feedback").textContent = "Not sent: the connection is lost. Please try again.";
+    $("feedback").dataset.mood = "bad";
+    sentIndex = null;
+    version = null;
+  }
+
+  async function follow() {
+    let failures = 0;
+    while (!finished) {
+      const path = version === null ? "/api/participant/state" : `/api/participant/state?after=${version}&timeout=20`;
+      try {
+        const response = await api(path);
+        if (response.status === 401 || response.status === 403) {
+          setStatus("This link is not valid any more. Please contact the researcher.", "paused");
+          setButtons(false);
+          return;
+        }
+        if (!response.ok) throw new Error(String(response.status));
+        const s = await response.json();
+        failures = 0;
+        version = s.version;
+        render(s);
+      } catch {
+        failures += 1;
+        setButtons(false);
+        enabledFor = null;
+        setStatus("Connection lost. Trying again…", "paused");
+        await sleep(Math.min(10000, 1000 * failures));
+        version = null;
+      }
+    }
+  }
+
+  for (const b of buttons) b.addEventListener("click", () => send(Number(b.dataset.action)));
+  document.addEventListener("keydown", (event) => {
+    if (event.ctrlKey || event.metaKey || event.altKey) return;
+    const action = KEYS[event.key.toLowerCase()];
+    if (action === undefined) return;
+    event.preventDefault();
+    send(action);
+  });
+  // Without a GPU (software WebGL) full-resolution rendering starves this page: draw the
+  // 3-D view at a lower resolution there.
+  function softwareWebGL() {
+    try {
+      const gl = document.createElement("canvas").getContext("webgl");
+      if (!gl) return false;
+      const info = gl.getExtension("WEBGL_debug_renderer_info");
+      const renderer = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+      gl.getExtension("WEBGL_lose_context")?.loseContext();
+      return /swiftshader|llvmpipe|softpipe|software/i.test(renderer);
+    } catch {
+      return false;
+    }
+  }
+  const scene = $("scene");
+  scene.src = scene.dataset.src + (softwareWebGL() ? "&fixedDpr=0.75" : "");
+  // Keys go to the 3-D view once it has focus: give focus back when the pointer leaves it.
+  scene.addEventListener("mouseleave", () => {
+    if (document.activeElement === scene) scene.blur();
+    window.focus();
+  });
+  follow();
+})();

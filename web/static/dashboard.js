@@ -1,0 +1,189 @@
+// The researchers' dashboard: polls the overview and the learning curves, and sends
+// start/pause/resume/stop, new studies and new participant sessions.
+"use strict";
+(() => {
+  const COLORS = ["#2f6f8f", "#c8572d", "#2e7d4f", "#7a4fb3", "#a0711b", "#b3412e", "#3d8f8a", "#8f2f6f"];
+  const COMMANDS = {
+    created: ["start", "stop"],
+    running: ["pause", "stop"],
+    paused: ["resume", "stop"],
+    stopped: ["resume"],
+    interrupted: ["resume", "stop"],
+    abandoned: ["resume", "stop"],
+  };
+  const $ = (id) => document.getElementById(id);
+  const template = $("study-template");
+  const sections = new Map();
+
+  function showError(message) {
+    $("dashboard-error").textContent = message;
+    $("dashboard-error").hidden = !message;
+  }
+
+  async function call(path, options = {}) {
+    const response = await fetch(path, {
+      ...options,
+      headers: { "X-Requested-With": "ideeprl-dashboard", "Content-Type": "application/json" },
+      cache: "no-store",
+    });
+    if (response.status === 401) {
+      window.location.assign("/dashboard/login");
+      throw new Error("logged out");
+    }
+    const body = await response.json().catch(() => ({}));
+    if (!response.ok) {
+      const detail = Array.isArray(body.detail) ? body.detail.map((d) => d.msg).join("; ") : body.detail;
+      throw new Error(detail || `error ${response.status}`);
+    }
+    return body;
+  }
+
+  function progressText(s) {
+    const p = s.progress;
+    const parts = [];
+    if (s.method !== "autonomous" && p.advice_budget) parts.push(`advice ${p.advice_given}/${p.advice_budget}`);
+    if (p.advice_wanted) parts.push("waiting for the participant");
+    if (p.phase === "training" || p.episode) parts.push(`episode ${p.episode}/${p.episodes}`);
+    else if (p.phase) parts.push(p.phase);
+    if (p.last_episode_reward !== null && p.last_episode_reward !== undefined) {
+      parts.push(`last ${p.last_episode_reward.toFixed(2)}`);
+    }
+    return parts.join(" · ") || "—";
+  }
+
+  function sessionRow(s, color) {
+    const tr = document.createElement("tr");
+    tr.dataset.session = s.id;
+    const cells = Array.from({ length: 6 }, () => tr.appendChild(document.createElement("td")));
+    cells[0].innerHTML = `<span class="swatch"></span><span class="session-id"></span><span class="muted small session-label"></span>`;
+    cells[0].querySelector(".swatch").style.background = color;
+    cells[0].querySelector(".session-id").textContent = `#${s.id}`;
+    cells[0].querySelector(".session-label").textContent = s.participant || s.label || `seed ${s.seed}`;
+    cells[1].textContent = s.method;
+    cells[2].innerHTML = `<span class="badge"></span>`;
+    cells[2].firstChild.textContent = s.status;
+    cells[2].firstChild.dataset.status = s.status;
+    if (s.status_detail) cells[2].firstChild.title = s.status_detail;
+    cells[3].textContent = progressText(s);
+    if (s.participant_url) {
+      cells[4].innerHTML = `<a class="link" target="_blank" rel="noopener"></a> <button class="copy" type="button">Copy</button>`;
+      cells[4].firstChild.href = s.participant_url;
+      cells[4].firstChild.textContent = "open";
+      cells[4].querySelector(".copy").addEventListener("click", async (event) => {
+        await navigator.clipboard.writeText(s.participant_url).catch(() => window.prompt("Participant link:", s.participant_url));
+        event.target.textContent = "Copied";
+        setTimeout(() => (event.target.textContent = "Copy"), 1500);
+      });
+    } else {
+      cells[4].innerHTML = `<span class="muted">—</span>`;
+    }
+    for (const command of COMMANDS[s.status] || []) {
+      const button = document.createElement("button");
+      button.type = "button";
+      button.className = `command ${command}`;
+      button.textContent = command;
+      button.addEventListener("click", async () => {
+        button.disabled = true;
+        try {
+          await call(`/dashboard/api/sessions/${s.id}/${command}`, { method: "POST" });
+          showError("");
+        } catch (e) {
+          showError(`Session ${s.id}: ${e.message}`);
+        }
+        refresh();
+      });
+      cells[5].append(button);
+    }
+    return tr;
+  }
+
+  function studySection(study) {
+    let section = sections.get(study.id);
+    if (section) return section;
+    section = template.content.firstElementChild.cloneNode(true);
+    section.dataset.study = study.id;
+    section.querySelector(".export").href = `/dashboard/api/studies/${study.id}/export`;
+    section.querySelector(".new-participant").addEventListener("submit", async (event) => {
+      event.preventDefault();
+      const input = event.target.elements.participant;
+      try {
+        await call(`/dashboard/api/studies/${study.id}/participants`, {
+          method: "POST",
+          body: JSON.stringify({ participant: input.value || null }),
+        });
+        input.value = "";
+        showError("");
+      } catch (e) {
+        showError(`New participant: ${e.message}`);
+      }
+      refresh();
+    });
+    sections.set(study.id, section);
+    return section;
+  }
+
+  async function refreshCurves(study, section, colors) {
+    const curves = await call(`/dashboard/api/studies/${study.id}/curves`);
+    const series = study.sessions
+      .filter((s) => curves[s.id])
+      .map((s) => ({ label: `#${s.id}`, color: colors[s.id], points: curves[s.id] }));
+    const xMax = Math.max(1, ...study.sessions.filter((s) => curves[s.id]).map((s) => s.progress.episodes));
+    window.drawCurves(section.querySelector("svg"), series, { xMax, empty: "No training episode yet" });
+    const legend = section.querySelector(".legend");
+    legend.replaceChildren();
+    for (const s of series) {
+      const item = document.createElement("span");
+      item.innerHTML = `<span class="swatch"></span>`;
+      item.firstChild.style.background = s.color;
+      item.append(` ${s.label}`);
+      legend.append(item);
+    }
+  }
+
+  async function refresh() {
+    let studies;
+    try {
+      studies = await call("/dashboard/api/overview");
+    } catch (e) {
+      showError(`Could not load the studies: ${e.message}`);
+      return;
+    }
+    const container = $("studies");
+    if (!studies.length) {
+      container.innerHTML = `<p class="muted">No study yet: create one above, or through the REST API.</p>`;
+      return;
+    }
+    const wanted = [];
+    for (const study of studies) {
+      const section = studySection(study);
+      section.querySelector(".study-name").textContent = study.name;
+      section.querySelector(".study-description").textContent = study.description;
+      const colors = {};
+      study.sessions.forEach((s, i) => (colors[s.id] = COLORS[i % COLORS.length]));
+      const tbody = section.querySelector("tbody");
+      tbody.replaceChildren(...study.sessions.map((s) => sessionRow(s, colors[s.id])));
+      if (!study.sessions.length) {
+        tbody.innerHTML = `<tr><td colspan="6" class="muted">No session yet. “New participant link” makes a human session.</td></tr>`;
+      }
+      refreshCurves(study, section, colors).catch((e) => showError(`Curves: ${e.message}`));
+      wanted.push(section);
+    }
+    container.replaceChildren(...wanted);
+  }
+
+  $("new-study").addEventListener("submit", async (event) => {
+    event.preventDefault();
+    const input = event.target.elements.name;
+    try {
+      await call("/dashboard/api/studies", { method: "POST", body: JSON.stringify({ name: input.value }) });
+      input.value = "";
+      showError("");
+    } catch (e) {
+      showError(`New study: ${e.message}`);
+    }
+    refresh();
+  });
+
+  refresh();
+  setInterval(refresh, 3000);
+})();
