@@ -12,7 +12,8 @@
 2. A paper-scale run (300 episodes) on the fast simulator, extrapolated from measured
    pretraining and >= 2,000 training steps to 15,000 training steps (about what 300
    episodes take: epsilon reaches 1 % after 9,200 updates, near episode 150).
-3. Resident memory with a full 20,000-transition replay memory (in a fresh process).
+3. Resident memory with a full 20,000-transition replay memory (in a fresh process), in
+   stages: torch alone is about 280 MiB, the memory adds its frames (235 MiB) and no more.
 4. With --curves N: collected reward of N training episodes, the fast update against the
    trainer's plain float32 update (`update="plain"`: NCHW convs and max-pools, like the
    reference), same seeds and everything else, drawn to
@@ -175,30 +176,26 @@ def bench_run(threads: int, training_steps: int) -> dict:
 
 
 def footprint() -> dict:
-    """Resident memory of a trainer before and after filling its replay memory."""
+    """Resident memory (MB) along a trainer's life: imports, an empty memory, a full one,
+    and after updates (autograd's working set, kernels' code pages)."""
     import sim
     from learner import DQNConfig, Trainer
 
+    stages = {"imports": _rss()}
     frames = real_frames(500)
-    env = sim.SortingEnv(motion="fast")
-    trainer = Trainer(env, DQNConfig(), seed=0)
-    before = _rss()
+    trainer = Trainer(sim.SortingEnv(motion="fast"), DQNConfig(), seed=0)
+    stages["trainer, empty memory"] = _rss()
     agent, memory = trainer.agent, trainer.memory
     packed = [agent.encode(frame) for frame in frames]
     for t in range(memory.capacity):
         done = t % 50 == 49
         memory.add(packed[t % 499], t % 4, 0.0, packed[t % 499 + 1], done, t % 250 == 249)
+    stages[f"{len(memory):,} transitions"] = _rss()
     rng = np.random.default_rng(0)
     for _ in range(5):
         agent.update(memory.sample(BATCH, rng))
-    after = _rss()
-    return {
-        "before_mb": before["rss"],
-        "after_mb": after["rss"],
-        "anon_after_mb": after["anon"],
-        "memory_mb": memory.nbytes / 2**20,
-        "transitions": len(memory),
-    }
+    stages["after updates"] = _rss()
+    return {"stages": stages, "memory_mb": memory.nbytes / 2**20}
 
 
 def _rss() -> dict[str, float]:
@@ -291,12 +288,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     command = [sys.executable, "-m", "benchmarks.bench_learner", "--footprint"]
     result = subprocess.run(command, capture_output=True, text=True, check=True)
     r = json.loads(result.stdout.strip().splitlines()[-1])
-    print(
-        f"\nresident memory: {r['before_mb']:.0f} MB with torch, simulator and an empty "
-        f"memory; {r['after_mb']:.0f} MB with {r['transitions']:,} transitions "
-        f"(+{r['after_mb'] - r['before_mb']:.0f} MB; the memory holds {r['memory_mb']:.0f} MB, "
-        "each uint8 frame once)"
-    )
+    print(f"\nresident memory (fresh process; the replay memory holds {r['memory_mb']:.0f} MiB)")
+    for stage, mb in r["stages"].items():
+        print(f"  {stage:24} {mb['rss']:5.0f} MiB resident, {mb['anon']:5.0f} MiB anonymous")
     if args.curves:
         print(f"\nlearning curves, {args.curves} episodes, seeds {args.seeds}:", flush=True)
         print(f"  wrote {curves(args.curves, args.seeds)}")

@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from learner.config import DQNConfig
 from learner.device import conv_dtype
 from learner.network import QNetwork
+from learner.optim import Adam, RMSprop
 from learner.phase_conv import PhaseConvForward, pack_frame
 from learner.replay import ReplaySample
 
@@ -43,17 +44,11 @@ class DQNAgent:
         """Gradient steps taken so far."""
         params = self.network.parameters()
         if config.optimizer == "rmsprop":
-            self.optimizer: torch.optim.Optimizer = torch.optim.RMSprop(
-                params,
-                lr=config.learning_rate,
-                alpha=config.rmsprop_alpha,
-                eps=config.optimizer_eps,
-                foreach=True,
+            self.optimizer: RMSprop | Adam = RMSprop(
+                params, config.learning_rate, config.rmsprop_alpha, config.optimizer_eps
             )
         else:
-            self.optimizer = torch.optim.Adam(
-                params, lr=config.learning_rate, eps=config.optimizer_eps, foreach=True
-            )
+            self.optimizer = Adam(params, config.learning_rate, config.optimizer_eps)
         self.dtype = conv_dtype(config.precision, device)
         self._fast = PhaseConvForward(self.network, self.dtype)
         self._fast_target = PhaseConvForward(self.target, self.dtype) if self.target else None
@@ -108,7 +103,7 @@ class DQNAgent:
             loss = F.mse_loss(taken, targets)
         else:
             loss = F.smooth_l1_loss(taken, targets)
-        self.optimizer.zero_grad(set_to_none=True)
+        self.optimizer.zero_grad()
         loss.backward()
         if config.grad_clip_norm is not None:
             torch.nn.utils.clip_grad_norm_(self.network.parameters(), config.grad_clip_norm)

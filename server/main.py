@@ -10,7 +10,7 @@ from fastapi.responses import JSONResponse
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
-from server.routes import ROUTERS, dashboard, pages, viewing
+from server.routes import ROUTERS, dashboard, pages, reports, viewing
 from server.services.errors import Invalid, ServiceError
 from server.sessions.hub import Hub
 from server.sessions.manager import SessionManager
@@ -67,7 +67,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.participant_tokens = {}
     for router in ROUTERS:
         app.include_router(router)
-    for router in (pages.router, viewing.router, dashboard.router):
+    for router in (reports.router, pages.router, viewing.router, dashboard.router):
         app.include_router(router)
     app.mount("/static", pages.static_files(), name="static")
 

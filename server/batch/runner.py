@@ -1,0 +1,410 @@
+"""Run a batch to its end: the advisor first when `agent` runs need one, then every run,
+a few at a time, with one progress bar for the whole batch.
+
+Re-running the same batch is how it resumes: runs are found by identity
+(`server.batch.sessions`), finished ones are skipped, interrupted ones resume from their
+checkpoint, and only the missing ones are created.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.engine import make_url
+from sqlalchemy.orm import Session, sessionmaker
+
+from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
+from server.batch.progress import BatchProgress
+from server.batch.sessions import (
+    body_identity,
+    ensure_session,
+    find_session,
+    take_back,
+)
+from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, session_body
+from server.db.engine import make_engine, make_session_factory
+from server.db.migrate import upgrade
+from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
+from server.services.sessions import set_status
+from server.services.studies import get_study
+from server.sessions.worker import WorkerOptions
+
+TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
+LIVE = {s.value for s in LIVE_STATUSES}
+WAITING = "waiting for the advisor"
+BLOCKED = "not run: the advisor did not finish"
+
+
+@dataclass(frozen=True)
+class RunnerOptions:
+    """How a batch executes (what it runs is the `BatchSpec`)."""
+
+    data_dir: Path = Path("study_data")
+    """Checkpoints go to `data_dir/checkpoints/session-ID/` (shared by every node on Ray)."""
+    backend: str = "local"
+    """`local` (worker processes on this machine) or `ray`."""
+    workers: int | None = None
+    """Runs at once; None: this machine's cores / `threads` (local), the cluster's (Ray)."""
+    threads: int = 1
+    """torch threads per run."""
+    address: str | None = None
+    """Ray cluster address (`ray://HOST:10001` or `auto`); None starts a local instance."""
+    checkpoint_every_episodes: int = 10
+    """Training episodes between checkpoints (an interrupted run loses at most these)."""
+    heartbeat_s: float = 5.0
+    """How often a run marks itself alive (and its progress) in the database."""
+    stale_after_s: float = 60.0
+    """A run of this batch silent this long (on another host) is taken back and resumed."""
+    nice: int = 0
+    """Added to each worker's niceness (lower priority beside a live study server)."""
+    poll_s: float = 1.0
+    """How often the runner looks at its runs."""
+    progress: bool = True
+    """Show the tqdm bar."""
+
+
+@dataclass
+class RunState:
+    """A run and where its session stands."""
+
+    run: Run
+    """Which run."""
+    session_id: int | None = None
+    """Its session (None: not created yet, an `agent` run waiting for the advisor)."""
+    status: str = WAITING
+    """The session's status, or `WAITING` / `BLOCKED`."""
+    detail: str = ""
+    """Why it failed or stopped."""
+    done_before: bool = False
+    """It had finished before this invocation."""
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What a batch invocation did."""
+
+    study_id: int
+    """The study holding the runs."""
+    runs: list[RunState]
+    """Every run, the advisor first (when trained)."""
+    wall_time_s: float
+    """Seconds this invocation took."""
+    interrupted: bool
+    """Stopped by Ctrl-C (or a signal) before the end."""
+
+    @property
+    def complete(self) -> bool:
+        return all(r.status == Status.finished.value for r in self.runs)
+
+    def session_ids(self, include_advisor: bool = False) -> list[int]:
+        """The runs' sessions, in plan order."""
+        return [
+            r.session_id
+            for r in self.runs
+            if r.session_id is not None and (include_advisor or not r.run.is_advisor)
+        ]
+
+    @property
+    def advisor(self) -> RunState | None:
+        return next((r for r in self.runs if r.run.is_advisor), None)
+
+
+def absolute_database_url(url: str) -> str:
+    """SQLite paths made absolute, so worker processes (Ray's included) find the file."""
+    parsed = make_url(url)
+    if parsed.get_backend_name() == "sqlite" and parsed.database not in (None, "", ":memory:"):
+        return parsed.set(database=str(Path(parsed.database).resolve())).render_as_string(
+            hide_password=False
+        )
+    return url
+
+
+class BatchRunner:
+    def __init__(self, spec: BatchSpec, study_id: int, database_url: str, options: RunnerOptions):
+        self.spec = spec
+        self.study_id = study_id
+        self.options = options
+        self.database_url = absolute_database_url(database_url)
+        engine = make_engine(self.database_url)
+        upgrade(engine)
+        self.factory: sessionmaker[Session] = make_session_factory(engine)
+        self.states = [RunState(run) for run in plan_runs(spec)]
+        self.advisor_checkpoint: str | None = (
+            str(Path(spec.advisor_checkpoint).resolve()) if spec.advisor_checkpoint else None
+        )
+        self.queue: list[RunState] = []
+        self.elsewhere: list[RunState] = []
+        self.log: Callable[[str], None] = print
+
+    # --- the runs' sessions ------------------------------------------------------------
+    def _ensure(self, db: Session, state: RunState) -> None:
+        body = session_body(self.spec, state.run, self.advisor_checkpoint)
+        session, _ = ensure_session(db, self.study_id, body)
+        state.session_id, state.status = session.id, session.status
+        state.done_before = session.status == Status.finished.value
+
+    def _advisor_ready(self, db: Session, advisor: RunState) -> None:
+        """The trained advisor's final checkpoint becomes the `agent` runs' advisor."""
+        session = db.get(StudySession, advisor.session_id)
+        assert session is not None and session.status == Status.finished.value
+        path = session.checkpoint_path
+        if not path or not Path(path).is_file():
+            raise BatchError(
+                f"the advisor (session {session.id}) has finished but its checkpoint "
+                f"{path or '(none)'} is gone; pass --advisor-checkpoint, or delete session "
+                f"{session.id} to train the advisor again"
+            )
+        self.advisor_checkpoint = str(Path(path).resolve())
+
+    def _create_agent_runs(self, db: Session) -> list[RunState]:
+        waiting = [s for s in self.states if s.status == WAITING]
+        for state in waiting:
+            self._ensure(db, state)
+        return waiting
+
+    def preview(self) -> list[str]:
+        """Each run and the session it has (nothing is created or run)."""
+        lines = []
+        checkpoint = self.advisor_checkpoint
+        with self.factory() as db:
+            get_study(db, self.study_id)
+            for state in self.states:
+                run = state.run
+                head = f"  {run.name:<18} seed {run.seed:<8}"
+                if run.method == "agent" and checkpoint is None:
+                    lines.append(f"{head} waits for the advisor")
+                    continue
+                found = find_session(db, self.study_id, session_body(self.spec, run, checkpoint))
+                if run.is_advisor and found is not None and found.status == Status.finished:
+                    checkpoint = found.checkpoint_path
+                lines.append(
+                    f"{head} session {found.id}: {found.status}" if found else f"{head} new"
+                )
+        return lines
+
+    def _validate(self) -> None:
+        """Every run's config checked before any starts: an `agent` run's session is only
+        created after the advisor has trained, which should not be when a typo shows."""
+        for state in self.states:
+            body = session_body(self.spec, state.run, self.advisor_checkpoint or "-")
+            config = body_identity(body)["config"]
+            early = body.method != "autonomous" and body.strategy == "early"
+            if early and config["advice_budget"] > config["pretraining_steps"]:
+                raise BatchError(
+                    f"early advising gives its {config['advice_budget']} advice at the end of "
+                    f"pretraining, which has only {config['pretraining_steps']} steps; lower "
+                    "--advice-budget or raise --pretraining-steps"
+                )
+
+    def prepare(self) -> None:
+        """Find or create every run's session; take back the ones whose worker died."""
+        self._validate()
+        with self.factory() as db:
+            get_study(db, self.study_id)
+            for state in self.states:
+                if state.run.method == "agent" and self.advisor_checkpoint is None:
+                    continue  # created once the advisor has finished
+                self._ensure(db, state)
+                if state.run.is_advisor and state.status == Status.finished.value:
+                    self._advisor_ready(db, state)
+            live = [s.session_id for s in self.states if s.status in LIVE and s.session_id]
+            for session_id in take_back(db, live, self.options.stale_after_s):  # type: ignore[arg-type]
+                self._state(session_id).status = Status.interrupted.value
+        self.queue = [s for s in self.states if s.status in TO_RUN]
+        self.elsewhere = [s for s in self.states if s.status in LIVE]
+
+    def _enqueue(self, states: list[RunState]) -> None:
+        """Runs wait in plan order (agent by agent), so a batch cut short, or read while it
+        runs, has its methods' runs in pairs rather than one method's all first."""
+        order = {id(s): i for i, s in enumerate(self.states)}
+        self.queue = sorted(self.queue + states, key=lambda s: order[id(s)])
+
+    def _state(self, session_id: int) -> RunState:
+        return next(s for s in self.states if s.session_id == session_id)
+
+    def _refresh(self, db: Session) -> dict[int, StudySession]:
+        ids = [s.session_id for s in self.states if s.session_id is not None]
+        rows = {s.id: s for s in db.scalars(select(StudySession).where(StudySession.id.in_(ids)))}
+        for state in self.states:
+            if state.session_id in rows:
+                row = rows[state.session_id]
+                state.status, state.detail = row.status, row.status_detail
+        return rows
+
+    # --- running -----------------------------------------------------------------------
+    def make_backend(self) -> Backend:
+        threads = max(1, self.options.threads)
+        worker = WorkerOptions(
+            data_dir=self.options.data_dir.resolve(),
+            checkpoint_every_episodes=self.options.checkpoint_every_episodes,
+            heartbeat_s=self.options.heartbeat_s,
+            torch_threads=threads,
+            nice=self.options.nice,
+        )
+        if self.options.backend == "ray":
+            return RayBackend(
+                self.database_url, worker, self.options.address, self.options.workers, threads
+            )
+        if self.options.backend != "local":
+            raise BatchError(f"unknown backend {self.options.backend!r}; use local or ray")
+        workers = self.options.workers or max(1, usable_cores() // threads)
+        return LocalBackend(self.database_url, worker, workers)
+
+    def _ended(self, db: Session, backend: Backend) -> None:
+        ended = backend.ended()
+        if not ended:
+            return
+        rows = self._refresh(db)
+        for session_id, problem in ended.items():
+            state = self._state(session_id)
+            if problem.startswith(NOT_RUN) and state.status in LIVE:
+                self.elsewhere.append(state)  # someone else claimed it first: watch it
+                continue
+            if state.status in LIVE:  # the worker died without saying so (killed, crashed)
+                row = rows[session_id]
+                set_interrupted(db, row, problem or "its worker stopped without finishing")
+                state.status, state.detail = Status.interrupted.value, problem
+            if state.run.is_advisor:
+                self._after_advisor(db, state)
+
+    def _after_advisor(self, db: Session, advisor: RunState) -> None:
+        if advisor.status == Status.finished.value:
+            self._advisor_ready(db, advisor)
+            created = self._create_agent_runs(db)
+            fresh = [s for s in created if s.status in TO_RUN]
+            self._enqueue(fresh)
+            self.elsewhere += [s for s in created if s.status in LIVE]
+        else:
+            for state in self.states:
+                if state.status == WAITING:
+                    state.status = BLOCKED
+
+    def _watch_elsewhere(self, db: Session) -> None:
+        """Runs another process was running when we started: wait for them; take them
+        back (and run them here) once their worker is gone."""
+        if not self.elsewhere:
+            return
+        self._refresh(db)
+        ids = [s.session_id for s in self.elsewhere if s.status in LIVE]
+        for session_id in take_back(db, ids, self.options.stale_after_s):  # type: ignore[arg-type]
+            state = self._state(session_id)
+            state.status = Status.interrupted.value
+            self._enqueue([state])
+        for state in [s for s in self.elsewhere if s.status not in LIVE]:
+            self.elsewhere.remove(state)
+            if state.run.is_advisor:
+                self._after_advisor(db, state)
+
+    def run(self) -> BatchResult:
+        started = time.monotonic()
+        self.prepare()
+        self._announce()
+        interrupted = False
+        pending = bool(self.queue or self.elsewhere)
+        backend = self.make_backend() if pending else None
+        bar = BatchProgress(self.states, enabled=self.options.progress)
+        previous = _stop_on_sigterm()
+        try:
+            while backend is not None:
+                while self.queue and len(backend.running()) < backend.capacity:
+                    state = self.queue.pop(0)
+                    assert state.session_id is not None
+                    backend.start(state.session_id)
+                    state.status = Status.running.value
+                with self.factory() as db:
+                    self._ended(db, backend)
+                    self._watch_elsewhere(db)
+                    rows = self._refresh(db)
+                bar.update(rows)
+                if not (self.queue or self.elsewhere or backend.running()):
+                    break
+                time.sleep(self.options.poll_s)
+        except KeyboardInterrupt:
+            interrupted = True
+            bar.write("stopping: the running runs checkpoint and can resume ...")
+            assert backend is not None
+            running = backend.running()
+            backend.stop()
+            with self.factory() as db:
+                take_back(db, running, 0.0)
+                bar.update(self._refresh(db))
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
+            bar.close()
+            if backend is not None:
+                backend.close()
+        return BatchResult(self.study_id, self.states, time.monotonic() - started, interrupted)
+
+    def _announce(self) -> None:
+        counts: dict[str, int] = {}
+        for state in self.states:
+            key = (
+                "finished already"
+                if state.done_before
+                else "to resume"
+                if state.status in {s.value for s in RESUMABLE_STATUSES}
+                else "running elsewhere"
+                if state.status in LIVE
+                else "to start"
+            )
+            counts[key] = counts.get(key, 0) + 1
+        methods = ", ".join(f"{self.spec.agents} {m}" for m in self.spec.methods)
+        advisor = " and the advisor" if self.spec.trains_advisor else ""
+        parts = ", ".join(f"{n} {k}" for k, n in counts.items())
+        self.log(
+            f"study {self.study_id}, batch {self.spec.label!r}: {len(self.states)} runs "
+            f"({methods}{advisor}): {parts}"
+        )
+        for state in self.states:
+            if state.status == Status.failed.value:
+                self.log(
+                    f"  {state.run.name} seed {state.run.seed}: session {state.session_id} "
+                    "failed before; it resumes from its last checkpoint"
+                )
+
+
+def _stop_on_sigterm() -> Any:
+    """SIGTERM stops the batch like Ctrl-C (running runs checkpoint); returns the handler
+    it replaced, None when signals cannot be handled here (not the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def stop(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    return signal.signal(signal.SIGTERM, stop)
+
+
+def set_interrupted(db: Session, row: StudySession, detail: str) -> None:
+    set_status(db, row.id, Status.interrupted, detail, token=row.worker_token)
+
+
+def run_batch(
+    spec: BatchSpec, study_id: int, database_url: str, options: RunnerOptions | None = None
+) -> BatchResult:
+    """Run every missing run of `spec` in the study; see the module docstring."""
+    return BatchRunner(spec, study_id, database_url, options or RunnerOptions()).run()
+
+
+def describe(result: BatchResult) -> list[str]:
+    """Lines for the end of a batch: what ran, what did not and why."""
+    lines = []
+    by_status: dict[str, list[RunState]] = {}
+    for state in result.runs:
+        by_status.setdefault(state.status, []).append(state)
+    for status, states in by_status.items():
+        ids = ", ".join(str(s.session_id) for s in states if s.session_id is not None)
+        lines.append(f"{len(states)} {status}" + (f" (sessions {ids})" if ids else ""))
+    for state in result.runs:
+        if state.status == Status.failed.value:
+            last = state.detail.strip().splitlines()[-1:] or ["(no detail)"]
+            lines.append(f"  {state.run.name} seed {state.run.seed}: {last[0]}")
+    return lines

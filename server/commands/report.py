@@ -1,0 +1,113 @@
+"""`ideeprl report --study ID --out DIR`: the paper's analysis of a study's sessions."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from server.commands.batch import add_database_options, settings_from
+
+DESCRIPTION = """\
+Write the paper's analysis of a study's sessions into a folder: report.md with Figures 5-7
+(reward per method with its spread, individual agents, Pearson's correlation), R_T per
+agent and method with the improvement over autonomous DeepRL, and Student's t-tests,
+as PNG and CSV files.
+
+By default the study's finished sessions, except the agent trained as an advisor, grouped
+by method; autonomous DeepRL is the baseline when there is one."""
+
+
+def _ints(values: list[str]) -> tuple[int, ...]:
+    try:
+        return tuple(int(v) for value in values for v in value.split(",") if v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--sessions takes session ids, got {' '.join(values)}"
+        ) from None
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "report",
+        help="write the paper's analysis (figures, R_T, t-tests) of a study's sessions",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--study", type=int, required=True, help="study id")
+    parser.add_argument("--out", type=Path, required=True, help="folder to write into")
+    parser.add_argument(
+        "--sessions", nargs="+", metavar="ID", help="these sessions only (any status)"
+    )
+    parser.add_argument("--methods", nargs="+", metavar="METHOD", help="these methods only")
+    parser.add_argument("--label", help="sessions with this label only (a batch's name)")
+    parser.add_argument(
+        "--baseline",
+        default="auto",
+        help="method to compare against: auto (autonomous if present), none, or a method",
+    )
+    parser.add_argument(
+        "--n-episodes", type=int, help="first N episodes of every agent (runs of unequal length)"
+    )
+    parser.add_argument("--title", help="report title (default: the study's name)")
+    parser.add_argument(
+        "--note",
+        action="append",
+        default=[],
+        metavar="TEXT",
+        help="a line under the title (how the sessions were run, ...), repeatable",
+    )
+    add_database_options(parser)
+    parser.set_defaults(func=report)
+
+
+def _fail(message: str) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return 2
+
+
+def report(args: argparse.Namespace) -> int:
+    from server.db.engine import make_engine, make_session_factory
+    from server.db.migrate import upgrade
+    from server.services.errors import ServiceError
+    from server.services.reports import ReportRequest, build_report
+
+    try:
+        sessions = _ints(args.sessions) if args.sessions else None
+    except argparse.ArgumentTypeError as error:
+        return _fail(str(error))
+    methods = tuple(m for value in args.methods or [] for m in value.split(",") if m) or None
+    if args.n_episodes is not None and args.n_episodes < 1:
+        return _fail(f"--n-episodes must be at least 1, got {args.n_episodes}")
+    if args.out.exists() and not args.out.is_dir():
+        return _fail(f"{args.out} is a file; --out takes a folder")
+    settings = settings_from(args)
+    engine = make_engine(settings.db_url)
+    upgrade(engine)
+    request = ReportRequest(
+        sessions=sessions,
+        methods=methods,
+        label=args.label,
+        baseline=args.baseline,
+        n_episodes=args.n_episodes,
+        title=args.title,
+        notes=tuple(args.note),
+    )
+    with make_session_factory(engine)() as db:
+        try:
+            built = build_report(db, args.study, args.out, request)
+        except ServiceError as error:
+            return _fail(error.message)
+    result = built.result
+    for note in built.notes:
+        print(f"note: {note}")
+    methods_table = result.analysis.methods
+    for _, row in methods_table.iterrows():
+        gain = row["improvement_pct"]
+        more = "" if gain != gain else f", {gain:+.1f} % vs {result.analysis.baseline}"
+        print(f"{row['name']}: {row['agents']} agents, R_T {row['R_T']:.2f}{more}")
+    print(f"figures: {', '.join(p.name for p in result.figures.values())}")
+    print(f"tables: {', '.join(p.name for p in result.tables.values())}")
+    print(f"report: {result.report}")
+    return 0

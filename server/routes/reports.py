@@ -1,0 +1,151 @@
+"""A study's report (the paper's analysis), built on request and served file by file."""
+
+from __future__ import annotations
+
+import shutil
+from datetime import datetime
+from typing import Annotated
+
+from fastapi import APIRouter, BackgroundTasks, Body
+from fastapi import Path as PathParam
+from fastapi.responses import FileResponse
+from pydantic import BaseModel, ConfigDict, Field
+
+from server.analysis.report import REPORT_FILE
+from server.deps import DbDep, ResearcherDep, SettingsDep
+from server.routes.params import MAX_ID, StudyId
+from server.services import reports
+from server.services.studies import get_study
+
+router = APIRouter(prefix="/api/studies", tags=["reports"], dependencies=[ResearcherDep])
+
+MEDIA_TYPES = {".md": "text/markdown", ".png": "image/png", ".csv": "text/csv"}
+FileName = Annotated[
+    str, PathParam(pattern=r"^[A-Za-z0-9_.-]+$", max_length=100, description="A report file.")
+]
+
+
+class ReportCreate(BaseModel):
+    """Which sessions the report covers; by default the study's finished sessions except
+    advisors, with autonomous DeepRL as the baseline when present."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    sessions: list[Annotated[int, Field(ge=1, le=MAX_ID)]] | None = Field(
+        default=None, min_length=1, description="These sessions only (any status)."
+    )
+    methods: list[str] | None = Field(default=None, min_length=1, description="These methods.")
+    label: str | None = Field(default=None, max_length=200, description="This label only.")
+    baseline: str = Field(
+        default=reports.AUTO,
+        max_length=40,
+        description="auto (autonomous when present), none, or a method.",
+    )
+    n_episodes: int | None = Field(
+        default=None, ge=1, le=100_000, description="First N episodes of every agent."
+    )
+    title: str | None = Field(default=None, max_length=200, description="Report title.")
+
+
+class ReportFile(BaseModel):
+    name: str
+    kind: str = Field(description="report (Markdown), figure (PNG) or table (CSV).")
+    url: str
+
+
+class ReportMethod(BaseModel):
+    method: str
+    name: str
+    agents: int
+    episodes: int
+    R_T: float = Field(description="Total collected reward of the method's average curve.")
+    improvement_pct: float | None = Field(description="Over the baseline; None without one.")
+
+
+class ReportPublic(BaseModel):
+    study_id: int
+    created_at: datetime
+    sessions: list[int]
+    baseline: str | None
+    n_episodes: int
+    notes: list[str] = Field(description="What the report left out or chose, and why.")
+    methods: list[ReportMethod]
+    files: list[ReportFile]
+    report_url: str = Field(description="report.md, which links its figures and tables.")
+    zip_url: str = Field(description="Every file in one zip.")
+
+
+def _public(description: dict[str, object], study_id: int) -> ReportPublic:
+    base = f"/api/studies/{study_id}/report"
+    files = [
+        ReportFile(name=f["name"], kind=f["kind"], url=f"{base}/files/{f['name']}")
+        for f in description["files"]  # type: ignore[attr-defined]
+    ]
+    return ReportPublic(
+        **{k: v for k, v in description.items() if k != "files"},  # type: ignore[arg-type]
+        files=files,
+        report_url=f"{base}/files/{REPORT_FILE}",
+        zip_url=f"{base}.zip",
+    )
+
+
+@router.post("/{study_id}/report", status_code=201)
+def build_report(
+    db: DbDep,
+    settings: SettingsDep,
+    study_id: StudyId,
+    body: Annotated[ReportCreate | None, Body()] = None,
+) -> ReportPublic:
+    """Build (or rebuild) the study's report: Figures 5-7, R_T per agent and method, the
+    improvement over the baseline, Student's t-tests, as PNG and CSV files and report.md."""
+    body = body or ReportCreate()
+    request = reports.ReportRequest(
+        sessions=tuple(body.sessions) if body.sessions else None,
+        methods=tuple(body.methods) if body.methods else None,
+        label=body.label,
+        baseline=body.baseline,
+        n_episodes=body.n_episodes,
+        title=body.title,
+    )
+    description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
+    return _public(description, study_id)
+
+
+@router.get("/{study_id}/report")
+def get_report(db: DbDep, settings: SettingsDep, study_id: StudyId) -> ReportPublic:
+    """The study's last report (404 until one is built)."""
+    get_study(db, study_id)
+    return _public(reports.published_report(reports.reports_dir(settings), study_id), study_id)
+
+
+@router.get(
+    "/{study_id}/report/files/{name}",
+    response_class=FileResponse,
+    responses={200: {"content": {t: {} for t in MEDIA_TYPES.values()}}},
+)
+def get_report_file(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, name: FileName
+) -> FileResponse:
+    """One file of the study's last report, by the name its listing gives."""
+    get_study(db, study_id)
+    path = reports.report_file(reports.reports_dir(settings), study_id, name)
+    return FileResponse(path, media_type=MEDIA_TYPES.get(path.suffix, "application/octet-stream"))
+
+
+@router.get(
+    "/{study_id}/report.zip",
+    response_class=FileResponse,
+    responses={200: {"content": {"application/zip": {}}}},
+)
+def get_report_zip(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, background: BackgroundTasks
+) -> FileResponse:
+    """Every file of the study's last report in one zip."""
+    get_study(db, study_id)
+    archive = reports.report_zip(
+        reports.reports_dir(settings), study_id, settings.export_dir / "tmp"
+    )
+    background.add_task(shutil.rmtree, archive.parent, ignore_errors=True)
+    return FileResponse(
+        archive, media_type="application/zip", filename=f"study-{study_id}-report.zip"
+    )
