@@ -21,12 +21,14 @@ from sqlalchemy import select
 from server.db.models import Episode, StudySession
 from server.deps import DbDep, ManagerDep, SettingsDep
 from server.routes import exports as export_routes
+from server.routes import reports as report_routes
 from server.routes import sessions as session_routes
 from server.routes.pages import templates
 from server.routes.params import SessionId, StudyId
+from server.routes.reports import FileName, ReportPublic
 from server.schemas.sessions import SessionCreate
 from server.schemas.studies import StudyCreate
-from server.services import sessions, studies
+from server.services import reports, sessions, studies
 from server.settings import Settings
 
 COOKIE = "ideeprl_dashboard"
@@ -206,3 +208,38 @@ def export(
     db: DbDep, settings: SettingsDep, study_id: StudyId, background: BackgroundTasks
 ) -> FileResponse:
     return export_routes.export_study(db, settings, study_id, background)
+
+
+# --- the study's report (the paper's analysis), as `POST /api/studies/ID/report` -------
+DASHBOARD_STUDIES = "/dashboard/api/studies"
+
+
+@router.post(f"{DASHBOARD_STUDIES}/{{study_id}}/report", dependencies=[LoginDep])
+def build_report(db: DbDep, settings: SettingsDep, study_id: StudyId) -> ReportPublic:
+    """The study's report over its finished sessions (advisors left out), autonomous
+    DeepRL as the baseline when there is one."""
+    description = reports.publish_report(
+        db, study_id, reports.reports_dir(settings), reports.ReportRequest()
+    )
+    return report_routes.public_report(description, study_id, DASHBOARD_STUDIES)
+
+
+@router.get(f"{DASHBOARD_STUDIES}/{{study_id}}/report", dependencies=[LoginDep])
+def get_report(db: DbDep, settings: SettingsDep, study_id: StudyId) -> ReportPublic:
+    studies.get_study(db, study_id)
+    description = reports.published_report(reports.reports_dir(settings), study_id)
+    return report_routes.public_report(description, study_id, DASHBOARD_STUDIES)
+
+
+@router.get(f"{DASHBOARD_STUDIES}/{{study_id}}/report/files/{{name}}", dependencies=[LoginDep])
+def get_report_file(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, name: FileName
+) -> FileResponse:
+    return report_routes.get_report_file(db, settings, study_id, name)
+
+
+@router.get(f"{DASHBOARD_STUDIES}/{{study_id}}/report.zip", dependencies=[LoginDep])
+def get_report_zip(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, background: BackgroundTasks
+) -> FileResponse:
+    return report_routes.get_report_zip(db, settings, study_id, background)

@@ -75,8 +75,12 @@ class ReportPublic(BaseModel):
     zip_url: str = Field(description="Every file in one zip.")
 
 
-def _public(description: dict[str, object], study_id: int) -> ReportPublic:
-    base = f"/api/studies/{study_id}/report"
+def public_report(
+    description: dict[str, object], study_id: int, prefix: str = "/api/studies"
+) -> ReportPublic:
+    """The report's description with its files' URLs under `prefix` (the dashboard serves
+    the same files behind its cookie)."""
+    base = f"{prefix}/{study_id}/report"
     files = [
         ReportFile(name=f["name"], kind=f["kind"], url=f"{base}/files/{f['name']}")
         for f in description["files"]  # type: ignore[attr-defined]
@@ -108,14 +112,15 @@ def build_report(
         title=body.title,
     )
     description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
-    return _public(description, study_id)
+    return public_report(description, study_id)
 
 
 @router.get("/{study_id}/report")
 def get_report(db: DbDep, settings: SettingsDep, study_id: StudyId) -> ReportPublic:
     """The study's last report (404 until one is built)."""
     get_study(db, study_id)
-    return _public(reports.published_report(reports.reports_dir(settings), study_id), study_id)
+    description = reports.published_report(reports.reports_dir(settings), study_id)
+    return public_report(description, study_id)
 
 
 @router.get(

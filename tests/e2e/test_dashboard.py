@@ -48,6 +48,10 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
                 "label": f"oracle, {int(error * 100)} % wrong",
             }
             oracle.append(api.post(f"/api/studies/{study['id']}/sessions", json=body).json())
+        advice_only = ("oracle_error_rate", "advice_budget")
+        baseline = {k: v for k, v in body.items() if k not in advice_only}
+        baseline.update(method="autonomous", seed=1, label="autonomous")
+        oracle.append(api.post(f"/api/studies/{study['id']}/sessions", json=baseline).json())
 
     context = browser.new_context(viewport=VIEWPORT, accept_downloads=True)
     page = context.new_page()
@@ -73,7 +77,31 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
     for session in oracle:
         row = section.locator(f"tr[data-session='{session['id']}']")
         expect(row.locator(".badge")).to_have_text("finished", timeout=240_000)
-    expect(section.locator("svg path.series")).to_have_count(2, timeout=30_000)
+    expect(section.locator("svg path.series")).to_have_count(3, timeout=30_000)
+
+    # The paper's analysis at the press of a button, the same as the REST API's report.
+    expect(section.locator(".report")).to_be_hidden()
+    section.locator("button.build-report").click()
+    report = section.locator(".report")
+    expect(report).to_be_visible(timeout=120_000)
+    with live.api() as api:
+        built = api.get(f"/api/studies/{study['id']}/report").json()
+    assert built["baseline"] == "autonomous" and sorted(built["sessions"]) == sorted(
+        s["id"] for s in oracle
+    )
+    for method in built["methods"]:
+        row = report.locator(f"tr[data-method='{method['method']}']")
+        expect(row.locator("td").nth(1)).to_have_text(str(method["agents"]))
+        expect(row.locator("td").nth(3)).to_have_text(f"{method['R_T']:.2f}")
+    figures = report.locator(".report-figures img")
+    expect(figures).to_have_count(sum(f["kind"] == "figure" for f in built["files"]))
+    figures.first.scroll_into_view_if_needed()
+    page.wait_for_function(
+        "() => [...document.querySelectorAll('.report-figures img')]"
+        ".every(i => i.complete && i.naturalWidth > 0)",
+        timeout=60_000,
+    )
+    save_screenshot(page, "dashboard-report", full_page=True)
 
     section.locator(".new-participant input").fill("P01")
     section.locator(".new-participant button").click()
@@ -93,5 +121,5 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
     archive = zipfile.ZipFile(io.BytesIO(download.value.path().read_bytes()))
     assert {"sessions.csv", "episodes.csv", "steps.csv", "advice.csv"} <= set(archive.namelist())
     sessions_csv = archive.read("sessions.csv").decode()
-    assert sessions_csv.count("\n") >= 4  # header and three sessions
+    assert sessions_csv.count("\n") >= 5  # header and four sessions
     context.close()

@@ -1,5 +1,6 @@
 // The researchers' dashboard: polls the overview and the learning curves, and sends
-// start/pause/resume/stop, new studies and new participant sessions.
+// start/pause/resume/stop, new studies and new participant sessions; builds and shows a
+// study's report (the paper's analysis).
 "use strict";
 (() => {
   const COLORS = ["#2f6f8f", "#c8572d", "#2e7d4f", "#7a4fb3", "#a0711b", "#b3412e", "#3d8f8a", "#8f2f6f"];
@@ -97,6 +98,48 @@
     return tr;
   }
 
+  function showReport(section, report) {
+    const box = section.querySelector(".report");
+    box.querySelector(".report-when").textContent =
+      `${report.sessions.length} sessions, ${report.n_episodes} episodes each, built ${new Date(report.created_at).toLocaleString()}` +
+      (report.baseline ? `, against ${report.baseline}` : ", no baseline");
+    const stamp = encodeURIComponent(report.created_at);
+    box.querySelector(".report-md").href = `${report.report_url}?t=${stamp}`;
+    box.querySelector(".report-zip").href = report.zip_url;
+    box.querySelector(".report-methods tbody").replaceChildren(
+      ...report.methods.map((m) => {
+        const tr = document.createElement("tr");
+        tr.dataset.method = m.method;
+        const improvement = m.improvement_pct === null ? "—" : `${m.improvement_pct >= 0 ? "+" : ""}${m.improvement_pct.toFixed(1)} %`;
+        for (const text of [m.name, m.agents, m.episodes, m.R_T.toFixed(2), improvement]) {
+          tr.appendChild(document.createElement("td")).textContent = text;
+        }
+        return tr;
+      })
+    );
+    box.querySelector(".report-notes").replaceChildren(
+      ...report.notes.map((note) => {
+        const li = document.createElement("li");
+        li.textContent = note;
+        return li;
+      })
+    );
+    box.querySelector(".report-figures").replaceChildren(
+      ...report.files
+        .filter((f) => f.kind === "figure")
+        .map((f) => {
+          const link = document.createElement("a");
+          link.href = `${f.url}?t=${stamp}`;
+          link.target = "_blank";
+          const img = link.appendChild(document.createElement("img"));
+          img.src = link.href;
+          img.alt = f.name;
+          return link;
+        })
+    );
+    box.hidden = false;
+  }
+
   function studySection(study) {
     let section = sections.get(study.id);
     if (section) return section;
@@ -118,6 +161,28 @@
       }
       refresh();
     });
+    const buildButton = section.querySelector(".build-report");
+    buildButton.addEventListener("click", async () => {
+      buildButton.disabled = true;
+      buildButton.textContent = "Building…";
+      try {
+        showReport(section, await call(`/dashboard/api/studies/${study.id}/report`, { method: "POST" }));
+        showError("");
+      } catch (e) {
+        showError(`Report of study ${study.id}: ${e.message}`);
+      } finally {
+        buildButton.disabled = false;
+        buildButton.textContent = "Rebuild report";
+      }
+    });
+    fetch(`/dashboard/api/studies/${study.id}/report`, { cache: "no-store" })
+      .then((r) => (r.ok ? r.json() : null))
+      .then((report) => {
+        if (!report) return;
+        showReport(section, report);
+        buildButton.textContent = "Rebuild report";
+      })
+      .catch(() => {});
     sections.set(study.id, section);
     return section;
   }
