@@ -9,7 +9,6 @@ the label is a name, not part of the identity, so a renamed batch still finds it
 from __future__ import annotations
 
 import json
-import os
 import socket
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -21,7 +20,7 @@ from sqlalchemy.orm import Session
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
 from server.schemas.sessions import SessionCreate
 from server.services import learning
-from server.services.sessions import create_session, set_status
+from server.services.sessions import create_session, pid_alive, set_status
 
 HOST = socket.gethostname()
 
@@ -115,21 +114,11 @@ def ensure_session(db: Session, study_id: int, body: SessionCreate) -> tuple[Stu
     return create_session(db, study_id, body), True
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def worker_gone(session: StudySession, stale_after_s: float) -> bool:
     """A running or paused session whose worker cannot be alive: its process is gone on
     this host, or it has not written for `stale_after_s` (a worker on another host)."""
     if session.worker_host == HOST and session.worker_pid is not None:
-        return not _pid_alive(session.worker_pid)
+        return not pid_alive(session.worker_pid)
     heartbeat = session.heartbeat_at
     if heartbeat is None:
         return True

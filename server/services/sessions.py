@@ -208,7 +208,8 @@ def set_status(
     return result.rowcount == 1  # type: ignore[attr-defined]
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether a process of this id runs on this host (one we may not signal counts)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -235,7 +236,7 @@ def mark_dead_interrupted(db: Session, stale_after_s: float, owned: set[int]) ->
         dead_here = (
             session.worker_host == HOST
             and session.worker_pid is not None
-            and not _pid_alive(session.worker_pid)
+            and not pid_alive(session.worker_pid)
         )
         silent = heartbeat is None or heartbeat < stale
         if dead_here or silent:
