@@ -10,8 +10,9 @@
    alternate, so both see the same machine load; the ratio is taken per block pair and
    its median reported. Other processes share the CPUs: compare ratios, not times.
 2. A paper-scale run (300 episodes) on the fast simulator, extrapolated from measured
-   pretraining and >= 2,000 training steps to 15,000 training steps (about what 300
-   episodes take: epsilon reaches 1 % after 9,200 updates, near episode 150).
+   pretraining and >= 2,000 training steps to 6,700 training steps: what 300 episodes
+   took the autonomous agents of docs/results/ (6,680 to 6,700; their epsilon is still
+   3.5 % at the end. The paper's agents reached 1 % near episode 150, >= 9,200 updates).
 3. Resident memory with a full 20,000-transition replay memory (in a fresh process), in
    stages: torch alone is about 280 MiB, the memory adds its frames (235 MiB) and no more.
 4. With --curves N: collected reward of N training episodes, the fast update against the
@@ -41,7 +42,8 @@ import torch.nn.functional as F
 from torch import nn
 
 BATCH = 128
-PAPER_TRAINING_STEPS = 15_000
+PAPER_TRAINING_STEPS = 6_700
+"""Training steps of a 300-episode autonomous run on this platform (docs/results/)."""
 CURVES_PNG = Path("docs/images/learner_fast_vs_plain.png")
 
 
