@@ -11,7 +11,7 @@
    its median reported. Other processes share the CPUs: compare ratios, not times.
 2. A paper-scale run (300 episodes) on the fast simulator, extrapolated from measured
    pretraining and >= 2,000 training steps to 6,700 training steps: what 300 episodes
-   took the autonomous agents of docs/results/ (6,680 to 6,700; their epsilon is still
+   took the autonomous agents of docs/results/ (6,637 to 6,731; their epsilon is still
    3.5 % at the end. The paper's agents reached 1 % near episode 150, >= 9,200 updates).
 3. Resident memory with a full 20,000-transition replay memory (in a fresh process), in
    stages: torch alone is about 280 MiB, the memory adds its frames (235 MiB) and no more.
