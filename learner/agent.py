@@ -37,7 +37,7 @@ class DQNAgent:
         self.n_actions = n_actions
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(init_seed)
-            self.network = QNetwork(n_actions, image_shape, config.head)
+            self.network = QNetwork(n_actions, image_shape, config.head, config.init)
         self.network.to(device)
         self.target = copy.deepcopy(self.network) if config.target_network else None
         self.updates = 0
@@ -75,12 +75,59 @@ class DQNAgent:
             q = self._forward(self.network, self._fast, frames, grad=False)
         return q[0].float().cpu().numpy()
 
-    def update(self, batch: ReplaySample) -> float:
-        """One gradient step on the batch's TD error; returns the loss. The batch's frames
+    def update(self, batch: ReplaySample, rng: np.random.Generator | None = None) -> float:
+        """Fit the batch (`config.fit`): one gradient step on its TD error, or the authors'
+        Keras fit (`rng` shuffles its minibatches); returns the loss. The batch's frames
         are stored as `encode` makes them."""
+        if self.config.fit == "keras":
+            return self._keras_fit(batch, rng or np.random.default_rng(self.updates))
         config = self.config
         n = len(batch.actions)
         weights = self._fast.weights() if config.update == "fast" else None
+        targets = self._td_targets(batch, weights)
+        q = self._forward(self.network, self._fast, batch.frames[:n], True, weights)
+        taken = q.gather(1, batch.actions.unsqueeze(1)).squeeze(1)
+        if config.loss == "mse":
+            loss = F.mse_loss(taken, targets)
+        else:
+            loss = F.smooth_l1_loss(taken, targets)
+        self._step(loss)
+        return float(loss.detach())
+
+    def _keras_fit(self, batch: ReplaySample, rng: np.random.Generator) -> float:
+        """`model.fit(states, targets, epochs=1)` on the batch, as the authors' Keras code:
+        every output gets a target (the untaken ones their own prediction), the loss is the
+        mean squared error over all outputs, one gradient step per shuffled minibatch.
+        Returns the mean of the minibatches' losses (what Keras reports)."""
+        config = self.config
+        n = len(batch.actions)
+        frames = batch.frames[:n]
+        with torch.no_grad():
+            weights = self._fast.weights() if config.update == "fast" else None
+            targets = self._forward(self.network, self._fast, frames, False, weights).float()
+            targets = targets.clone()
+            rows = torch.arange(n, device=targets.device)
+            targets[rows, batch.actions] = self._td_targets(batch, weights).float()
+        order = torch.from_numpy(rng.permutation(n)).to(frames.device)
+        losses = []
+        for start in range(0, n, config.keras_minibatch):
+            part = order[start : start + config.keras_minibatch]
+            q = self._forward(self.network, self._fast, frames[part], True)
+            loss = (
+                F.mse_loss(q, targets[part])
+                if config.loss == "mse"
+                else F.smooth_l1_loss(q, targets[part])
+            )
+            self._step(loss)
+            losses.append(float(loss.detach()))
+        return float(np.mean(losses))
+
+    def _td_targets(
+        self, batch: ReplaySample, weights: list[tuple[torch.Tensor, torch.Tensor]] | None
+    ) -> torch.Tensor:
+        """r + gamma max Q(s') (or the target network's / Double DQN's value) unless
+        terminated."""
+        config = self.config
         with torch.no_grad():
             next_frames = batch.next_states
             if self.target is None:
@@ -96,13 +143,11 @@ class DQNAgent:
                     next_value = target_q.gather(1, choice).squeeze(1)
                 else:
                     next_value = target_q.max(1).values
-            targets = batch.rewards + config.gamma * (1.0 - batch.terminated) * next_value
-        q = self._forward(self.network, self._fast, batch.frames[:n], True, weights)
-        taken = q.gather(1, batch.actions.unsqueeze(1)).squeeze(1)
-        if config.loss == "mse":
-            loss = F.mse_loss(taken, targets)
-        else:
-            loss = F.smooth_l1_loss(taken, targets)
+            return batch.rewards + config.gamma * (1.0 - batch.terminated) * next_value
+
+    def _step(self, loss: torch.Tensor) -> None:
+        """One optimizer step on `loss` (one of `updates`)."""
+        config = self.config
         self.optimizer.zero_grad()
         loss.backward()
         if config.grad_clip_norm is not None:
@@ -111,7 +156,6 @@ class DQNAgent:
         self.updates += 1
         if self.target is not None and self.updates % config.target_update_interval == 0:
             self.target.load_state_dict(self.network.state_dict())
-        return float(loss.detach())
 
     def _forward(
         self,

@@ -60,6 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threshold", type=float, default=0.1, help="importance: Q-value spread")
     parser.add_argument("--motion", choices=("fast", "physics"), default="fast")
     parser.add_argument("--sort-rule", default="color", help="color, shape, or a JSON object map")
+    add_scenario_arguments(parser)
     parser.add_argument(
         "--set",
         action="append",
@@ -80,6 +81,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
+def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
+    """The scenario's options (`sim.ScenarioOptions`); `scenario_options(args)` reads them."""
+    from sim.rewards import REWARD_SCHEMES
+
+    parser.add_argument(
+        "--reward-scheme",
+        choices=REWARD_SCHEMES,
+        default="paper",
+        help="what a step without a placement costs: the paper's text (default), or the "
+        "authors' autonomous / interactive scripts",
+    )
+    parser.add_argument(
+        "--grasp-failure-rate", type=float, default=0.0, help="chance a grab comes back empty"
+    )
+    parser.add_argument(
+        "--knock-off-rate",
+        type=float,
+        default=0.0,
+        help="chance a grab knocks another object off the center table",
+    )
+
+
+def scenario_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The scenario options the arguments give, checked (`ValueError` otherwise)."""
+    from sim.scenario import ScenarioOptions
+
+    return ScenarioOptions(
+        args.reward_scheme, args.grasp_failure_rate, args.knock_off_rate
+    ).to_dict()
+
+
 def train(args: argparse.Namespace) -> int:
     try:
         config, settings, resume_state = _settings(args)
@@ -89,6 +121,7 @@ def train(args: argparse.Namespace) -> int:
             motion=settings["motion"],
             sort_rule=settings["sort_rule"],
             max_episode_steps=config.max_episode_steps,
+            **settings.get("scenario", {}),
         )
         advisor, strategy = _advising(settings)
     except (ValueError, FileNotFoundError) as error:
@@ -170,6 +203,7 @@ def _settings(args: argparse.Namespace) -> tuple[DQNConfig, dict[str, Any], dict
         "sort_rule": sim.SortRule.parse(_parse_json(args.sort_rule)).to_spec(),
         "seed": args.seed,
         "preset": args.preset,
+        "scenario": scenario_options(args),
     }
     return config, settings, None
 

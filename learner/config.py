@@ -21,8 +21,20 @@ Loss = Literal["mse", "huber"]
 Optimizer = Literal["rmsprop", "adam"]
 UpdateImpl = Literal["fast", "plain"]
 Precision = Literal["auto", "bf16", "fp32"]
+Fit = Literal["td", "keras"]
+Init = Literal["torch", "glorot"]
 
-PRESETS = ("paper", "modern")
+PRESETS = ("paper", "modern", "authors")
+AUTHORS = {
+    "head": "softmax",
+    "fit": "keras",
+    "init": "glorot",
+    "update_during_advice": True,
+    "update_on_final_step": False,
+    "max_episode_steps": 252,
+}
+"""The `authors` preset: what their Keras scripts did beyond the paper's text (each field's
+docstring says where it comes from; shared/reference/README.md, "The learner as coded")."""
 _DEVICE = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
 
 
@@ -80,6 +92,25 @@ class DQNConfig:
     (needs `target_network`)."""
     grad_clip_norm: float | None = None
     """Clip the gradient's global L2 norm to this value; None: no clipping."""
+    fit: Fit = "td"
+    """How a sampled batch is fitted. `td`: one gradient step on the TD error of the taken
+    actions. `keras`: as the authors' `Deep_NN.py:97-110` did with Keras' `fit`: targets for
+    all outputs, the taken action's r + gamma max Q(s') and the others the network's own
+    predictions (computed once, before the steps), MSE over all outputs, in minibatches of
+    `keras_minibatch` (Keras' default 32: four gradient steps on a batch of 128, in a
+    shuffled order, as `fit(shuffle=True)` does)."""
+    keras_minibatch: int = 32
+    """Minibatch size of `fit="keras"` (Keras' default batch size, which the authors kept)."""
+    init: Init = "torch"
+    """Initial weights: `torch` (PyTorch's default, Kaiming-uniform) or `glorot` (Keras'
+    default that the authors' model got: Glorot-uniform weights, zero biases)."""
+    update_during_advice: bool = False
+    """Also update after each advised pretraining step (the authors' agent-advised script,
+    78a15b8:199-253, trains after every one of its advised steps; epsilon decays with each
+    such update, as their `entrenar` does). Without it pretraining never updates."""
+    update_on_final_step: bool = True
+    """Update after an episode's final step too. The authors' loop breaks out of the episode
+    before training (`Deep_NN.py:238-252`), so their final steps never update (False)."""
     update: UpdateImpl = "fast"
     """`fast`: convolution and pooling fused by space-to-depth, bfloat16 convolutions,
     uint8 frames converted inside the step (same network, same function); `plain`: the
@@ -101,7 +132,7 @@ class DQNConfig:
             _check_type(field.name, value, hints[field.name])
             if hints[field.name] in (float, float | None) and isinstance(value, int):
                 object.__setattr__(self, field.name, float(value))
-        positive = ("episodes", "max_episode_steps", "batch_size", "memory_size")
+        positive = ("episodes", "max_episode_steps", "batch_size", "memory_size", "keras_minibatch")
         for name in positive:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
@@ -135,10 +166,15 @@ class DQNConfig:
 
     @classmethod
     def preset(cls, name: str, **overrides: Any) -> DQNConfig:
-        """`paper` (the default fields) or `modern` (target network, Double DQN, Huber
-        loss, gradient clipping); keyword overrides are checked like `from_dict`."""
+        """`paper` (the default fields), `modern` (target network, Double DQN, Huber loss,
+        gradient clipping) or `authors` (what the authors' Keras code did: softmax head
+        fitted the Keras way, Glorot init, updates during advice and not on an episode's
+        final step, the 252-step limit of their `time > 250`); keyword overrides are checked
+        like `from_dict`."""
         if name == "paper":
             base: dict[str, Any] = {}
+        elif name == "authors":
+            base = dict(AUTHORS)
         elif name == "modern":
             base = {
                 "target_network": True,

@@ -34,6 +34,7 @@ class QNetwork(nn.Module):
         n_actions: int = 4,
         image_shape: tuple[int, int, int] = (64, 64, 3),
         head: str = "linear",
+        init: str = "torch",
     ) -> None:
         super().__init__()
         height, width, channels = image_shape
@@ -51,6 +52,12 @@ class QNetwork(nn.Module):
         self.conv1, self.conv2, self.conv3 = convs
         self.dense = nn.Linear(in_channels * (height // 8) * (width // 8), DENSE_UNITS)
         self.out = nn.Linear(DENSE_UNITS, n_actions)
+        if init == "glorot":  # Keras' default: Glorot-uniform weights, zero biases
+            for layer in (*convs, self.dense, self.out):
+                nn.init.xavier_uniform_(layer.weight)
+                nn.init.zeros_(layer.bias)
+        elif init != "torch":
+            raise ValueError(f"init must be 'torch' or 'glorot', got {init!r}")
 
     @property
     def convs(self) -> tuple[nn.Conv2d, nn.Conv2d, nn.Conv2d]:

@@ -185,8 +185,9 @@ class Trainer:
         )  # fmt: skip
         epsilon = self.epsilon.value
         loss = None
-        if not pretraining:
-            loss = self.agent.update(self.memory.sample(config.batch_size, self._memory_rng))
+        if self._updates_now(pretraining, advised is not None, terminated or truncated):
+            batch = self.memory.sample(config.batch_size, self._memory_rng)
+            loss = self.agent.update(batch, self._memory_rng)
             self.epsilon.step()
             episode.loss_sum += loss
             episode.loss_count += 1
@@ -221,6 +222,17 @@ class Trainer:
         if self.episode_record is not None:
             self._notify("on_episode", self.episode_record)
         return record
+
+    def _updates_now(self, pretraining: bool, advised: bool, final: bool) -> bool:
+        """Whether this step is followed by an update: every training step (Algorithm 2),
+        with the authors' options also advised pretraining steps once the memory holds a
+        batch, and not an episode's final step."""
+        config = self.config
+        if final and not config.update_on_final_step:
+            return False
+        if pretraining:
+            return advised and config.update_during_advice and len(self.memory) >= config.batch_size
+        return True
 
     def _begin_episode(self) -> None:
         stage = self.stage

@@ -12,7 +12,9 @@ import gymnasium
 
 from sim.actions import ACTION_NAMES, Action
 from sim.bodies import BodySpec, Box, Cylinder, Mesh, MotionFrame, Pose
+from sim.rewards import REWARD_SCHEMES, rescore, step_penalty
 from sim.rules import COLORS, SHAPES, SortRule, oracle_action
+from sim.scenario import ScenarioOptions
 
 ENV_ID = "ideeprl/Sorting-v0"
 
@@ -33,6 +35,7 @@ __all__ = [
     "ACTION_NAMES",
     "COLORS",
     "ENV_ID",
+    "REWARD_SCHEMES",
     "SHAPES",
     "Action",
     "BodySpec",
@@ -41,7 +44,10 @@ __all__ = [
     "Mesh",
     "MotionFrame",
     "Pose",
+    "ScenarioOptions",
     "SortRule",
     "SortingEnv",
     "oracle_action",
+    "rescore",
+    "step_penalty",
 ]

@@ -11,8 +11,10 @@ from sim.actions import ACTION_NAMES, Action
 from sim.bodies import BodySpec, MotionFrame, Pose
 from sim.camera import IMAGE_SIZE, Camera
 from sim.layout import Layout
+from sim.rewards import RewardScheme
 from sim.robot import SuctionArm
 from sim.rules import SortRule, SortRuleSpec
+from sim.scenario import ScenarioOptions
 from sim.scene import Scene
 from sim.task import SortingTask, StepEvents
 from sim.world import World
@@ -29,6 +31,15 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
     `motion="fast"` sets the same poses directly (batch training). Both obey the same
     rules and render through the same camera. An episode is truncated after
     `max_episode_steps` steps (made by `gym.make`, Gymnasium's TimeLimit does that).
+
+    `reward_scheme` says what a step without a placement costs (`sim.rewards`). The
+    realism rates make the authors' imperfect scene (shared/reference/README.md, "The
+    scene"): `grasp_failure_rate` is the chance that a grab comes back empty (the arm goes
+    down and up above the center table, nothing is held), `knock_off_rate` the chance that
+    a grab knocks one other remaining object off the center table (it is *lost*: out of
+    the task, without reward or penalty). Both are seeded draws from `np_random`, in both
+    motion modes (the physics mode can also fail a grasp or push an object off by itself,
+    rarely); at 0 (the default) nothing is drawn, so runs are as without the options.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -40,6 +51,9 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         max_episode_steps: int = 250,
         record_motion: bool = False,
         render_mode: str | None = None,
+        reward_scheme: RewardScheme = "paper",
+        grasp_failure_rate: float = 0.0,
+        knock_off_rate: float = 0.0,
     ) -> None:
         if motion not in MOTIONS:
             raise ValueError(
@@ -54,6 +68,10 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
             raise ValueError(f"max_episode_steps must be a positive int, got {max_episode_steps!r}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        options = ScenarioOptions(reward_scheme, grasp_failure_rate, knock_off_rate)
+        self.reward_scheme = options.reward_scheme
+        self.grasp_failure_rate = options.grasp_failure_rate
+        self.knock_off_rate = options.knock_off_rate
         self.motion = motion
         self.sort_rule = SortRule.parse(sort_rule)
         self.max_episode_steps = int(max_episode_steps)
@@ -67,7 +85,9 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         self._build()
         self._camera = Camera(self._world, self.layout.camera)
         self._task = SortingTask(
-            self.sort_rule, {obj.name: (obj.shape, obj.color) for obj in self._scene.objects}
+            self.sort_rule,
+            {obj.name: (obj.shape, obj.color) for obj in self._scene.objects},
+            self.reward_scheme,
         )
         self._slots_used = {"left": 0, "right": 0}
         self._needs_reset = True
@@ -182,10 +202,18 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
                 return StepEvents(), False
             remaining = self._task.remaining
             target = remaining[int(self.np_random.integers(len(remaining)))]
-            picked = arm.grab(
-                self._objects[target].body, [self._objects[name].body for name in remaining]
-            )
-            grabbed = None if picked is None else self._scene.by_body[picked].name
+            if self._chance(self.grasp_failure_rate):
+                arm.go_to("center")
+                grabbed = None
+            else:
+                picked = arm.grab(
+                    self._objects[target].body, [self._objects[name].body for name in remaining]
+                )
+                grabbed = None if picked is None else self._scene.by_body[picked].name
+            others = [name for name in remaining if name != grabbed]
+            if others and self._chance(self.knock_off_rate):
+                victim = others[int(self.np_random.integers(len(others)))]
+                self._scene.knock_off(self._objects[victim])
             return StepEvents(grabbed=grabbed), True
         if action in (Action.MOVE_RIGHT, Action.MOVE_LEFT):
             station = "right" if action == Action.MOVE_RIGHT else "left"
@@ -199,6 +227,11 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         arm.drop(side, self._slots_used[side])
         self._slots_used[side] += 1
         return StepEvents(placed=(held, side)), True  # type: ignore[arg-type]
+
+    def _chance(self, rate: float) -> bool:
+        """A seeded draw with probability `rate`; none at all at 0, so default runs keep
+        their random streams."""
+        return rate > 0.0 and bool(self.np_random.random() < rate)
 
     def _info(self) -> dict[str, Any]:
         return {"station": self._arm.station, **self._task.info()}

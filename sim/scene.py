@@ -43,6 +43,7 @@ class Scene:
             world.add_box(table.name, (hx, hy, top / 2), (*table.center, top / 2), table.rgba)
         self._add_camera_props()
         self.objects: list[SceneObject] = []
+        self._parking: dict[int, tuple[float, float, float]] = {}
         for i, kind in enumerate(layout.objects):
             for j, color in enumerate(COLORS):
                 name = f"objects/{kind.shape}_{color}"
@@ -57,6 +58,7 @@ class Scene:
                         name, kind.radius, 2 * kind.half_height, park, rgba, mass
                     )
                 self.objects.append(SceneObject(name, kind.shape, color, body, kind.half_height))
+                self._parking[body] = park
         self.by_body = {obj.body: obj for obj in self.objects}
 
     def _add_camera_props(self) -> None:
@@ -94,6 +96,14 @@ class Scene:
                 obj.body, (x, y, top + obj.half_height), (0.0, 0.0, 0.0, 1.0)
             )
             self.world.p.resetBaseVelocity(obj.body, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+    def knock_off(self, obj: SceneObject) -> None:
+        """Take an object off the center table, as the authors' scene did with objects the
+        arm knocked down (`Simulador.py:144-156`): it goes back to where it waits unused."""
+        self.world.p.resetBasePositionAndOrientation(
+            obj.body, self._parking[obj.body], (0.0, 0.0, 0.0, 1.0)
+        )
+        self.world.p.resetBaseVelocity(obj.body, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
     def is_on(self, obj: SceneObject, table: Table) -> bool:
         """Whether the object's centre is above `table`'s top, within its edges."""

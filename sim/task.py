@@ -7,6 +7,7 @@ arm did in a step (`StepEvents`), the task says what it earned.
 from dataclasses import dataclass, field
 from typing import Any
 
+from sim.rewards import RewardScheme, step_penalty
 from sim.rules import Side, SortRule
 
 REWARD_COMPLETE = 1.0
@@ -15,10 +16,6 @@ REWARD_CORRECT = 0.4
 """Any other correct placement."""
 REWARD_WRONG = -1.0
 """An incorrect placement; it ends the episode."""
-STEP_PENALTY = -0.01
-"""A step with no placement after the `MIN_STEPS`-th."""
-MIN_STEPS = 18
-"""6 objects x 3 actions: the shortest episode that sorts everything."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +38,8 @@ class SortingTask:
     """Where each object belongs."""
     kinds: dict[str, tuple[str, str]]
     """(shape, color) of each object, by name, in a fixed order."""
+    reward_scheme: RewardScheme = "paper"
+    """What a step without a placement costs (`sim.rewards.step_penalty`)."""
     remaining: list[str] = field(default_factory=list)
     """Objects still on the center table, in `kinds` order."""
     held: str | None = None
@@ -73,7 +72,7 @@ class SortingTask:
             assert name in self.remaining
             self.remaining.remove(name)
             self.lost += 1
-        reward = STEP_PENALTY if self.episode_step > MIN_STEPS else 0.0
+        reward = step_penalty(self.reward_scheme, self.episode_step)
         if events.placed is not None:
             name, side = events.placed
             assert name == self.held

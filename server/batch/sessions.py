@@ -2,7 +2,7 @@
 ones, and take back sessions whose worker died.
 
 A run's identity is its study, method, seed and the configuration its session stores
-(learner config, sorting rule, strategy, advisor, error rate, motion), compared as stored:
+(learner config, sorting rule, strategy, advisor, error rate, motion, scenario options), compared as stored:
 the label is a name, not part of the identity, so a renamed batch still finds its runs.
 """
 
@@ -62,6 +62,7 @@ def body_identity(body: SessionCreate) -> dict[str, Any]:
         "advisor_checkpoint": _path(body.advisor_checkpoint),
         "oracle_error_rate": body.oracle_error_rate if body.method == "oracle" else None,
         "motion": body.motion or "fast",
+        "scenario": learning.parse_scenario(body.scenario.model_dump()),
     }
 
 
@@ -76,6 +77,15 @@ def _stored_config(config: dict[str, Any]) -> dict[str, Any]:
         return _plain(config)
 
 
+def _stored_scenario(scenario: dict[str, Any] | None) -> dict[str, Any]:
+    """Stored scenario options with the defaults filled in (a session stored before they
+    existed ran the paper's scenario)."""
+    try:
+        return learning.parse_scenario(scenario)
+    except ValueError:  # an option the scenario no longer has: never the same run
+        return _plain(scenario)
+
+
 def session_identity(session: StudySession) -> dict[str, Any]:
     return {
         "method": session.method,
@@ -86,6 +96,7 @@ def session_identity(session: StudySession) -> dict[str, Any]:
         "advisor_checkpoint": _path(session.advisor_checkpoint),
         "oracle_error_rate": session.oracle_error_rate,
         "motion": session.motion,
+        "scenario": _stored_scenario(session.scenario),
     }
 
 

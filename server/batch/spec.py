@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from server.schemas.sessions import Motion, SessionCreate, Strategy
+from server.schemas.sessions import Motion, Scenario, SessionCreate, Strategy
+from sim.scenario import ScenarioOptions
 
 BATCH_METHODS: tuple[str, ...] = ("autonomous", "agent", "oracle", "random")
 """Methods a batch can run: every machine advisor, and no advisor at all."""
@@ -62,6 +63,13 @@ class BatchSpec:
     """`fast` (poses set directly) or `physics`; batch runs need no one to watch."""
     sort_rule: str | dict[str, str] = "color"
     """The sorting rule (`color`, `shape`, or a map of all six objects to a side)."""
+    scenario: dict[str, Any] = field(default_factory=dict)
+    """Scenario options of every run (`sim.ScenarioOptions`: reward scheme, realism rates)."""
+    reward_schemes: dict[str, str] = field(default_factory=dict)
+    """A reward scheme for some methods only, over `scenario`'s: how the authors compared
+    their methods (`autonomous` under `authors-autonomous`, `agent` under
+    `authors-interactive`). The report flags such a comparison. The advisor trained for
+    `agent` runs is an autonomous run and takes the autonomous scheme."""
 
     def __post_init__(self) -> None:
         unknown = [m for m in self.methods if m not in BATCH_METHODS]
@@ -97,6 +105,16 @@ class BatchSpec:
             raise BatchError(
                 f"oracle error rate must be between 0 and 1, got {self.oracle_error_rate}"
             )
+        strays = sorted(set(self.reward_schemes) - set(self.methods))
+        if strays:
+            raise BatchError(
+                f"a reward scheme is given for {', '.join(strays)}, which the batch does not run"
+            )
+        for method in self.methods:
+            try:
+                ScenarioOptions.from_dict(self.scenario_of(method))
+            except ValueError as error:
+                raise BatchError(str(error)) from None
         if self.advisor_checkpoint is not None:
             if "agent" not in self.methods:
                 raise BatchError("an advisor checkpoint is only used by the 'agent' method")
@@ -106,6 +124,13 @@ class BatchSpec:
                     "trained learner's checkpoint (e.g. a session's final.pt), or leave it out "
                     "to train the advisor first"
                 )
+
+    def scenario_of(self, method: str) -> dict[str, Any]:
+        """The scenario options of a method's runs."""
+        scenario = dict(self.scenario)
+        if method in self.reward_schemes:
+            scenario["reward_scheme"] = self.reward_schemes[method]
+        return scenario
 
     @property
     def trains_advisor(self) -> bool:
@@ -166,4 +191,5 @@ def session_body(spec: BatchSpec, run: Run, advisor_checkpoint: str | None) -> S
         advisor_checkpoint=advisor_checkpoint if run.method == "agent" else None,
         oracle_error_rate=spec.oracle_error_rate if run.method == "oracle" else 0.0,
         motion=spec.motion,  # type: ignore[arg-type]
+        scenario=Scenario(**spec.scenario_of(run.method)),
     )

@@ -81,7 +81,7 @@ def register(subparsers: Any) -> None:
     what.add_argument(
         "--label", default="baselines", help="the batch's name, every run's session label"
     )
-    what.add_argument("--preset", default="paper", help="learner preset: paper or modern")
+    what.add_argument("--preset", default="paper", help="learner preset: paper, modern or authors")
     what.add_argument("--episodes", type=int, help="training episodes per run (default 300)")
     what.add_argument("--pretraining-steps", type=int, help="pretraining actions (default 1000)")
     what.add_argument("--advice-budget", type=int, help="advice per advised run (default 100)")
@@ -103,6 +103,21 @@ def register(subparsers: Any) -> None:
     what.add_argument("--motion", default="fast", help="fast (default) or physics")
     what.add_argument(
         "--sort-rule", default="color", help='color, shape, or a JSON map {"cube/red": "left"}'
+    )
+    what.add_argument(
+        "--reward-scheme",
+        nargs="+",
+        default=["paper"],
+        metavar="[METHOD=]SCHEME",
+        help="paper (default), authors-autonomous or authors-interactive, for every method, "
+        "or METHOD=SCHEME for one (how the authors compared: autonomous=authors-autonomous "
+        "agent=authors-interactive; the report flags it)",
+    )
+    what.add_argument(
+        "--grasp-failure-rate", type=float, default=0.0, help="chance a grab comes back empty"
+    )
+    what.add_argument(
+        "--knock-off-rate", type=float, default=0.0, help="chance a grab knocks another off"
     )
     how = parser.add_argument_group("how to run it")
     how.add_argument("--backend", choices=("local", "ray"), default="local")
@@ -131,6 +146,17 @@ def spec_from(args: argparse.Namespace) -> Any:
     sort_rule: Any = args.sort_rule
     if sort_rule.strip().startswith("{"):
         sort_rule = json.loads(sort_rule)
+    scenario: dict[str, Any] = {
+        "grasp_failure_rate": args.grasp_failure_rate,
+        "knock_off_rate": args.knock_off_rate,
+    }
+    per_method: dict[str, str] = {}
+    for item in args.reward_scheme:
+        method, sep, scheme = item.rpartition("=")
+        if sep:
+            per_method[method] = scheme
+        else:
+            scenario["reward_scheme"] = scheme
     return BatchSpec(
         methods=_methods(args.methods),
         agents=args.agents,
@@ -146,6 +172,8 @@ def spec_from(args: argparse.Namespace) -> Any:
         advisor_checkpoint=args.advisor_checkpoint,
         motion=args.motion,
         sort_rule=sort_rule,
+        scenario=scenario,
+        reward_schemes=per_method,
     )
 
 
@@ -170,6 +198,12 @@ def command_line(args: argparse.Namespace, spec: Any) -> str:
     parts += ["--strategy", spec.strategy, "--motion", spec.motion]
     if spec.sort_rule != "color":
         parts += ["--sort-rule", json.dumps(spec.sort_rule)]
+    schemes = [spec.scenario.get("reward_scheme", "paper")]
+    schemes += [f"{method}={scheme}" for method, scheme in spec.reward_schemes.items()]
+    parts += ["--reward-scheme", *schemes]
+    for name in ("grasp_failure_rate", "knock_off_rate"):
+        if spec.scenario.get(name):
+            parts += ["--" + name.replace("_", "-"), str(spec.scenario[name])]
     parts += ["--backend", args.backend]
     if args.address:
         parts += ["--address", args.address]

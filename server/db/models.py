@@ -125,6 +125,8 @@ class StudySession(Base):
     advisor_checkpoint: Mapped[str | None] = mapped_column(Text)
     oracle_error_rate: Mapped[float | None] = mapped_column(Float)
     motion: Mapped[str] = mapped_column(String(20))
+    scenario: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    """`sim.ScenarioOptions` as JSON: reward scheme and realism rates ({} before 0004)."""
     episodes: Mapped[int] = mapped_column(Integer)
     max_episode_steps: Mapped[int] = mapped_column(Integer, default=250)
     idle_limit_s: Mapped[float | None] = mapped_column(Float)

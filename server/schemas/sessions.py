@@ -11,6 +11,30 @@ from server.db.models import Method
 
 Strategy = Literal["early", "alternating", "importance", "mistake_correcting"]
 Motion = Literal["physics", "fast"]
+RewardSchemeName = Literal["paper", "authors-autonomous", "authors-interactive"]
+
+
+class Scenario(BaseModel):
+    """The scenario's options (`sim.ScenarioOptions`; a test keeps the two the same)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    reward_scheme: RewardSchemeName = Field(
+        default="paper",
+        description="What a step without a placement costs: paper (the paper's text: -0.01 "
+        "after the 18th step), authors-autonomous (the authors' DeepRL script: 0 up to the "
+        "19th step, then -0.01 x (n - 19)), authors-interactive (their IDeepRL scripts: -0.01 "
+        "from the first step).",
+    )
+    grasp_failure_rate: float = Field(
+        default=0.0, ge=0.0, le=1.0, description="Chance that a grab comes back empty."
+    )
+    knock_off_rate: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="Chance that a grab knocks one other object off the center table (lost).",
+    )
 
 
 class SessionCreate(BaseModel):
@@ -47,6 +71,9 @@ class SessionCreate(BaseModel):
     motion: Motion | None = Field(
         default=None, description="physics (default for human) or fast (default otherwise)."
     )
+    scenario: Scenario = Field(
+        default_factory=Scenario, description="Reward scheme and realism rates."
+    )
     participant: str | None = Field(
         default=None,
         min_length=1,
@@ -74,6 +101,7 @@ class SessionPublic(BaseModel):
     advisor_checkpoint: str | None
     oracle_error_rate: float | None
     motion: str
+    scenario: dict[str, Any]
     episodes: int
     max_episode_steps: int
     idle_limit_s: float | None

@@ -35,6 +35,16 @@ def parse_sort_rule(spec: str | dict[str, str]) -> Any:
         raise Invalid("sort_rule", str(error)) from None
 
 
+def parse_scenario(values: dict[str, Any] | None) -> dict[str, Any]:
+    """The scenario options, every one spelled out (defaults filled in), as JSON."""
+    import sim
+
+    try:
+        return sim.ScenarioOptions.from_dict(values).to_dict()
+    except (ValueError, TypeError) as error:
+        raise Invalid("scenario", str(error)) from None
+
+
 def make_env(session: Any, record_motion: bool) -> Any:
     import sim
 
@@ -43,6 +53,7 @@ def make_env(session: Any, record_motion: bool) -> Any:
         sort_rule=session.sort_rule,
         max_episode_steps=session.max_episode_steps,
         record_motion=record_motion,
+        **parse_scenario(session.scenario),
     )
 
 

@@ -90,6 +90,7 @@ def create_session(db: Session, study_id: int, body: SessionCreate) -> StudySess
         advisor_checkpoint=body.advisor_checkpoint,
         oracle_error_rate=body.oracle_error_rate if method == Method.oracle else None,
         motion=body.motion or ("physics" if method == Method.human else "fast"),
+        scenario=learning.parse_scenario(body.scenario.model_dump()),
         episodes=config["episodes"],
         max_episode_steps=config["max_episode_steps"],
         idle_limit_s=body.idle_limit_s,
