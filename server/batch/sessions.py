@@ -2,8 +2,9 @@
 ones, and take back sessions whose worker died.
 
 A run's identity is its study, method, seed and the configuration its session stores
-(learner config, sorting rule, strategy, advisor, error rate, motion, scenario options), compared as stored:
-the label is a name, not part of the identity, so a renamed batch still finds its runs.
+(learner config, sorting rule, strategy, advisor, error rate, motion, scenario options),
+compared as stored: the label is a name, not part of the identity, so a renamed batch still
+finds its runs.
 """
 
 from __future__ import annotations
