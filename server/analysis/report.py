@@ -7,6 +7,7 @@ The Markdown links its images and tables by relative path: copy the folder anywh
 
 from __future__ import annotations
 
+import dataclasses
 import platform
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -18,6 +19,7 @@ import pandas as pd
 import scipy
 
 from server.analysis import markdown as md
+from server.analysis.audit import Audit, audit
 from server.analysis.episodes import EpisodeTableError, agents_of, method_name
 from server.analysis.figures import (
     example_agents,
@@ -29,9 +31,12 @@ from server.analysis.figures import (
     plot_method_curves,
     save_figure,
 )
-from server.analysis.paper import PAPER_AGENTS, PAPER_EPISODES
+from server.analysis.paper import PAPER_AGENTS, PAPER_EPISODES, paper_comparison
+from server.analysis.reference import REFERENCES, authors_totals, overlay_authors
+from server.analysis.rescoring import rescored_totals, rescoring_table
 from server.analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
 from server.analysis.summary import Analysis, analyze
+from sim.rewards import REWARD_SCHEMES
 
 REPORT_FILE = "report.md"
 FIGURE_FILES: dict[str, str] = {
@@ -50,6 +55,13 @@ TABLE_FILES: dict[str, str] = {
     "curves": "reward_per_episode.csv",
     "paper": "paper_comparison.csv",
 }
+OPTIONAL_TABLE_FILES: dict[str, str] = {
+    "settings": "settings_per_method.csv",
+    "rescored": "r_t_rescored.csv",
+    "reference": "authors_reference.csv",
+}
+"""Tables written when their input is given: the sessions' settings (the audit), the step
+logs (rescoring), a reference."""
 MAX_HEATMAP_AGENTS = 24
 """Above this many agents Figure 7 shows the paper's selection; the CSV keeps them all."""
 
@@ -70,6 +82,10 @@ class ReportResult:
     """Sentences on what the report left out or chose, also printed in it."""
     analysis: Analysis
     """The statistics behind the files, for callers that show them another way."""
+    audit: Audit | None = None
+    """What each method ran under and which pairs differ (None without a settings table)."""
+    rescored: pd.DataFrame | None = None
+    """R_T per method under each reward scheme (None without step logs)."""
 
     @property
     def files(self) -> list[Path]:
@@ -152,6 +168,8 @@ def _heatmap_labels(analysis: Analysis, focus: str) -> tuple[list[str], list[str
 
 
 def _describe_test(row: pd.Series, alpha: float) -> str:
+    if isinstance(row.get("withheld"), str) and row["withheld"]:
+        return f"t-test withheld ({row['withheld']})"
     if np.isnan(row["p"]):
         return f"t-test undefined (n = {row['n_a']} + {row['n_b']}: needs 2+ varying values)"
     verdict = "significant" if row["p"] < alpha else "not significant"
@@ -248,6 +266,9 @@ def _tests_table(analysis: Analysis, alpha: float) -> str:
         "p": "p",
         "significant": f"p < {alpha:g}",
     }
+    if "withheld" in frame and (frame["withheld"] != "").any():
+        frame["withheld"] = [f"withheld: {w}" if w else "" for w in frame["withheld"]]
+        columns["withheld"] = "note"
     formats = {
         "mean_a": md.fixed(3),
         "mean_b": md.fixed(3),
@@ -337,6 +358,10 @@ def write_report(
     smoothing: int = 1,
     alpha: float = 0.05,
     equal_var: bool = True,
+    settings: pd.DataFrame | None = None,
+    steps: pd.DataFrame | None = None,
+    allow_mismatch: bool = False,
+    reference: str | None = None,
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -347,8 +372,31 @@ def write_report(
     agents (by default up to three human-IDeepRL examples against the median autonomous
     agent); `smoothing` is a moving-average window for Figures 5 and 6 only. Existing
     files of the same names are replaced; nothing is written if the table is invalid.
+
+    `settings` (one row per session, `server.analysis.audit.SETTINGS_COLUMNS`) adds the
+    comparability audit: the settings per method, a warning at the top for methods that
+    differ, and no t-test for such a pair unless `allow_mismatch` (the warning stays).
+    `steps` (training steps, `server.analysis.rescoring.STEP_COLUMNS`) with `settings` adds
+    R_T rescored under each reward scheme. `reference="authors"` draws the authors' mean
+    curves on Figure 5 and lists the paper's R_T beside them.
     """
+    if reference is not None and reference not in REFERENCES:
+        raise EpisodeTableError(
+            f"unknown reference {reference!r}; available: {', '.join(REFERENCES)}"
+        )
     analysis = analyze(episodes_df, baseline=baseline, n_episodes=n_episodes, equal_var=equal_var)
+    checked = None
+    if settings is not None:
+        kept = settings[settings["session_id"].isin(analysis.episodes["session_id"])]
+        checked = audit(kept, baseline)
+        analysis = _withhold_tests(analysis, checked, allow_mismatch)
+    rescored = None
+    if steps is not None and settings is not None:
+        schemes = dict(zip(settings["session_id"], settings["reward_scheme"], strict=True))
+        methods = dict(zip(settings["session_id"], settings["method"], strict=True))
+        kept_steps = steps[steps["session_id"].isin(analysis.episodes["session_id"])]
+        totals = rescored_totals(kept_steps, schemes, n_episodes=analysis.n_episodes)
+        rescored = rescoring_table(totals, methods, baseline)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise EpisodeTableError(f"{out} is a file; pass a folder for the report")
@@ -368,15 +416,22 @@ def write_report(
         "curves": analysis.curves,
         "paper": analysis.paper,
     }
+    if checked is not None:
+        tables["settings"] = checked.methods
+    if rescored is not None:
+        tables["rescored"] = rescored
+    if reference == "authors":
+        tables["reference"] = authors_totals(analysis.n_episodes)
     table_paths = {}
     for name, frame in tables.items():
-        table_paths[name] = out / TABLE_FILES[name]
+        table_paths[name] = out / {**TABLE_FILES, **OPTIONAL_TABLE_FILES}[name]
         frame.to_csv(table_paths[name], index=name == "correlation")
 
+    figure5 = plot_method_curves(analysis.episodes, baseline=baseline, smoothing=smoothing)
+    if reference == "authors":
+        overlay_authors(figure5, analysis.method_order, analysis.n_episodes)
     figures = {
-        "reward_per_method": plot_method_curves(
-            analysis.episodes, baseline=baseline, smoothing=smoothing
-        ),
+        "reward_per_method": figure5,
         "correlation": plot_correlation(analysis.correlation.loc[heatmap_labels, heatmap_labels]),
         "cumulative_reward": plot_cumulative_reward(analysis.episodes, baseline=baseline),
     }
@@ -397,11 +452,122 @@ def write_report(
     }
 
     report = out / REPORT_FILE
+    extra = _Extras(checked, rescored, tables.get("reference"), allow_mismatch)
     report.write_text(
-        _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var),
+        _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra),
         encoding="utf-8",
     )
-    return ReportResult(out, report, figure_paths, table_paths, tuple(report_notes), analysis)
+    warnings = tuple(checked.warnings()) if checked is not None else ()
+    return ReportResult(
+        out, report, figure_paths, table_paths, (*warnings, *report_notes), analysis,
+        checked, rescored,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _Extras:
+    """The audit, rescoring and reference parts of a report (each may be absent)."""
+
+    audit: Audit | None
+    rescored: pd.DataFrame | None
+    reference: pd.DataFrame | None
+    allow_mismatch: bool
+
+
+def _withhold_tests(analysis: Analysis, checked: Audit, allow_mismatch: bool) -> Analysis:
+    """The analysis with the t-tests of pairs that differ in their settings withheld (t,
+    p and df left empty, the reason in `withheld`), unless `allow_mismatch`."""
+    tests = analysis.t_tests.copy()
+    reasons = [
+        "" if allow_mismatch or not checked.differ(a, b)
+        else "the methods differ in " + " and ".join(checked.differ(a, b))
+        for a, b in zip(tests["method_a"], tests["method_b"], strict=True)
+    ]  # fmt: skip
+    tests["withheld"] = reasons
+    mask = tests["withheld"] != ""
+    tests.loc[mask, ["t", "df", "p"]] = np.nan
+    paper = paper_comparison(analysis.methods, tests, baseline=analysis.baseline)
+    return dataclasses.replace(analysis, t_tests=tests, paper=paper)
+
+
+def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
+    """The audit's warning (for the top) and its table; the rescoring and reference tables."""
+    out: list[str] = []
+    if extra.audit is not None:
+        columns = {
+            "name": "method",
+            "sessions": "sessions",
+            "reward_scheme": "reward scheme",
+            "learner": "learner preset and options",
+            "scenario": "scenario options",
+            "motion": "motion",
+            "sort_rule": "sorting rule",
+            "advice": "advice (the treatment)",
+        }
+        out += [
+            "## Comparability: what each method ran under",
+            "",
+            "Compared methods must share everything but the treatment (who advises, how, "
+            "how much). "
+            + (
+                "They do here."
+                if extra.audit.comparable
+                else "**They do not here**: "
+                + " ".join(extra.audit.warnings())
+                + (
+                    " The t-tests of those pairs are given because they were asked for "
+                    "(`--allow-mismatch`); read them with that in mind."
+                    if extra.allow_mismatch
+                    else " The t-tests of those pairs are withheld (`--allow-mismatch` gives them)."
+                )
+            ),
+            "",
+            md.table(extra.audit.methods, columns),
+            "",
+        ]
+    if extra.rescored is not None:
+        columns = {"name": "method", "agents": "agents", "logged_under": "logged under",
+                   "R_T_logged": "R_T as logged"}  # fmt: skip
+        formats: dict[str, object] = {"R_T_logged": md.fixed(2)}
+        for scheme in REWARD_SCHEMES:
+            columns[f"R_T_{scheme}"] = f"R_T under {scheme}"
+            formats[f"R_T_{scheme}"] = md.fixed(2)
+            if f"improvement_{scheme}" in extra.rescored:
+                columns[f"improvement_{scheme}"] = f"vs baseline under {scheme}"
+                formats[f"improvement_{scheme}"] = md.signed_pct
+        out += [
+            "## R_T rescored under each reward scheme",
+            "",
+            "The same logged behaviour scored under each accounting: a placement keeps its "
+            "reward, every other step costs what the scheme says (`sim.rewards`). Compare "
+            "methods within one column.",
+            "",
+            md.table(extra.rescored, columns, formats),  # type: ignore[arg-type]
+            "",
+        ]
+    if extra.reference is not None:
+        out += [
+            "## The authors' curves (reference)",
+            "",
+            "Figure 5's dashed lines are the authors' published mean curves "
+            "(`server/analysis/data/`), each scored under its own script's rule, so they "
+            "are not comparable with each other, and compare with ours only under the "
+            "same rule.",
+            "",
+            md.table(
+                extra.reference,
+                {
+                    "name": "method",
+                    "scheme": "their scheme",
+                    "episodes": "episodes",
+                    "authors_curve_R_T": "R_T of their curve",
+                    "paper_R_T": "R_T in the paper",
+                },
+                {"authors_curve_R_T": md.fixed(2), "paper_R_T": md.fixed(2)},
+            ),
+            "",
+        ]
+    return out
 
 
 def _markdown(
@@ -413,9 +579,15 @@ def _markdown(
     alpha: float,
     smoothing: int,
     equal_var: bool,
+    extra: _Extras,
 ) -> str:
     agents = agents_of(analysis.episodes)
     out = [f"# {title}", ""]
+    if extra.audit is not None and not extra.audit.comparable:
+        out += [
+            "> **Comparability warning.** " + " ".join(extra.audit.warnings()),
+            "",
+        ]
     if notes:
         out += [notes if isinstance(notes, str) else "\n".join(f"- {n}" for n in notes), ""]
     out += [
@@ -429,6 +601,7 @@ def _markdown(
         *_summary(analysis, alpha),
         *(f"- {n}" for n in report_notes),
         "",
+        *_comparability(extra, analysis.baseline),
         "## Average collected reward per method (the paper's Figure 5)",
         "",
         "![Figure 5: average collected reward per episode per method]"
@@ -507,6 +680,15 @@ def _markdown(
         "## Files",
         "",
         *(f"- [{f}]({f})" for f in TABLE_FILES.values()),
+        *(
+            f"- [{OPTIONAL_TABLE_FILES[name]}]({OPTIONAL_TABLE_FILES[name]})"
+            for name, part in (
+                ("settings", extra.audit),
+                ("rescored", extra.rescored),
+                ("reference", extra.reference),
+            )
+            if part is not None
+        ),
         "",
         f"numpy {np.__version__}, pandas {pd.__version__}, scipy {scipy.__version__}, "
         f"matplotlib {matplotlib.__version__}, Python {platform.python_version()}.",

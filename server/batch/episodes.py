@@ -6,13 +6,17 @@ Pretraining episodes are left out: the paper's curves and R_T count the training
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 
 import pandas as pd
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from server.db.models import Episode, StudySession
+from server.analysis.audit import describe_learner, describe_scenario
+from server.analysis.rescoring import STEP_COLUMNS
+from server.db.models import Episode, Step, StudySession
+from server.services.learning import parse_scenario
 from server.sessions.recorder import TRAINING
 
 EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
@@ -52,3 +56,41 @@ def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
     )
     rows = [tuple(row) for row in db.execute(query)]
     return pd.DataFrame(rows, columns=list(EPISODE_TABLE_COLUMNS))
+
+
+def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
+    """The training steps of these sessions (`server.analysis.rescoring.STEP_COLUMNS`)."""
+    query = (
+        select(Step.session_id, Step.episode, Step.episode_step, Step.reward, Step.terminated)
+        .where(Step.session_id.in_(list(session_ids)), Step.phase == TRAINING)
+        .order_by(Step.session_id, Step.global_step)
+    )
+    return pd.DataFrame([tuple(row) for row in db.execute(query)], columns=list(STEP_COLUMNS))
+
+
+def session_settings(sessions: Sequence[StudySession]) -> pd.DataFrame:
+    """What each session ran under, for the report's comparability audit
+    (`server.analysis.audit.SETTINGS_COLUMNS`)."""
+    from learner.config import PRESETS, DQNConfig
+
+    presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
+    rows = []
+    for s in sessions:
+        scenario = parse_scenario(s.scenario)
+        rows.append(
+            {
+                "session_id": s.id,
+                "method": s.method,
+                "reward_scheme": scenario["reward_scheme"],
+                "learner": describe_learner(DQNConfig.from_dict(s.config).to_dict(), presets),
+                "scenario": describe_scenario(scenario),
+                "motion": s.motion,
+                "sort_rule": json.dumps(s.sort_rule, sort_keys=True)
+                if not isinstance(s.sort_rule, str)
+                else s.sort_rule,
+                "advice": "none"
+                if s.method == "autonomous"
+                else f"{s.strategy}, budget {s.advice_budget}",
+            }
+        )
+    return pd.DataFrame(rows)

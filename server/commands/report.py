@@ -52,6 +52,16 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--title", help="report title (default: the study's name)")
     parser.add_argument(
+        "--allow-mismatch",
+        action="store_true",
+        help="also give the t-tests of methods whose settings differ (the warning stays)",
+    )
+    parser.add_argument(
+        "--reference",
+        choices=("authors",),
+        help="authors: draw the authors' published mean curves on Figure 5",
+    )
+    parser.add_argument(
         "--note",
         action="append",
         default=[],
@@ -93,6 +103,8 @@ def report(args: argparse.Namespace) -> int:
         n_episodes=args.n_episodes,
         title=args.title,
         notes=tuple(args.note),
+        allow_mismatch=args.allow_mismatch,
+        reference=args.reference,
     )
     with make_session_factory(engine)() as db:
         try:
@@ -100,8 +112,12 @@ def report(args: argparse.Namespace) -> int:
         except ServiceError as error:
             return _fail(error.message)
     result = built.result
+    warnings = result.audit.warnings() if result.audit is not None else []
+    for warning in warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     for note in built.notes:
-        print(f"note: {note}")
+        if note not in warnings:
+            print(f"note: {note}")
     methods_table = result.analysis.methods
     for _, row in methods_table.iterrows():
         gain = row["improvement_pct"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import shutil
 from datetime import datetime
-from typing import Annotated
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Body
 from fastapi import Path as PathParam
@@ -45,6 +45,14 @@ class ReportCreate(BaseModel):
         default=None, ge=1, le=100_000, description="First N episodes of every agent."
     )
     title: str | None = Field(default=None, max_length=200, description="Report title.")
+    allow_mismatch: bool = Field(
+        default=False,
+        description="Also give the t-tests of methods that ran under different settings "
+        "(reward scheme, learner, scenario); the report's warning stays.",
+    )
+    reference: Literal["authors"] | None = Field(
+        default=None, description="authors: draw the authors' published curves on Figure 5."
+    )
 
 
 class ReportFile(BaseModel):
@@ -110,6 +118,8 @@ def build_report(
         baseline=body.baseline,
         n_episodes=body.n_episodes,
         title=body.title,
+        allow_mismatch=body.allow_mismatch,
+        reference=body.reference,
     )
     description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
     return public_report(description, study_id)

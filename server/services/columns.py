@@ -24,6 +24,11 @@ SESSION_COLUMNS = {
     "oracle_error_rate": "Chance the oracle advised a wrong action (oracle sessions) [0-1].",
     "motion": "physics (simulated motion) or fast (poses set directly).",
     "sort_rule": "Sorting rule, as JSON (color, shape, or a map object -> side).",
+    "reward_scheme": "What a step without a placement cost: paper (-0.01 after the 18th "
+    "step), authors-autonomous (0 up to the 19th, then -0.01 x (n - 19)), authors-interactive "
+    "(-0.01 from the first step).",
+    "grasp_failure_rate": "Chance that a grab came back empty (realism option) [0-1].",
+    "knock_off_rate": "Chance that a grab knocked another object off the center table [0-1].",
     "episodes": "Training episodes the session was set to run [count].",
     "max_episode_steps": "Steps after which an episode is truncated [count].",
     "config": "The full learner configuration, as JSON.",

@@ -15,6 +15,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from server.db.models import Advice, Episode, Step, StudySession
+from server.services import learning
 from server.services.columns import column_dictionary
 from server.services.studies import get_study
 
@@ -38,6 +39,9 @@ SESSION_FIELDS = [
     "oracle_error_rate",
     "motion",
     "sort_rule",
+    "reward_scheme",
+    "grasp_failure_rate",
+    "knock_off_rate",
     "episodes",
     "max_episode_steps",
     "config",
@@ -88,6 +92,7 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "oracle_error_rate": "" if s.oracle_error_rate is None else s.oracle_error_rate,
             "motion": s.motion,
             "sort_rule": json.dumps(s.sort_rule),
+            **learning.parse_scenario(s.scenario),
             "episodes": s.episodes,
             "max_episode_steps": s.max_episode_steps,
             "config": json.dumps(s.config, sort_keys=True),

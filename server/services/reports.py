@@ -20,7 +20,7 @@ import pandas as pd
 from sqlalchemy.orm import Session
 
 from server.analysis import EpisodeTableError, ReportResult, method_name, write_report
-from server.batch.episodes import load_episodes
+from server.batch.episodes import load_episodes, load_training_steps, session_settings
 from server.db.models import Status, StudySession
 from server.services.errors import Conflict, Invalid, NotFound
 from server.services.sessions import list_sessions
@@ -51,6 +51,10 @@ class ReportRequest:
     """The report's title; default: the study's name."""
     notes: tuple[str, ...] = ()
     """Lines under the title (the command, versions, wall time)."""
+    allow_mismatch: bool = False
+    """Give the t-tests of methods whose settings differ too (the warning stays)."""
+    reference: str | None = None
+    """`authors`: draw the authors' published curves on Figure 5."""
 
 
 def advisor_sessions(sessions: list[StudySession]) -> set[int]:
@@ -158,6 +162,8 @@ def build_report(
     sessions, notes = select_sessions(db, study_id, request)
     baseline, baseline_notes = choose_baseline({s.method for s in sessions}, request.baseline)
     episodes = load_episodes(db, [s.id for s in sessions])
+    settings = session_settings(sessions)
+    steps = load_training_steps(db, [s.id for s in sessions])
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
     if empty:
         raise Conflict(
@@ -182,6 +188,10 @@ def build_report(
             baseline=baseline,
             notes=lines,
             n_episodes=request.n_episodes,
+            settings=settings,
+            steps=steps,
+            allow_mismatch=request.allow_mismatch,
+            reference=request.reference,
         )
     except EpisodeTableError as error:
         raise Conflict(f"these sessions cannot be compared as they are: {error}") from None

@@ -1,0 +1,148 @@
+"""The comparability audit: are the compared methods' numbers made under the same rules?
+
+The paper's headline compares an autonomous learner scored under one reward accounting with
+advised learners scored under another (shared/reference/README.md). A study platform must
+not repeat that silently: every report lists, per method, the settings its sessions ran
+under, says at the top when compared methods differ in any setting that is not the
+treatment itself (who advises, how, how much), and withholds the t-tests of such pairs
+unless the caller asks for them (`allow_mismatch`), with the warning kept.
+
+Pure pandas over a settings table, one row per session (`SETTINGS_COLUMNS`), which the
+server builds from its session rows; nothing here reads the database.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from itertools import combinations
+from typing import Any
+
+import pandas as pd
+
+from server.analysis.episodes import method_name, order_methods
+
+SETTINGS_COLUMNS: tuple[str, ...] = (
+    "session_id",
+    "method",
+    "reward_scheme",
+    "learner",
+    "scenario",
+    "motion",
+    "sort_rule",
+    "advice",
+)
+"""One row per session. `learner`: the preset and the fields that differ from it, as text;
+`scenario`: the realism rates as text; `advice`: strategy and budget (the treatment)."""
+
+COMPARED: dict[str, str] = {
+    "reward_scheme": "reward scheme",
+    "learner": "learner preset and options",
+    "scenario": "scenario options",
+    "motion": "motion mode",
+    "sort_rule": "sorting rule",
+}
+"""Settings that must be equal for two methods' numbers to be compared (the label in words)."""
+
+RUNTIME_FIELDS = ("device", "torch_threads", "update", "precision", "advice_budget", "episodes")
+"""Learner config fields that do not change what is learned (where it runs, how fast the
+same function is computed), or are the treatment or the report's own cut."""
+
+
+def describe_learner(config: dict[str, Any], presets: dict[str, dict[str, Any]]) -> str:
+    """The preset a config is, plus the fields where it differs from it: the closest preset
+    by number of differing fields (e.g. `authors`, `paper + gamma=0.99`)."""
+
+    def differences(base: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in config.items() if k not in RUNTIME_FIELDS and base.get(k) != v}
+
+    name, diff = min(
+        ((name, differences(base)) for name, base in presets.items()),
+        key=lambda item: len(item[1]),
+    )
+    extra = ", ".join(f"{k}={json.dumps(v)}" for k, v in sorted(diff.items()))
+    return f"{name} + {extra}" if extra else name
+
+
+def describe_scenario(scenario: dict[str, Any]) -> str:
+    """Realism rates in words ("none" when off)."""
+    rates = [
+        f"{label} {scenario.get(key, 0.0):g}"
+        for key, label in (
+            ("grasp_failure_rate", "failed grasps"),
+            ("knock_off_rate", "knock-offs"),
+        )
+        if scenario.get(key, 0.0)
+    ]
+    return ", ".join(rates) or "no realism"
+
+
+@dataclass(frozen=True)
+class Audit:
+    """What each method ran under, and which compared pairs differ."""
+
+    methods: pd.DataFrame
+    """Per method: its sessions and each setting (several values joined by ' | ')."""
+    mismatches: dict[tuple[str, str], list[str]]
+    """Pairs of methods (in display order) and the settings, in words, in which they differ."""
+    mixed: dict[str, list[str]]
+    """Methods whose own sessions differ, and in which settings."""
+
+    @property
+    def comparable(self) -> bool:
+        return not self.mismatches and not self.mixed
+
+    def differ(self, a: str, b: str) -> list[str]:
+        """The settings in which methods a and b differ (either order)."""
+        return self.mismatches.get((a, b)) or self.mismatches.get((b, a)) or []
+
+    def warnings(self) -> list[str]:
+        """Sentences for the top of a report; empty when everything compares."""
+        out = []
+        for (a, b), what in self.mismatches.items():
+            out.append(
+                f"{method_name(a)} and {method_name(b)} were run under different settings "
+                f"({', '.join(what)}): their numbers are not comparable as they stand"
+                + (
+                    " (the rescoring table scores the same behaviour under one scheme)."
+                    if COMPARED["reward_scheme"] in what
+                    else "."
+                )
+            )
+        for method, what in self.mixed.items():
+            out.append(
+                f"The {method_name(method)} sessions differ among themselves "
+                f"({', '.join(what)}): its mean mixes them."
+            )
+        return out
+
+
+def audit(settings: pd.DataFrame, baseline: str | None = None) -> Audit:
+    """The audit of the sessions in `settings` (`SETTINGS_COLUMNS`)."""
+    missing = [c for c in SETTINGS_COLUMNS if c not in settings]
+    assert not missing, f"settings table lacks {missing}"
+    order = order_methods(settings["method"], baseline)
+    values: dict[str, dict[str, list[str]]] = {}
+    rows = []
+    for method in order:
+        group = settings[settings["method"] == method]
+        values[method] = {c: sorted(set(map(str, group[c]))) for c in (*COMPARED, "advice")}
+        rows.append(
+            {
+                "method": method,
+                "name": method_name(method),
+                "sessions": len(group),
+                **{c: " | ".join(v) for c, v in values[method].items()},
+            }
+        )
+    mixed = {m: [label for c, label in COMPARED.items() if len(values[m][c]) > 1] for m in order}
+    mismatches = {}
+    for a, b in combinations(order, 2):
+        differ = [label for c, label in COMPARED.items() if values[a][c] != values[b][c]]
+        if differ:
+            mismatches[(a, b)] = differ
+    return Audit(
+        methods=pd.DataFrame(rows),
+        mismatches=mismatches,
+        mixed={m: what for m, what in mixed.items() if what},
+    )

@@ -1,0 +1,87 @@
+"""R_T rescored from the step logs under each reward scheme.
+
+The same behaviour scores differently under the authors' two accountings: what a method
+"collects" depends on the rule as much as on the learner. Rescoring each logged training
+step (a placement keeps its reward, every other step costs what the scheme says, see
+`sim.rewards.rescore`) shows each method's R_T under every scheme, so methods run under
+different schemes can still be compared under one.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from server.analysis.episodes import method_name, order_methods
+from sim.rewards import REWARD_SCHEMES, rescore
+
+STEP_COLUMNS: tuple[str, ...] = (
+    "session_id",
+    "episode",
+    "episode_step",
+    "reward",
+    "terminated",
+)
+"""One row per training step (episode 1..N within the session, `episode_step` from 1, every
+step of each episode present: a step's cost depends on its number in the episode)."""
+
+
+def rescored_totals(
+    steps: pd.DataFrame, schemes: dict[int, str], n_episodes: int | None = None
+) -> pd.DataFrame:
+    """Per session: R_T as logged and under each scheme (`R_T_<scheme>` columns), over its
+    first `n_episodes` episodes (all when None). `schemes` maps a session to the scheme
+    its steps were scored under."""
+    table = steps
+    if n_episodes is not None:
+        table = table[table["episode"] <= n_episodes]
+    table = table.sort_values(["session_id", "episode", "episode_step"])
+    rows = []
+    for session_id, group in table.groupby("session_id", sort=True):
+        scheme = schemes[int(session_id)]
+        row: dict[str, object] = {
+            "session_id": int(session_id),
+            "scheme": scheme,
+            "R_T_logged": float(group["reward"].sum()),
+        }
+        episodes = [
+            ([float(r) for r in e["reward"]], [bool(t) for t in e["terminated"]])
+            for _, e in group.groupby("episode", sort=True)
+        ]
+        for target in REWARD_SCHEMES:
+            row[f"R_T_{target}"] = sum(
+                sum(rescore(rewards, ended, scheme, target)) for rewards, ended in episodes
+            )
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def rescoring_table(
+    totals: pd.DataFrame, methods: dict[int, str], baseline: str | None = None
+) -> pd.DataFrame:
+    """Per method: the schemes its sessions were scored under, mean R_T as logged and under
+    each scheme, and (with a baseline) the improvement in percent under each scheme."""
+    frame = totals.assign(method=totals["session_id"].map(methods))
+    out = []
+    for method in order_methods(frame["method"], baseline):
+        group = frame[frame["method"] == method]
+        row: dict[str, object] = {
+            "method": method,
+            "name": method_name(method),
+            "agents": len(group),
+            "logged_under": " | ".join(sorted(set(group["scheme"]))),
+            "R_T_logged": group["R_T_logged"].mean(),
+        }
+        for scheme in REWARD_SCHEMES:
+            row[f"R_T_{scheme}"] = group[f"R_T_{scheme}"].mean()
+        out.append(row)
+    table = pd.DataFrame(out)
+    if baseline is not None and baseline in set(table["method"]):
+        base = table.set_index("method")
+        for scheme in ("logged", *REWARD_SCHEMES):
+            column = f"R_T_{scheme}"
+            reference = float(base.loc[baseline, column])
+            table[f"improvement_{scheme}"] = [
+                100.0 * (value - reference) / abs(reference) if reference else float("nan")
+                for value in table[column]
+            ]
+    return table

@@ -1,0 +1,62 @@
+"""Scenario options (reward scheme, realism) from the REST body to the environment, and the
+REST schema kept equal to the scenario's own description."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+
+import httpx
+import pandas as pd
+
+import sim
+from server.schemas.sessions import Scenario
+from server.services.learning import make_env
+from tests.server.scale import export, session_body, wait_for_status
+
+
+def test_rest_schema_and_scenario_options_cannot_drift() -> None:
+    ours = {f.name: f.default for f in dataclasses.fields(sim.ScenarioOptions)}
+    rest = {name: field.default for name, field in Scenario.model_fields.items()}
+    assert rest == ours
+    schemes = Scenario.model_json_schema()["properties"]["reward_scheme"]["enum"]
+    assert tuple(schemes) == sim.REWARD_SCHEMES
+
+
+def test_a_session_runs_under_its_scenario_options(api: httpx.Client) -> None:
+    study = api.post("/api/studies", json={"name": "scenario"}).json()
+    scenario = {"reward_scheme": "authors-interactive", "knock_off_rate": 0.25}
+    created = api.post(
+        f"/api/studies/{study['id']}/sessions",
+        json=session_body("autonomous", scenario=scenario),
+    )
+    assert created.status_code == 201, created.text
+    session = created.json()
+    assert session["scenario"] == {**scenario, "grasp_failure_rate": 0.0}
+    env = make_env(type("Row", (), session)(), record_motion=False)
+    assert (env.reward_scheme, env.knock_off_rate) == ("authors-interactive", 0.25)
+    env.close()
+    assert api.post(f"/api/sessions/{session['id']}/start").status_code == 200
+    wait_for_status(api, session["id"], {"finished"})
+    episodes = api.get(f"/api/sessions/{session['id']}/episodes").json()
+    assert any(e["lost"] > 0 for e in episodes), "knock-offs at 0.25 lose objects"
+    steps = pd.read_csv(io.BytesIO(export(api, study["id"])["steps.csv"]))
+    train = steps[steps["phase"] == "train"]
+    costs = train.loc[(train["reward"] <= 0) & ~train["terminated"].astype(bool), "reward"]
+    assert len(costs) and (costs == -0.01).all()  # flat -0.01 from step 1, never 0
+    assert (train["episode_step"] <= 18).any()
+
+
+def test_bad_scenario_options_are_422(api: httpx.Client) -> None:
+    study = api.post("/api/studies", json={"name": "bad-scenario"}).json()
+    for scenario in (
+        {"reward_scheme": "keras"},
+        {"knock_off_rate": 1.5},
+        {"grasp_failure_rate": -0.1},
+        {"surprise": 1},
+    ):
+        response = api.post(
+            f"/api/studies/{study['id']}/sessions",
+            json=session_body("autonomous", scenario=scenario),
+        )
+        assert response.status_code == 422, (scenario, response.text)
