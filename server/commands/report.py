@@ -35,7 +35,7 @@ def register(subparsers: Any) -> None:
         description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--study", type=int, required=True, help="study id")
+    parser.add_argument("--study", required=True, help="study id or name")
     parser.add_argument("--out", type=Path, required=True, help="folder to write into")
     parser.add_argument(
         "--sessions", nargs="+", metavar="ID", help="these sessions only (any status)"
@@ -70,6 +70,21 @@ def register(subparsers: Any) -> None:
     )
     add_database_options(parser)
     parser.set_defaults(func=report)
+
+
+def _study_id(db: Any, study: str) -> int:
+    """The id of the study named by id or name (never creates one)."""
+    from sqlalchemy import select
+
+    from server.db.models import Study
+    from server.services.errors import NotFound
+
+    if study.isdigit():
+        return int(study)
+    found = db.scalar(select(Study.id).where(Study.name == study))
+    if found is None:
+        raise NotFound(f"no study named {study!r}; `GET /api/studies` lists them")
+    return int(found)
 
 
 def _fail(message: str) -> int:
@@ -108,7 +123,7 @@ def report(args: argparse.Namespace) -> int:
     )
     with make_session_factory(engine)() as db:
         try:
-            built = build_report(db, args.study, args.out, request)
+            built = build_report(db, _study_id(db, args.study), args.out, request)
         except ServiceError as error:
             return _fail(error.message)
     result = built.result

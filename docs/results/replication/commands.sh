@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# The replication (docs/results/README.md): two advisors, then two resumable batches.
+# Run from the repository root after `make setup`. DATA holds the batches' database, the
+# advisors and the checkpoints (outside the work tree: several GB); every command can be
+# run again to resume. `save` copies the database and the advisors (a few MB) into
+# state/ to be committed; `restore` puts them back into a fresh DATA, so a later session
+# goes on where this one stopped (finished runs are kept, unfinished ones start again).
+set -euo pipefail
+DATA=${DATA:-/work/replication}
+OUT=docs/results/replication
+BIN=${BIN:-.venv/bin}
+mkdir -p "$DATA"
+
+# 1. The advisors: autonomous learners of seed 100000 (apart from every compared seed),
+#    trained under the settings of the comparison they advise in.
+advisor() {  # name, then ideeprl train options
+  local name=$1; shift
+  if [ ! -f "$DATA/advisor-$name.pt" ]; then
+    [ -f "$DATA/advisor-$name/checkpoint.pt" ] && resume=(--resume "$DATA/advisor-$name/checkpoint.pt") || resume=()
+    nice -n 10 $BIN/ideeprl train --seed 100000 --threads 1 --checkpoint-every 50 \
+      --no-progress --out "$DATA/advisor-$name" "$@" "${resume[@]}"
+    # Keep what an agent advisor reads (config and network, about 1 MB), not the memory.
+    $BIN/python -c "
+import sys, torch
+from learner.checkpoint import read_checkpoint, write_checkpoint
+s = read_checkpoint(sys.argv[1])
+write_checkpoint(sys.argv[2], {'config': s['config'], 'seed': s['seed'],
+    'metadata': s['metadata'], 'agent': {'network': s['agent']['network']}})
+" "$DATA/advisor-$name/checkpoint.pt" "$DATA/advisor-$name.pt"
+  fi
+}
+
+# (a) the paper's comparison as the authors made it: their learner, their realism, and
+#     each method scored by the rule of its own script.
+authors() {
+  advisor authors --preset authors --reward-scheme authors-autonomous \
+    --grasp-failure-rate 0.05 --knock-off-rate 0.05
+  $BIN/ideeprl batch --study replication-authors --label authors \
+    --methods autonomous agent --agents "${AGENTS:-10}" --seed 0 --preset authors \
+    --reward-scheme autonomous=authors-autonomous agent=authors-interactive \
+    --grasp-failure-rate 0.05 --knock-off-rate 0.05 \
+    --advisor-checkpoint "$DATA/advisor-authors.pt" \
+    --workers 1 --threads 1 --checkpoint-every 25 --nice 10 --no-progress --data-dir "$DATA"
+}
+
+# (b) the same methods under one rule (the paper's text), the paper's learner settings.
+paper() {
+  advisor paper --preset paper
+  $BIN/ideeprl batch --study replication-paper --label paper \
+    --methods autonomous agent --agents "${AGENTS:-10}" --seed 0 --preset paper \
+    --reward-scheme paper --advisor-checkpoint "$DATA/advisor-paper.pt" \
+    --workers 1 --threads 1 --checkpoint-every 25 --nice 10 --no-progress --data-dir "$DATA"
+}
+
+# 2. The reports (what docs/results/ holds).
+reports() {
+  $BIN/ideeprl report --study replication-authors --data-dir "$DATA" --out "$OUT/authors" \
+    --reference authors --allow-mismatch \
+    --title "(a) The paper's comparison as the authors made it"
+  $BIN/ideeprl report --study replication-paper --data-dir "$DATA" --out "$OUT/paper" \
+    --reference authors --title "(b) The same methods under one rule (paper)"
+}
+
+save() {
+  mkdir -p "$OUT/state"
+  $BIN/python -c "
+import sqlite3, sys
+src = sqlite3.connect(sys.argv[1]); dst = sqlite3.connect(sys.argv[2])
+src.backup(dst); dst.close()
+" "$DATA/ideeprl.sqlite3" "$OUT/state/ideeprl.sqlite3"
+  cp "$DATA"/advisor-*.pt "$OUT/state/"
+  gzip -f -9 "$OUT/state/ideeprl.sqlite3"
+}
+
+restore() {
+  [ -f "$DATA/ideeprl.sqlite3" ] || gunzip -c "$OUT/state/ideeprl.sqlite3.gz" > "$DATA/ideeprl.sqlite3"
+  for f in "$OUT"/state/advisor-*.pt; do [ -f "$DATA/$(basename "$f")" ] || cp "$f" "$DATA/"; done
+}
+
+case "${1:-all}" in
+  save) save ;;
+  restore) restore ;;
+  authors) authors ;;
+  paper) paper ;;
+  reports) reports ;;
+  all) authors & paper & wait; reports ;;
+esac
