@@ -4,8 +4,13 @@
     trainer = Trainer(env, DQNConfig.preset("paper"), advisor=make_advisor("oracle"), seed=7)
     trainer.run()
 
-See docs/architecture.md ("learner: the agent") for the contract.
+See docs/architecture.md ("learner: the agent") for the contract. Torch is imported only
+when a name that computes is first asked for (`Trainer`), as `sim` does for PyBullet, so
+the server and the analysis can use the config, records, advisors and strategies (and
+their types) without it.
 """
+
+from typing import TYPE_CHECKING, Any
 
 from learner.advisors import (
     Advisor,
@@ -18,7 +23,18 @@ from learner.advisors import (
 from learner.config import DQNConfig
 from learner.records import EpisodeRecord, StepRecord
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
-from learner.trainer import Trainer
+
+if TYPE_CHECKING:
+    from learner.trainer import Trainer
+
+
+def __getattr__(name: str) -> Any:
+    if name == "Trainer":
+        from learner.trainer import Trainer
+
+        return Trainer
+    raise AttributeError(f"module 'learner' has no attribute {name!r}")
+
 
 __all__ = [
     "AdviceMoment",

@@ -12,7 +12,6 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from learner.config import DQNConfig
-from learner.device import resolve_device
 
 ADVISOR_KINDS = ("agent", "oracle", "random")
 
@@ -94,6 +93,7 @@ class AgentAdvisor:
     def __init__(self, checkpoint: str | Path, device: str = "auto") -> None:
         from learner.agent import DQNAgent
         from learner.checkpoint import read_checkpoint
+        from learner.device import resolve_device
 
         state = read_checkpoint(checkpoint)
         config = DQNConfig.from_dict({**state["config"], "device": device})
