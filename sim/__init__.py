@@ -1,7 +1,8 @@
 """The sorting scenario: a PyBullet robot arm sorting red and blue objects onto two tables.
 
 `import sim` registers the Gymnasium id `ideeprl/Sorting-v0`, whose class is
-`sim.SortingEnv`; see docs/architecture.md ("sim: the scenario") for the contract.
+`sim.SortingEnv` (`gym.make("sim:ideeprl/Sorting-v0")` imports it for you); see
+docs/architecture.md ("sim: the scenario") for the contract.
 PyBullet is imported only when the environment itself is first used, so a viewer or an
 analysis script can use the actions, rules, oracle and scene types without it.
 """
@@ -12,7 +13,7 @@ import gymnasium
 
 from sim.actions import ACTION_NAMES, Action
 from sim.bodies import BodySpec, Box, Cylinder, Mesh, MotionFrame, Pose
-from sim.rules import COLORS, SHAPES, SortRule, oracle_action
+from sim.rules import COLORS, OBJECTS, SHAPES, SortRule, oracle_action
 
 ENV_ID = "ideeprl/Sorting-v0"
 
@@ -33,6 +34,7 @@ __all__ = [
     "ACTION_NAMES",
     "COLORS",
     "ENV_ID",
+    "OBJECTS",
     "SHAPES",
     "Action",
     "BodySpec",

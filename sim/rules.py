@@ -14,6 +14,8 @@ from sim.actions import Action
 SHAPES: tuple[str, ...] = ("cube", "cylinder", "disk")
 COLORS: tuple[str, ...] = ("red", "blue")
 SIDES: tuple[str, ...] = ("left", "right")
+OBJECTS: tuple[str, ...] = tuple(f"{s}/{c}" for s in SHAPES for c in COLORS)
+"""The six objects as "shape/color", in the order of `info["on_center"]`."""
 Side = Literal["left", "right"]
 SortRuleSpec = str | Mapping[str, str]
 
@@ -104,9 +106,10 @@ def oracle_action(info: Mapping[str, Any], sort_rule: "SortRuleSpec | SortRule")
     """
     rule = SortRule.parse(sort_rule)
     held = info["held"]
-    if held is None:
+    if not held:  # "" (the env's info), or None in a hand-made one
         return int(Action.GRAB)
-    side = rule.side(held["shape"], held["color"])
+    shape, color = held.split("/") if isinstance(held, str) else (held["shape"], held["color"])
+    side = rule.side(shape, color)
     if info["station"] == side:
         return int(Action.DROP)
     return int(Action.MOVE_RIGHT if side == "right" else Action.MOVE_LEFT)
