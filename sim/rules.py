@@ -29,7 +29,7 @@ VALID_FORMS = (
     'a sort rule is "color" (blue right, red left), "shape" (cubes left, cylinders and disks '
     'right), or a map from each of the six objects "shape/color" (shapes cube, cylinder, disk; '
     'colors red, blue) to "left" or "right", e.g. {"cube/red": "left", "cube/blue": "right", '
-    "...} (a dict, or the same as a JSON string)"
+    '...} (a dict, the same as a JSON string, or as text "cube/red=left;cube/blue=right;...")'
 )
 
 
@@ -59,6 +59,9 @@ class SortRule:
                     ) from None
             elif text.lower() in _NAMED:
                 return cls._from_map(text.lower(), _NAMED[text.lower()])
+            elif "=" in text:  # the exports' plain text: "cube/red=left;cube/blue=right;..."
+                pairs = [part.partition("=") for part in text.split(";") if part.strip()]
+                spec = {key.strip(): side.strip() for key, _, side in pairs}
             else:
                 raise ValueError(f"unknown sort rule {spec!r}; {VALID_FORMS}")
         if not isinstance(spec, Mapping):

@@ -18,13 +18,17 @@ from server.commands.common import (
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "export",
-        help="write a study's CSV files and column dictionary to a folder",
-        description="Write sessions.csv, episodes.csv, steps.csv, advice.csv (with the "
-        "advised images in advice/) and columns.csv, the column dictionary. The database "
+        help="write a study's tables (CSV or Parquet) and their data package to a folder",
+        description="Write sessions, episodes, steps and advice tables (with the advised "
+        "images in advice/), datapackage.json (Frictionless: each column's type, unit and "
+        "description) and columns.csv, the same dictionary. The database "
         "is found as `ideeprl serve` finds it (IDEEPRL_DATA_DIR, .env, or study_data here).",
     )
     parser.add_argument("--study", required=True, help="study id or name")
     parser.add_argument("--out", type=Path, required=True, help="folder to write into")
+    parser.add_argument(
+        "--format", choices=("csv", "parquet"), default="csv", help="table format (default csv)"
+    )
     add_database_options(parser)
     parser.set_defaults(func=export)
 
@@ -40,10 +44,11 @@ def export(args: argparse.Namespace) -> int:
     with make_session_factory(engine)() as db:
         study_id, _ = find_study(db, args.study)
         try:
-            counts = export_study(db, study_id, args.out)
+            counts = export_study(db, study_id, args.out, args.format)
         except ServiceError as error:
             raise CommandError(error.message, service_exit_code(error)) from None
     for name, rows in counts.items():
         print(f"{args.out / name}: {rows} rows")
+    print(f"{args.out / 'datapackage.json'}: the data package (types, units, descriptions)")
     print(f"{args.out / 'columns.csv'}: the column dictionary")
     return 0
