@@ -133,7 +133,8 @@ def train(args: argparse.Namespace) -> int:
     out = args.out or (args.resume.parent if args.resume else _default_out())
     resumed_step = resume_state["global_step"] if resume_state else None
     recorder = CsvRecorder(out, resume_from_step=resumed_step)
-    progress = Progress(config, resume_state, disable=args.no_progress)
+    # Bars only for a person at a terminal, never into a pipe or a log file.
+    progress = Progress(config, resume_state, disable=args.no_progress or not sys.stderr.isatty())
     trainer = Trainer(env, config, advisor, strategy, settings["seed"], [recorder, progress])
     if args.resume:
         trainer.load_checkpoint(args.resume)

@@ -109,6 +109,9 @@ class EpisodeRecord:
     """Global step of the episode's first step."""
     last_global_step: int
     """Global step of the episode's last step."""
+    reset_seed: int | None = None
+    """Seed the environment was reset with for this episode (drawn from the trainer's
+    RNG): the scene, and with the episode's actions every step, can be replayed from it."""
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

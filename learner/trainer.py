@@ -263,6 +263,7 @@ class Trainer:
             mean_loss=episode.loss_sum / episode.loss_count if episode.loss_count else None,
             first_global_step=episode.first_global_step,
             last_global_step=self.global_step,
+            reset_seed=episode.reset_seed,
         )
 
     def _notify(self, method: str, record: StepRecord | EpisodeRecord) -> None:

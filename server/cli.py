@@ -1,7 +1,9 @@
 """The `ideeprl` command line: one entry point, a sub-command per task.
 
 `train` comes from the learner; every module in `server/commands/` that defines
-`register(subparsers)` adds its own sub-commands, so a new command is a new file.
+`register(subparsers)` adds its own sub-commands, so a new command is a new file. Exit
+codes: 0 done, 1 a runtime error, 2 a usage error, 130 interrupted
+(`server.commands.common`).
 """
 
 from __future__ import annotations
@@ -10,8 +12,18 @@ import argparse
 import importlib
 import pkgutil
 from collections.abc import Sequence
+from importlib import metadata
 
 from server import commands
+from server.commands.common import CommandError, fail
+
+
+def version() -> str:
+    """The installed distribution's version (pyproject.toml)."""
+    try:
+        return metadata.version("ideeprl")
+    except metadata.PackageNotFoundError:  # run from a checkout that is not installed
+        return "unknown (not installed)"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="ideeprl",
         description="Human advising studies in interactive deep reinforcement learning.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     modules = ["learner.cli"] + [
         f"{commands.__name__}.{info.name}" for info in pkgutil.iter_modules(commands.__path__)
@@ -33,7 +46,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    try:
+        return int(args.func(args) or 0)
+    except CommandError as error:
+        return fail(error.message, error.code)
 
 
 if __name__ == "__main__":

@@ -10,6 +10,8 @@ from fastapi.responses import JSONResponse
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
+from server.openapi import install as install_openapi
+from server.openapi import operation_id
 from server.routes import ROUTERS, dashboard, pages, reports, viewing
 from server.services.errors import Invalid, ServiceError
 from server.sessions.hub import Hub
@@ -57,6 +59,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Human advising studies in interactive deep reinforcement learning.",
         version="0.1.0",
         lifespan=lifespan,
+        generate_unique_id_function=operation_id,
     )
     app.state.settings = settings
     app.state.engine = engine
@@ -70,6 +73,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in (reports.router, pages.router, viewing.router, dashboard.router):
         app.include_router(router)
     app.mount("/static", pages.static_files(), name="static")
+    install_openapi(app)
 
     @app.exception_handler(ServiceError)
     async def service_error(_: Request, error: ServiceError) -> JSONResponse:

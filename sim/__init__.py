@@ -1,7 +1,8 @@
 """The sorting scenario: a PyBullet robot arm sorting red and blue objects onto two tables.
 
 `import sim` registers the Gymnasium id `ideeprl/Sorting-v0`, whose class is
-`sim.SortingEnv`; see docs/architecture.md ("sim: the scenario") for the contract.
+`sim.SortingEnv` (`gym.make("sim:ideeprl/Sorting-v0")` imports it for you); see
+docs/architecture.md ("sim: the scenario") for the contract.
 PyBullet is imported only when the environment itself is first used, so a viewer or an
 analysis script can use the actions, rules, oracle and scene types without it.
 """
@@ -13,7 +14,7 @@ import gymnasium
 from sim.actions import ACTION_NAMES, Action
 from sim.bodies import BodySpec, Box, Cylinder, Mesh, MotionFrame, Pose
 from sim.rewards import REWARD_SCHEMES, rescore, step_penalty
-from sim.rules import COLORS, SHAPES, SortRule, oracle_action
+from sim.rules import COLORS, OBJECTS, SHAPES, SortRule, oracle_action
 from sim.scenario import ScenarioOptions
 
 ENV_ID = "ideeprl/Sorting-v0"
@@ -35,6 +36,7 @@ __all__ = [
     "ACTION_NAMES",
     "COLORS",
     "ENV_ID",
+    "OBJECTS",
     "REWARD_SCHEMES",
     "SHAPES",
     "Action",

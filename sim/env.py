@@ -1,5 +1,6 @@
 """The Gymnasium environment: thin glue between the arm, the scene, the task and the camera."""
 
+import copy
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -13,7 +14,7 @@ from sim.camera import IMAGE_SIZE, Camera
 from sim.layout import Layout
 from sim.rewards import RewardScheme
 from sim.robot import SuctionArm
-from sim.rules import SortRule, SortRuleSpec
+from sim.rules import OBJECTS, SortRule, SortRuleSpec
 from sim.scenario import ScenarioOptions
 from sim.scene import Scene
 from sim.task import SortingTask, StepEvents
@@ -55,6 +56,8 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         grasp_failure_rate: float = 0.0,
         knock_off_rate: float = 0.0,
     ) -> None:
+        # Every constructor argument, for a copy or an unpickled env (see `__deepcopy__`).
+        self._init_kwargs = {k: v for k, v in locals().items() if k not in ("self", "__class__")}
         if motion not in MOTIONS:
             raise ValueError(
                 f"motion must be 'physics' (the arm moves through simulated steps, for people "
@@ -94,6 +97,8 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         self._obs = np.zeros(self.observation_space.shape, np.uint8)
         self.last_motion: list[MotionFrame] = []
         """With `record_motion=True`: the moving bodies along the last step (or reset)."""
+        self._episode_start: dict[str, Any] | None = None
+        self._episode_actions: list[int] = []
 
     # -- Gymnasium API ------------------------------------------------------------------
 
@@ -101,6 +106,8 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
+        self._episode_start = copy.deepcopy(self.np_random.bit_generator.state)
+        self._episode_actions = []
         if self.motion == "physics":
             # Contact caches, sleeping timers and solver warm starts survive PyBullet's
             # saveState/restoreState; only a rebuilt world continues exactly as a new one.
@@ -123,6 +130,7 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
             raise ResetNeeded(
                 "the episode has ended (or never started): call env.reset() before env.step()"
             )
+        self._episode_actions.append(int(action))
         if self.record_motion:
             self._world.start_recording()
         events, moved = self._act(action)
@@ -234,7 +242,77 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         return rate > 0.0 and bool(self.np_random.random() < rate)
 
     def _info(self) -> dict[str, Any]:
-        return {"station": self._arm.station, **self._task.info()}
+        """The task's ground truth with values of one type and shape at every step and in
+        every env, so Gymnasium's vector envs can stack them (docs/architecture.md)."""
+        truth = self._task.info()
+        held = truth.pop("held")
+        left = {f"{kind['shape']}/{kind['color']}" for kind in truth.pop("remaining")}
+        on_center = tuple(name in left for name in OBJECTS)
+        return {
+            "station": self._arm.station,
+            "held": "" if held is None else f"{held['shape']}/{held['color']}",
+            "held_shape": "" if held is None else held["shape"],
+            "held_color": "" if held is None else held["color"],
+            "remaining": len(left),
+            "on_center": on_center,
+            **truth,
+        }
+
+    # -- copies -------------------------------------------------------------------------
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> "SortingEnv":
+        """A copy with its own PyBullet connection, in the same state: sharing the client
+        would let the copy's garbage collection disconnect the original."""
+        clone = _rebuild(*self._copy_state())
+        memo[id(self)] = clone
+        return clone
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as its constructor arguments, RNG and the episode's actions so far;
+        unpickling builds a new world and replays them (determinism makes it exact)."""
+        return (_rebuild, self._copy_state())
+
+    def _copy_state(self) -> tuple[Any, ...]:
+        rng = self._np_random
+        return (
+            type(self),
+            dict(self._init_kwargs),
+            self.spec,
+            self._np_random_seed,
+            None if rng is None else copy.deepcopy(rng.bit_generator.state),
+            copy.deepcopy(self._episode_start),
+            list(self._episode_actions),
+        )
+
+
+def _generator(state: dict[str, Any]) -> np.random.Generator:
+    bit_generator = getattr(np.random, state["bit_generator"])()
+    bit_generator.state = state
+    return np.random.Generator(bit_generator)
+
+
+def _rebuild(
+    cls: type[SortingEnv],
+    kwargs: dict[str, Any],
+    spec: Any,
+    seed: int | None,
+    rng_state: dict[str, Any] | None,
+    episode_start: dict[str, Any] | None,
+    actions: list[int],
+) -> SortingEnv:
+    """A new env in the state of the one `_copy_state` described: the same episode's reset
+    replayed from the RNG state it started with, then its actions."""
+    env = cls(**kwargs)
+    env.spec = spec
+    if episode_start is not None:
+        env._np_random = _generator(episode_start)
+        env.reset()
+        for action in actions:
+            env.step(action)
+    if rng_state is not None:
+        env._np_random = _generator(rng_state)
+    env._np_random_seed = seed
+    return env
 
 
 def _parse_action(action: Any) -> Action:

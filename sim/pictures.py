@@ -29,7 +29,7 @@ def first_grab_seed(env: SortingEnv, color: str) -> int:
     """A seed whose first grab picks an object of `color` (grab picks at random)."""
     for seed in range(100):
         env.reset(seed=seed)
-        if env.step(Action.GRAB)[4]["held"]["color"] == color:
+        if env.step(Action.GRAB)[4]["held_color"] == color:
             return seed
     raise RuntimeError(f"no seed below 100 grabs a {color} object first")
 

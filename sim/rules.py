@@ -14,6 +14,8 @@ from sim.actions import Action
 SHAPES: tuple[str, ...] = ("cube", "cylinder", "disk")
 COLORS: tuple[str, ...] = ("red", "blue")
 SIDES: tuple[str, ...] = ("left", "right")
+OBJECTS: tuple[str, ...] = tuple(f"{s}/{c}" for s in SHAPES for c in COLORS)
+"""The six objects as "shape/color", in the order of `info["on_center"]`."""
 Side = Literal["left", "right"]
 SortRuleSpec = str | Mapping[str, str]
 
@@ -27,7 +29,7 @@ VALID_FORMS = (
     'a sort rule is "color" (blue right, red left), "shape" (cubes left, cylinders and disks '
     'right), or a map from each of the six objects "shape/color" (shapes cube, cylinder, disk; '
     'colors red, blue) to "left" or "right", e.g. {"cube/red": "left", "cube/blue": "right", '
-    "...} (a dict, or the same as a JSON string)"
+    '...} (a dict, the same as a JSON string, or as text "cube/red=left;cube/blue=right;...")'
 )
 
 
@@ -57,6 +59,9 @@ class SortRule:
                     ) from None
             elif text.lower() in _NAMED:
                 return cls._from_map(text.lower(), _NAMED[text.lower()])
+            elif "=" in text:  # the exports' plain text: "cube/red=left;cube/blue=right;..."
+                pairs = [part.partition("=") for part in text.split(";") if part.strip()]
+                spec = {key.strip(): side.strip() for key, _, side in pairs}
             else:
                 raise ValueError(f"unknown sort rule {spec!r}; {VALID_FORMS}")
         if not isinstance(spec, Mapping):
@@ -104,9 +109,10 @@ def oracle_action(info: Mapping[str, Any], sort_rule: "SortRuleSpec | SortRule")
     """
     rule = SortRule.parse(sort_rule)
     held = info["held"]
-    if held is None:
+    if not held:  # "" (the env's info), or None in a hand-made one
         return int(Action.GRAB)
-    side = rule.side(held["shape"], held["color"])
+    shape, color = held.split("/") if isinstance(held, str) else (held["shape"], held["color"])
+    side = rule.side(shape, color)
     if info["station"] == side:
         return int(Action.DROP)
     return int(Action.MOVE_RIGHT if side == "right" else Action.MOVE_LEFT)

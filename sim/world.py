@@ -63,6 +63,18 @@ class Client:
             pybullet.disconnect(physicsClientId=self.id)
             self.id = -1
 
+    def __deepcopy__(self, memo: dict[int, Any]) -> "Client":
+        raise TypeError(
+            "a PyBullet client cannot be copied: the copy would share its connection and "
+            "disconnect it when collected; copy the SortingEnv instead (it builds its own)"
+        )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        raise TypeError(
+            "a PyBullet client cannot be pickled; pickle the SortingEnv instead (it is "
+            "rebuilt with its own connection)"
+        )
+
     def __del__(self) -> None:
         with contextlib.suppress(Exception):  # interpreter shutdown may have removed pybullet
             self.close()

@@ -22,6 +22,12 @@ from server.analysis.figures import (
     plot_method_curves,
     save_figure,
 )
+from server.analysis.intervals import (
+    bootstrap_interval,
+    difference_intervals,
+    iqm,
+    method_intervals,
+)
 from server.analysis.paper import paper_comparison
 from server.analysis.report import ReportResult, write_report
 from server.analysis.stats import (
@@ -45,10 +51,14 @@ __all__ = [
     "ReportResult",
     "agent_totals",
     "analyze",
+    "bootstrap_interval",
     "correlation_matrix",
+    "difference_intervals",
     "improvement_pct",
+    "iqm",
     "method_correlations",
     "method_curves",
+    "method_intervals",
     "method_name",
     "method_totals",
     "order_methods",

@@ -54,6 +54,8 @@ TABLE_FILES: dict[str, str] = {
     "method_correlations": "correlation_per_method.csv",
     "curves": "reward_per_episode.csv",
     "paper": "paper_comparison.csv",
+    "intervals": "r_t_intervals.csv",
+    "differences": "r_t_differences.csv",
 }
 OPTIONAL_TABLE_FILES: dict[str, str] = {
     "settings": "settings_per_method.csv",
@@ -265,6 +267,9 @@ def _tests_table(analysis: Analysis, alpha: float) -> str:
         "df": "df",
         "p": "p",
         "significant": f"p < {alpha:g}",
+        "t_welch": "Welch t",
+        "df_welch": "Welch df",
+        "p_welch": "Welch p",
     }
     if "withheld" in frame and (frame["withheld"] != "").any():
         frame["withheld"] = [f"withheld: {w}" if w else "" for w in frame["withheld"]]
@@ -275,8 +280,72 @@ def _tests_table(analysis: Analysis, alpha: float) -> str:
         "t": md.fixed(4),
         "df": md.fixed(0),
         "p": md.p_value,
+        "t_welch": md.fixed(4),
+        "df_welch": md.fixed(1),
+        "p_welch": md.p_value,
     }
     return md.table(frame, columns, formats)
+
+
+def _interval(low: float, high: float, digits: int = 2) -> str:
+    return "–" if np.isnan(low) else f"[{low:.{digits}f}, {high:.{digits}f}]"
+
+
+def _intervals_section(analysis: Analysis) -> list[str]:
+    """Bootstrap intervals and the IQM (server.analysis.intervals): what 4-10 agents allow."""
+    if analysis.intervals is None or analysis.differences is None:
+        return []
+    level = (
+        f"{(analysis.intervals.confidence.max() if len(analysis.intervals) else 0.95) * 100:g} %"
+    )
+    frame = analysis.intervals.copy()
+    frame["mean_ci"] = [_interval(a, b) for a, b in zip(frame.R_T_low, frame.R_T_high, strict=True)]
+    frame["iqm_ci"] = [_interval(a, b) for a, b in zip(frame.IQM_low, frame.IQM_high, strict=True)]
+    methods = md.table(
+        frame,
+        {
+            "name": "method",
+            "agents": "agents",
+            "R_T_mean": "mean of agents' R_T",
+            "mean_ci": f"{level} CI",
+            "IQM": "IQM of agents' R_T",
+            "iqm_ci": f"{level} CI",
+        },
+        {"R_T_mean": md.fixed(2), "IQM": md.fixed(2)},
+    )
+    diff = analysis.differences.copy()
+    diff["pair"] = [
+        f"{method_name(a)} − {method_name(b)}"
+        for a, b in zip(diff.method_a, diff.method_b, strict=True)
+    ]
+    diff["ci"] = [_interval(a, b) for a, b in zip(diff.low, diff.high, strict=True)]
+    diff["iqm_ci"] = [_interval(a, b) for a, b in zip(diff.IQM_low, diff.IQM_high, strict=True)]
+    differences = md.table(
+        diff,
+        {
+            "pair": "difference (a − b)",
+            "difference": "mean R_T",
+            "ci": f"{level} CI",
+            "IQM_difference": "IQM R_T",
+            "iqm_ci": f"{level} CI",
+        },
+        {"difference": md.fixed(2), "IQM_difference": md.fixed(2)},
+    )
+    return [
+        "## Confidence intervals and interquartile mean",
+        "",
+        "Percentile bootstrap over agents (`scipy.stats.bootstrap`, 10,000 resamples, "
+        "seed 0; each method's agents resampled on their own). The IQM is the mean of the "
+        "middle 50 % of agents' R_T (`scipy.stats.trim_mean(x, 0.25)`), robust to a single "
+        "run that failed or took off (Agarwal et al., NeurIPS 2021). With few agents these "
+        "intervals describe the runs and are too narrow as a guarantee; an interval needs "
+        "2+ agents per method.",
+        "",
+        methods,
+        "",
+        differences,
+        "",
+    ]
 
 
 def _paper_table(analysis: Analysis) -> str:
@@ -415,6 +484,8 @@ def write_report(
         "method_correlations": analysis.method_correlations,
         "curves": analysis.curves,
         "paper": analysis.paper,
+        "intervals": analysis.intervals,
+        "differences": analysis.differences,
     }
     if checked is not None:
         tables["settings"] = checked.methods
@@ -652,6 +723,7 @@ def _markdown(
         "",
         _tests_table(analysis, alpha),
         "",
+        *_intervals_section(analysis),
         "## Correlation between agents (the paper's Figure 7)",
         "",
         f"![Figure 7: Pearson's correlation between agents]({FIGURE_FILES['correlation']})",

@@ -168,7 +168,10 @@ def t_tests(
     method_b), then the other methods among themselves in display order (`method_pairs`).
     `sample = "episode_means"` compares the two average curves, N values each (the
     paper's Table 2); `sample = "agent_totals"` compares the agents' R_T, one value per
-    agent. Columns: method_a, method_b, sample, n_a, n_b, mean_a, mean_b, t, p, df, test.
+    agent. Columns: method_a, method_b, sample, n_a, n_b, mean_a, mean_b, t, p, df, test,
+    and Welch's test (unequal variances) beside it: t_welch, p_welch, df_welch; with a
+    handful of agents whose spreads differ (advised agents vary less), Welch's is the
+    safer reading.
     t is scipy's `ttest_ind(a, b)`: t > 0 means method_a's sample has the larger mean,
     so against the baseline t > 0 means more reward than the baseline. The paper
     prints |t|.
@@ -190,10 +193,9 @@ def t_tests(
         for sample, by_method in samples.items():
             a, b = by_method[method_a], by_method[method_b]
             t, p = student_t_test(a, b, equal_var=equal_var)
-            dof = len(a) + len(b) - 2 if equal_var else float("nan")
-            if not equal_var and len(a) > 1 and len(b) > 1:
-                va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)
-                dof = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1))
+            t_welch, p_welch = student_t_test(a, b, equal_var=False)
+            dof_welch = welch_dof(a, b)
+            dof = len(a) + len(b) - 2 if equal_var else dof_welch
             rows.append(
                 {
                     "method_a": method_a,
@@ -207,10 +209,24 @@ def t_tests(
                     "p": p,
                     "df": dof,
                     "test": name,
+                    "t_welch": t_welch,
+                    "p_welch": p_welch,
+                    "df_welch": dof_welch,
                 }
             )
     columns = ["method_a", "method_b", "sample", "n_a", "n_b", "mean_a", "mean_b"]
-    return pd.DataFrame(rows, columns=[*columns, "t", "p", "df", "test"])
+    welch = ["t_welch", "p_welch", "df_welch"]
+    return pd.DataFrame(rows, columns=[*columns, "t", "p", "df", "test", *welch])
+
+
+def welch_dof(a: np.ndarray, b: np.ndarray) -> float:
+    """Welch-Satterthwaite degrees of freedom; NaN when undefined (as the test is)."""
+    if len(a) < 2 or len(b) < 2:
+        return float("nan")
+    va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)
+    if va + vb == 0:
+        return float("nan")
+    return float((va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1)))
 
 
 def correlation_matrix(episodes: pd.DataFrame, labels: list[str] | None = None) -> pd.DataFrame:

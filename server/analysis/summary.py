@@ -8,6 +8,7 @@ import pandas as pd
 
 from server.analysis.episodes import order_methods, validate_episodes
 from server.analysis.figures import epsilon_reaches
+from server.analysis.intervals import difference_intervals, method_intervals
 from server.analysis.paper import paper_comparison
 from server.analysis.stats import (
     agent_totals,
@@ -43,6 +44,10 @@ class Analysis:
     """The paper's published numbers beside ours (`paper.paper_comparison`)."""
     epsilon_reached: pd.Series | None
     """First episode where a method's mean epsilon is at most 1 %; None without epsilon."""
+    intervals: pd.DataFrame | None = None
+    """Mean and IQM of agents' R_T per method with bootstrap intervals (`intervals`)."""
+    differences: pd.DataFrame | None = None
+    """Differences of those between methods, with bootstrap intervals (`intervals`)."""
 
     @property
     def method_order(self) -> list[str]:
@@ -82,4 +87,6 @@ def analyze(
         method_correlations=method_correlations(table, correlation),
         paper=paper_comparison(methods, tests, baseline=baseline),
         epsilon_reached=epsilon_reaches(table) if "epsilon" in table else None,
+        intervals=method_intervals(table, baseline=baseline),
+        differences=difference_intervals(table, baseline=baseline),
     )

@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from server.commands.common import service_exit_code, show_progress
+
 DESCRIPTION = """\
 Run N agents per method (autonomous, agent, oracle, random) as sessions of a study, in
 parallel worker processes on this machine or on Ray. Agent i of every method gets seed
@@ -247,9 +249,10 @@ def resolve_study(db: Any, study: str) -> tuple[int, str]:
     return created.id, f"new study {created.id} ({created.name})"
 
 
-def _fail(message: str) -> int:
+def _fail(message: str, code: int = 2) -> int:
+    """Exit 2 for options that make no sense, 1 (`code=1`) for what went wrong running."""
     print(f"error: {message}", file=sys.stderr)
-    return 2
+    return code
 
 
 def batch(args: argparse.Namespace) -> int:
@@ -280,10 +283,11 @@ def batch(args: argparse.Namespace) -> int:
             return 0
         return _run(args, spec, study_id, settings)
     except LookupError as error:
+        return _fail(str(error), 1)
+    except ServiceError as error:
+        return _fail(error.message, service_exit_code(error))
+    except (BatchError, ValidationError) as error:
         return _fail(str(error))
-    except (BatchError, ServiceError, ValidationError) as error:
-        message = getattr(error, "message", None) or str(error)
-        return _fail(message)
 
 
 def _check_counts(args: argparse.Namespace) -> None:
@@ -319,7 +323,7 @@ def _options(args: argparse.Namespace, settings: Any) -> Any:
         heartbeat_s=settings.heartbeat_s,
         stale_after_s=settings.stale_after_s,
         nice=args.nice,
-        progress=not args.no_progress,
+        progress=show_progress(args.no_progress),
     )
 
 

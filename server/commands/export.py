@@ -1,4 +1,4 @@
-"""`ideeprl export --study ID --out DIR`: a study's CSV files and column dictionary."""
+"""`ideeprl export --study ID|NAME --out DIR`: a study's tables and their data package."""
 
 from __future__ import annotations
 
@@ -6,36 +6,49 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from server.commands.batch import add_database_options, settings_from
+from server.commands.common import (
+    CommandError,
+    existing_database,
+    find_study,
+    service_exit_code,
+)
+
 
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "export",
-        help="write a study's CSV files and column dictionary to a folder",
-        description="Write sessions.csv, episodes.csv, steps.csv, advice.csv (with the "
-        "advised images in advice/) and columns.csv, the column dictionary.",
+        help="write a study's tables (CSV or Parquet) and their data package to a folder",
+        description="Write sessions, episodes, steps and advice tables (with the advised "
+        "images in advice/), datapackage.json (Frictionless: each column's type, unit and "
+        "description) and columns.csv, the same dictionary. The database "
+        "is found as `ideeprl serve` finds it (IDEEPRL_DATA_DIR, .env, or study_data here).",
     )
-    parser.add_argument("--study", type=int, required=True, help="study id")
+    parser.add_argument("--study", required=True, help="study id or name")
     parser.add_argument("--out", type=Path, required=True, help="folder to write into")
+    parser.add_argument(
+        "--format", choices=("csv", "parquet"), default="csv", help="table format (default csv)"
+    )
+    add_database_options(parser)
     parser.set_defaults(func=export)
 
 
 def export(args: argparse.Namespace) -> int:
-    from server.db.engine import make_engine, make_session_factory
-    from server.db.migrate import upgrade
+    from server.db.engine import make_session_factory
     from server.services.errors import ServiceError
     from server.services.export import export_study
-    from server.settings import Settings
 
-    settings = Settings()
-    engine = make_engine(settings.db_url)
-    upgrade(engine)
+    if args.out.exists() and not args.out.is_dir():
+        raise CommandError(f"{args.out} is a file; --out takes a folder", code=2)
+    engine = existing_database(settings_from(args))
     with make_session_factory(engine)() as db:
+        study_id, _ = find_study(db, args.study)
         try:
-            counts = export_study(db, args.study, args.out)
+            counts = export_study(db, study_id, args.out, args.format)
         except ServiceError as error:
-            print(f"error: {error.message}")
-            return 2
+            raise CommandError(error.message, service_exit_code(error)) from None
     for name, rows in counts.items():
         print(f"{args.out / name}: {rows} rows")
+    print(f"{args.out / 'datapackage.json'}: the data package (types, units, descriptions)")
     print(f"{args.out / 'columns.csv'}: the column dictionary")
     return 0

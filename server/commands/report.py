@@ -1,4 +1,4 @@
-"""`ideeprl report --study ID --out DIR`: the paper's analysis of a study's sessions."""
+"""`ideeprl report --study ID|NAME --out DIR`: the paper's analysis of a study's sessions."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from server.commands.batch import add_database_options, settings_from
+from server.commands.common import EXIT_USAGE, existing_database, find_study, service_exit_code
 
 DESCRIPTION = """\
 Write the paper's analysis of a study's sessions into a folder: report.md with Figures 5-7
@@ -72,29 +73,13 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=report)
 
 
-def _study_id(db: Any, study: str) -> int:
-    """The id of the study named by id or name (never creates one)."""
-    from sqlalchemy import select
-
-    from server.db.models import Study
-    from server.services.errors import NotFound
-
-    if study.isdigit():
-        return int(study)
-    found = db.scalar(select(Study.id).where(Study.name == study))
-    if found is None:
-        raise NotFound(f"no study named {study!r}; `GET /api/studies` lists them")
-    return int(found)
-
-
-def _fail(message: str) -> int:
+def _fail(message: str, code: int = EXIT_USAGE) -> int:
     print(f"error: {message}", file=sys.stderr)
-    return 2
+    return code
 
 
 def report(args: argparse.Namespace) -> int:
-    from server.db.engine import make_engine, make_session_factory
-    from server.db.migrate import upgrade
+    from server.db.engine import make_session_factory
     from server.services.errors import ServiceError
     from server.services.reports import ReportRequest, build_report
 
@@ -107,9 +92,7 @@ def report(args: argparse.Namespace) -> int:
         return _fail(f"--n-episodes must be at least 1, got {args.n_episodes}")
     if args.out.exists() and not args.out.is_dir():
         return _fail(f"{args.out} is a file; --out takes a folder")
-    settings = settings_from(args)
-    engine = make_engine(settings.db_url)
-    upgrade(engine)
+    engine = existing_database(settings_from(args))
     request = ReportRequest(
         sessions=sessions,
         methods=methods,
@@ -122,10 +105,11 @@ def report(args: argparse.Namespace) -> int:
         reference=args.reference,
     )
     with make_session_factory(engine)() as db:
+        study_id, _ = find_study(db, args.study)
         try:
-            built = build_report(db, _study_id(db, args.study), args.out, request)
+            built = build_report(db, study_id, args.out, request)
         except ServiceError as error:
-            return _fail(error.message)
+            return _fail(error.message, service_exit_code(error))
     result = built.result
     warnings = result.audit.warnings() if result.audit is not None else []
     for warning in warnings:

@@ -206,6 +206,8 @@ class Episode(Base):
     first_global_step: Mapped[int] = mapped_column(Integer)
     last_global_step: Mapped[int] = mapped_column(Integer)
     wall_time: Mapped[float] = mapped_column(Float)
+    reset_seed: Mapped[int | None] = mapped_column(Integer)
+    """The environment's reset seed (None for episodes recorded before it was kept)."""
 
 
 class Advice(Base):

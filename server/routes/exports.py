@@ -1,8 +1,9 @@
 """A study's export as one zip download."""
 
 import shutil
+from typing import Annotated, Literal
 
-from fastapi import APIRouter, BackgroundTasks
+from fastapi import APIRouter, BackgroundTasks, Query
 from fastapi.responses import FileResponse
 
 from server.deps import DbDep, ResearcherDep, SettingsDep
@@ -18,10 +19,17 @@ router = APIRouter(prefix="/api/studies", tags=["exports"], dependencies=[Resear
     responses={200: {"content": {"application/zip": {}}}},
 )
 def export_study(
-    db: DbDep, settings: SettingsDep, study_id: StudyId, background: BackgroundTasks
+    db: DbDep,
+    settings: SettingsDep,
+    study_id: StudyId,
+    background: BackgroundTasks,
+    format: Annotated[
+        Literal["csv", "parquet"], Query(description="Tables as CSV (default) or Parquet.")
+    ] = "csv",
 ) -> FileResponse:
-    """CSV files of sessions, episodes, steps and advice (with the advised images), and
-    `columns.csv`, the column dictionary."""
-    archive = export_zip(db, study_id, settings.export_dir / "tmp")
+    """Tables of sessions, episodes, steps and advice (with the advised images), described
+    by `datapackage.json` (Frictionless: each column's type, unit, description) and
+    `columns.csv`, the same column dictionary."""
+    archive = export_zip(db, study_id, settings.export_dir / "tmp", format)
     background.add_task(shutil.rmtree, archive.parent, ignore_errors=True)
     return FileResponse(archive, media_type="application/zip", filename=f"study-{study_id}.zip")

@@ -8,6 +8,7 @@ from sqlalchemy import select
 
 from server.db.models import Advice
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
+from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
 from server.schemas.sessions import (
     AdvicePublic,
@@ -33,8 +34,10 @@ def create_session(
 
 
 @router.get("/studies/{study_id}/sessions")
-def list_sessions(db: DbDep, settings: SettingsDep, study_id: StudyId) -> list[SessionPublic]:
-    found = sessions.list_sessions(db, study_id)
+def list_sessions(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, page: PageDep
+) -> list[SessionPublic]:
+    found = page.of(sessions.list_sessions(db, study_id))
     return [sessions.session_public(s, settings.base_url) for s in found]
 
 
@@ -109,19 +112,22 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
 def list_episodes(
     db: DbDep,
     session_id: SessionId,
+    page: PageDep,
     phase: Literal["train", "pretrain", "all"] = Query(
         default="train", description="train: the learning curve; pretrain; or all."
     ),
 ) -> list[EpisodePublic]:
     """The learning curve: collected reward (and more) per episode, in order."""
     found = sessions.list_episodes(db, session_id)
-    return [EpisodePublic.model_validate(e) for e in found if phase in ("all", e.phase)]
+    chosen = [e for e in found if phase in ("all", e.phase)]
+    return [EpisodePublic.model_validate(e) for e in page.of(chosen)]
 
 
 @router.get("/sessions/{session_id}/advice")
-def list_advice(db: DbDep, session_id: SessionId) -> list[AdvicePublic]:
+def list_advice(db: DbDep, session_id: SessionId, page: PageDep) -> list[AdvicePublic]:
     sessions.get_session(db, session_id)
     query = select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
+    query = query.offset(page.offset).limit(page.limit)
     return [AdvicePublic.model_validate(a) for a in db.scalars(query)]
 
 

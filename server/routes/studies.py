@@ -3,6 +3,7 @@
 from fastapi import APIRouter, Request, Response
 
 from server.deps import DbDep, ResearcherDep
+from server.routes.paging import PageDep
 from server.routes.params import StudyId
 from server.schemas.studies import StudyCreate, StudyPublic, StudyUpdate
 from server.services import studies
@@ -16,8 +17,8 @@ def create_study(db: DbDep, body: StudyCreate) -> StudyPublic:
 
 
 @router.get("")
-def list_studies(db: DbDep) -> list[StudyPublic]:
-    return [studies.public(db, s) for s in studies.list_studies(db)]
+def list_studies(db: DbDep, page: PageDep) -> list[StudyPublic]:
+    return [studies.public(db, s) for s in page.of(studies.list_studies(db))]
 
 
 @router.get("/{study_id}")

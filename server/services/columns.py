@@ -1,7 +1,8 @@
-"""The export's column dictionary: what each column means and its unit.
+"""The export's column dictionary: each column's type, unit and meaning.
 
 Step and episode columns are documented where they are made, in the docstrings under the
-learner's `StepRecord` and `EpisodeRecord` fields; the rest are documented here."""
+learner's `StepRecord` and `EpisodeRecord` fields (their types come from the database
+model); the learner config's columns from `DQNConfig`; the rest are documented here."""
 
 from __future__ import annotations
 
@@ -11,49 +12,89 @@ import itertools
 import textwrap
 from typing import Any
 
-SESSION_COLUMNS = {
-    "session_id": "Session id (unique in the database).",
-    "study_id": "Study the session belongs to.",
-    "label": "Free text set by the researcher (e.g. a batch name).",
-    "method": "Who advised: autonomous, agent, human, oracle or random.",
-    "participant": "Pseudonym of the human advisor (human sessions).",
-    "seed": "Seed of the scene, network init, memory sampling and exploration.",
-    "strategy": "Advising strategy (early, alternating, importance, mistake_correcting).",
-    "advice_budget": "Advice the strategy may ask for in all [count].",
-    "advisor_checkpoint": "Trained learner that advised (agent sessions).",
-    "oracle_error_rate": "Chance the oracle advised a wrong action (oracle sessions) [0-1].",
-    "motion": "physics (simulated motion) or fast (poses set directly).",
-    "sort_rule": "Sorting rule, as JSON (color, shape, or a map object -> side).",
-    "reward_scheme": "What a step without a placement cost: paper (-0.01 after the 18th "
-    "step), authors-autonomous (0 up to the 19th, then -0.01 x (n - 19)), authors-interactive "
-    "(-0.01 from the first step).",
-    "grasp_failure_rate": "Chance that a grab came back empty (realism option) [0-1].",
-    "knock_off_rate": "Chance that a grab knocked another object off the center table [0-1].",
-    "episodes": "Training episodes the session was set to run [count].",
-    "max_episode_steps": "Steps after which an episode is truncated [count].",
-    "config": "The full learner configuration, as JSON.",
-    "status": "Final or current status (finished, running, stopped, interrupted, ...).",
-    "created_at": "When the session was created [UTC, ISO 8601].",
-    "started_at": "When it first started [UTC, ISO 8601].",
-    "finished_at": "When it finished [UTC, ISO 8601].",
+from server.services.tables import Column, column
+
+SESSION_COLUMNS: dict[str, tuple[str, str]] = {
+    "session_id": ("integer", "Session id (unique in the database)."),
+    "study_id": ("integer", "Study the session belongs to."),
+    "label": ("string", "Free text set by the researcher (e.g. a batch name)."),
+    "method": ("string", "Who advised: autonomous, agent, human, oracle or random."),
+    "participant": ("string", "Pseudonym of the human advisor (human sessions)."),
+    "seed": ("integer", "Seed of the scene, network init, memory sampling and exploration."),
+    "strategy": (
+        "string",
+        "Advising strategy (early, alternating, importance, mistake_correcting).",
+    ),
+    "advice_budget": ("integer", "Advice the strategy may ask for in all [count]."),
+    "advisor_checkpoint": ("string", "Trained learner that advised (agent sessions)."),
+    "oracle_error_rate": (
+        "number",
+        "Chance the oracle advised a wrong action (oracle sessions) [probability].",
+    ),
+    "motion": ("string", "physics (simulated motion) or fast (poses set directly)."),
+    "sort_rule": (
+        "string",
+        "Sorting rule: color (blue right, red left), shape (cubes left, the rest right), "
+        "or a map written shape/color=side;... for all six objects.",
+    ),
+    "reward_scheme": (
+        "string",
+        "What a step without a placement cost: paper (-0.01 after the 18th step), "
+        "authors-autonomous (0 up to the 19th, then -0.01 x (n - 19)), authors-interactive "
+        "(-0.01 from the first step).",
+    ),
+    "grasp_failure_rate": ("number", "Chance that a grab came back empty [probability]."),
+    "knock_off_rate": (
+        "number",
+        "Chance that a grab knocked another object off the center table [probability].",
+    ),
+    "episodes": ("integer", "Training episodes the session was set to run [count]."),
+    "max_episode_steps": ("integer", "Steps after which an episode is truncated [count]."),
+    "status": ("string", "Final or current status (finished, running, stopped, ...)."),
+    "created_at": ("datetime", "When the session was created (UTC)."),
+    "started_at": ("datetime", "When it first started (UTC)."),
+    "finished_at": ("datetime", "When it finished (UTC)."),
 }
-ADVICE_COLUMNS = {
-    "session_id": "Session the advice belongs to.",
-    "advice_index": "Index of the advice in its session, from 0 [count].",
-    "global_step": "Global step the advice was for (from 1, pretraining included).",
-    "advisor": "Who advised: human, agent, oracle or random.",
-    "action": "Advised action: 0 grab, 1 move right, 2 move left, 3 drop.",
-    "action_name": "The advised action's name.",
-    "greedy_action": "The learner's own greedy choice for the same observation (if known).",
-    "response_time_s": "Time from showing the observation to receiving the advice [s]; "
-    "for people measured by the server, so network time is included.",
-    "requested_at": "When the observation was shown [UTC, ISO 8601].",
-    "answered_at": "When the advice arrived [UTC, ISO 8601].",
-    "observation_file": "PNG (64x64 RGB, lossless) of what the advisor saw, in advice/.",
+ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
+    "session_id": ("integer", "Session the advice belongs to."),
+    "advice_index": ("integer", "Index of the advice in its session, from 0."),
+    "global_step": ("integer", "Global step the advice was for (from 1, pretraining included)."),
+    "advisor": ("string", "Who advised: human, agent, oracle or random."),
+    "action": ("integer", "Advised action: 0 grab, 1 move right, 2 move left, 3 drop."),
+    "action_name": ("string", "The advised action's name."),
+    "greedy_action": (
+        "integer",
+        "The learner's own greedy choice for the same observation (if known).",
+    ),
+    "response_time_s": (
+        "number",
+        "Time from showing the observation to receiving the advice; for people measured "
+        "by the server, so network time is included [s].",
+    ),
+    "requested_at": ("datetime", "When the observation was shown (UTC)."),
+    "answered_at": ("datetime", "When the advice arrived (UTC)."),
+    "observation_file": ("string", "PNG (64x64 RGB, lossless) of what the advisor saw."),
 }
-SESSION_KEY = {
-    "session_id": "Session the record belongs to.",
-    "wall_time": "When the session's worker logged the record [Unix time, s].",
+RECORD_EXTRA: dict[str, tuple[str, str]] = {
+    "logged_at": ("datetime", "When the session's worker logged the record (UTC)."),
+    "elapsed_s": ("number", "Seconds from the session's first start to the record [s]."),
+}
+STEP_ADVISED = ("boolean", "The step's action came from the advisor (advised_action is set).")
+PHASES = {
+    "steps": "`pretrain` (pretraining stage, random or advised: see `advised`) or `train` "
+    "(training stage); the same vocabulary as episodes.csv.",
+    "episodes": "`pretrain` or `train`; the paper's curves and R_T use the `train` episodes.",
+}
+UNITS = {
+    "reward": "reward",
+    "collected_reward": "reward",
+    "epsilon": "probability",
+    "steps": "count",
+    "placed_correct": "count",
+    "misplaced": "count",
+    "lost": "count",
+    "advised_steps": "count",
+    "advice_remaining": "count",
 }
 
 
@@ -80,22 +121,77 @@ def field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
-def record_columns() -> dict[str, dict[str, str]]:
-    """Step and episode column docs, from the learner's record classes."""
+def _sql_type(column: Any) -> str:
+    from sqlalchemy import Boolean, DateTime, Float, Integer
+
+    kind = column.type
+    for sql, name in ((Boolean, "boolean"), (Integer, "integer"), (Float, "number")):
+        if isinstance(kind, sql):
+            return name
+    return "datetime" if isinstance(kind, DateTime) else "string"
+
+
+def _record_columns(table: str) -> list[Column]:
+    """Step or episode columns: types from the database model, descriptions from the
+    docstrings under the learner's record fields."""
     from learner import EpisodeRecord, StepRecord
+    from server.db.models import Episode, Step
 
+    model, record = (Step, StepRecord) if table == "steps" else (Episode, EpisodeRecord)
+    docs = field_docs(record)
+    docs["phase"] = PHASES[table]
+    columns = [column("session_id", "integer", "Session the record belongs to.")]
+    for c in model.__table__.columns:
+        if c.name in ("id", "session_id", "wall_time"):
+            continue
+        description = docs.get(c.name) or "(not documented)"
+        columns.append(column(c.name, _sql_type(c), description, UNITS.get(c.name)))
+    if table == "steps":
+        columns.append(column("advised", *STEP_ADVISED))
+    return columns + [column(name, *spec) for name, spec in RECORD_EXTRA.items()]
+
+
+def _config_columns(configs: list[dict[str, Any]]) -> list[Column]:
+    """One column per learner config field (`config_lr`, ...), typed by the config's own
+    dataclass, in its field order; fields only old sessions have come after."""
+    import dataclasses
+    import typing
+
+    from learner.config import DQNConfig
+    from learner.config import field_docs as config_docs
+
+    hints = typing.get_type_hints(DQNConfig)
+    docs = config_docs()
+    names = [f.name for f in dataclasses.fields(DQNConfig)]
+    names += sorted({k for c in configs for k in c} - set(names))
+    columns = []
+    for name in names:
+        kind = _python_type(hints.get(name), [c.get(name) for c in configs])
+        text = docs.get(name, "Learner configuration field.")
+        columns.append(column(f"config_{name}", kind, f"Learner config: {text}"))
+    return columns
+
+
+def _python_type(hint: Any, values: list[Any]) -> str:
+    import typing
+
+    options = [a for a in typing.get_args(hint) if a is not type(None)] or [hint]
+    kinds = {bool: "boolean", int: "integer", float: "number", str: "string"}
+    if len(options) == 1 and options[0] in kinds:
+        return kinds[options[0]]
+    present = {type(v) for v in values if v is not None}
+    if present and present <= {int, float} and present != {bool}:
+        return "integer" if present == {int} else "number"
+    return "boolean" if present == {bool} else "string"
+
+
+def table_columns(configs: list[dict[str, Any]]) -> dict[str, list[Column]]:
+    """Every exported table's typed, documented columns; `configs`: the sessions' learner
+    configs (they decide the `config_*` columns)."""
+    sessions = [column(name, *spec) for name, spec in SESSION_COLUMNS.items()]
     return {
-        "steps.csv": {**SESSION_KEY, **field_docs(StepRecord)},
-        "episodes.csv": {**SESSION_KEY, **field_docs(EpisodeRecord)},
+        "sessions": sessions + _config_columns(configs),
+        "episodes": _record_columns("episodes"),
+        "steps": _record_columns("steps"),
+        "advice": [column(name, *spec) for name, spec in ADVICE_COLUMNS.items()],
     }
-
-
-def column_dictionary(files: dict[str, list[str]]) -> list[dict[str, Any]]:
-    """Rows (file, column, description) for every column of every exported file."""
-    docs = {"sessions.csv": SESSION_COLUMNS, "advice.csv": ADVICE_COLUMNS, **record_columns()}
-    rows = []
-    for name, columns in files.items():
-        for column in columns:
-            description = docs.get(name, {}).get(column) or "(not documented)"
-            rows.append({"file": name, "column": column, "description": description})
-    return rows

@@ -1,13 +1,21 @@
-"""A study's data as CSV files (sessions, episodes, steps, advice with its images) and a
-column dictionary, written to a folder or packed as one zip."""
+"""A study's data, ready for analysis: sessions, episodes, steps and advice (with the
+advised images) as CSV or Parquet, described by a Frictionless `datapackage.json` (each
+column's type, unit and description) and the same dictionary as `columns.csv`; written to
+a folder or packed as one zip.
+
+Analysis-ready means: ISO 8601 UTC timestamps (`logged_at`, with `elapsed_s` since the
+session started beside it), lowercase booleans, the sort rule as plain text, the learner
+config as one column per field, each episode's reset seed (replay it with the episode's
+actions), and one phase vocabulary in steps and episodes (`pretrain`, `train`; a
+pretraining step taken on advice has `advised = true`).
+"""
 
 from __future__ import annotations
 
-import csv
 import json
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -16,65 +24,37 @@ from sqlalchemy.orm import Session
 
 from server.db.models import Advice, Episode, Step, StudySession
 from server.services import learning
-from server.services.columns import column_dictionary
+from server.services.columns import table_columns
 from server.services.studies import get_study
+from server.services.tables import column, resource, write_csv, write_parquet
 
 ACTION_NAMES = ("grab", "move right", "move left", "drop")
-STEP_COLUMNS = ["session_id"] + [
-    c.name for c in Step.__table__.columns if c.name not in ("id", "session_id")
-]
-EPISODE_COLUMNS = ["session_id"] + [
-    c.name for c in Episode.__table__.columns if c.name not in ("id", "session_id")
-]
-SESSION_FIELDS = [
-    "session_id",
-    "study_id",
-    "label",
-    "method",
-    "participant",
-    "seed",
-    "strategy",
-    "advice_budget",
-    "advisor_checkpoint",
-    "oracle_error_rate",
-    "motion",
-    "sort_rule",
-    "reward_scheme",
-    "grasp_failure_rate",
-    "knock_off_rate",
-    "episodes",
-    "max_episode_steps",
-    "config",
-    "status",
-    "created_at",
-    "started_at",
-    "finished_at",
-]
-ADVICE_FIELDS = [
-    "session_id",
-    "advice_index",
-    "global_step",
-    "advisor",
-    "action",
-    "action_name",
-    "greedy_action",
-    "response_time_s",
-    "requested_at",
-    "answered_at",
-    "observation_file",
-]
+FORMATS = ("csv", "parquet")
+TABLES = ("sessions", "episodes", "steps", "advice")
+KEYS: dict[str, dict[str, Any]] = {
+    "sessions": {"primaryKey": ["session_id"]},
+    "episodes": {"primaryKey": ["session_id", "phase", "episode"]},
+    "steps": {"primaryKey": ["session_id", "global_step"]},
+    "advice": {"primaryKey": ["session_id", "advice_index"]},
+}
 BATCH = 5000
+DICTIONARY_COLUMNS = [
+    column("file", "string", "The table."),
+    column("column", "string", "The column."),
+    column("type", "string", "Its Frictionless Table Schema type."),
+    column("unit", "string", "Its unit, for a quantity."),
+    column("description", "string", "What it means."),
+]
 
 
-def _write(path: Path, columns: list[str], rows: Iterable[dict[str, Any]]) -> int:
-    count = 0
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow(row)
-            count += 1
-    return count
+def plain_sort_rule(spec: Any) -> str:
+    """`color`, `shape`, or `cube/red=left;cube/blue=right;...` for an explicit map."""
+    from sim.rules import SortRule
+
+    rule = SortRule.parse(spec)
+    if rule.name != "map":
+        return rule.name
+    return ";".join(f"{shape}/{color}={side}" for shape, color, side in rule.sides)
 
 
 def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
@@ -84,90 +64,112 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "study_id": s.study_id,
             "label": s.label,
             "method": s.method,
-            "participant": s.participant.pseudonym if s.participant else "",
+            "participant": s.participant.pseudonym if s.participant else None,
             "seed": s.seed,
-            "strategy": s.strategy or "",
+            "strategy": s.strategy,
             "advice_budget": s.advice_budget,
-            "advisor_checkpoint": s.advisor_checkpoint or "",
-            "oracle_error_rate": "" if s.oracle_error_rate is None else s.oracle_error_rate,
+            "advisor_checkpoint": s.advisor_checkpoint,
+            "oracle_error_rate": s.oracle_error_rate,
             "motion": s.motion,
-            "sort_rule": json.dumps(s.sort_rule),
+            "sort_rule": plain_sort_rule(s.sort_rule),
             **learning.parse_scenario(s.scenario),
             "episodes": s.episodes,
             "max_episode_steps": s.max_episode_steps,
-            "config": json.dumps(s.config, sort_keys=True),
             "status": s.status,
-            "created_at": s.created_at.isoformat(),
-            "started_at": s.started_at.isoformat() if s.started_at else "",
-            "finished_at": s.finished_at.isoformat() if s.finished_at else "",
+            "created_at": s.created_at,
+            "started_at": s.started_at,
+            "finished_at": s.finished_at,
+            **{f"config_{k}": v for k, v in (s.config or {}).items()},
         }
 
 
-def _records(db: Session, model: Any, ids: list[int], order: Any) -> Iterator[dict[str, Any]]:
+def _records(
+    db: Session, model: Any, sessions: list[StudySession], order: Any
+) -> Iterator[dict[str, Any]]:
+    from datetime import UTC, datetime
+
     columns = [c for c in model.__table__.columns if c.name != "id"]
-    for session_id in ids:
+    for session in sessions:
+        started = session.started_at.timestamp() if session.started_at else None
         query = (
             select(*columns)
-            .where(model.session_id == session_id)
+            .where(model.session_id == session.id)
             .order_by(order)
             .execution_options(yield_per=BATCH)
         )
-        for row in db.execute(query):
-            yield dict(row._mapping)
+        for found in db.execute(query):
+            row = dict(found._mapping)
+            wall = row.pop("wall_time")
+            row["logged_at"] = datetime.fromtimestamp(wall, UTC)
+            row["elapsed_s"] = None if started is None else round(wall - started, 3)
+            if model is Step:
+                row["advised"] = row["advised_action"] is not None
+                if row["phase"] == "advice":  # a pretraining step taken on advice
+                    row["phase"] = "pretrain"
+            yield row
 
 
-def _advice_rows(db: Session, ids: list[int], out: Path) -> Iterator[dict[str, Any]]:
+def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterator[dict[str, Any]]:
     images = out / "advice"
     images.mkdir(exist_ok=True)
-    for session_id in ids:
-        query = select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
-        for a in db.scalars(query.execution_options(yield_per=500)):
-            name = f"session-{session_id}-advice-{a.advice_index:05d}.png"
+    for session in sessions:
+        query = select(Advice).where(Advice.session_id == session.id)
+        for a in db.scalars(query.order_by(Advice.advice_index).execution_options(yield_per=500)):
+            name = f"session-{session.id}-advice-{a.advice_index:05d}.png"
             (images / name).write_bytes(a.observation_png)
             yield {
-                "session_id": session_id,
+                "session_id": session.id,
                 "advice_index": a.advice_index,
                 "global_step": a.global_step,
                 "advisor": a.advisor,
                 "action": a.action,
                 "action_name": ACTION_NAMES[a.action],
-                "greedy_action": "" if a.greedy_action is None else a.greedy_action,
+                "greedy_action": a.greedy_action,
                 "response_time_s": a.response_time_s,
-                "requested_at": a.requested_at.isoformat(),
-                "answered_at": a.answered_at.isoformat(),
+                "requested_at": a.requested_at,
+                "answered_at": a.answered_at,
                 "observation_file": f"advice/{name}",
             }
 
 
-def export_study(db: Session, study_id: int, out: Path) -> dict[str, int]:
-    """Write the study's files into `out`; returns the row count of each CSV."""
+def export_study(db: Session, study_id: int, out: Path, fmt: str = "csv") -> dict[str, int]:
+    """Write the study's tables (`fmt`: csv or parquet), `datapackage.json`, `columns.csv`
+    and `study.json` into `out`; returns the row count of each table file."""
+    if fmt not in FORMATS:
+        raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     study = get_study(db, study_id)
     out.mkdir(parents=True, exist_ok=True)
-    sessions = list(
-        db.scalars(
-            select(StudySession).where(StudySession.study_id == study.id).order_by(StudySession.id)
-        )
-    )
-    ids = [s.id for s in sessions]
-    counts = {
-        "sessions.csv": _write(out / "sessions.csv", SESSION_FIELDS, _session_rows(sessions)),
-        "episodes.csv": _write(
-            out / "episodes.csv",
-            EPISODE_COLUMNS,
-            _records(db, Episode, ids, Episode.first_global_step),
-        ),
-        "steps.csv": _write(
-            out / "steps.csv", STEP_COLUMNS, _records(db, Step, ids, Step.global_step)
-        ),
-        "advice.csv": _write(out / "advice.csv", ADVICE_FIELDS, _advice_rows(db, ids, out)),
+    query = select(StudySession).where(StudySession.study_id == study.id)
+    sessions = list(db.scalars(query.order_by(StudySession.id)))
+    columns = table_columns([s.config or {} for s in sessions])
+    rows = {
+        "sessions": _session_rows(sessions),
+        "episodes": _records(db, Episode, sessions, Episode.first_global_step),
+        "steps": _records(db, Step, sessions, Step.global_step),
+        "advice": _advice_rows(db, sessions, out),
     }
-    files = {
-        "sessions.csv": SESSION_FIELDS,
-        "episodes.csv": EPISODE_COLUMNS,
-        "steps.csv": STEP_COLUMNS,
-        "advice.csv": ADVICE_FIELDS,
+    write = write_parquet if fmt == "parquet" else write_csv
+    counts, resources = {}, []
+    for table in TABLES:
+        name = f"{table}.{fmt}"
+        counts[name] = write(out / name, columns[table], rows[table])
+        resources.append(resource(table, name, columns[table], KEYS[table]))
+    package = {
+        "profile": "tabular-data-package",
+        "name": f"ideeprl-study-{study.id}",
+        "title": study.name,
+        "description": study.description
+        or "An IDeepRL study: sessions, their episodes, steps and advice.",
+        "resources": resources,
     }
-    _write(out / "columns.csv", ["file", "column", "description"], column_dictionary(files))
+    (out / "datapackage.json").write_text(json.dumps(package, indent=2) + "\n")
+    dictionary = [
+        {"file": f"{table}.{fmt}", "column": c.name, "type": c.type, "unit": c.unit,
+         "description": c.description}
+        for table in TABLES
+        for c in columns[table]
+    ]  # fmt: skip
+    write_csv(out / "columns.csv", DICTIONARY_COLUMNS, dictionary)
     (out / "study.json").write_text(
         json.dumps(
             {"id": study.id, "name": study.name, "description": study.description, "rows": counts},
@@ -177,10 +179,10 @@ def export_study(db: Session, study_id: int, out: Path) -> dict[str, int]:
     return counts
 
 
-def export_zip(db: Session, study_id: int, work_dir: Path) -> Path:
+def export_zip(db: Session, study_id: int, work_dir: Path, fmt: str = "csv") -> Path:
     """The study's export packed as one zip in a fresh temporary folder under `work_dir`."""
     work_dir.mkdir(parents=True, exist_ok=True)
     temp = Path(tempfile.mkdtemp(prefix=f"study-{study_id}-", dir=work_dir))
     folder = temp / f"study-{study_id}"
-    export_study(db, study_id, folder)
+    export_study(db, study_id, folder, fmt)
     return Path(shutil.make_archive(str(folder), "zip", root_dir=folder))

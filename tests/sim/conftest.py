@@ -58,7 +58,7 @@ def seed_whose_first_grab_is(env: sim.SortingEnv, color: str) -> int:
     for seed in range(100):
         env.reset(seed=seed)
         _, _, _, _, info = env.step(sim.Action.GRAB)
-        if info["held"]["color"] == color:
+        if info["held_color"] == color:
             return seed
     raise AssertionError(f"no seed in 0..99 grabs a {color} object first")
 

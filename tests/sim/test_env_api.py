@@ -40,15 +40,15 @@ def test_import_registers_the_id_and_names_the_actions() -> None:
 
 def test_info_holds_the_ground_truth(fast_env: sim.SortingEnv) -> None:
     _, info = fast_env.reset(seed=0)
-    assert info["station"] == "center" and info["held"] is None
-    assert sorted((o["shape"], o["color"]) for o in info["remaining"]) == sorted(
-        (s, c) for s in sim.SHAPES for c in sim.COLORS
-    )
+    assert info["station"] == "center" and info["held"] == ""
+    assert (info["held_shape"], info["held_color"]) == ("", "")
+    assert info["remaining"] == 6 and info["on_center"] == (True,) * 6
     assert (info["placed_correct"], info["misplaced"], info["lost"]) == (0, 0, 0)
     assert info["episode_step"] == 0
     _, _, _, _, info = fast_env.step(sim.Action.GRAB)
-    assert info["held"] is not None and info["held"] not in info["remaining"]
-    assert len(info["remaining"]) == 5 and info["episode_step"] == 1
+    assert info["held"] == f"{info['held_shape']}/{info['held_color']}"
+    assert not info["on_center"][sim.OBJECTS.index(info["held"])]
+    assert info["remaining"] == 5 and info["episode_step"] == 1
 
 
 def test_the_scenario_does_not_need_pybullet_until_the_env_is_used() -> None:
@@ -94,7 +94,7 @@ def test_stepping_after_the_end_without_reset_raises_and_changes_nothing(motion:
             env.step(sim.Action.GRAB)  # never reset
         env.reset(seed=2)
         _, _, _, _, info = env.step(sim.Action.GRAB)
-        wrong = sim.Action.MOVE_LEFT if info["held"]["color"] == "blue" else sim.Action.MOVE_RIGHT
+        wrong = sim.Action.MOVE_LEFT if info["held_color"] == "blue" else sim.Action.MOVE_RIGHT
         env.step(wrong)
         _, reward, terminated, _, info = env.step(sim.Action.DROP)
         assert terminated and reward == -1.0

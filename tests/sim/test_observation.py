@@ -45,8 +45,8 @@ def test_every_held_object_is_plainly_visible_at_every_station(fast_env: sim.Sor
     first_grab = {}
     for seed in range(200):
         fast_env.reset(seed=seed)
-        held = fast_env.step(GRAB)[4]["held"]
-        first_grab.setdefault(f"objects/{held['shape']}_{held['color']}", seed)
+        info = fast_env.step(GRAB)[4]
+        first_grab.setdefault(f"objects/{info['held_shape']}_{info['held_color']}", seed)
         if len(first_grab) == 6:
             break
     assert len(first_grab) == 6

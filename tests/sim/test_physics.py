@@ -38,7 +38,7 @@ def test_the_held_object_hangs_from_the_cup_wherever_the_arm_goes(
 ) -> None:
     _, info = physics_env.reset(seed=1)
     _, _, _, _, info = physics_env.step(GRAB)
-    name = f"objects/{info['held']['shape']}_{info['held']['color']}"
+    name = f"objects/{info['held'].replace('/', '_')}"
     for action in (LEFT, RIGHT, GRAB):
         _, _, _, _, info = physics_env.step(action)
         poses = physics_env.body_poses()
@@ -53,8 +53,8 @@ def test_an_object_knocked_off_the_table_is_lost_without_reward(
     physics_env: sim.SortingEnv,
 ) -> None:
     _, info = physics_env.reset(seed=2)
-    victim = info["remaining"][0]
-    name = f"objects/{victim['shape']}_{victim['color']}"
+    victim = int(np.flatnonzero(info["on_center"])[0])
+    name = f"objects/{sim.OBJECTS[victim].replace('/', '_')}"
     # Knock it just past the table's far edge (as a careless arm would), then let the arm
     # move: the object falls while the world steps.
     world, body = physics_env._world, physics_env._objects[name].body
@@ -63,7 +63,7 @@ def test_an_object_knocked_off_the_table_is_lost_without_reward(
     world.p.resetBasePositionAndOrientation(body, (edge, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0))
     _, reward, terminated, _, info = physics_env.step(LEFT)
     assert (reward, terminated, info["lost"]) == (0.0, False, 1)
-    assert victim not in info["remaining"] and len(info["remaining"]) == 5
+    assert not info["on_center"][victim] and info["remaining"] == 5
     assert physics_env.body_poses()[name].position[2] < physics_env.layout.table_height
     # The other five, sorted, complete the task: 4 x 0.4 + 1.0.
     total, steps = 0.0, 1
@@ -84,7 +84,7 @@ def test_objects_pushed_aside_on_the_table_are_still_picked(physics_env: sim.Sor
         world.p.resetBasePositionAndOrientation(obj.body, (x - 0.03, y, z), orientation)
     for placed in range(3):
         _, _, _, _, info = physics_env.step(GRAB)
-        assert info["held"] is not None and len(info["remaining"]) == 5 - placed
+        assert info["held"] != "" and info["remaining"] == 5 - placed
         physics_env.step(sim.oracle_action(info, "color"))
         _, reward, _, _, info = physics_env.step(DROP)
         assert (reward, info["lost"]) == (0.4, 0)

@@ -72,6 +72,6 @@ def test_oracle_goes_to_the_held_objects_side_then_drops(
 ) -> None:
     info = {
         "station": station,
-        "held": None if held is None else dict(zip(("shape", "color"), held, strict=True)),
+        "held": "" if held is None else "/".join(held),
     }
     assert sim.oracle_action(info, rule) == expected

@@ -34,8 +34,8 @@ def test_body_poses_follow_the_scene(fast_env: sim.SortingEnv) -> None:
     for pose in poses.values():
         assert np.linalg.norm(pose.orientation) == pytest.approx(1.0)
     grid = np.array(fast_env.layout.grid())
-    for kind in info["remaining"]:
-        x, y, z = poses[f"objects/{kind['shape']}_{kind['color']}"].position
+    for kind in np.array(sim.OBJECTS)[np.array(info["on_center"])]:
+        x, y, z = poses[f"objects/{kind.replace('/', '_')}"].position
         assert np.min(np.linalg.norm(grid - (x, y), axis=1)) < 1e-6
         assert z > fast_env.layout.table_height
     # The base's mesh frame is where the arm stands, not PyBullet's centre of mass.
@@ -62,8 +62,8 @@ def test_physics_motion_is_recorded_densely_enough_to_replay() -> None:
         cup_z = [frame.poses["arm/suction_cup"].position[2] for frame in frames]
         assert min(cup_z) < cup_z[0] - 0.15  # it went down to the object and came back
         assert abs(cup_z[-1] - cup_z[0]) < 0.01
-        env.step(RIGHT if info["held"]["color"] == "red" else LEFT)  # wrong way: fine
-        env.step(RIGHT if info["held"]["color"] == "red" else LEFT)  # already there
+        env.step(RIGHT if info["held_color"] == "red" else LEFT)  # wrong way: fine
+        env.step(RIGHT if info["held_color"] == "red" else LEFT)  # already there
         assert len(env.last_motion) == 1
     finally:
         env.close()

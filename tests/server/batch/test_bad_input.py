@@ -1,4 +1,5 @@
-"""Mistakes on the command line get a message that says what to do, and run nothing."""
+"""Mistakes on the command line get a message that says what to do, and run nothing:
+exit 2 for an option that makes no sense, 1 for what the database does not hold."""
 
 from __future__ import annotations
 
@@ -39,10 +40,10 @@ def test_an_unknown_study_id_is_named_and_nothing_runs(
     place: Place, capsys: pytest.CaptureFixture[str]
 ) -> None:
     code, out = run(place, capsys, "batch", "--study", "987654", *SCALE)
-    assert code == 2 and "error: no study with id 987654" in out
+    assert code == 1 and "error: no study with id 987654" in out
     assert "Give a name instead to create a study" in out
     code, out = run(place, capsys, "report", "--study", "987654", "--out", "unused")
-    assert code == 2 and "error: no study with id 987654" in out
+    assert code == 1 and "error: no study with id 987654" in out
     assert not Path("unused").exists()
 
 
@@ -54,7 +55,7 @@ def test_a_study_with_nothing_finished_says_how_to_fill_it(
     study = study_id(place.engine(), "still empty")
     assert sessions(place.engine(), study) == []  # a dry run creates no session
     code, out = run(place, capsys, "report", "--study", str(study), "--out", str(tmp_path / "r"))
-    assert code == 2 and "no finished sessions to analyse; run sessions first" in out
+    assert code == 1 and "no finished sessions to analyse; run sessions first" in out
     assert f"ideeprl batch --study {study}" in out
     assert not (tmp_path / "r").exists()
 

@@ -1,0 +1,147 @@
+"""The OpenAPI contract a generated client can trust.
+
+FastAPI declares a route's success and, for routes with parameters, 422; a client
+generated from that raises on every other status as if it were unexpected. Here every
+status a route can return is declared, all errors with one model (`ErrorBody`, FastAPI's
+own `{"detail": ...}` written down), operation ids are the route functions' names
+(`create_study`, not `create_study_api_studies_post`), and zip, PNG, CSV and Markdown
+downloads are binary strings. Done once, over the finished app, so a new route gets the
+same treatment as long as its errors follow the rules below (a test checks them).
+
+Which errors a route can return:
+- 401 and 403: the researcher key or the participant token is missing or wrong
+  (the operation has a security requirement);
+- 404: a path id that names nothing, a participant whose session was deleted, or an
+  entry of `EXTRA_ERRORS` (`NotFound`);
+- 409: the entries of `EXTRA_ERRORS` (a service's `Conflict`: a state that forbids it);
+- 422: a parameter or body that does not validate (FastAPI), or a service's `Invalid`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+from fastapi.routing import APIRoute
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class ErrorItem(BaseModel):
+    """One problem with the request (422), as FastAPI and pydantic report it."""
+
+    model_config = ConfigDict(extra="allow")
+
+    loc: list[str | int] = Field(description='Where: e.g. ["body", "name"] or ["path", "id"].')
+    msg: str = Field(description="What is wrong, in words.")
+    type: str = Field(description="pydantic's error type, e.g. missing, value_error.")
+
+
+class ErrorBody(BaseModel):
+    """Every error response: a sentence that says what to do, or (422) the problems."""
+
+    detail: str | list[ErrorItem] = Field(
+        description="A message (401, 403, 404, 409, ...) or, for 422, one item per problem."
+    )
+
+
+ERROR_DESCRIPTIONS: dict[int, str] = {
+    401: "No credentials: the researcher key (X-API-Key) or the participant token is missing.",
+    403: "Wrong credentials: the key or token is not valid.",
+    404: "Nothing with that id (or not yet: e.g. no report built).",
+    409: "The resource's state forbids this now (e.g. a session already running).",
+    422: "The parameters or the body are not valid.",
+}
+
+EXTRA_ERRORS: dict[str, tuple[int, ...]] = {
+    "create_study": (409,),
+    "update_study": (409,),
+    "delete_study": (409,),
+    "start_session": (409,),
+    "pause_session": (409,),
+    "resume_session": (409,),
+    "stop_session": (409,),
+    "build_report": (409,),
+    "get_report": (404,),
+    "get_report_file": (404,),
+    "get_report_zip": (404,),
+    "advice_observation": (404,),
+    "participant_give_advice": (409,),
+    "participant_start": (409,),
+}
+"""Statuses a route returns beyond what its dependencies and path ids imply (by name)."""
+
+BINARY_TYPES = ("application/zip", "image/png", "text/csv", "text/markdown")
+
+_REF = "#/components/schemas/"
+PARTICIPANT_SCHEME = "HTTPBearer"
+"""The participant token's security scheme (`server.deps`); the researcher's is APIKeyHeader."""
+
+
+def operation_id(route: APIRoute) -> str:
+    """The route function's name, what a generated client calls the method; a
+    participant's routes say so (`participant_start`, not `start`)."""
+    if "participant" in route.tags and not route.name.startswith("participant"):
+        return f"participant_{route.name}"
+    return route.name
+
+
+def route_errors(operation: dict[str, Any]) -> list[int]:
+    """The error statuses an operation can return, by the rules in the module's docstring,
+    read from its OpenAPI description (security, parameters, body) and `EXTRA_ERRORS`."""
+    codes: set[int] = set(EXTRA_ERRORS.get(operation.get("operationId", ""), ()))
+    schemes = {name for need in operation.get("security", []) for name in need}
+    if schemes:
+        codes |= {401, 403}
+    if PARTICIPANT_SCHEME in schemes:
+        codes.add(404)  # the participant's session may have been deleted meanwhile
+    places = {p.get("in") for p in operation.get("parameters", [])}
+    if "path" in places:
+        codes.add(404)
+    if places or "requestBody" in operation:
+        codes.add(422)
+    return sorted(codes)
+
+
+def install(app: FastAPI) -> None:
+    """Declare errors and binary bodies on first use of `app.openapi()` (FastAPI caches
+    the result). Operation ids come from `operation_id`, given to `FastAPI(...)`."""
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = get_openapi(
+                title=app.title,
+                version=app.version,
+                summary=app.summary,
+                description=app.description,
+                routes=app.routes,
+            )
+            app.openapi_schema = _declare(schema)
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+
+
+def _declare(schema: dict[str, Any]) -> dict[str, Any]:
+    components = schema.setdefault("components", {}).setdefault("schemas", {})
+    body = ErrorBody.model_json_schema(ref_template=_REF + "{model}")
+    components.update(body.pop("$defs", {}))
+    components["ErrorBody"] = body
+    error_content = {"application/json": {"schema": {"$ref": _REF + "ErrorBody"}}}
+    for operations in schema.get("paths", {}).values():
+        for operation in operations.values():
+            codes = route_errors(operation)
+            responses = operation.setdefault("responses", {})
+            responses.pop("422", None)  # FastAPI's HTTPValidationError: one model instead
+            for code in codes:
+                responses[str(code)] = {
+                    "description": ERROR_DESCRIPTIONS[code],
+                    "content": error_content,
+                }
+            for response in responses.values():
+                for media_type, content in response.get("content", {}).items():
+                    if media_type in BINARY_TYPES:
+                        content["schema"] = {"type": "string", "format": "binary"}
+    for unused in ("HTTPValidationError", "ValidationError"):
+        components.pop(unused, None)
+    return schema

@@ -1,0 +1,176 @@
+"""`ideeprl` behaves like a well-kept command-line tool: --version, a study by id or name,
+exit 1 for runtime errors and 2 for usage, no bars into a pipe, and commands that read
+find the data folder as `serve` does and never create an empty database."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import struct
+import subprocess
+import sys
+import termios
+import threading
+from importlib import metadata
+from pathlib import Path
+
+import pytest
+
+from server.cli import main
+from server.commands.common import show_progress
+from server.db.engine import make_engine, make_session_factory
+from server.db.migrate import upgrade
+from server.schemas.studies import StudyCreate
+from server.services.studies import create_study
+
+ROOT = Path(__file__).absolute().parents[2]
+TINY_TRAIN = [
+    "--episodes", "2", "--set", "pretraining_steps=40", "--set", "batch_size=8",
+    "--set", "memory_size=200", "--set", "max_episode_steps=15", "--set", "advice_budget=0",
+]  # fmt: skip
+
+
+def environment(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("IDEEPRL_")}
+    env.pop("DATABASE_URL", None)
+    return {**env, "PYTHONPATH": str(ROOT), **extra}
+
+
+def ideeprl(*args: str, cwd: Path, **env: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "server", *args],
+        cwd=cwd,
+        env=environment(**env),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+@pytest.fixture
+def data_dir(tmp_path: Path) -> Path:
+    """A data folder as `serve` leaves it: a migrated database holding one study."""
+    folder = tmp_path / "data"
+    folder.mkdir()
+    engine = make_engine(f"sqlite:///{folder / 'ideeprl.sqlite3'}")
+    upgrade(engine)
+    with make_session_factory(engine)() as db:
+        create_study(db, StudyCreate(name="pilot study", description="for the CLI tests"))
+    engine.dispose()
+    return folder
+
+
+def test_version_prints_the_installed_version(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as stopped:
+        main(["--version"])
+    assert stopped.value.code == 0
+    assert capsys.readouterr().out.strip() == f"ideeprl {metadata.version('ideeprl')}"
+
+
+def test_export_by_name_or_id_finds_the_data_folder_as_serve_does(
+    data_dir: Path, tmp_path: Path
+) -> None:
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    by_name = ideeprl(
+        "export", "--study", "pilot study", "--out", str(tmp_path / "a"),
+        cwd=elsewhere, IDEEPRL_DATA_DIR=str(data_dir),
+    )  # fmt: skip
+    assert by_name.returncode == 0, by_name.stderr
+    assert (tmp_path / "a" / "sessions.csv").is_file()
+    by_id = ideeprl(
+        "export", "--study", "1", "--out", str(tmp_path / "b"), "--data-dir", str(data_dir),
+        cwd=elsewhere,
+    )  # fmt: skip
+    assert by_id.returncode == 0, by_id.stderr
+    # Like serve, a `.env` in the working folder names the data folder too.
+    (elsewhere / ".env").write_text(f"IDEEPRL_DATA_DIR={data_dir}\n")
+    dotenv = ideeprl(
+        "export", "--study", "pilot study", "--out", str(tmp_path / "c"), cwd=elsewhere
+    )
+    assert dotenv.returncode == 0, dotenv.stderr
+    assert list(elsewhere.iterdir()) == [elsewhere / ".env"]
+
+
+def test_reading_commands_never_create_an_empty_database(tmp_path: Path) -> None:
+    for command in (["export"], ["report"]):
+        done = ideeprl(*command, "--study", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
+        assert done.returncode == 1, done.stderr
+        assert "error: no database at" in done.stderr and "--data-dir" in done.stderr
+    assert list(tmp_path.iterdir()) == [], "no study_data folder, no database, no output"
+
+
+def test_unknown_studies_are_runtime_errors_and_bad_options_usage_errors(
+    data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    flags = ["--data-dir", str(data_dir)]
+    out = str(tmp_path / "out")
+    assert main(["export", "--study", "no such study", "--out", out, *flags]) == 1
+    assert "error: no study with name no such study; studies: 1 (pilot study)" in (
+        capsys.readouterr().err
+    )
+    assert main(["report", "--study", "pilot study", "--out", out, *flags]) == 1
+    assert "no finished sessions" in capsys.readouterr().err
+    assert main(["report", "--study", "1", "--n-episodes", "0", "--out", out, *flags]) == 2
+    with pytest.raises(SystemExit) as stopped:
+        main(["export", "--no-such-option"])
+    assert stopped.value.code == 2
+    assert not Path(out).exists()
+
+
+class FakeTerminal:
+    def __init__(self, tty: bool) -> None:
+        self.tty = tty
+
+    def isatty(self) -> bool:
+        return self.tty
+
+
+def test_progress_bars_only_for_a_terminal() -> None:
+    assert show_progress(False, FakeTerminal(True)) is True
+    assert show_progress(False, FakeTerminal(False)) is False
+    assert show_progress(True, FakeTerminal(True)) is False
+
+
+def train_output(tmp_path: Path, *, terminal: bool) -> str:
+    """Everything `ideeprl train` writes on stderr, into a pipe or into a terminal (a pty)."""
+    command = [sys.executable, "-m", "server", "train", "--out", str(tmp_path), *TINY_TRAIN]
+    if not terminal:
+        done = subprocess.run(
+            command, cwd=ROOT, env=environment(), capture_output=True, text=True, timeout=300
+        )
+        assert done.returncode == 0, done.stderr
+        return done.stderr
+    master, slave = os.openpty()
+    # A pty starts 0 columns wide, where tqdm draws an empty bar: make it a usual 80.
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
+    chunks: list[bytes] = []
+
+    def drain() -> None:
+        while True:
+            try:
+                data = os.read(master, 4096)
+            except OSError:
+                return
+            if not data:
+                return
+            chunks.append(data)
+
+    reader = threading.Thread(target=drain, daemon=True)
+    reader.start()
+    with subprocess.Popen(
+        command, cwd=ROOT, env=environment(), stdout=subprocess.DEVNULL, stderr=slave
+    ) as process:
+        os.close(slave)
+        assert process.wait(timeout=300) == 0
+    reader.join(timeout=10)
+    os.close(master)
+    return b"".join(chunks).decode(errors="replace")
+
+
+@pytest.mark.slow
+def test_train_draws_bars_in_a_terminal_and_none_into_a_pipe(tmp_path: Path) -> None:
+    piped = train_output(tmp_path / "piped", terminal=False)
+    assert "%|" not in piped and "\r" not in piped
+    shown = train_output(tmp_path / "tty", terminal=True)
+    assert "%|" in shown, "the same run at a terminal shows its bars"
