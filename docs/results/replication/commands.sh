@@ -66,7 +66,13 @@ save() {
   $BIN/python -c "
 import sqlite3, sys
 src = sqlite3.connect(sys.argv[1]); dst = sqlite3.connect(sys.argv[2])
-src.backup(dst); dst.close()
+src.backup(dst)
+# Unfinished runs' checkpoints stay behind: drop those runs, the batch creates them anew.
+gone = 'select id from sessions where status != \"finished\"'
+for table in ('steps', 'episodes', 'advice'):
+    dst.execute(f'delete from {table} where session_id in ({gone})')
+dst.execute(f'delete from sessions where id in ({gone})')
+dst.commit(); dst.execute('vacuum'); dst.close()
 " "$DATA/ideeprl.sqlite3" "$OUT/state/ideeprl.sqlite3"
   cp "$DATA"/advisor-*.pt "$OUT/state/"
   gzip -f -9 "$OUT/state/ideeprl.sqlite3"

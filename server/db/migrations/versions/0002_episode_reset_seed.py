@@ -1,7 +1,7 @@
 """episodes keep their environment reset seed (an episode can be replayed from the export)
 
 Revision ID: 0002_reset_seed
-Revises: 0001
+Revises: 0004 (the scenario options came first on main)
 Create Date: 2026-12-01 20:45:00
 """
 
@@ -11,7 +11,7 @@ import sqlalchemy as sa
 from alembic import op
 
 revision: str = "0002_reset_seed"
-down_revision: str | None = "0001"
+down_revision: str | None = "0004"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 

@@ -1,7 +1,7 @@
 """sessions.scenario: the scenario options (reward scheme, realism rates)
 
 Revision ID: 0004
-Revises: 0002_reset_seed
+Revises: 0001
 """
 
 from collections.abc import Sequence
@@ -10,7 +10,7 @@ import sqlalchemy as sa
 from alembic import op
 
 revision: str = "0004"
-down_revision: str | None = "0002_reset_seed"
+down_revision: str | None = "0001"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
