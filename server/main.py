@@ -35,6 +35,7 @@ def worker_options(settings: Settings) -> WorkerOptions:
         idle_limit_s=settings.idle_limit_s,
         torch_threads=settings.worker_threads,
         nice=settings.trainer_nice,
+        keep_replay_memory=settings.keep_replay_memory,
     )
 
 

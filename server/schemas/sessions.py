@@ -63,6 +63,13 @@ class SessionCreate(BaseModel):
         pattern=r"^[A-Za-z0-9_-]+$",
         description="Pseudonym of the participant (human); generated when omitted.",
     )
+    keep_replay_memory: bool | None = Field(
+        default=None,
+        strict=True,
+        description="Keep the replay memory in the final checkpoint (default: the server's "
+        "keep_replay_memory setting). Without it the final checkpoint holds the network and "
+        "what an advisor needs, a few MB instead of about 250 MB at paper scale.",
+    )
     idle_limit_s: Number | None = Field(
         default=None, gt=0, description="Seconds without advice before abandoning (human)."
     )
@@ -86,6 +93,7 @@ class SessionPublic(BaseModel):
     episodes: int
     max_episode_steps: int
     idle_limit_s: float | None
+    keep_replay_memory: bool | None = None
     participant: str | None = None
     participant_url: str | None = None
     status: str
