@@ -17,6 +17,7 @@ from server.db.migrate import upgrade
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
 from server.guard import LOGIN, RequestGuard
 from server.headers import SecurityHeaders, validation_error
+from server.logins import Logins
 from server.routes import ROUTERS, dashboard, pages, reports, viewing
 from server.services.errors import Invalid, ServiceError
 from server.sessions.hub import Hub
@@ -93,6 +94,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.manager = manager
     app.state.viewer = viewer
     app.state.participant_tokens = {}
+    app.state.dashboard_logins = Logins(settings.dashboard_login_s)
     for router in ROUTERS:
         app.include_router(router)
     for router in (reports.router, pages.router, viewing.router, dashboard.router):
