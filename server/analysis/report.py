@@ -32,6 +32,7 @@ from server.analysis.figures import (
 from server.analysis.paper import PAPER_AGENTS, PAPER_EPISODES
 from server.analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
 from server.analysis.summary import Analysis, analyze
+from server.csvsafe import safe_frame
 
 REPORT_FILE = "report.md"
 FIGURE_FILES: dict[str, str] = {
@@ -371,7 +372,7 @@ def write_report(
     table_paths = {}
     for name, frame in tables.items():
         table_paths[name] = out / TABLE_FILES[name]
-        frame.to_csv(table_paths[name], index=name == "correlation")
+        safe_frame(frame).to_csv(table_paths[name], index=name == "correlation")
 
     figures = {
         "reward_per_method": plot_method_curves(

@@ -14,6 +14,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from server.csvsafe import safe_row
 from server.db.models import Advice, Episode, Step, StudySession
 from server.services.columns import column_dictionary
 from server.services.studies import get_study
@@ -68,7 +69,7 @@ def _write(path: Path, columns: list[str], rows: Iterable[dict[str, Any]]) -> in
         writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
         for row in rows:
-            writer.writerow(row)
+            writer.writerow(safe_row(row))
             count += 1
     return count
 

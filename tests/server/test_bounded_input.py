@@ -4,14 +4,19 @@ lone surrogates) or a bool where a number belongs gets a 422, never a 500."""
 
 from __future__ import annotations
 
+import csv
+import io
 import socket
 import uuid
 from pathlib import Path
 
 import httpx
+import pandas as pd
 import pytest
 
+from server.csvsafe import safe_frame
 from tests.server.live import API_KEY, LiveServer
+from tests.server.scale import export
 
 MiB = 1 << 20
 
@@ -244,3 +249,31 @@ def test_security_headers_on_every_page(
             assert "frame-ancestors 'self'" in policy and "script-src 'self';" in policy, path
         docs = browser.get("/docs")
         assert "cdn.jsdelivr.net" in docs.headers["content-security-policy"]
+
+
+FORMULAS = ['=HYPERLINK("http://evil.example","click")', "+cmd|' /C calc'!A0", "@SUM(A1)", "-2+3"]
+
+
+def test_spreadsheet_formulas_are_neutralised_in_every_export_cell(
+    server: LiveServer,
+) -> None:
+    with server.client() as api:
+        study = api.post("/api/studies", json={"name": f"=csv-{uuid.uuid4().hex}"}).json()["id"]
+        for label in FORMULAS:
+            body = {"method": "human", "label": label, "participant": "P1"}
+            assert api.post(f"/api/studies/{study}/sessions", json=body).status_code == 201
+        files = export(api, study)
+    rows = list(csv.DictReader(io.StringIO(files["sessions.csv"].decode())))
+    assert [r["label"] for r in rows] == ["'" + f for f in FORMULAS]
+    for name, data in files.items():
+        if name.endswith(".csv"):
+            for row in csv.reader(io.StringIO(data.decode())):
+                assert not any(cell.startswith(("=", "+", "@")) for cell in row), (name, row)
+    assert rows[0]["seed"] == "0", "numbers are left alone"
+
+
+def test_report_tables_are_neutralised_too() -> None:
+    frame = pd.DataFrame({"=agent": ["=1+1", "ok"], "reward": [-1.5, 2.0]}, index=["@a", "b"])
+    safe = safe_frame(frame)
+    assert list(safe.columns) == ["'=agent", "reward"] and list(safe.index) == ["'@a", "b"]
+    assert safe["'=agent"].tolist() == ["'=1+1", "ok"] and safe["reward"].tolist() == [-1.5, 2.0]
