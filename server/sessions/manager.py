@@ -59,6 +59,7 @@ HUB_KINDS: dict[type, str] = {
 }
 HISTORY = 10
 COMMAND_TIMEOUT_S = 120.0
+STARTUP_LIMIT_S = 180.0
 COALESCE_S = 0.05
 
 
@@ -85,6 +86,9 @@ class WorkerHandle:
     moving: bool = False
     last_reward: float | None = None
     history: deque[HistoryEntry] = field(default_factory=lambda: deque(maxlen=HISTORY))
+    started: float = field(default_factory=time.monotonic)
+    reported: bool = False
+    """The worker has said something: it is past its start (imports, resuming)."""
     advice_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     send_lock: threading.Lock = field(default_factory=threading.Lock)
 
@@ -142,7 +146,14 @@ class SessionManager:
 
     def _reap(self) -> list[int]:
         """Mark sessions whose worker died, and kill our own workers that stopped beating."""
-        owned = {sid: h for sid, h in self.handles.items() if h.status in LIVE_STATUSES}
+        # A starting worker (importing torch, replaying a checkpoint's episode) is judged
+        # by its heartbeat only once it reports in, or after STARTUP_LIMIT_S.
+        starting = time.monotonic() - STARTUP_LIMIT_S
+        owned = {
+            sid: h
+            for sid, h in self.handles.items()
+            if h.status in LIVE_STATUSES and (h.reported or h.started < starting)
+        }
         with self.factory() as db:
             marked = mark_dead_interrupted(db, self.stale_after_s, set(self.handles))
             silent = silent_sessions(db, self.stale_after_s, set(owned))
@@ -356,6 +367,7 @@ class SessionManager:
                 self._loop.call_soon_threadsafe(callback, *args)
 
     def _apply(self, handle: WorkerHandle, message: Any) -> None:
+        handle.reported = True
         if isinstance(message, Progress):
             handle.progress = message
             return
