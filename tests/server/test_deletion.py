@@ -179,3 +179,29 @@ def test_advisor_checkpoints_are_sessions_of_this_installation_or_files_under_it
     assert by_path.status_code == 201, by_path.text
     refused = api.delete(f"/api/sessions/{advisor['id']}")
     assert refused.status_code == 409 and "advises" in refused.json()["detail"]
+
+
+def test_a_paper_scale_final_checkpoint_is_small_and_still_advises(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    """The paper's network, batch and 20,000-transition memory; few steps, since the
+    final checkpoint's size does not depend on how long the run was once the memory is
+    left out."""
+    study = api.post("/api/studies", json={"name": f"paper-{uuid.uuid4().hex}"}).json()["id"]
+    paper = {"config": {"pretraining_steps": 200}, "max_episode_steps": 30, "episodes": 1}
+    body = {"method": "autonomous", "seed": 3, "motion": "fast", **paper}
+    advisor = api.post(f"/api/studies/{study}/sessions", json=body).json()
+    api.post(f"/api/sessions/{advisor['id']}/start")
+    wait_for_status(api, advisor["id"], {"finished"})
+    final = _checkpoints(server, advisor["id"]) / "final.pt"
+    size = final.stat().st_size
+    state = read_checkpoint(final)
+    assert state["config"]["memory_size"] == 20_000 and state["memory"] is None
+    print(f"\npaper-scale final checkpoint without the replay memory: {size} bytes")
+    assert size < 5_000_000, f"{size} bytes"
+    body = {**body, "method": "agent", "advisor_checkpoint": f"session:{advisor['id']}"}
+    agent = api.post(f"/api/studies/{study}/sessions", json=body | {"advice_budget": 100}).json()
+    api.post(f"/api/sessions/{agent['id']}/start")
+    trained = wait_for_status(api, agent["id"], {"finished"})
+    advice = api.get(f"/api/sessions/{trained['id']}/advice").json()
+    assert len(advice) == 100 and {a["advisor"] for a in advice} == {"agent"}

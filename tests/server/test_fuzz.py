@@ -54,13 +54,16 @@ def _runner(
     headers: dict[str, str],
     tally: Counter[str],
     bad: list[str],
+    ids: dict[str, int] | None = None,
 ) -> Any:
-    """One hypothesis test of one operation: every response checked, failures collected."""
+    """One hypothesis test of one operation: every response checked, failures collected.
+    `ids`: path parameters fixed to existing rows, so fuzzed bodies reach the handlers."""
     method, path = operation.method.upper(), operation.path
     security = operation.definition.raw.get("security", [])
     researcher = any("APIKeyHeader" in requirement for requirement in security)
+    strategy = operation.as_strategy(generation_mode=mode, path_parameters=ids)
 
-    @given(case=operation.as_strategy(generation_mode=mode))
+    @given(case=strategy)
     @settings(
         max_examples=EXAMPLES,
         deadline=None,
@@ -86,16 +89,26 @@ def _runner(
 
 
 def _fuzz(
-    schema: Any, url: str, headers: dict[str, str], tally: Counter[str], bad: list[str]
+    schema: Any,
+    url: str,
+    headers: dict[str, str],
+    tally: Counter[str],
+    bad: list[str],
+    ids: dict[str, int],
 ) -> None:
     operations = 0
     for result in schema.get_all_operations():
         operation = result.ok()
-        if (operation.method.upper(), operation.path) in NOT_FUZZED:
+        method, path = operation.method.upper(), operation.path
+        if (method, path) in NOT_FUZZED:
             continue
         operations += 1
-        for mode in (GenerationMode.POSITIVE, GenerationMode.NEGATIVE):
-            run = _runner(operation, mode, url, headers, tally, bad)
+        known = {name: ids[name] for name in ids if "{" + name + "}" in path}
+        runs = [(GenerationMode.POSITIVE, None), (GenerationMode.NEGATIVE, None)]
+        if known and method != "DELETE" and "advice_index" not in path:
+            runs.append((GenerationMode.POSITIVE, known))
+        for mode, fixed in runs:
+            run = _runner(operation, mode, url, headers, tally, bad, fixed)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 try:
@@ -116,7 +129,10 @@ def test_fuzzing_the_whole_api_finds_no_server_error_and_no_open_door(
         human = api.post(
             f"/api/studies/{study}/sessions", json=session_body("human", advice_budget=5)
         ).json()
-        api.post(f"/api/studies/{study}/sessions", json=session_body("oracle", advice_budget=5))
+        oracle = api.post(
+            f"/api/studies/{study}/sessions", json=session_body("oracle", advice_budget=5)
+        ).json()
+    ids = {"study_id": study, "session_id": oracle["id"]}
     schema = schemathesis.openapi.from_url(f"{fuzz_server.url}/openapi.json")
     passes = {
         "participant token": {"Authorization": f"Bearer {human['participant_token']}"},
@@ -126,7 +142,7 @@ def test_fuzzing_the_whole_api_finds_no_server_error_and_no_open_door(
     bad: list[str] = []
     for name, headers in passes.items():
         tally: Counter[str] = Counter()
-        _fuzz(schema, fuzz_server.url, headers, tally, bad)
+        _fuzz(schema, fuzz_server.url, headers, tally, bad, ids)
         print(f"\nfuzz with {name}: {dict(sorted(tally.items()))}")
         assert tally["requests"] > 0
     assert not bad, "\n".join(bad[:30])
