@@ -272,10 +272,13 @@ class Trainer:
             if handler is not None and handler(record) is False:
                 self._stopped = True
 
-    def save_checkpoint(self, path: str | Path, metadata: dict[str, Any] | None = None) -> None:
+    def save_checkpoint(
+        self, path: str | Path, metadata: dict[str, Any] | None = None, memory: bool = True
+    ) -> None:
         """Everything needed to continue exactly as if never stopped; `metadata` (plain
         JSON-like values) is stored alongside for the caller, e.g. how to rebuild the
-        advisor."""
+        advisor. `memory=False` leaves out the replay memory (most of the file at paper
+        scale): the checkpoint still advises and can be inspected, but cannot resume."""
         episode = self._episode
         write_checkpoint(
             path,
@@ -284,7 +287,7 @@ class Trainer:
                 "config": self.config.to_dict(),
                 "seed": self.seed,
                 "agent": self.agent.state_dict(),
-                "memory": self.memory.state_dict(),
+                "memory": self.memory.state_dict() if memory else None,
                 "epsilon": self.epsilon.value,
                 "global_step": self.global_step,
                 "episodes_done": dict(self.episodes_done),
@@ -304,6 +307,11 @@ class Trainer:
         `RUNTIME_FIELDS`), strategy and advisor kind. A partial episode is rebuilt by
         resetting the environment with its seed and replaying its actions."""
         state = read_checkpoint(path)
+        if state["memory"] is None:
+            raise ValueError(
+                f"{path} was saved without its replay memory (a finished run's final "
+                "checkpoint): it can advise, not resume; keep_replay_memory keeps it"
+            )
         saved = DQNConfig.from_dict(state["config"]).to_dict()
         mine = self.config.to_dict()
         differ = [k for k in mine if k not in RUNTIME_FIELDS and saved[k] != mine[k]]

@@ -4,12 +4,20 @@ from __future__ import annotations
 
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from fastapi.security import HTTPAuthorizationCredentials
+from fastapi.security.utils import get_authorization_scheme_param
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
+from server.deps import API_KEY_HEADER, participant_session, require_researcher
+from server.guard import LOGIN, RequestGuard
+from server.headers import SecurityHeaders, validation_error
+from server.logins import Logins
 from server.openapi import install as install_openapi
 from server.openapi import operation_id
 from server.routes import ROUTERS, dashboard, pages, reports, viewing
@@ -30,7 +38,28 @@ def worker_options(settings: Settings) -> WorkerOptions:
         idle_limit_s=settings.idle_limit_s,
         torch_threads=settings.worker_threads,
         nice=settings.trainer_nice,
+        keep_replay_memory=settings.keep_replay_memory,
     )
+
+
+def credential_guards(settings: Settings) -> dict[Any, Any]:
+    """What `RequestGuard` checks before reading a body, per dependency a route declares."""
+
+    def researcher(request: Request) -> None:
+        require_researcher(settings, request.headers.get(API_KEY_HEADER))
+
+    def participant(request: Request) -> None:
+        scheme, token = get_authorization_scheme_param(request.headers.get("Authorization"))
+        given = None
+        if scheme.lower() == "bearer" and token:
+            given = HTTPAuthorizationCredentials(scheme=scheme, credentials=token)
+        participant_session(request, given)
+
+    return {
+        "APIKeyHeader": researcher,
+        "HTTPBearer": participant,
+        LOGIN: dashboard.require_login,
+    }
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -68,11 +97,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.manager = manager
     app.state.viewer = viewer
     app.state.participant_tokens = {}
+    app.state.dashboard_logins = Logins(settings.dashboard_login_s)
     for router in ROUTERS:
         app.include_router(router)
     for router in (reports.router, pages.router, viewing.router, dashboard.router):
         app.include_router(router)
     app.mount("/static", pages.static_files(), name="static")
+    app.add_middleware(
+        RequestGuard, max_body_bytes=settings.max_request_bytes, guards=credential_guards(settings)
+    )
+    app.add_middleware(SecurityHeaders)
+    app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
     install_openapi(app)
 
     @app.exception_handler(ServiceError)

@@ -76,6 +76,17 @@ class Settings(BaseSettings):
     viewer_playback_speed: float = Field(default=1.0, gt=0)
     """How fast the 3-D view replays the robot's motion; 1 is real time."""
 
+    max_request_bytes: int = Field(default=1_048_576, ge=1024)
+    """Largest request body accepted (bytes); larger ones get 413 before they are read."""
+
+    dashboard_login_s: float = Field(default=8 * 3600.0, gt=0)
+    """How long a dashboard login lasts; logging out ends it at once."""
+
+    keep_replay_memory: bool = False
+    """Keep the replay memory in a finished session's final checkpoint (a session's own
+    `keep_replay_memory` wins). Without it the checkpoint holds the network and what an
+    advisor needs: a few MB instead of the whole memory (about 250 MB at paper scale)."""
+
     @field_validator("database_url")
     @classmethod
     def _driver(cls, url: str | None) -> str | None:

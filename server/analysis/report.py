@@ -36,6 +36,7 @@ from server.analysis.reference import REFERENCES, authors_totals, overlay_author
 from server.analysis.rescoring import rescored_totals, rescoring_table
 from server.analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
 from server.analysis.summary import Analysis, analyze
+from server.csvsafe import safe_frame
 from sim.rewards import REWARD_SCHEMES
 
 REPORT_FILE = "report.md"
@@ -496,7 +497,7 @@ def write_report(
     table_paths = {}
     for name, frame in tables.items():
         table_paths[name] = out / {**TABLE_FILES, **OPTIONAL_TABLE_FILES}[name]
-        frame.to_csv(table_paths[name], index=name == "correlation")
+        safe_frame(frame).to_csv(table_paths[name], index=name == "correlation")
 
     figure5 = plot_method_curves(analysis.episodes, baseline=baseline, smoothing=smoothing)
     if reference == "authors":

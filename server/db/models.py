@@ -76,6 +76,7 @@ RESUMABLE_STATUSES = (Status.stopped, Status.interrupted, Status.abandoned, Stat
 
 class Study(Base):
     __tablename__ = "studies"
+    __table_args__: ClassVar[Any] = {"sqlite_autoincrement": True}  # ids never return
 
     id: Mapped[int] = mapped_column(primary_key=True)
     name: Mapped[str] = mapped_column(String(200), unique=True)
@@ -95,7 +96,7 @@ class Participant(Base):
     """A person who advises, known only by a pseudonym (never a name, never in a path)."""
 
     __tablename__ = "participants"
-    __table_args__ = (UniqueConstraint("study_id", "pseudonym"),)
+    __table_args__ = (UniqueConstraint("study_id", "pseudonym"), {"sqlite_autoincrement": True})
 
     id: Mapped[int] = mapped_column(primary_key=True)
     study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"))
@@ -109,6 +110,7 @@ class StudySession(Base):
     """One learner's run: its full configuration, its status and where it can resume from."""
 
     __tablename__ = "sessions"
+    __table_args__: ClassVar[Any] = {"sqlite_autoincrement": True}
 
     id: Mapped[int] = mapped_column(primary_key=True)
     study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
@@ -130,6 +132,8 @@ class StudySession(Base):
     episodes: Mapped[int] = mapped_column(Integer)
     max_episode_steps: Mapped[int] = mapped_column(Integer, default=250)
     idle_limit_s: Mapped[float | None] = mapped_column(Float)
+    keep_replay_memory: Mapped[bool | None] = mapped_column()
+    """Keep the replay memory in the final checkpoint; None: the server's setting."""
     participant_token: Mapped[str | None] = mapped_column(String(100), unique=True)
 
     status: Mapped[str] = mapped_column(String(20), default=Status.created.value, index=True)

@@ -1,6 +1,7 @@
 """The researchers' dashboard: a login form that sets an HttpOnly cookie (the key never
-goes in a URL), a page of studies and sessions with live learning curves, and the JSON
-the page polls. Behind the same researcher key as the REST API, whose routes these reuse.
+goes in a URL; the cookie holds a login that expires and that logout ends, `Logins`), a
+page of studies and sessions with live learning curves, and the JSON the page polls.
+Behind the same researcher key as the REST API, whose routes these reuse.
 
 Requests that change something need the `X-Requested-With` header (a form on another
 site cannot send it) on top of the SameSite=Strict cookie.
@@ -8,8 +9,6 @@ site cannot send it) on top of the SameSite=Strict cookie.
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import secrets
 from typing import Annotated, Any, Literal
 
@@ -20,6 +19,7 @@ from sqlalchemy import select
 
 from server.db.models import Episode, StudySession
 from server.deps import DbDep, ManagerDep, SettingsDep
+from server.logins import Logins
 from server.routes import exports as export_routes
 from server.routes import reports as report_routes
 from server.routes import sessions as session_routes
@@ -29,23 +29,18 @@ from server.routes.reports import FileName, ReportPublic
 from server.schemas.sessions import SessionCreate
 from server.schemas.studies import StudyCreate
 from server.services import reports, sessions, studies
-from server.settings import Settings
 
 COOKIE = "ideeprl_dashboard"
 CSRF_HEADER = "X-Requested-With"
 router = APIRouter(include_in_schema=False)
 
 
-def cookie_value(settings: Settings) -> str:
-    """What the cookie holds: derived from the key, so it is not the key itself and
-    becomes invalid when the key changes."""
-    assert settings.api_key, "the app always has a key"
-    return hmac.new(settings.api_key.encode(), b"ideeprl-dashboard", hashlib.sha256).hexdigest()
+def _logins(request: Request) -> Logins:
+    return request.app.state.dashboard_logins
 
 
 def _logged_in(request: Request) -> bool:
-    given = request.cookies.get(COOKIE, "")
-    return secrets.compare_digest(given.encode(), cookie_value(request.app.state.settings).encode())
+    return _logins(request).valid(request.cookies.get(COOKIE, ""))
 
 
 def require_login(request: Request) -> None:
@@ -81,17 +76,22 @@ def login(request: Request, settings: SettingsDep, key: Annotated[str, Form()] =
     response = RedirectResponse("/dashboard", status_code=303)
     response.set_cookie(
         COOKIE,
-        cookie_value(settings),
+        _logins(request).issue(),
+        max_age=int(settings.dashboard_login_s),
         httponly=True,
         samesite="strict",
-        secure=request.url.scheme == "https",
+        # behind an HTTPS proxy the scheme comes from X-Forwarded-Proto (uvicorn trusts
+        # the local proxy); a public https URL says so too
+        secure=request.url.scheme == "https" or settings.base_url.startswith("https://"),
         path="/dashboard",
     )
     return response
 
 
 @router.post("/dashboard/logout")
-def logout() -> Response:
+def logout(request: Request) -> Response:
+    """Ends the login on the server: the cookie's value is refused from now on."""
+    _logins(request).revoke(request.cookies.get(COOKIE, ""))
     response = RedirectResponse("/dashboard/login", status_code=303)
     response.delete_cookie(COOKIE, path="/dashboard")
     return response

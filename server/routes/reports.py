@@ -31,17 +31,22 @@ class ReportCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    sessions: list[Annotated[int, Field(ge=1, le=MAX_ID)]] | None = Field(
-        default=None, min_length=1, description="These sessions only (any status)."
+    sessions: list[Annotated[int, Field(strict=True, ge=1, le=MAX_ID)]] | None = Field(
+        default=None,
+        min_length=1,
+        max_length=10_000,
+        description="These sessions only (any status).",
     )
-    methods: list[str] | None = Field(default=None, min_length=1, description="These methods.")
+    methods: list[Annotated[str, Field(max_length=40)]] | None = Field(
+        default=None, min_length=1, max_length=20, description="These methods."
+    )
     label: str | None = Field(default=None, max_length=200, description="This label only.")
     baseline: str = Field(
         default=reports.AUTO,
         max_length=40,
         description="auto (autonomous when present), none, or a method.",
     )
-    n_episodes: int | None = Field(
+    n_episodes: Annotated[int, Field(strict=True)] | None = Field(
         default=None, ge=1, le=100_000, description="First N episodes of every agent."
     )
     title: str | None = Field(default=None, max_length=200, description="Report title.")

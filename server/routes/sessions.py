@@ -2,11 +2,11 @@
 
 from typing import Literal
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 from sqlalchemy import select
 
-from server.db.models import Advice
+from server.db.models import LIVE_STATUSES, Advice
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
@@ -18,7 +18,7 @@ from server.schemas.sessions import (
     SessionCreated,
     SessionPublic,
 )
-from server.services import sessions
+from server.services import sessions, storage
 from server.services.errors import NotFound
 
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
@@ -28,7 +28,8 @@ router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep
 def create_session(
     db: DbDep, settings: SettingsDep, study_id: StudyId, body: SessionCreate
 ) -> SessionCreated:
-    session = sessions.create_session(db, study_id, body)
+    session = sessions.create_session(db, study_id, body, data_dir=settings.data_dir)
+    storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
     public = sessions.session_public(session, settings.base_url)
     return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
 
@@ -44,6 +45,19 @@ def list_sessions(
 @router.get("/sessions/{session_id}")
 def get_session(db: DbDep, settings: SettingsDep, session_id: SessionId) -> SessionPublic:
     return sessions.session_public(sessions.get_session(db, session_id), settings.base_url)
+
+
+@router.delete("/sessions/{session_id}", status_code=204)
+def delete_session(
+    request: Request, db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
+) -> Response:
+    """A session with its records, advice images and checkpoints, and the study's report
+    (built from them); refused while it runs. How a participant's data is deleted."""
+    handle = manager.handles.get(session_id)
+    live = handle is not None and handle.status in LIVE_STATUSES
+    storage.delete_session(db, settings.data_dir, session_id, live)
+    request.app.state.participant_tokens.clear()
+    return Response(status_code=204)
 
 
 def _fresh(db: DbDep, settings: SettingsDep, session_id: int) -> SessionPublic:

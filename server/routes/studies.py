@@ -2,18 +2,21 @@
 
 from fastapi import APIRouter, Request, Response
 
-from server.deps import DbDep, ResearcherDep
+from server.db.models import LIVE_STATUSES
+from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes.paging import PageDep
 from server.routes.params import StudyId
 from server.schemas.studies import StudyCreate, StudyPublic, StudyUpdate
-from server.services import studies
+from server.services import storage, studies
 
 router = APIRouter(prefix="/api/studies", tags=["studies"], dependencies=[ResearcherDep])
 
 
 @router.post("", status_code=201)
-def create_study(db: DbDep, body: StudyCreate) -> StudyPublic:
-    return studies.public(db, studies.create_study(db, body))
+def create_study(db: DbDep, settings: SettingsDep, body: StudyCreate) -> StudyPublic:
+    study = studies.create_study(db, body)
+    storage.remove_study_files(settings.data_dir, study.id)  # left by a database reusing ids
+    return studies.public(db, study)
 
 
 @router.get("")
@@ -32,7 +35,18 @@ def update_study(db: DbDep, study_id: StudyId, body: StudyUpdate) -> StudyPublic
 
 
 @router.delete("/{study_id}", status_code=204)
-def delete_study(request: Request, db: DbDep, study_id: StudyId) -> Response:
-    studies.delete_study(db, study_id)
+def delete_study(
+    request: Request, db: DbDep, settings: SettingsDep, manager: ManagerDep, study_id: StudyId
+) -> Response:
+    """The study, its sessions and participants, their records, checkpoints, its report
+    and exports; refused while a session runs. Its id is never given again."""
+    live = {i for i, h in manager.handles.items() if h.status in LIVE_STATUSES}
+    storage.delete_study(db, settings.data_dir, study_id, live)
     request.app.state.participant_tokens.clear()
     return Response(status_code=204)
+
+
+@router.get("/{study_id}/disk")
+def study_disk(db: DbDep, settings: SettingsDep, study_id: StudyId) -> storage.StudyDisk:
+    """Bytes the study keeps on disk (checkpoints per session, report), beside its rows."""
+    return storage.study_disk(db, settings.data_dir, study_id)

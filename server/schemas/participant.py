@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from server.schemas.types import Int
+
 
 class AdviceCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    advice_index: int = Field(ge=0, le=2**31 - 1, description="Index of the advice (0-based).")
-    action: int = Field(ge=0, le=3, description="0 grab, 1 move right, 2 move left, 3 drop.")
+    advice_index: Int = Field(ge=0, le=2**31 - 1, description="Index of the advice (0-based).")
+    action: Int = Field(ge=0, le=3, description="0 grab, 1 move right, 2 move left, 3 drop.")
 
 
 class HistoryItem(BaseModel):

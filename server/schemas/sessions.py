@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from server.db.models import Method
+from server.schemas.types import Int, Key, Number
 
 Strategy = Literal["early", "alternating", "importance", "mistake_correcting"]
 Motion = Literal["physics", "fast"]
@@ -26,10 +27,10 @@ class Scenario(BaseModel):
         "19th step, then -0.01 x (n - 19)), authors-interactive (their IDeepRL scripts: -0.01 "
         "from the first step).",
     )
-    grasp_failure_rate: float = Field(
+    grasp_failure_rate: Number = Field(
         default=0.0, ge=0.0, le=1.0, description="Chance that a grab comes back empty."
     )
-    knock_off_rate: float = Field(
+    knock_off_rate: Number = Field(
         default=0.0,
         ge=0.0,
         le=1.0,
@@ -43,29 +44,37 @@ class SessionCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     method: Method = Field(description="Who advises: autonomous, agent, human, oracle, random.")
-    seed: int = Field(default=0, ge=0, le=2**31 - 1, description="Fixes scene, network, sampling.")
+    seed: Int = Field(default=0, ge=0, le=2**31 - 1, description="Fixes scene, network, sampling.")
     label: str = Field(default="", max_length=200, description="Free text, e.g. a batch name.")
-    preset: str = Field(default="paper", description="Learner config preset (paper, modern).")
-    config: dict[str, Any] = Field(
-        default_factory=dict, description="Learner config fields overriding the preset."
+    preset: str = Field(
+        default="paper", max_length=40, description="Learner config preset (paper, modern)."
     )
-    episodes: int | None = Field(
+    config: dict[Key, Any] = Field(
+        default_factory=dict,
+        max_length=100,
+        description="Learner config fields overriding the preset.",
+    )
+    episodes: Int | None = Field(
         default=None, ge=1, le=100_000, description="Training episodes (default: the preset's)."
     )
-    max_episode_steps: int | None = Field(
+    max_episode_steps: Int | None = Field(
         default=None, ge=1, le=10_000, description="Truncation (default: the preset's)."
     )
-    sort_rule: str | dict[str, str] = Field(
-        default="color", description='"color", "shape", or a map {"cube/red": "left", ...}.'
-    )
+    sort_rule: (
+        Annotated[str, Field(max_length=40)]
+        | Annotated[dict[Key, Annotated[str, Field(max_length=10)]], Field(max_length=12)]
+    ) = Field(default="color", description='"color", "shape", or a map {"cube/red": "left", ...}.')
     strategy: Strategy = Field(default="early", description="Advising strategy (advised methods).")
-    advice_budget: int | None = Field(
+    advice_budget: Int | None = Field(
         default=None, ge=0, le=100_000, description="Advice in all (default: the preset's)."
     )
     advisor_checkpoint: str | None = Field(
-        default=None, description="Path of a trained learner checkpoint (method agent)."
+        default=None,
+        max_length=1000,
+        description="The advisor (method agent): `session:ID`, a session of this installation "
+        "whose final checkpoint advises, or the path of a checkpoint file under the data folder.",
     )
-    oracle_error_rate: float = Field(
+    oracle_error_rate: Number = Field(
         default=0.0, ge=0.0, le=1.0, description="Chance that the oracle advises wrongly."
     )
     motion: Motion | None = Field(
@@ -81,7 +90,14 @@ class SessionCreate(BaseModel):
         pattern=r"^[A-Za-z0-9_-]+$",
         description="Pseudonym of the participant (human); generated when omitted.",
     )
-    idle_limit_s: float | None = Field(
+    keep_replay_memory: bool | None = Field(
+        default=None,
+        strict=True,
+        description="Keep the replay memory in the final checkpoint (default: the server's "
+        "keep_replay_memory setting). Without it the final checkpoint holds the network and "
+        "what an advisor needs, a few MB instead of about 250 MB at paper scale.",
+    )
+    idle_limit_s: Number | None = Field(
         default=None, gt=0, description="Seconds without advice before abandoning (human)."
     )
 
@@ -105,6 +121,7 @@ class SessionPublic(BaseModel):
     episodes: int
     max_episode_steps: int
     idle_limit_s: float | None
+    keep_replay_memory: bool | None = None
     participant: str | None = None
     participant_url: str | None = None
     status: str

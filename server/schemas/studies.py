@@ -3,16 +3,24 @@
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from server.schemas.types import Key
+
+MAX_TEXT = 50_000
+"""Characters of one page text (the consent form is the longest, about 3,000)."""
+Texts = dict[Key, Annotated[str, Field(max_length=MAX_TEXT)]]
 
 
 class StudyBase(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     description: str = Field(default="", max_length=10_000)
-    texts: dict[str, str] = Field(
+    texts: Texts = Field(
         default_factory=dict,
+        max_length=32,
         description="Per-study texts of the participant pages (consent, induction steps).",
     )
 
@@ -26,7 +34,7 @@ class StudyUpdate(BaseModel):
 
     name: str | None = Field(default=None, min_length=1, max_length=200)
     description: str | None = Field(default=None, max_length=10_000)
-    texts: dict[str, str] | None = None
+    texts: Texts | None = Field(default=None, max_length=32)
 
 
 class StudyPublic(StudyBase):

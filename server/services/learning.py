@@ -18,7 +18,13 @@ def build_config(preset: str, overrides: dict[str, Any], **fields: int | None) -
         base = DQNConfig.preset(preset)
     except (ValueError, KeyError) as error:
         raise Invalid("preset", str(error).strip("'\"")) from None
-    data = {**base.to_dict(), **overrides}
+    defaults = base.to_dict()
+    for name, value in overrides.items():
+        default = defaults.get(name)
+        number = isinstance(default, int | float) and not isinstance(default, bool)
+        if number and isinstance(value, bool):
+            raise Invalid("config", f"config.{name} is a number, not {str(value).lower()}")
+    data = {**defaults, **overrides}
     data.update({name: value for name, value in fields.items() if value is not None})
     try:
         return DQNConfig.from_dict(data).to_dict()

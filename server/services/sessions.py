@@ -36,8 +36,42 @@ def participant_url(base_url: str, token: str) -> str:
     return f"{base_url}/p/{token}"
 
 
-def create_session(db: Session, study_id: int, body: SessionCreate) -> StudySession:
-    """A new session in `created` state; a human one gets its participant and token."""
+def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
+    """The checkpoint file an `agent` session's advisor names: `session:ID` (a session of
+    this installation with a checkpoint), or a path that must lie under `data_dir` (the
+    API's rule; the batch runner and the command line, run by the researcher, pass None)."""
+    if spec.startswith("session:"):
+        number = spec.removeprefix("session:")
+        found = db.get(StudySession, int(number)) if number.isdigit() and len(number) < 10 else None
+        if found is None or not found.checkpoint_path or not Path(found.checkpoint_path).is_file():
+            raise Invalid(
+                "advisor_checkpoint",
+                f"{spec!r} is not a session of this installation with a "
+                "checkpoint; name a finished session, e.g. session:12",
+            )
+        return str(Path(found.checkpoint_path).resolve())
+    try:
+        path = Path(spec).resolve()
+        inside = data_dir is None or path.is_relative_to(data_dir.resolve())
+        present = inside and path.is_file()
+    except (OSError, ValueError):
+        inside = present = False
+    if not inside:
+        raise Invalid(
+            "advisor_checkpoint",
+            "advisor_checkpoint must be session:ID (a session of this installation) or a "
+            "checkpoint file under the server's data folder",
+        )
+    if not present:
+        raise Invalid("advisor_checkpoint", f"no file at {spec!r}")
+    return str(path)
+
+
+def create_session(
+    db: Session, study_id: int, body: SessionCreate, data_dir: Path | None = None
+) -> StudySession:
+    """A new session in `created` state; a human one gets its participant and token.
+    `data_dir`: where an advisor's checkpoint file must lie (see `advisor_path`)."""
     get_study(db, study_id)
     method = Method(body.method)
     advised = method not in (Method.autonomous,)
@@ -72,10 +106,11 @@ def create_session(db: Session, study_id: int, body: SessionCreate) -> StudySess
                 "advisor_checkpoint",
                 "method 'agent' needs advisor_checkpoint: the path of a trained learner checkpoint",
             )
-        if not Path(body.advisor_checkpoint).is_file():
-            raise Invalid("advisor_checkpoint", f"no file at {body.advisor_checkpoint!r}")
+        advisor = advisor_path(db, body.advisor_checkpoint, data_dir)
     elif body.advisor_checkpoint:
         raise Invalid("advisor_checkpoint", "only method 'agent' takes an advisor_checkpoint")
+    else:
+        advisor = None
     if body.participant and method != Method.human:
         raise Invalid("participant", "only method 'human' has a participant")
     session = StudySession(
@@ -87,7 +122,8 @@ def create_session(db: Session, study_id: int, body: SessionCreate) -> StudySess
         sort_rule=sort_rule,
         strategy=body.strategy if advised else None,
         advice_budget=config["advice_budget"],
-        advisor_checkpoint=body.advisor_checkpoint,
+        advisor_checkpoint=advisor,
+        keep_replay_memory=body.keep_replay_memory,
         oracle_error_rate=body.oracle_error_rate if method == Method.oracle else None,
         motion=body.motion or ("physics" if method == Method.human else "fast"),
         scenario=learning.parse_scenario(body.scenario.model_dump()),
@@ -224,7 +260,8 @@ def mark_dead_interrupted(db: Session, stale_after_s: float, owned: set[int]) ->
     """Sessions marked running/paused whose worker is gone become `interrupted` (resumable).
 
     Gone: on this host and its pid is dead, or silent for `stale_after_s` (other hosts,
-    e.g. a Ray batch). Sessions whose worker this process owns are left alone."""
+    e.g. a Ray batch). Sessions whose worker this process owns are the manager's to judge
+    (`silent_sessions`): it kills a hung worker before marking its session."""
     stale = datetime.now(UTC) - timedelta(seconds=stale_after_s)
     query = select(StudySession).where(StudySession.status.in_([s.value for s in LIVE_STATUSES]))
     marked = []
@@ -246,3 +283,22 @@ def mark_dead_interrupted(db: Session, stale_after_s: float, owned: set[int]) ->
             marked.append(session.id)
     db.commit()
     return marked
+
+
+def silent_sessions(db: Session, stale_after_s: float, ids: set[int]) -> list[tuple[int, str]]:
+    """(id, worker token) of the live sessions among `ids` whose worker has not marked
+    itself alive for `stale_after_s`: hung (stopped, deadlocked, swapped out for good)."""
+    if not ids:
+        return []
+    stale = datetime.now(UTC) - timedelta(seconds=stale_after_s)
+    query = select(StudySession).where(
+        StudySession.id.in_(ids), StudySession.status.in_([s.value for s in LIVE_STATUSES])
+    )
+    found = []
+    for session in db.scalars(query):
+        heartbeat = session.heartbeat_at
+        if heartbeat is not None and heartbeat.tzinfo is None:
+            heartbeat = heartbeat.replace(tzinfo=UTC)
+        if (heartbeat is None or heartbeat < stale) and session.worker_token:
+            found.append((session.id, session.worker_token))
+    return found

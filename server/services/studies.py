@@ -6,7 +6,7 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from server.db.models import LIVE_STATUSES, Study, StudySession
+from server.db.models import Study, StudySession
 from server.schemas.studies import StudyCreate, StudyPublic, StudyUpdate
 from server.services.errors import Conflict, NotFound
 
@@ -49,17 +49,3 @@ def update_study(db: Session, study_id: int, body: StudyUpdate) -> Study:
         db.rollback()
         raise Conflict(f"a study named {body.name!r} exists already; choose another name") from None
     return study
-
-
-def delete_study(db: Session, study_id: int) -> None:
-    study = get_study(db, study_id)
-    live = db.scalar(
-        select(func.count()).where(
-            StudySession.study_id == study_id,
-            StudySession.status.in_([s.value for s in LIVE_STATUSES]),
-        )
-    )
-    if live:
-        raise Conflict(f"study {study_id} has {live} running session(s); stop them first")
-    db.delete(study)
-    db.commit()

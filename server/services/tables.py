@@ -79,12 +79,23 @@ def cell(value: Any) -> Any:
 
 
 def write_csv(path: Path, columns: list[Column], rows: Iterable[dict[str, Any]]) -> int:
+    """The rows as CSV; text cells a spreadsheet would run as a formula are neutralised
+    (`server.csvsafe`), numbers are written as they are."""
+    from server.csvsafe import safe_cell
+
     count = 0
     with path.open("w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
         writer.writerow([c.name for c in columns])
         for row in rows:
-            writer.writerow([cell(row.get(c.name)) for c in columns])
+            writer.writerow(
+                [
+                    safe_cell(cell(row.get(c.name)))
+                    if c.type == "string"
+                    else cell(row.get(c.name))
+                    for c in columns
+                ]
+            )
             count += 1
     return count
 

@@ -41,13 +41,17 @@ class WorkerLink:
         conn: Connection,
         on_pause: Callable[[bool, bool], None],
         on_watch: Callable[[], None],
+        on_idle: Callable[[], None] = lambda: None,
     ) -> None:
         """`on_pause(paused, at_step_boundary)` records the new status (and checkpoints);
-        `on_watch()` sends the whole scene to a viewer that just arrived."""
+        `on_watch()` sends the whole scene to a viewer that just arrived; `on_idle()` runs
+        about once a second while the worker waits (paused, or for advice), so it can
+        mark itself alive: a worker that stops beating is killed as hung."""
         self._conn = conn
         self._on_watch = on_watch
         self._parent = os.getppid()
         self._on_pause = on_pause
+        self._on_idle = on_idle
         self.watching = False
         self.paused = False
 
@@ -64,6 +68,7 @@ class WorkerLink:
         while self.paused:
             if self._ready(1.0):
                 self._handle(self._recv())
+            self._on_idle()
 
     def wait_for_answer(self, advice_index: int, idle_limit_s: float) -> int:
         """Block until the participant answers `advice_index`; no limit per action, but
@@ -74,6 +79,7 @@ class WorkerLink:
             ready = self._ready(1.0)
             if not self.paused:
                 waited += time.monotonic() - started
+            self._on_idle()
             if ready:
                 message = self._recv()
                 if isinstance(message, AdviceAnswer):

@@ -27,7 +27,13 @@ from starlette.concurrency import run_in_threadpool
 
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
 from server.services.errors import Conflict
-from server.services.sessions import claim, get_session, mark_dead_interrupted, set_status
+from server.services.sessions import (
+    claim,
+    get_session,
+    mark_dead_interrupted,
+    set_status,
+    silent_sessions,
+)
 from server.sessions.hub import Hub
 from server.sessions.messages import (
     AdviceRequest,
@@ -53,6 +59,7 @@ HUB_KINDS: dict[type, str] = {
 }
 HISTORY = 10
 COMMAND_TIMEOUT_S = 120.0
+STARTUP_LIMIT_S = 180.0
 COALESCE_S = 0.05
 
 
@@ -79,6 +86,9 @@ class WorkerHandle:
     moving: bool = False
     last_reward: float | None = None
     history: deque[HistoryEntry] = field(default_factory=lambda: deque(maxlen=HISTORY))
+    started: float = field(default_factory=time.monotonic)
+    reported: bool = False
+    """The worker has said something: it is past its start (imports, resuming)."""
     advice_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     send_lock: threading.Lock = field(default_factory=threading.Lock)
 
@@ -105,6 +115,8 @@ class SessionManager:
         self.hub = hub
         self.options = options
         self.stale_after_s = stale_after_s
+        self.command_timeout_s = min(COMMAND_TIMEOUT_S, stale_after_s)
+        """How long pause and stop wait for a worker; a hung one is killed by then."""
         self.handles: dict[int, WorkerHandle] = {}
         self._context = multiprocessing.get_context("spawn")
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -133,11 +145,42 @@ class SessionManager:
                 handle.process.terminate()
 
     def _reap(self) -> list[int]:
+        """Mark sessions whose worker died, and kill our own workers that stopped beating."""
+        # A starting worker (importing torch, replaying a checkpoint's episode) is judged
+        # by its heartbeat only once it reports in, or after STARTUP_LIMIT_S.
+        starting = time.monotonic() - STARTUP_LIMIT_S
+        owned = {
+            sid: h
+            for sid, h in self.handles.items()
+            if h.status in LIVE_STATUSES and (h.reported or h.started < starting)
+        }
         with self.factory() as db:
             marked = mark_dead_interrupted(db, self.stale_after_s, set(self.handles))
+            silent = silent_sessions(db, self.stale_after_s, set(owned))
+        for session_id, token in silent:
+            handle = owned[session_id]
+            if handle.token != token:
+                continue
+            detail = (
+                f"its worker stopped marking itself alive for {self.stale_after_s:.0f} s "
+                "and was killed; resume it"
+            )
+            self._kill(handle, Status.interrupted, detail)
+            marked.append(session_id)
         for session_id in marked:
             self.hub.publish(session_id, "status", StatusChanged(Status.interrupted.value))
         return marked
+
+    def _kill(self, handle: WorkerHandle, status: Status, detail: str) -> None:
+        """Record `status` for a worker that does not answer, then kill it (SIGKILL works
+        on a stopped process too); its last checkpoint stays, for a resume."""
+        self._set_status(handle.session_id, status, detail, handle.token)
+        handle.status = status.value
+        with contextlib.suppress(Exception):
+            handle.process.kill()
+        handle.process.join(5)
+        log.warning("session %s: %s", handle.session_id, detail)
+        self._call_soon(self.notify, handle.session_id)
 
     async def _reap_forever(self) -> None:
         while True:
@@ -223,9 +266,14 @@ class SessionManager:
                     return
             raise Conflict(f"session {session_id} is {session.status}; there is nothing to stop")
         handle.send(Command("stop"))
-        await run_in_threadpool(handle.process.join, COMMAND_TIMEOUT_S)
+        await run_in_threadpool(handle.process.join, self.command_timeout_s)
         if handle.process.is_alive():
-            handle.process.terminate()
+            detail = (
+                f"stopped by the researcher; its worker did not answer within "
+                f"{self.command_timeout_s:.0f} s and was killed (it resumes from its last "
+                "checkpoint)"
+            )
+            await run_in_threadpool(self._kill, handle, Status.stopped, detail)
 
     def _live(self, session_id: int, verb: str) -> WorkerHandle:
         handle = self.handles.get(session_id)
@@ -236,13 +284,13 @@ class SessionManager:
         return handle
 
     async def _until(self, session_id: int, done: Callable[[WorkerHandle], bool]) -> None:
-        deadline = time.monotonic() + COMMAND_TIMEOUT_S
+        deadline = time.monotonic() + self.command_timeout_s
         while time.monotonic() < deadline:
             handle = self.handles.get(session_id)
             if handle is None or done(handle):
                 return
             await self.wait_change(session_id, self.version(session_id), 1.0)
-        raise Conflict(f"session {session_id} did not answer within {COMMAND_TIMEOUT_S:.0f} s")
+        raise Conflict(f"session {session_id} did not answer within {self.command_timeout_s:.0f} s")
 
     def status(self, session_id: int) -> str:
         """The live status if a worker runs, else the stored one."""
@@ -319,6 +367,7 @@ class SessionManager:
                 self._loop.call_soon_threadsafe(callback, *args)
 
     def _apply(self, handle: WorkerHandle, message: Any) -> None:
+        handle.reported = True
         if isinstance(message, Progress):
             handle.progress = message
             return

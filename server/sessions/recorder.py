@@ -31,7 +31,7 @@ class LeaseLost(Exception):
 
 
 class Checkpointable(Protocol):
-    def save_checkpoint(self, path: str | os.PathLike[str]) -> Any: ...
+    def save_checkpoint(self, path: str | os.PathLike[str], *, memory: bool = ...) -> Any: ...
 
 
 def _row(record: Any, columns: frozenset[str], session_id: int) -> dict[str, Any]:
@@ -130,14 +130,16 @@ class Recorder:
         self._steps, self._episodes, self._advice = [], [], []
         self._last_flush = time.monotonic()
 
-    def checkpoint(self, trainer: Checkpointable, advice_count: int, name: str = "") -> Path:
+    def checkpoint(
+        self, trainer: Checkpointable, advice_count: int, name: str = "", memory: bool = True
+    ) -> Path:
         """Flush, save the learner, then record where it stands (in that order: a crash in
         between leaves the previous checkpoint in force, whose file we keep until now)."""
         self.flush()
         self._dir.mkdir(parents=True, exist_ok=True)
         path = self._dir / (name or f"step-{self.steps:09d}.pt")
         partial = path.with_name(path.name + ".partial")
-        trainer.save_checkpoint(partial)
+        trainer.save_checkpoint(partial, memory=memory)
         os.replace(partial, path)
         with self._factory() as db:
             self._own(

@@ -22,7 +22,7 @@ from typing import Any
 from sqlalchemy import select, update
 
 from server.db.engine import make_engine, make_session_factory
-from server.db.models import Advice, Method, Status, StudySession
+from server.db.models import Advice, Method, Status, StudySession, utcnow
 from server.services import learning
 from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, set_status
@@ -56,6 +56,8 @@ class WorkerOptions:
     """Show a tqdm bar of training episodes (command line runs)."""
     nice: int = 0
     """Added to the process's niceness (the server lowers machine sessions' priority)."""
+    keep_replay_memory: bool = False
+    """Keep the replay memory in final checkpoints (a session's own choice wins)."""
 
 
 class _Reporter:
@@ -108,11 +110,13 @@ class _Run:
             db.execute(
                 update(StudySession)
                 .where(StudySession.id == session_id, StudySession.worker_token == token)
-                .values(worker_pid=os.getpid())
+                .values(worker_pid=os.getpid(), heartbeat_at=utcnow())
             )
             db.commit()
         s = self.session
-        self.link = WorkerLink(conn, self._on_pause, self._on_watch) if conn else None
+        self.link = (
+            WorkerLink(conn, self._on_pause, self._on_watch, self._on_idle) if conn else None
+        )
         self.env = SceneBroadcast(learning.make_env(s, record_motion=conn is not None), self.link)
         self.reporter = _Reporter(self)
         self.recorder = Recorder(
@@ -212,6 +216,9 @@ class _Run:
                 db, self.session_id, Status.paused if paused else Status.running, token=self.token
             )
 
+    def _on_idle(self) -> None:
+        self.recorder.tick()  # flushes and marks the worker alive every heartbeat_s
+
     def _on_watch(self) -> None:
         self.env.announce()
 
@@ -243,7 +250,9 @@ class _Run:
                     self.trainer.step()
                 except WorkerExit as exit_:
                     return self._exit(exit_, at_step_boundary=False)
-            self.checkpoint("final.pt")
+            keep = self.session.keep_replay_memory
+            keep = self.options.keep_replay_memory if keep is None else keep
+            self.recorder.checkpoint(self.trainer, self.advice_given, "final.pt", memory=keep)
             self.set_status(Status.finished)
             self.send_progress()
             return Status.finished

@@ -1,0 +1,221 @@
+"""The door every request passes before the app: a bounded body, credentials checked
+before the body is read, and JSON that Python can parse but JSON does not allow (NaN,
+Infinity, numbers too large for a float, lone surrogates) refused with a 422.
+
+One pure ASGI middleware, so nothing is buffered before its checks: a body larger than
+`max_body_bytes` is refused from its Content-Length at once, or as soon as the bytes read
+pass the limit (chunked bodies), and memory stays bounded whatever a client sends.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Callable
+from typing import Any
+
+from fastapi import HTTPException
+from starlette.concurrency import run_in_threadpool
+from starlette.requests import Request
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+BODY_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+DASHBOARD_API = "/dashboard/api/"
+LOGIN = "dashboard-login"
+
+
+class BodyTooLarge(HTTPException):
+    """Raised from `receive` once the body passes the limit; FastAPI lets it through."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__(
+            413,
+            f"the request body is larger than this server accepts ({limit} bytes); "
+            "send less (IDEEPRL_MAX_REQUEST_BYTES sets the limit)",
+        )
+
+
+class UnacceptableJson(ValueError):
+    pass
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise UnacceptableJson(f"the number {text[:40]} is too large for a float")
+    return value
+
+
+def _constant(name: str) -> float:
+    raise UnacceptableJson(f"{name} is not a JSON number; numbers must be finite")
+
+
+def _check_text(value: Any, where: str = "body") -> None:
+    """Refuse strings that cannot be encoded as UTF-8 (lone surrogates), keys included."""
+    stack = [(value, where)]
+    while stack:
+        item, at = stack.pop()
+        if isinstance(item, str):
+            try:
+                item.encode("utf-8")
+            except UnicodeEncodeError:
+                raise UnacceptableJson(
+                    f"text at {at} is not valid Unicode (it holds a lone surrogate such as "
+                    "\\ud800); send UTF-8 text"
+                ) from None
+        elif isinstance(item, dict):
+            for key, child in item.items():
+                stack.append((key, f"{at} (a key)"))
+                stack.append((child, f"{at}.{key.encode('utf-8', 'backslashreplace').decode()}"))
+        elif isinstance(item, list):
+            stack.extend((child, f"{at}[{i}]") for i, child in enumerate(item))
+
+
+def check_json(body: bytes) -> None:
+    """Raise `UnacceptableJson` for JSON Python would accept but the standard does not;
+    leave malformed JSON to FastAPI, which explains it."""
+    try:
+        parsed = json.loads(body, parse_constant=_constant, parse_float=_finite)
+    except UnacceptableJson:
+        raise
+    except RecursionError:
+        raise UnacceptableJson("the JSON is nested too deeply") from None
+    except ValueError:
+        return
+    _check_text(parsed)
+
+
+def _json_error(status: int, detail: Any, headers: dict[str, str] | None = None) -> Any:
+    from fastapi.responses import JSONResponse
+
+    return JSONResponse({"detail": detail}, status_code=status, headers=headers)
+
+
+class RequestGuard:
+    """Size limit, then credentials, then JSON sanity; see the module's docstring.
+
+    `guards` maps an OpenAPI security scheme (`APIKeyHeader`, `HTTPBearer`) or `LOGIN`
+    (the dashboard's routes) to a check run with the request before its body is read."""
+
+    def __init__(
+        self,
+        app: ASGIApp,
+        max_body_bytes: int,
+        guards: dict[Callable[..., Any], Callable[[Request], Any]],
+    ) -> None:
+        self.app = app
+        self.max_body_bytes = max_body_bytes
+        self.guards = guards
+        self._table: list[tuple[re.Pattern[str], dict[str, list[str]]]] | None = None
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] not in BODY_METHODS:
+            await self.app(scope, receive, send)
+            return
+        limit = self.max_body_bytes
+        length = _content_length(scope)
+        if length is not None and length > limit:
+            await _json_error(413, BodyTooLarge(limit).detail)(scope, receive, send)
+            return
+        try:
+            await self._credentials(scope)
+        except HTTPException as error:
+            await _json_error(error.status_code, error.detail, error.headers)(scope, receive, send)
+            return
+        try:
+            body = await _read(receive, limit)
+        except BodyTooLarge as error:
+            await _json_error(413, error.detail)(scope, receive, send)
+            return
+        if _is_json(scope):
+            try:
+                check_json(body)
+            except UnacceptableJson as error:
+                detail = [{"loc": ["body"], "msg": str(error), "type": "json_invalid"}]
+                await _json_error(422, detail)(scope, receive, send)
+                return
+        await self.app(scope, _replay(body, receive), send)
+
+    async def _credentials(self, scope: Scope) -> None:
+        checks = self._checks(scope)
+        if checks:
+            request = Request(scope)
+            for check in checks:
+                await run_in_threadpool(check, request)
+
+    def _checks(self, scope: Scope) -> list[Callable[[Request], Any]]:
+        """The credentials a request's operation declares: read from the OpenAPI schema
+        (public, and what clients see), plus the dashboard's cookie for its own routes."""
+        if self._table is None:
+            self._table = _security_table(scope["app"].openapi())
+        path, method = scope["path"], scope["method"].lower()
+        if path.startswith(DASHBOARD_API):
+            return [self.guards[LOGIN]] if LOGIN in self.guards else []
+        for pattern, methods in self._table:
+            if method in methods and pattern.fullmatch(path):
+                return [self.guards[name] for name in methods[method] if name in self.guards]
+        return []
+
+
+def _security_table(schema: dict[str, Any]) -> list[tuple[re.Pattern[str], dict[str, list[str]]]]:
+    """(path pattern, {method: security scheme names}) for every operation."""
+    table = []
+    for template, operations in schema.get("paths", {}).items():
+        parts = re.split(r"(\{[^}]+\})", template)
+        pattern = "".join("[^/]+" if p.startswith("{") else re.escape(p) for p in parts)
+        methods = {
+            method: [name for requirement in op.get("security", []) for name in requirement]
+            for method, op in operations.items()
+            if isinstance(op, dict)
+        }
+        table.append((re.compile(pattern), methods))
+    return table
+
+
+def _content_length(scope: Scope) -> int | None:
+    for name, value in scope.get("headers", []):
+        if name == b"content-length":
+            try:
+                return int(value)
+            except ValueError:
+                return None
+    return None
+
+
+def _is_json(scope: Scope) -> bool:
+    for name, value in scope.get("headers", []):
+        if name == b"content-type":
+            kind = value.split(b";")[0].strip().lower()
+            return kind.endswith(b"/json") or kind.endswith(b"+json")
+    return True  # FastAPI may parse a body without a type as JSON
+
+
+async def _read(receive: Receive, limit: int) -> bytes:
+    chunks: list[bytes] = []
+    size = 0
+    while True:
+        message = await receive()
+        if message["type"] != "http.request":
+            break
+        chunk = message.get("body", b"")
+        size += len(chunk)
+        if size > limit:
+            raise BodyTooLarge(limit)
+        chunks.append(chunk)
+        if not message.get("more_body", False):
+            break
+    return b"".join(chunks)
+
+
+def _replay(body: bytes, receive: Receive) -> Receive:
+    sent = False
+
+    async def replay() -> Message:
+        nonlocal sent
+        if not sent:
+            sent = True
+            return {"type": "http.request", "body": body, "more_body": False}
+        return await receive()
+
+    return replay

@@ -1,0 +1,117 @@
+"""Security headers on every response, and validation errors that can always be sent.
+
+The pages load only their own scripts (no inline script: their configuration travels in
+`<script type="application/json">` blocks, which are not run), so `script-src 'self'`
+holds; style attributes (the advice meter) need `'unsafe-inline'` for styles only. The
+participant's page frames the 3-D view, served by viser on its own port (or under a path
+of this server): `frame-src` names that origin. No one may frame our pages
+(`frame-ancestors 'self'`). FastAPI's `/docs` and `/redoc` pages load Swagger UI and
+ReDoc from their CDN with an inline script, so they get a policy that allows exactly that.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+from urllib.parse import urlsplit
+
+from fastapi import Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+DOCS_PATHS = ("/docs", "/redoc")
+DOCS_CDN = "https://cdn.jsdelivr.net"
+BASE_HEADERS = [
+    (b"x-content-type-options", b"nosniff"),
+    (b"x-frame-options", b"SAMEORIGIN"),
+    (b"referrer-policy", b"no-referrer"),
+    (b"cross-origin-opener-policy", b"same-origin"),
+]
+
+
+def page_policy(frame_origin: str | None) -> str:
+    frames = "'self'" + (f" {frame_origin}" if frame_origin else "")
+    return (
+        "default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+        "img-src 'self' data: blob:; connect-src 'self'; font-src 'self'; "
+        f"frame-src {frames}; frame-ancestors 'self'; object-src 'none'; "
+        "base-uri 'self'; form-action 'self'"
+    )
+
+
+DOCS_POLICY = (
+    f"default-src 'self'; script-src 'self' 'unsafe-inline' {DOCS_CDN}; "
+    f"style-src 'self' 'unsafe-inline' {DOCS_CDN}; img-src 'self' data: https:; "
+    f"connect-src 'self'; worker-src 'self' blob:; frame-ancestors 'self'; object-src 'none'"
+)
+
+
+def _viewer_origin(scope: Scope) -> str | None:
+    """Where the participant's page frames the 3-D view from (as the page computes it)."""
+    from server.routes.pages import scene_url
+
+    try:
+        parts = urlsplit(scene_url(Request(scope), "token"))
+    except Exception:  # no viewer configured (tests of the app alone): frame only ourselves
+        return None
+    return f"{parts.scheme}://{parts.netloc}" if parts.scheme and parts.netloc else None
+
+
+class SecurityHeaders:
+    """Adds the headers above to every HTTP response (CSP on HTML ones)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def with_headers(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                headers = list(message.get("headers", []))
+                names = {name.lower() for name, _ in headers}
+                headers.extend(h for h in BASE_HEADERS if h[0] not in names)
+                if b"content-security-policy" not in names:
+                    headers.append((b"content-security-policy", self._policy(scope, headers)))
+                message = {**message, "headers": headers}
+            await send(message)
+
+        await self.app(scope, receive, with_headers)
+
+    @staticmethod
+    def _policy(scope: Scope, headers: list[tuple[bytes, bytes]]) -> bytes:
+        path = scope.get("path", "")
+        if path.startswith(DOCS_PATHS):
+            return DOCS_POLICY.encode()
+        html = any(n.lower() == b"content-type" and v.startswith(b"text/html") for n, v in headers)
+        origin = _viewer_origin(scope) if html and path.startswith("/p/") else None
+        if origin and origin == _own_origin(scope):
+            origin = None
+        return page_policy(origin).encode()
+
+
+def _own_origin(scope: Scope) -> str:
+    request = Request(scope)
+    return f"{request.url.scheme}://{request.url.netloc}"
+
+
+def _printable(value: Any) -> Any:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return value
+    return str(value).encode("utf-8", "backslashreplace").decode("utf-8")
+
+
+async def validation_error(_: Request, error: RequestValidationError) -> JSONResponse:
+    """FastAPI's 422, without echoing the input: input it cannot encode (NaN, a lone
+    surrogate) would turn the 422 into a 500, and a message need not repeat the input."""
+    detail = [
+        {
+            "loc": [_printable(part) for part in e.get("loc", ())],
+            "msg": _printable(e.get("msg", "")),
+            "type": _printable(e.get("type", "value_error")),
+        }
+        for e in error.errors()
+    ]
+    return JSONResponse({"detail": detail}, status_code=422)
