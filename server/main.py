@@ -11,11 +11,13 @@ from fastapi.responses import JSONResponse
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.routes import ROUTERS, dashboard, pages, reports, viewing
+from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
 from server.sessions.hub import Hub
 from server.sessions.manager import SessionManager
 from server.sessions.worker import WorkerOptions
 from server.settings import Settings
+from server.viewer import proxy as viewer_proxy
 from server.viewer import viewer_from_settings
 
 
@@ -57,6 +59,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Human advising studies in interactive deep reinforcement learning.",
         version="0.1.0",
         lifespan=lifespan,
+        docs_url=None,  # served from local files by add_docs
+        redoc_url=None,  # ReDoc has no offline bundle here; /docs is the reference
     )
     app.state.settings = settings
     app.state.engine = engine
@@ -67,9 +71,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.participant_tokens = {}
     for router in ROUTERS:
         app.include_router(router)
-    for router in (reports.router, pages.router, viewing.router, dashboard.router):
+    for router in (
+        reports.router,
+        pages.router,
+        viewing.router,
+        dashboard.router,
+        viewer_proxy.router,
+    ):
         app.include_router(router)
     app.mount("/static", pages.static_files(), name="static")
+    add_docs(app)
 
     @app.exception_handler(ServiceError)
     async def service_error(_: Request, error: ServiceError) -> JSONResponse:
