@@ -20,7 +20,7 @@ from fastapi import FastAPI
 
 from server.main import create_app
 from server.settings import Settings
-from tests.e2e.proxy import nginx, nginx_available
+from tests.e2e.proxy import config, nginx, nginx_available
 from tests.server.live import API_KEY, free_port
 
 ROOT = Path(__file__).absolute().parents[2]
@@ -48,6 +48,8 @@ class Live:
     """Where the browser reaches it: nginx, in front of uvicorn."""
     data_dir: Path
     proxy_port: int
+    server_port: int
+    """uvicorn's own port, behind nginx."""
 
     def api(self, token: str | None = None) -> httpx.Client:
         headers = {"Authorization": f"Bearer {token}"} if token else {"X-API-Key": API_KEY}
@@ -109,8 +111,10 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
         assert thread.is_alive() and time.monotonic() < deadline, "the server did not start"
         time.sleep(0.05)
     try:
-        with nginx(data_dir / "nginx", proxy_port, port):
-            yield Live(app, f"http://localhost:{proxy_port}", data_dir, proxy_port)
+        folder = data_dir / "nginx"
+        conf = config(folder, proxy_port, port)
+        with nginx(folder, conf, f"http://127.0.0.1:{proxy_port}/api/health"):
+            yield Live(app, f"http://localhost:{proxy_port}", data_dir, proxy_port, port)
     finally:
         server.should_exit = True
         thread.join(120)

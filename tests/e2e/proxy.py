@@ -25,11 +25,11 @@ def nginx_available() -> bool:
     return Path(NGINX).exists()
 
 
-def config(folder: Path, listen_port: int, upstream_port: int) -> str:
-    """An nginx.conf around the deployment's own proxy snippet, writing only in `folder`."""
+def _main_config(folder: Path, http_body: str) -> str:
+    """nginx.conf for a foreground nginx that writes only in `folder`."""
     temp = {k: folder / k for k in ("body", "proxy", "fastcgi", "uwsgi", "scgi")}
     for path in temp.values():
-        path.mkdir(exist_ok=True)
+        path.mkdir(parents=True, exist_ok=True)
     user = "user root;\n" if os.geteuid() == 0 else ""
     return f"""{user}worker_processes 1;
 daemon off;
@@ -43,7 +43,16 @@ http {{
     fastcgi_temp_path {temp["fastcgi"]};
     uwsgi_temp_path {temp["uwsgi"]};
     scgi_temp_path {temp["scgi"]};
-    map $http_upgrade $connection_upgrade {{
+{http_body}
+}}
+"""
+
+
+def config(folder: Path, listen_port: int, upstream_port: int) -> str:
+    """Plain HTTP on loopback around the deployment's own proxy snippet."""
+    return _main_config(
+        folder,
+        f"""    map $http_upgrade $connection_upgrade {{
         default upgrade;
         ''      '';
     }}
@@ -54,23 +63,55 @@ http {{
     server {{
         listen 127.0.0.1:{listen_port};
         include {PROXY_SNIPPET};
-    }}
-}}
-"""
+    }}""",
+    )
+
+
+def tls_config(
+    folder: Path, http_port: int, https_port: int, upstream_port: int, cert: Path, key: Path
+) -> str:
+    """The shipped site file (deploy/nginx/ideeprl.conf) as it is, but for its ports, paths
+    and certificate: what docs/deploy.md tells a researcher to install."""
+    site = SITE.read_text()
+    for old, new in {
+        "listen 80;": f"listen 127.0.0.1:{http_port};",
+        "listen [::]:80;": "",
+        "listen 443 ssl http2;": f"listen 127.0.0.1:{https_port} ssl http2;",
+        "listen [::]:443 ssl http2;": "",
+        "server 127.0.0.1:8000;": f"server 127.0.0.1:{upstream_port};",
+        "/etc/letsencrypt/live/study.example.org/fullchain.pem": str(cert),
+        "/etc/letsencrypt/live/study.example.org/privkey.pem": str(key),
+        "/etc/nginx/snippets/ideeprl-proxy.conf": str(PROXY_SNIPPET),
+    }.items():
+        assert old in site, f"{SITE} no longer has {old!r}: update the test with the file"
+        site = site.replace(old, new)
+    (folder / "site.conf").write_text(site)
+    return _main_config(folder, f"    include {folder / 'site.conf'};")
+
+
+def self_signed(folder: Path, name: str = "localhost") -> tuple[Path, Path]:
+    """A throw-away certificate and key, as `openssl req -x509` makes them."""
+    cert, key = folder / "cert.pem", folder / "key.pem"
+    subprocess.run(
+        ["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2",
+         "-subj", f"/CN={name}", "-keyout", str(key), "-out", str(cert)],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    return cert, key
 
 
 @contextmanager
-def nginx(folder: Path, listen_port: int, upstream_port: int) -> Iterator[str]:
-    """nginx on 127.0.0.1:`listen_port` proxying to `upstream_port`; yields its base URL."""
+def nginx(folder: Path, conf_text: str, probe: str) -> Iterator[None]:
+    """nginx running `conf_text` in the foreground until the block ends; `probe` is a URL
+    that answers once it is up."""
     folder.mkdir(parents=True, exist_ok=True)
     conf = folder / "nginx.conf"
-    conf.write_text(config(folder, listen_port, upstream_port))
+    conf.write_text(conf_text)
     process = subprocess.Popen(
         [NGINX, "-p", str(folder), "-e", str(folder / "error.log"), "-c", str(conf)],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
     )
-    url = f"http://127.0.0.1:{listen_port}"
     try:
         deadline = time.monotonic() + 30
         while True:
@@ -79,12 +120,12 @@ def nginx(folder: Path, listen_port: int, upstream_port: int) -> Iterator[str]:
                 out = process.stdout.read().decode() if process.stdout else ""
                 raise AssertionError(f"nginx exited ({process.returncode}): {out}{log}")
             try:
-                httpx.get(f"{url}/api/health", timeout=2)
+                httpx.get(probe, timeout=2, verify=False)
                 break
             except httpx.TransportError:
                 assert time.monotonic() < deadline, "nginx did not start"
                 time.sleep(0.1)
-        yield url
+        yield
     finally:
         process.send_signal(signal.SIGTERM)  # fast shutdown: open websockets are cut
         try:
