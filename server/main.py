@@ -1,9 +1,11 @@
-"""The FastAPI app: `create_app(settings)`; `uvicorn --factory server.main:app_from_env`."""
+"""The FastAPI app: `create_app(settings)`; `uvicorn --factory server.main:app_from_env
+--ws-per-message-deflate false` (see `UVICORN_OPTIONS`)."""
 
 from __future__ import annotations
 
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
@@ -19,6 +21,11 @@ from server.sessions.worker import WorkerOptions
 from server.settings import Settings
 from server.viewer import proxy as viewer_proxy
 from server.viewer import viewer_from_settings
+
+UVICORN_OPTIONS: dict[str, Any] = {"ws_per_message_deflate": False}
+"""How uvicorn must run this app: its only websocket is the 3-D view's relay, whose stream of
+pose updates viser itself sends uncompressed ("compression can be too slow"); deflating it
+again in the web process would cost that process the CPU its participants' requests need."""
 
 
 def worker_options(settings: Settings) -> WorkerOptions:

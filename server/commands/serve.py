@@ -28,7 +28,7 @@ def register(subparsers: Any) -> None:
 def serve(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from server.main import create_app
+    from server.main import UVICORN_OPTIONS, create_app
     from server.settings import Settings
 
     overrides = {
@@ -58,5 +58,7 @@ def serve(args: argparse.Namespace) -> int:
         f"  curl -H 'X-API-Key: {key}' {base}/api/studies",
         flush=True,
     )
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level=args.log_level)
+    uvicorn.run(
+        app, host=settings.host, port=settings.port, log_level=args.log_level, **UVICORN_OPTIONS
+    )
     return 0

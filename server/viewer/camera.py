@@ -15,7 +15,7 @@ import math
 
 from sim.layout import CameraPose
 
-VIEWER_CAMERA = CameraPose(eye=(-0.5, -0.95, 1.57), target=(0.45, 0.0, 0.45), fov=45.0)
+VIEWER_CAMERA = CameraPose(eye=(-0.5, -0.95, 1.57), target=(0.45, 0.0, 0.45), fov=50.0)
 """Metres in the world frame (z up); `fov` vertical, degrees (viser's own default is 75)."""
 
 

@@ -77,7 +77,12 @@ async def relay(websocket: WebSocket, token: str) -> None:
     url = f"ws://{_upstream(viewer.config.host)}:{viewer.port}/p/{token}"
     try:
         upstream = await connect(
-            url, subprotocols=offered or None, max_size=None, open_timeout=20, ping_interval=None
+            url,
+            subprotocols=offered or None,
+            max_size=None,
+            compression=None,  # as viser serves it
+            open_timeout=20,
+            ping_interval=None,
         )
     except (OSError, InvalidStatus, TimeoutError) as error:
         log.warning("the 3-D view's server did not answer (%s)", error)

@@ -18,7 +18,7 @@ import pytest
 import uvicorn
 from fastapi import FastAPI
 
-from server.main import create_app
+from server.main import UVICORN_OPTIONS, create_app
 from server.settings import Settings
 from tests.e2e.proxy import config, nginx, nginx_available
 from tests.server.live import API_KEY, free_port
@@ -103,7 +103,9 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
         checkpoint_every_episodes=5,
     )
     app = create_app(settings)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    server = uvicorn.Server(
+        uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", **UVICORN_OPTIONS)
+    )
     thread = threading.Thread(target=server.run, name="e2e-uvicorn", daemon=True)
     thread.start()
     deadline = time.monotonic() + 60

@@ -153,7 +153,6 @@ def test_a_participant_gives_all_advice_and_is_thanked(live: Live, browser) -> N
         if index == 40:
             assert len(view.mirror.handles) >= 20 and view.player.updates > 40
     last_advice = time.monotonic()
-    expect(page.locator("#advice-left")).to_have_text("0", timeout=30_000)
 
     # By itself, without a reload, while the learner trains on (and the view replays it).
     expect(page).to_have_url(re.compile(r"/thanks$"), timeout=THANKS_WITHIN_S * 1000)

@@ -66,4 +66,4 @@ def test_the_camera_reaches_viser_in_its_units() -> None:
     params = viser_camera_params()
     assert params["initialCameraPosition"] == "-0.5,-0.95,1.57"
     assert params["initialCameraUp"] == "0,0,1"
-    assert float(params["initialCameraFov"]) == pytest.approx(0.7854, abs=1e-4)
+    assert float(params["initialCameraFov"]) == pytest.approx(0.8727, abs=1e-4)
