@@ -19,12 +19,13 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
-# Debian's Chromium drives the browser tests; installed when missing and we may.
+# Debian's Chromium drives the browser tests, through Debian's nginx in front of the
+# server as deployed; installed when missing and we may.
 browser:
-	@command -v chromium >/dev/null 2>&1 || { \
+	@{ command -v chromium && { command -v nginx || test -x /usr/sbin/nginx; }; } >/dev/null 2>&1 || { \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
-	  else echo "chromium not found: browser tests will be skipped (apt-get install chromium)"; fi; }
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium nginx >/dev/null; \
+	  else echo "chromium or nginx not found: browser tests will be skipped (apt-get install chromium nginx)"; fi; }
 
 serve: setup
 	$(VENV)/bin/ideeprl serve

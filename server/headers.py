@@ -3,8 +3,8 @@
 The pages load only their own scripts (no inline script: their configuration travels in
 `<script type="application/json">` blocks, which are not run), so `script-src 'self'`
 holds; style attributes (the advice meter) need `'unsafe-inline'` for styles only. The
-participant's page frames the 3-D view, served by viser on its own port (or under a path
-of this server): `frame-src` names that origin. No one may frame our pages
+participant's page frames the 3-D view, relayed under /viewer/ by this server (or from
+`viewer_public_url`): `frame-src` names that origin when it is another one. No one may frame our pages
 (`frame-ancestors 'self'`). FastAPI's `/docs` and `/redoc` pages load Swagger UI and
 ReDoc from their CDN with an inline script, so they get a policy that allows exactly that.
 """
@@ -20,6 +20,9 @@ from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 DOCS_PATHS = ("/docs", "/redoc")
+VIEWER_PATH = "/viewer/"
+"""Where the app relays viser's client (server/viewer/proxy.py): a prebuilt bundle that
+needs inline styles, workers from blobs and WebAssembly, so it gets its own policy."""
 DOCS_CDN = "https://cdn.jsdelivr.net"
 BASE_HEADERS = [
     (b"x-content-type-options", b"nosniff"),
@@ -39,6 +42,14 @@ def page_policy(frame_origin: str | None) -> str:
     )
 
 
+VIEWER_POLICY = (
+    "default-src 'self'; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:; "
+    "worker-src 'self' blob:; style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; "
+    "connect-src 'self' ws: wss: data: blob:; font-src 'self' data:; "
+    "frame-ancestors 'self'; object-src 'none'; base-uri 'self'"
+)
+
+
 DOCS_POLICY = (
     f"default-src 'self'; script-src 'self' 'unsafe-inline' {DOCS_CDN}; "
     f"style-src 'self' 'unsafe-inline' {DOCS_CDN}; img-src 'self' data: https:; "
@@ -47,12 +58,13 @@ DOCS_POLICY = (
 
 
 def _viewer_origin(scope: Scope) -> str | None:
-    """Where the participant's page frames the 3-D view from (as the page computes it)."""
-    from server.routes.pages import scene_url
+    """Where the participant's page frames the 3-D view from, when not its own origin
+    (`viewer_public_url` set to another host)."""
+    from server.routes.pages import scene_src
 
     try:
-        parts = urlsplit(scene_url(Request(scope), "token"))
-    except Exception:  # no viewer configured (tests of the app alone): frame only ourselves
+        parts = urlsplit(scene_src(Request(scope)))
+    except Exception:  # no app state (tests of the middleware alone): frame only ourselves
         return None
     return f"{parts.scheme}://{parts.netloc}" if parts.scheme and parts.netloc else None
 
@@ -85,6 +97,8 @@ class SecurityHeaders:
         path = scope.get("path", "")
         if path.startswith(DOCS_PATHS):
             return DOCS_POLICY.encode()
+        if path.startswith(VIEWER_PATH):
+            return VIEWER_POLICY.encode()
         html = any(n.lower() == b"content-type" and v.startswith(b"text/html") for n, v in headers)
         origin = _viewer_origin(scope) if html and path.startswith("/p/") else None
         if origin and origin == _own_origin(scope):

@@ -1,4 +1,5 @@
-"""The FastAPI app: `create_app(settings)`; `uvicorn --factory server.main:app_from_env`."""
+"""The FastAPI app: `create_app(settings)`; `uvicorn --factory server.main:app_from_env
+--ws-per-message-deflate false` (see `UVICORN_OPTIONS`)."""
 
 from __future__ import annotations
 
@@ -21,12 +22,19 @@ from server.logins import Logins
 from server.openapi import install as install_openapi
 from server.openapi import operation_id
 from server.routes import ROUTERS, dashboard, pages, reports, viewing
+from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
 from server.sessions.hub import Hub
 from server.sessions.manager import SessionManager
 from server.sessions.worker import WorkerOptions
 from server.settings import Settings
+from server.viewer import proxy as viewer_proxy
 from server.viewer import viewer_from_settings
+
+UVICORN_OPTIONS: dict[str, Any] = {"ws_per_message_deflate": False}
+"""How uvicorn must run this app: its only websocket is the 3-D view's relay, whose stream of
+pose updates viser itself sends uncompressed ("compression can be too slow"); deflating it
+again in the web process would cost that process the CPU its participants' requests need."""
 
 
 def worker_options(settings: Settings) -> WorkerOptions:
@@ -89,6 +97,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="0.1.0",
         lifespan=lifespan,
         generate_unique_id_function=operation_id,
+        docs_url=None,  # served from local files by add_docs
+        redoc_url=None,  # ReDoc has no offline bundle here; /docs is the reference
     )
     app.state.settings = settings
     app.state.engine = engine
@@ -100,7 +110,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.dashboard_logins = Logins(settings.dashboard_login_s)
     for router in ROUTERS:
         app.include_router(router)
-    for router in (reports.router, pages.router, viewing.router, dashboard.router):
+    for router in (
+        reports.router,
+        pages.router,
+        viewing.router,
+        dashboard.router,
+        viewer_proxy.router,
+    ):
         app.include_router(router)
     app.mount("/static", pages.static_files(), name="static")
     app.add_middleware(
@@ -109,6 +125,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(SecurityHeaders)
     app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
     install_openapi(app)
+    add_docs(app)
 
     @app.exception_handler(ServiceError)
     async def service_error(_: Request, error: ServiceError) -> JSONResponse:

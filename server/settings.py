@@ -34,13 +34,14 @@ class Settings(BaseSettings):
     """Researcher key (header `X-API-Key`). Unset: generated once and kept in `data_dir`."""
 
     host: str = "127.0.0.1"
-    """Interface the HTTP server listens on."""
+    """Interface the HTTP server listens on: `0.0.0.0` (or `::`) serves other computers."""
 
     port: int = Field(default=8000, ge=0, le=65535)
-    """HTTP port."""
+    """HTTP port: the one port of the whole platform (API, pages, dashboard, 3-D view)."""
 
     public_url: str | None = None
-    """Base URL participants reach the server at (for links); default `http://host:port`."""
+    """Base URL participants reach the server at, e.g. `https://study.example.org` behind
+    a reverse proxy: the participant links use it. Default `http://host:port`."""
 
     idle_limit_s: float = Field(default=1800.0, gt=0)
     """Seconds without advice while advice is wanted before a human session is abandoned."""
@@ -64,14 +65,16 @@ class Settings(BaseSettings):
     """Niceness of machine-advised workers, so training never slows people's requests."""
 
     viser_host: str = "127.0.0.1"
-    """Interface the participants' 3-D view (viser) listens on."""
+    """Interface viser (the 3-D view's server) listens on. Browsers never reach it directly:
+    the app relays it under `/viewer/` on its own port, so keep it on loopback."""
 
-    viser_port: int = Field(default=8080, ge=0, le=65535)
-    """Port of the 3-D view; 0 picks a free one, and a taken one is skipped upwards."""
+    viser_port: int = Field(default=0, ge=0, le=65535)
+    """viser's port on `viser_host`; 0 picks a free one, and a taken one is skipped upwards."""
 
-    viser_public_url: str | None = None
-    """Base URL browsers reach the 3-D view at (e.g. behind a proxy); default: the host the
-    participant's page was loaded from, on the view's port."""
+    viewer_public_url: str | None = None
+    """Base URL browsers load the 3-D view from; default `/viewer/` on the page's own origin.
+    Only for unusual setups, e.g. the tests, which load it from another host name of the
+    same server so that Chromium renders it in a process of its own."""
 
     viewer_playback_speed: float = Field(default=1.0, gt=0)
     """How fast the 3-D view replays the robot's motion; 1 is real time."""

@@ -17,15 +17,21 @@ IMAGE_SIZE = 64
 class Camera:
     """Renders what the agent sees."""
 
-    def __init__(self, world: World, pose: CameraPose, size: int = IMAGE_SIZE) -> None:
+    def __init__(
+        self, world: World, pose: CameraPose, size: int = IMAGE_SIZE, height: int | None = None
+    ) -> None:
+        """`size` wide and `height` (default `size`) high; `pose.fov` is vertical."""
         self.world = world
         self.size = size
+        self.height = height or size
         self.view = world.p.computeViewMatrix(pose.eye, pose.target, (0.0, 0.0, 1.0))
-        self.projection = world.p.computeProjectionMatrixFOV(pose.fov, 1.0, pose.near, pose.far)
+        self.projection = world.p.computeProjectionMatrixFOV(
+            pose.fov, size / self.height, pose.near, pose.far
+        )
 
     def _render(self, flags: int) -> tuple:
         return self.world.p.getCameraImage(
-            self.size, self.size, self.view, self.projection,
+            self.size, self.height, self.view, self.projection,
             shadow=0, flags=flags, renderer=pybullet.ER_TINY_RENDERER,
         )  # fmt: skip
 
@@ -33,7 +39,7 @@ class Camera:
         """uint8 (size, size, 3)."""
         rgba = self._render(pybullet.ER_NO_SEGMENTATION_MASK)[2]
         return np.ascontiguousarray(
-            np.asarray(rgba, dtype=np.uint8).reshape(self.size, self.size, 4)[:, :, :3]
+            np.asarray(rgba, dtype=np.uint8).reshape(self.height, self.size, 4)[:, :, :3]
         )
 
     def visible_pixels(self) -> dict[tuple[int, int], int]:

@@ -11,7 +11,7 @@ from gymnasium.error import ResetNeeded
 from sim.actions import ACTION_NAMES, Action
 from sim.bodies import BodySpec, MotionFrame, Pose
 from sim.camera import IMAGE_SIZE, Camera
-from sim.layout import Layout
+from sim.layout import CameraPose, Layout
 from sim.rewards import RewardScheme
 from sim.robot import SuctionArm
 from sim.rules import OBJECTS, SortRule, SortRuleSpec
@@ -187,11 +187,15 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         """Every body's current world pose, by name."""
         return self._world.poses()
 
-    def visible_pixels(self) -> dict[str, int]:
+    def visible_pixels(
+        self, camera: CameraPose | None = None, size: tuple[int, int] = (IMAGE_SIZE, IMAGE_SIZE)
+    ) -> dict[str, int]:
         """How many of the camera's pixels each named body covers now (for checking the
-        camera setup; renders once more)."""
+        camera setup; renders once more). `camera` and `size` (width, height) check another
+        view of the scene, such as the participants' 3-D view."""
         by_part = {(part.body, part.link): name for name, part in self._world.parts.items()}
-        counts = self._camera.visible_pixels()
+        eye = self._camera if camera is None else Camera(self._world, camera, *size)
+        counts = eye.visible_pixels()
         return {name: counts.get(key, 0) for key, name in by_part.items()}
 
     # -- the actions --------------------------------------------------------------------

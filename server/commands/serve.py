@@ -16,6 +16,10 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--host", help="interface to listen on (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="port (default 8000)")
+    parser.add_argument(
+        "--public-url",
+        help="address participants reach the server at, for their links (default http://HOST:PORT)",
+    )
     parser.add_argument("--data-dir", type=Path, help="folder of database, checkpoints, exports")
     parser.add_argument("--log-level", default="info", help="uvicorn log level")
     parser.set_defaults(func=serve)
@@ -24,12 +28,17 @@ def register(subparsers: Any) -> None:
 def serve(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from server.main import create_app
+    from server.main import UVICORN_OPTIONS, create_app
     from server.settings import Settings
 
     overrides = {
         k: v
-        for k, v in {"host": args.host, "port": args.port, "data_dir": args.data_dir}.items()
+        for k, v in {
+            "host": args.host,
+            "port": args.port,
+            "public_url": args.public_url,
+            "data_dir": args.data_dir,
+        }.items()
         if v is not None
     }
     settings = Settings(**overrides)
@@ -49,5 +58,7 @@ def serve(args: argparse.Namespace) -> int:
         f"  curl -H 'X-API-Key: {key}' {base}/api/studies",
         flush=True,
     )
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level=args.log_level)
+    uvicorn.run(
+        app, host=settings.host, port=settings.port, log_level=args.log_level, **UVICORN_OPTIONS
+    )
     return 0

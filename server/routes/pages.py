@@ -14,7 +14,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from urllib.parse import quote
 
 from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
@@ -26,6 +25,7 @@ from sqlalchemy import func, select
 import sim
 from server.db.models import Advice, Status
 from server.services.sessions import session_for_token
+from server.viewer.camera import viser_camera_params
 
 WEB_DIR = Path(__file__).resolve().parents[2] / "web"
 templates = Jinja2Templates(directory=WEB_DIR / "templates")
@@ -34,11 +34,6 @@ router = APIRouter(include_in_schema=False)
 TEXT_KEYS = ("title", "consent", "induction_1", "induction_2", "induction_3", "thanks")
 """Keys of a study's `texts` that replace the default page texts (web/texts/KEY.txt)."""
 INDUCTION_TITLES = ("The robot and the experiment", "The task, and how to solve it", "Your screen")
-CAMERA = {  # above and behind the robot, so its left is the screen's left
-    "initialCameraPosition": "-0.12,-0.5,1.72",
-    "initialCameraLookAt": "0.42,0.02,0.4",
-    "initialCameraUp": "0,0,1",
-}
 
 
 def static_files() -> StaticFiles:
@@ -164,7 +159,7 @@ def advise(request: Request, token: str) -> Response:
         request,
         "participant/advise.html",
         visit,
-        scene_url=scene_url(request, token),
+        scene_src=scene_src(request),
         action_names=sim.ACTION_NAMES,
     )
 
@@ -179,19 +174,13 @@ def thanks(request: Request, token: str) -> Response:
     return _page(request, "participant/thanks.html", visit, body=visit.text("thanks"))
 
 
-def scene_url(request: Request, token: str) -> str:
-    """viser's client, its websocket at /p/TOKEN on the viewer's port."""
-    settings = request.app.state.settings
-    base = settings.viser_public_url
-    if not base:
-        host = request.url.hostname or settings.viser_host
-        if ":" in host:
-            host = f"[{host}]"
-        base = f"{request.url.scheme}://{host}:{request.app.state.viewer.port}"
-    base = base.rstrip("/")
-    websocket = re.sub(r"^http", "ws", base) + f"/p/{token}"
-    params = "&".join(f"{k}={v}" for k, v in CAMERA.items())
-    return f"{base}/?websocket={quote(websocket, safe=':/')}&hideViserLogo&{params}"
+def scene_src(request: Request) -> str:
+    """viser's client under /viewer/ of this server, with the participant's camera; the
+    page adds the websocket (`/viewer/p/TOKEN` on the same host, ws or wss as loaded)."""
+    base = request.app.state.settings.viewer_public_url or "/viewer/"
+    base = base.rstrip("/") + "/"
+    params = "&".join(f"{k}={v}" for k, v in viser_camera_params().items())
+    return f"{base}?hideViserLogo&{params}"
 
 
 def describe_rule(spec: Any) -> str:

@@ -21,6 +21,11 @@ class HistoryItem(BaseModel):
     reward: float | None = None
 
 
+class HeldObject(BaseModel):
+    shape: str
+    color: str
+
+
 class ParticipantState(BaseModel):
     """Everything the advising page shows; `version` grows with every change (long-poll)."""
 
@@ -34,6 +39,12 @@ class ParticipantState(BaseModel):
         default=None, description="Base64 PNG (64x64, lossless) of what the learner sees."
     )
     robot_moving: bool
+    held: HeldObject | None = Field(
+        default=None, description="What the robot holds at this request (None: nothing)."
+    )
+    station: str | None = Field(
+        default=None, description="Where the arm is at this request: center, left, right."
+    )
     advice_budget: int
     advice_given: int
     advice_left: int

@@ -11,6 +11,7 @@ import base64
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
+from typing import Any
 
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
@@ -20,6 +21,7 @@ from server.db.models import Advice, Status, StudySession
 from server.schemas.participant import (
     AdviceCreate,
     AdviceReceipt,
+    HeldObject,
     HistoryItem,
     ParticipantState,
 )
@@ -59,6 +61,15 @@ def _history(entries: list[HistoryEntry]) -> list[HistoryItem]:
         )
         for e in entries
     ]
+
+
+def _arm(info: dict[str, Any]) -> dict[str, Any]:
+    """What the robot holds and where, from the request's ground truth, for the page's words."""
+    held = info.get("held")
+    return {
+        "held": HeldObject(shape=held["shape"], color=held["color"]) if held else None,
+        "station": info.get("station"),
+    }
 
 
 def participant_state(manager: SessionManager, session: ParticipantSession) -> ParticipantState:
@@ -103,6 +114,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             base64.b64encode(request.observation_png).decode() if request is not None else None
         ),
         robot_moving=handle.moving,
+        **_arm(request.info if request is not None else {}),
         advice_budget=budget,
         advice_given=given,
         advice_left=max(0, budget - given),

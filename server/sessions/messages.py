@@ -42,7 +42,8 @@ class AdviceRequest:
     observation_png: bytes
     """The 64x64 image the learner sees, PNG (lossless)."""
     info: dict[str, Any]
-    """The environment's ground truth at this step (not shown to participants)."""
+    """The environment's ground truth at this step; participants are shown only what the arm
+    holds and where, in words (the scene shows it too)."""
     advice_budget: int
     """Advice the strategy may ask for in all."""
 

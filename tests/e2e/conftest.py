@@ -1,5 +1,6 @@
 """A real study server (uvicorn on loopback, in this process so tests can look at its viser
-scenes and hub), a real SQLite file, and Debian's Chromium driven by Playwright."""
+scenes and hub) behind Debian's nginx, a real SQLite file, and Debian's Chromium driven by
+Playwright."""
 
 from __future__ import annotations
 
@@ -17,8 +18,9 @@ import pytest
 import uvicorn
 from fastapi import FastAPI
 
-from server.main import create_app
+from server.main import UVICORN_OPTIONS, create_app
 from server.settings import Settings
+from tests.e2e.proxy import config, nginx, nginx_available
 from tests.server.live import API_KEY, free_port
 
 ROOT = Path(__file__).absolute().parents[2]
@@ -43,7 +45,11 @@ class Live:
 
     app: FastAPI
     url: str
+    """Where the browser reaches it: nginx, in front of uvicorn."""
     data_dir: Path
+    proxy_port: int
+    server_port: int
+    """uvicorn's own port, behind nginx."""
 
     def api(self, token: str | None = None) -> httpx.Client:
         headers = {"Authorization": f"Bearer {token}"} if token else {"X-API-Key": API_KEY}
@@ -73,34 +79,44 @@ class Live:
 
 @pytest.fixture(scope="package")
 def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
+    """The study server behind Debian's nginx, as deployed (docs/deploy.md): the browser
+    reaches everything, the 3-D view's websocket included, through nginx's one port."""
+    if not nginx_available():
+        pytest.skip("nginx not found: install Debian's nginx (apt-get install nginx)")
     data_dir = tmp_path_factory.mktemp("e2e_data")
-    port = free_port()
+    port, proxy_port = free_port(), free_port()
     settings = Settings(
         database_url=f"sqlite:///{data_dir / 'study.sqlite3'}",
         api_key=API_KEY,
         data_dir=data_dir,
         host="127.0.0.1",
         port=port,
-        public_url=f"http://localhost:{port}",
+        public_url=f"http://localhost:{proxy_port}",
+        # Pages on localhost, the 3-D view on 127.0.0.1, both through nginx's one port: two
+        # sites, so Chromium draws the view in a process of its own. With software WebGL on
+        # two busy cores, a view in the page's process starves the page (seconds per
+        # request); a GPU makes this moot, and a deployment uses one origin (the default).
+        viewer_public_url=f"http://127.0.0.1:{proxy_port}/viewer/",
         viser_port=0,
         viewer_playback_speed=PLAYBACK_SPEED,
         heartbeat_s=1,
         checkpoint_every_episodes=5,
     )
     app = create_app(settings)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    server = uvicorn.Server(
+        uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", **UVICORN_OPTIONS)
+    )
     thread = threading.Thread(target=server.run, name="e2e-uvicorn", daemon=True)
     thread.start()
     deadline = time.monotonic() + 60
     while not server.started:
         assert thread.is_alive() and time.monotonic() < deadline, "the server did not start"
         time.sleep(0.05)
-    # Pages on localhost, the 3-D view on 127.0.0.1: two sites, so Chromium draws the view
-    # in a process of its own. With software WebGL on two busy cores, a view in the page's
-    # process starves the page (seconds per request); a GPU makes this moot.
-    settings.viser_public_url = f"http://127.0.0.1:{app.state.viewer.port}"
     try:
-        yield Live(app, f"http://localhost:{port}", data_dir)
+        folder = data_dir / "nginx"
+        conf = config(folder, proxy_port, port)
+        with nginx(folder, conf, f"http://127.0.0.1:{proxy_port}/api/health"):
+            yield Live(app, f"http://localhost:{proxy_port}", data_dir, proxy_port, port)
     finally:
         server.should_exit = True
         thread.join(120)

@@ -3,7 +3,6 @@ each client's scene) and in the browser (the pixels of viser's canvas)."""
 
 from __future__ import annotations
 
-import contextlib
 import io
 import time
 from collections.abc import Mapping
@@ -49,8 +48,7 @@ def distances(view: ClientView, poses: Mapping[str, Any]) -> dict[str, float]:
 
 
 def canvas_pixels(page: Any) -> np.ndarray:
-    """The middle of the 3-D view as the participant sees it (RGB), clear of viser's
-    overlays (connection panel, notices)."""
+    """The middle of the 3-D view as the participant sees it (RGB)."""
     png = page.locator("#scene").screenshot(timeout=120_000, animations="disabled")
     image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
     h, w, _ = image.shape
@@ -64,15 +62,3 @@ def colored(pixels: np.ndarray) -> dict[str, int]:
         "red": int(((r > 150) & (g < 110) & (b < 110)).sum()),
         "blue": int(((b > 150) & (r < 130) & (g < 130)).sum()),
     }
-
-
-def dismiss_notices(page: Any, wait_s: float = 8.0) -> None:
-    """Close viser's notices (headless Chromium renders WebGL in software and says so)."""
-    closers = page.frame_locator("#scene").locator("[class*='Notification-closeButton']")
-    with contextlib.suppress(Exception):  # no notice: a GPU, or it closed itself
-        closers.first.wait_for(timeout=wait_s * 1000)
-    for i in reversed(range(closers.count())):
-        with contextlib.suppress(Exception):  # it closed itself meanwhile
-            closers.nth(i).evaluate("button => button.click()", timeout=10_000)
-    with contextlib.suppress(Exception):
-        closers.first.wait_for(state="detached", timeout=10_000)

@@ -177,8 +177,8 @@ def test_a_forged_token_sees_nothing_and_cannot_act(live: Live, browser, pair) -
     )
     assert statuses == [403, 401]
 
-    port = viewer.port
-    page.goto(f"http://127.0.0.1:{port}/?websocket=ws://127.0.0.1:{port}/p/{forged}")
+    socket = live.url.replace("http://", "ws://") + f"/viewer/p/{forged}"
+    page.goto(f"{live.url}/viewer/?websocket={socket}")
     deadline = time.monotonic() + 30
     while viewer.refused == refused and time.monotonic() < deadline:
         time.sleep(0.1)

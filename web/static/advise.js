@@ -7,6 +7,7 @@
   const $ = (id) => document.getElementById(id);
   const buttons = [...document.querySelectorAll("button.action")];
   const KEYS = { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
+  const LAST_MOVE_MS = 4000;
   const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 
   let version = null;
@@ -84,6 +85,12 @@
     $("observation-empty").hidden = true;
   }
 
+  function showArm(s, on) {
+    $("holding").hidden = !on;
+    $("holding").textContent = on ? window.describeArm(s) : "";
+    $("holding").dataset.held = on && s.held ? "yes" : "no";
+  }
+
   async function waitForPlayback(gen) {
     for (let i = 0; i < 600 && gen === generation; i++) {
       const response = await api("/api/participant/playback").catch(() => null);
@@ -105,6 +112,7 @@
     if (!ready) {
       enabledFor = null;
       setButtons(false);
+      showArm(s, false);
       if (s.status !== "running") setStatus(s.message || `The session is ${s.status}.`, "paused");
       else if (s.robot_moving || sentIndex !== null) setStatus("The robot is moving…", "busy");
       else setStatus("The robot is exploring on its own. Your first turn comes in a moment…", "busy");
@@ -116,6 +124,7 @@
     await waitForPlayback(gen);
     if (gen !== generation) return;
     showObservation(s);
+    showArm(s, true);
     enabledFor = s.advice_index;
     sentIndex = null;
     setButtons(true);
@@ -128,7 +137,10 @@
     enabledFor = null;
     setButtons(false);
     setStatus("That was your last choice. Thank you!", "turn");
-    await waitForPlayback(gen);
+    showArm({}, false);
+    // Show the last advised move, but no more: the view goes on to replay the robot's own
+    // training moves, which never end while it learns.
+    await Promise.race([waitForPlayback(gen), sleep(LAST_MOVE_MS)]);
     await sleep(800);
     window.location.assign(`/p/${config.token}/thanks`);
   }
@@ -224,11 +236,7 @@
     }
   }
   const scene = $("scene");
-  scene.src = scene.dataset.src + (softwareWebGL() ? "&fixedDpr=0.75" : "");
-  // Keys go to the 3-D view once it has focus: give focus back when the pointer leaves it.
-  scene.addEventListener("mouseleave", () => {
-    if (document.activeElement === scene) scene.blur();
-    window.focus();
-  });
+  scene.src = window.sceneUrl(scene, softwareWebGL());
+  window.keepKeysOnPage(scene);
   follow();
 })();
