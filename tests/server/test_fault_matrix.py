@@ -21,6 +21,8 @@ from tests.server.test_resume import records
 
 pytestmark = pytest.mark.slow
 EPISODES = 5
+LONGER = 10
+"""Episodes of the several-at-once case: none finishes before all three are killed."""
 
 
 @pytest.fixture(scope="module")
@@ -47,13 +49,14 @@ def _wait_episode(api: httpx.Client, session_id: int, episode: int) -> None:
         time.sleep(0.05)
 
 
-def _kill_worker(api: httpx.Client, session_id: int) -> None:
+def _kill_worker(api: httpx.Client, session_id: int, wait: bool = True) -> None:
     deadline = time.monotonic() + 60
     while not (pid := api.get(f"/api/sessions/{session_id}").json()["worker_pid"]):
         assert time.monotonic() < deadline
         time.sleep(0.02)
     os.kill(pid, signal.SIGKILL)
-    wait_for_status(api, session_id, {"interrupted"}, timeout=60)
+    if wait:
+        wait_for_status(api, session_id, {"interrupted"}, timeout=60)
 
 
 def _twins(api: httpx.Client, method: str, **extra: Any) -> tuple[int, dict, dict]:
@@ -65,14 +68,16 @@ def _twins(api: httpx.Client, method: str, **extra: Any) -> tuple[int, dict, dic
     return study, faulty, twin
 
 
-def _same(api: httpx.Client, study: int, pairs: list[tuple[int, int]]) -> None:
+def _same(
+    api: httpx.Client, study: int, pairs: list[tuple[int, int]], episodes: int = EPISODES
+) -> None:
     for faulty, twin in pairs:
         wait_for_status(api, faulty, {"finished"}, timeout=600)
         wait_for_status(api, twin, {"finished"}, timeout=600)
     files = export(api, study)
     for faulty, twin in pairs:
         got, want = records(files, faulty), records(files, twin)
-        assert len([e for e in got["episodes.csv"] if e["phase"] == "train"]) == EPISODES
+        assert len([e for e in got["episodes.csv"] if e["phase"] == "train"]) == episodes
         for name in got:
             assert got[name] == want[name], (name, faulty, twin)
 
@@ -111,20 +116,21 @@ def test_several_sessions_killed_at_once(live: LiveServer) -> None:
         pairs = []
         for seed, method in [(1, "oracle"), (2, "random"), (3, "autonomous")]:
             budget = {} if method == "autonomous" else {"advice_budget": 20}
-            body = session_body(method, episodes=EPISODES, seed=seed, **budget)
+            body = session_body(method, episodes=LONGER, seed=seed, **budget)
             faulty = api.post(f"/api/studies/{study}/sessions", json=body).json()
             twin = api.post(f"/api/studies/{study}/sessions", json=body).json()
             pairs.append((faulty["id"], twin["id"]))
         for faulty, _ in pairs:
             api.post(f"/api/sessions/{faulty}/start")
-        for faulty, _ in pairs:
+        for faulty, _ in pairs:  # each killed as soon as it is one episode in
             _wait_episode(api, faulty, 1)
+            _kill_worker(api, faulty, wait=False)
         for faulty, _ in pairs:
-            _kill_worker(api, faulty)
+            wait_for_status(api, faulty, {"interrupted"}, timeout=60)
         for faulty, twin in pairs:
             assert api.post(f"/api/sessions/{faulty}/resume").json()["status"] == "running"
             api.post(f"/api/sessions/{twin}/start")
-        _same(api, study, pairs)
+        _same(api, study, pairs, LONGER)
 
 
 def test_an_abandoned_human_session_resumed(live: LiveServer) -> None:
