@@ -4,9 +4,9 @@ The pages load only their own scripts (no inline script: their configuration tra
 `<script type="application/json">` blocks, which are not run), so `script-src 'self'`
 holds; style attributes (the advice meter) need `'unsafe-inline'` for styles only. The
 participant's page frames the 3-D view, relayed under /viewer/ by this server (or from
-`viewer_public_url`): `frame-src` names that origin when it is another one. No one may frame our pages
-(`frame-ancestors 'self'`). FastAPI's `/docs` and `/redoc` pages load Swagger UI and
-ReDoc from their CDN with an inline script, so they get a policy that allows exactly that.
+`viewer_public_url`): `frame-src` names that origin when it is another one. No one may
+frame our pages (`frame-ancestors 'self'`). `/docs` loads Swagger UI's local files with an
+inline script, so it gets a policy that allows that.
 """
 
 from __future__ import annotations
