@@ -34,7 +34,7 @@ def percentile(values: list[float], q: float) -> float:
 def advise_loop(
     participant: SimulatedParticipant, count: int, out: list[float], ready: threading.Barrier
 ) -> None:
-    participant.client.post("/api/participant/start")
+    participant.begin()
     state = participant.next_request()
     ready.wait()  # all workers started: measure advising, not process start-up
     for _ in range(count):

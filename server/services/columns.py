@@ -31,6 +31,27 @@ SESSION_COLUMNS = {
     "created_at": "When the session was created [UTC, ISO 8601].",
     "started_at": "When it first started [UTC, ISO 8601].",
     "finished_at": "When it finished [UTC, ISO 8601].",
+    "texts_version": "Version of the study's texts the participant was shown when they "
+    "consented or declined (texts_versions.csv has them); empty for machine sessions.",
+    "consented_at": "When the participant consented, recorded by the server; no advice is "
+    "asked before it [UTC, ISO 8601].",
+    "declined_at": "When the participant last declined (they may consent later) [UTC, ISO 8601].",
+    "induction_done_at": "When the participant finished the three-step induction (pressed "
+    "Start); advice is asked only after it [UTC, ISO 8601].",
+}
+TEXTS_COLUMNS = {
+    "study_id": "Study the texts belong to.",
+    "texts_version": "Version number within the study, from 1; a new version is stored "
+    "whenever the texts shown change (e.g. edited after sessions ran).",
+    "content_hash": "SHA-256 of the version's texts (JSON, sorted keys).",
+    "created_at": "When this version was first shown [UTC, ISO 8601].",
+    "title": "Page title, exactly as shown.",
+    "consent": "Consent text, exactly as shown (placeholders filled in; plain text with "
+    "## headings, - bullets, **bold**).",
+    "induction_1": "Induction step 1 (the scenario and expected results), as shown.",
+    "induction_2": "Induction step 2 (the problem and how to solve it), as shown.",
+    "induction_3": "Induction step 3 (how to use the interface), as shown.",
+    "thanks": "Thank-you page text, as shown.",
 }
 ADVICE_COLUMNS = {
     "session_id": "Session the advice belongs to.",
@@ -40,9 +61,13 @@ ADVICE_COLUMNS = {
     "action": "Advised action: 0 grab, 1 move right, 2 move left, 3 drop.",
     "action_name": "The advised action's name.",
     "greedy_action": "The learner's own greedy choice for the same observation (if known).",
-    "response_time_s": "Time from showing the observation to receiving the advice [s]; "
-    "for people measured by the server, so network time is included.",
-    "requested_at": "When the observation was shown [UTC, ISO 8601].",
+    "response_time_s": "Server side: time from the page first reading the request to the "
+    "advice arriving [s]; for people this includes the 3-D replay of the robot's last move "
+    "(buttons still off) and network time. For machine advisors: the advisor's compute time.",
+    "decision_time_s": "Browser side (people only): time from the action buttons becoming "
+    "active to the click or key, on the browser's monotonic clock (performance.now()) [s]; "
+    "the participant's own decision time. Empty for machine advisors.",
+    "requested_at": "Server side: when the page first read the request [UTC, ISO 8601].",
     "answered_at": "When the advice arrived [UTC, ISO 8601].",
     "observation_file": "PNG (64x64 RGB, lossless) of what the advisor saw, in advice/.",
 }
@@ -87,7 +112,12 @@ def record_columns() -> dict[str, dict[str, str]]:
 
 def column_dictionary(files: dict[str, list[str]]) -> list[dict[str, Any]]:
     """Rows (file, column, description) for every column of every exported file."""
-    docs = {"sessions.csv": SESSION_COLUMNS, "advice.csv": ADVICE_COLUMNS, **record_columns()}
+    docs = {
+        "sessions.csv": SESSION_COLUMNS,
+        "advice.csv": ADVICE_COLUMNS,
+        "texts_versions.csv": TEXTS_COLUMNS,
+        **record_columns(),
+    }
     rows = []
     for name, columns in files.items():
         for column in columns:

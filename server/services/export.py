@@ -1,5 +1,6 @@
-"""A study's data as CSV files (sessions, episodes, steps, advice with its images) and a
-column dictionary, written to a folder or packed as one zip."""
+"""A study's data as CSV files (sessions, episodes, steps, advice with its images, the
+versions of the texts participants read) and a column dictionary, written to a folder or
+packed as one zip."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from server.db.models import Advice, Episode, Step, StudySession
+from server.db.models import Advice, Episode, Step, StudySession, StudyTexts
 from server.services.columns import column_dictionary
 from server.services.studies import get_study
 
@@ -45,7 +46,13 @@ SESSION_FIELDS = [
     "created_at",
     "started_at",
     "finished_at",
+    "texts_version",
+    "consented_at",
+    "declined_at",
+    "induction_done_at",
 ]
+TEXT_KEYS = ("title", "consent", "induction_1", "induction_2", "induction_3", "thanks")
+TEXTS_FIELDS = ["study_id", "texts_version", "content_hash", "created_at", *TEXT_KEYS]
 ADVICE_FIELDS = [
     "session_id",
     "advice_index",
@@ -55,6 +62,7 @@ ADVICE_FIELDS = [
     "action_name",
     "greedy_action",
     "response_time_s",
+    "decision_time_s",
     "requested_at",
     "answered_at",
     "observation_file",
@@ -95,6 +103,26 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "created_at": s.created_at.isoformat(),
             "started_at": s.started_at.isoformat() if s.started_at else "",
             "finished_at": s.finished_at.isoformat() if s.finished_at else "",
+            "texts_version": s.texts_version.version if s.texts_version else "",
+            "consented_at": _when(s.consented_at),
+            "declined_at": _when(s.declined_at),
+            "induction_done_at": _when(s.induction_done_at),
+        }
+
+
+def _when(value: Any) -> str:
+    return value.isoformat() if value is not None else ""
+
+
+def _texts_rows(db: Session, study_id: int) -> Iterator[dict[str, Any]]:
+    query = select(StudyTexts).where(StudyTexts.study_id == study_id).order_by(StudyTexts.version)
+    for version in db.scalars(query):
+        yield {
+            "study_id": version.study_id,
+            "texts_version": version.version,
+            "content_hash": version.content_hash,
+            "created_at": version.created_at.isoformat(),
+            **{key: version.texts.get(key, "") for key in TEXT_KEYS},
         }
 
 
@@ -128,6 +156,7 @@ def _advice_rows(db: Session, ids: list[int], out: Path) -> Iterator[dict[str, A
                 "action_name": ACTION_NAMES[a.action],
                 "greedy_action": "" if a.greedy_action is None else a.greedy_action,
                 "response_time_s": a.response_time_s,
+                "decision_time_s": "" if a.decision_time_s is None else a.decision_time_s,
                 "requested_at": a.requested_at.isoformat(),
                 "answered_at": a.answered_at.isoformat(),
                 "observation_file": f"advice/{name}",
@@ -155,12 +184,16 @@ def export_study(db: Session, study_id: int, out: Path) -> dict[str, int]:
             out / "steps.csv", STEP_COLUMNS, _records(db, Step, ids, Step.global_step)
         ),
         "advice.csv": _write(out / "advice.csv", ADVICE_FIELDS, _advice_rows(db, ids, out)),
+        "texts_versions.csv": _write(
+            out / "texts_versions.csv", TEXTS_FIELDS, _texts_rows(db, study.id)
+        ),
     }
     files = {
         "sessions.csv": SESSION_FIELDS,
         "episodes.csv": EPISODE_COLUMNS,
         "steps.csv": STEP_COLUMNS,
         "advice.csv": ADVICE_FIELDS,
+        "texts_versions.csv": TEXTS_FIELDS,
     }
     _write(out / "columns.csv", ["file", "column", "description"], column_dictionary(files))
     (out / "study.json").write_text(

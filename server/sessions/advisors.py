@@ -45,8 +45,13 @@ class HumanAdvisor:
         idle_limit_s: float,
         step_index: Callable[[], int],
         before_waiting: Callable[[], None] = lambda: None,
+        until_participant_ready: Callable[[], None] = lambda: None,
     ) -> None:
+        """`before_waiting()` runs after the request is sent and before blocking on the
+        answer (the worker flushes its records there); `until_participant_ready()` blocks
+        until the participant consented and finished the induction."""
         self._before_waiting = before_waiting
+        self._until_ready = until_participant_ready
         self._link = link
         self._given = given
         self.count = start_index
@@ -81,8 +86,9 @@ class HumanAdvisor:
                 info=dict(info),
                 advice_budget=self._budget,
             )
-            self._before_waiting()
+            self._until_ready()
             self._link.send(request)
+            self._before_waiting()
             action = self._link.wait_for_answer(index, self._idle_limit_s)
             self._given[index] = action
             self._answered = index
