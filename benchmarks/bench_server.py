@@ -304,7 +304,7 @@ def main() -> None:
     parser.add_argument("--advice", type=int, default=40, help="advice per participant")
     parser.add_argument("--motion", choices=["fast", "physics"], default="fast")
     parser.add_argument(
-        "--reading", type=float, nargs="+", default=[0.0, 20.0], help="first-turn: seconds"
+        "--reading", type=float, nargs="+", default=[0.0, 20.0, 60.0], help="first-turn: seconds"
     )
     parser.add_argument("--study-motion", choices=["fast", "physics"], default="physics")
     args = parser.parse_args([] if __name__ != "__main__" else None)

@@ -47,9 +47,10 @@ class HumanAdvisor:
         before_waiting: Callable[[], None] = lambda: None,
         until_participant_ready: Callable[[], None] = lambda: None,
     ) -> None:
-        """`before_waiting()` runs after the request is sent and before blocking on the
-        answer (the worker flushes its records there); `until_participant_ready()` blocks
-        until the participant consented and finished the induction."""
+        """`before_waiting()` runs before the request is sent (the worker flushes its
+        records there, so every step before the wait is in the database);
+        `until_participant_ready()` blocks until the participant consented and finished the
+        induction."""
         self._before_waiting = before_waiting
         self._until_ready = until_participant_ready
         self._link = link
@@ -87,8 +88,8 @@ class HumanAdvisor:
                 advice_budget=self._budget,
             )
             self._until_ready()
-            self._link.send(request)
             self._before_waiting()
+            self._link.send(request)
             action = self._link.wait_for_answer(index, self._idle_limit_s)
             self._given[index] = action
             self._answered = index

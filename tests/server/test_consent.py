@@ -76,6 +76,9 @@ def test_a_session_started_by_the_researcher_asks_no_advice_before_consent_and_i
     state = participant.next_request(timeout=60)
     assert state["advice_wanted"] and state["advice_index"] == 0 and state["ready"]
     assert participant.advise(0, 1).status_code == 200
+    state = participant.next_request(timeout=60)
+    assert state["advice_index"] == 1
+    assert _steps_in_database(server, session["id"]) == first_turn + 1, "the advised step too"
 
     shown = api.get(f"/api/sessions/{session['id']}").json()
     assert shown["consented_at"] and shown["induction_done_at"] and shown["texts_version"] == 1
