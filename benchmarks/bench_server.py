@@ -255,7 +255,7 @@ def _one_study(motion: str) -> tuple[list[float], tuple[int, int, int]]:
                 ]
                 for thread in threads:
                     thread.start()
-                ready.wait()
+                ready.wait(timeout=900)  # a participant that failed breaks it: no hang
                 while any(t.is_alive() for t in threads):
                     rows = [api.get(f"/api/sessions/{m['id']}/progress").json() for m in made]
                     now = (
