@@ -242,9 +242,11 @@ def _one_study(motion: str) -> tuple[list[float], tuple[int, int, int]]:
                         "motion": motion,
                         "advice_budget": budget,
                         "episodes": 300,
-                        "config": {**CONFIG, "pretraining_steps": budget + 20},
+                        "config": {**CONFIG, "pretraining_steps": budget + 40},
                     }
-                    made.append(api.post(f"/api/studies/{study_id}/sessions", json=body).json())
+                    response = api.post(f"/api/studies/{study_id}/sessions", json=body)
+                    assert response.status_code == 201, response.text
+                    made.append(response.json())
                 ready = threading.Barrier(len(made) + 1)
                 threads = [
                     threading.Thread(
