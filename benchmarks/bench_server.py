@@ -1,17 +1,29 @@
-"""The advice round trip under load: 8 simulated participants advise at once while 2
-machine sessions train, against a real server on loopback.
+"""The study server under load, against a real server on loopback; three scenarios.
 
-Round trip = submit an action (POST /api/participant/advice) until the next observation
-arrives (long-poll GET /api/participant/state). It includes the worker's environment
-step. Printed with a bare request (GET /api/health) measured at the same time, as the
-reference for what this loaded machine gives any request. Aim: p95 < 150 ms.
+`advice`: 8 simulated participants advise at once while 2 machine sessions train. Round
+trip = submit an action (POST /api/participant/advice) until the next observation arrives
+(long-poll GET /api/participant/state). It includes the worker's environment step. Printed
+with a bare request (GET /api/health) measured at the same time, as the reference for what
+this loaded machine gives any request. Aim: p95 < 150 ms.
 
-    python -m benchmarks.bench_server [--participants 8] [--trainers 2] [--advice 40]
+`first-turn`: a human session at default settings (1,000 pretraining steps, 100 advice,
+physics motion). The participant opens the link (which starts the random pretraining),
+consents, reads the induction for R seconds, presses Start: the time from Start to the
+first advice request. Aim: under 5 s. Also the time from opening the link to the robot
+being ready, which says how long a reading makes the wait vanish.
+
+`study`: 11 human sessions, each advising its budget (10 to 40 advice, staggered) and then
+training, queued for the server's trainer slots (one per core): the advice round trips of
+the sessions still advising while the others train. Aim: p95 < 100 ms.
+
+    python -m benchmarks.bench_server [--scenario advice|first-turn|study|all] [--runs 3]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import statistics
 import tempfile
 import threading
@@ -34,7 +46,7 @@ def percentile(values: list[float], q: float) -> float:
 def advise_loop(
     participant: SimulatedParticipant, count: int, out: list[float], ready: threading.Barrier
 ) -> None:
-    participant.client.post("/api/participant/start")
+    participant.begin()
     state = participant.next_request()
     ready.wait()  # all workers started: measure advising, not process start-up
     for _ in range(count):
@@ -134,14 +146,176 @@ def run(participants: int, trainers: int, advice: int, motion: str) -> None:
     )
 
 
+def first_turn(reading_s: list[float], runs: int) -> None:
+    """End of the induction to the first turn, at default settings."""
+    results: dict[float, list[tuple[float, float]]] = {r: [] for r in reading_s}
+    with tempfile.TemporaryDirectory() as tmp:
+        server = LiveServer(Path(tmp), f"sqlite:///{tmp}/bench.sqlite3").start()
+        try:
+            with server.client() as api:
+                study = api.post("/api/studies", json={"name": "first turn"}).json()["id"]
+                for _ in range(runs):
+                    for reading in reading_s:
+                        body = {"method": "human"}  # the paper's defaults, physics motion
+                        made = api.post(f"/api/studies/{study}/sessions", json=body).json()
+                        results[reading].append(_one_first_turn(server, made, reading))
+                        api.post(f"/api/sessions/{made['id']}/stop")
+        finally:
+            server.stop()
+    print(f"first turn at default settings, {runs} runs each (median, min-max)")
+    print(f"{'reading the induction':24}{'link -> robot ready s':>24}{'Start -> first turn s':>24}")
+    for reading, values in results.items():
+        ready = [v[0] for v in values if not math.isnan(v[0])]
+        wait = [v[1] for v in values]
+        print(f"{f'{reading:.0f} s':24}{_spread(ready):>24}{_spread(wait):>24}")
+
+
+def _spread(values: list[float]) -> str:
+    if not values:
+        return "(not seen)"
+    return f"{statistics.median(values):.1f} ({min(values):.1f}-{max(values):.1f})"
+
+
+def _one_first_turn(server: LiveServer, session: dict, reading_s: float) -> tuple[float, float]:
+    """(link opened -> robot ready, Start -> first advice request), in seconds; the first
+    is NaN when the reading ended before the robot was ready."""
+    participant = SimulatedParticipant(server.url, session["participant_token"])
+    opened = time.perf_counter()
+    participant.client.get(f"/p/{session['participant_token']}", follow_redirects=False)
+    participant.consent()
+    ready_after = math.nan
+    while True:
+        readiness = participant.client.get("/api/participant/readiness").json()
+        if math.isnan(ready_after) and readiness["ready"]:
+            ready_after = time.perf_counter() - opened
+        if time.perf_counter() - opened >= reading_s:
+            break
+        time.sleep(0.1)
+    started = time.perf_counter()
+    assert participant.client.post("/api/participant/start").status_code == 200
+    state = participant.next_request(timeout=600)
+    assert state["advice_wanted"], state
+    turn = time.perf_counter() - started
+    participant.close()
+    return ready_after, turn
+
+
+STUDY_SESSIONS = 11
+
+
+def study(runs: int, motion: str = "physics") -> None:
+    """11 participants; each advises its budget, then its session trains in a queue."""
+    p50s, p95s, counts, peaks = [], [], [], []
+    for _ in range(runs):
+        trips, peak = _one_study(motion)
+        p50s.append(percentile(trips, 50) * 1000)
+        p95s.append(percentile(trips, 95) * 1000)
+        counts.append(len(trips))
+        peaks.append(peak)
+    print(
+        f"{STUDY_SESSIONS} human sessions ({motion} motion), advising 10-40 advice each, then "
+        f"training queued for {len(os.sched_getaffinity(0))} trainer slots; {runs} runs"
+    )
+    print(f"  advice round trips per run: {counts}")
+    print(f"  p50 ms per run: {[round(v, 1) for v in p50s]}; median {statistics.median(p50s):.1f}")
+    print(f"  p95 ms per run: {[round(v, 1) for v in p95s]}; median {statistics.median(p95s):.1f}")
+    print(
+        "  most seen at once (training, queued, advising): "
+        + ", ".join(f"({t}, {q}, {a})" for t, q, a in peaks)
+    )
+
+
+def _one_study(motion: str) -> tuple[list[float], tuple[int, int, int]]:
+    trips: list[float] = []
+    peak = [0, 0, 0]
+    with tempfile.TemporaryDirectory() as tmp:
+        server = LiveServer(Path(tmp), f"sqlite:///{tmp}/bench.sqlite3").start()
+        try:
+            with server.client() as api:
+                study_id = api.post("/api/studies", json={"name": "study"}).json()["id"]
+                made = []
+                for i in range(STUDY_SESSIONS):
+                    budget = 10 + 3 * i
+                    body = {
+                        "method": "human",
+                        "seed": i,
+                        "motion": motion,
+                        "advice_budget": budget,
+                        "episodes": 300,
+                        "config": {**CONFIG, "pretraining_steps": budget + 40},
+                    }
+                    response = api.post(f"/api/studies/{study_id}/sessions", json=body)
+                    assert response.status_code == 201, response.text
+                    made.append(response.json())
+                ready = threading.Barrier(len(made) + 1)
+                threads = [
+                    threading.Thread(
+                        target=_advise_budget,
+                        args=(server.url, m["participant_token"], m["advice_budget"], trips, ready),
+                    )
+                    for m in made
+                ]
+                for thread in threads:
+                    thread.start()
+                ready.wait(timeout=900)  # a participant that failed breaks it: no hang
+                while any(t.is_alive() for t in threads):
+                    rows = [api.get(f"/api/sessions/{m['id']}/progress").json() for m in made]
+                    now = (
+                        sum(r["phase"] == "training" and not r["queued"] for r in rows),
+                        sum(r["queued"] for r in rows),
+                        sum(r["advice_left"] > 0 for r in rows),
+                    )
+                    peak = [max(p, n) for p, n in zip(peak, now, strict=True)]
+                    time.sleep(0.5)
+                for thread in threads:
+                    thread.join()
+        finally:
+            server.stop()
+    return trips, (peak[0], peak[1], peak[2])
+
+
+def _advise_budget(
+    url: str, token: str, budget: int, out: list[float], ready: threading.Barrier
+) -> None:
+    """Advise every advice of the budget, timing each round trip but the last (after it
+    the session trains and no request follows)."""
+    participant = SimulatedParticipant(url, token)
+    participant.begin()
+    state = participant.next_request(timeout=600)
+    ready.wait()  # every worker started: measure advising, not process start-up
+    for index in range(budget):
+        assert state["advice_index"] == index, state
+        if index == budget - 1:
+            assert participant.advise(index, index % 4).status_code == 200
+            break
+        started = time.perf_counter()
+        assert participant.advise(index, index % 4, wait=20).status_code == 200
+        state = participant.next_request()
+        out.append(time.perf_counter() - started)
+    participant.close()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--scenario", choices=["advice", "first-turn", "study", "all"], default="all"
+    )
+    parser.add_argument("--runs", type=int, default=3, help="runs of first-turn and study")
     parser.add_argument("--participants", type=int, default=8)
     parser.add_argument("--trainers", type=int, default=2)
     parser.add_argument("--advice", type=int, default=40, help="advice per participant")
     parser.add_argument("--motion", choices=["fast", "physics"], default="fast")
+    parser.add_argument(
+        "--reading", type=float, nargs="+", default=[0.0, 20.0, 60.0], help="first-turn: seconds"
+    )
+    parser.add_argument("--study-motion", choices=["fast", "physics"], default="physics")
     args = parser.parse_args([] if __name__ != "__main__" else None)
-    run(args.participants, args.trainers, args.advice, args.motion)
+    if args.scenario in ("advice", "all"):
+        run(args.participants, args.trainers, args.advice, args.motion)
+    if args.scenario in ("first-turn", "all"):
+        first_turn(args.reading, args.runs)
+    if args.scenario in ("study", "all"):
+        study(args.runs, args.study_motion)
 
 
 if __name__ == "__main__":

@@ -3,11 +3,13 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.security import HTTPAuthorizationCredentials
@@ -77,7 +79,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     hub = Hub()
     factory = make_session_factory(engine)
     manager = SessionManager(
-        factory, settings.db_url, hub, worker_options(settings), settings.stale_after_s
+        factory,
+        settings.db_url,
+        hub,
+        worker_options(settings),
+        settings.stale_after_s,
+        settings.max_trainers,
     )
     viewer = viewer_from_settings(settings, hub, factory)
 
@@ -127,6 +134,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_openapi(app)
     add_docs(app)
 
+    @app.exception_handler(RequestValidationError)
+    async def invalid_request(_: Request, error: RequestValidationError) -> JSONResponse:
+        # FastAPI echoes the input, which JSON cannot carry when it is NaN or infinite.
+        detail = jsonable_encoder(_finite(error.errors()))
+        return JSONResponse({"detail": detail}, status_code=422)
+
     @app.exception_handler(ServiceError)
     async def service_error(_: Request, error: ServiceError) -> JSONResponse:
         if isinstance(error, Invalid):
@@ -135,6 +148,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return JSONResponse({"detail": error.message}, status_code=error.status_code)
 
     return app
+
+
+def _finite(value: Any) -> Any:
+    """`value` with every NaN or infinite float written as text."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 def app_from_env() -> FastAPI:

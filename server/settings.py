@@ -62,7 +62,12 @@ class Settings(BaseSettings):
     """torch threads per session worker; several workers share the machine's cores."""
 
     trainer_nice: int = Field(default=10, ge=0, le=19)
-    """Niceness of machine-advised workers, so training never slows people's requests."""
+    """Niceness of machine-advised workers, and of human sessions once their advice is
+    over, so training never slows people's requests."""
+
+    max_trainers: int = Field(default=0, ge=0)
+    """Human sessions that train at once after their advice; the others wait in a queue
+    (status `running`, `queued: true`). 0: the number of cores."""
 
     viser_host: str = "127.0.0.1"
     """Interface viser (the 3-D view's server) listens on. Browsers never reach it directly:

@@ -87,9 +87,34 @@ class Study(Base):
     sessions: Mapped[list[StudySession]] = relationship(
         back_populates="study", cascade="all, delete-orphan", passive_deletes=True
     )
+    texts_versions: Mapped[list[StudyTexts]] = relationship(
+        back_populates="study", cascade="all, delete-orphan", passive_deletes=True
+    )
     participants: Mapped[list[Participant]] = relationship(
         back_populates="study", cascade="all, delete-orphan", passive_deletes=True
     )
+
+
+class StudyTexts(Base):
+    """One distinct version of the texts a study's participants read (consent, induction,
+    thanks), exactly as shown: placeholders filled in. Rows are never changed: editing a
+    study's texts after sessions ran makes a new version, and each session points at the
+    version its participant consented (or declined) to."""
+
+    __tablename__ = "study_texts"
+    __table_args__ = (
+        UniqueConstraint("study_id", "content_hash"),
+        UniqueConstraint("study_id", "version"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"))
+    version: Mapped[int] = mapped_column(Integer)
+    content_hash: Mapped[str] = mapped_column(String(64))
+    texts: Mapped[dict[str, Any]] = mapped_column()
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+    study: Mapped[Study] = relationship(back_populates="texts_versions")
 
 
 class Participant(Base):
@@ -153,8 +178,21 @@ class StudySession(Base):
     checkpoint_episodes: Mapped[int] = mapped_column(Integer, default=0)
     checkpoint_advice: Mapped[int] = mapped_column(Integer, default=0)
 
+    texts_version_id: Mapped[int | None] = mapped_column(
+        ForeignKey("study_texts.id", ondelete="SET NULL")
+    )
+    consented_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    declined_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    induction_done_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+
     study: Mapped[Study] = relationship(back_populates="sessions")
     participant: Mapped[Participant | None] = relationship()
+    texts_version: Mapped[StudyTexts | None] = relationship()
+
+    @property
+    def ready_for_advice(self) -> bool:
+        """A person may be asked for advice only after consent and the induction."""
+        return self.consented_at is not None and self.induction_done_at is not None
 
 
 class Step(Base):
@@ -232,5 +270,6 @@ class Advice(Base):
     greedy_action: Mapped[int | None] = mapped_column(Integer)
     observation_png: Mapped[bytes] = mapped_column(LargeBinary)
     response_time_s: Mapped[float] = mapped_column(Float)
+    decision_time_s: Mapped[float | None] = mapped_column(Float)
     requested_at: Mapped[datetime] = mapped_column(UTCDateTime())
     answered_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)

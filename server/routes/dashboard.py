@@ -17,7 +17,7 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 from pydantic import BaseModel, Field, ValidationError
 from sqlalchemy import select
 
-from server.db.models import Episode, StudySession
+from server.db.models import Episode, Method, StudySession
 from server.deps import DbDep, ManagerDep, SettingsDep
 from server.logins import Logins
 from server.routes import exports as export_routes
@@ -118,6 +118,7 @@ class SessionRow(BaseModel):
     status: str
     status_detail: str
     progress: dict[str, Any]
+    declined: bool = False
 
 
 class StudyRow(BaseModel):
@@ -145,7 +146,11 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
             public = sessions.session_public(session, settings.base_url)
             progress = session_routes.get_progress(db, manager, session.id)
             fields = public.model_dump(include=set(SessionRow.model_fields))
-            fields.update(status=progress.status, progress=progress.model_dump())
+            fields.update(
+                status=progress.status,
+                progress=progress.model_dump(),
+                declined=session.declined_at is not None and session.consented_at is None,
+            )
             found.append(SessionRow(**fields))
         rows.append(
             StudyRow(id=study.id, name=study.name, description=study.description, sessions=found)
@@ -177,7 +182,13 @@ async def command(
     session_id: SessionId,
     command: Literal["start", "pause", "resume", "stop"],
 ) -> dict[str, str]:
-    sessions.get_session(db, session_id)
+    session = sessions.get_session(db, session_id)
+    if command == "start" and session.method == Method.human and session.consented_at is None:
+        raise HTTPException(
+            409,
+            f"session {session_id} waits for its participant's consent: their link shows the "
+            "consent page and starts the session (the REST API can start it early)",
+        )
     await getattr(manager, command)(session_id)
     return {"status": manager.status(session_id)}
 
@@ -214,13 +225,21 @@ def export(
 DASHBOARD_STUDIES = "/dashboard/api/studies"
 
 
+class DashboardReport(BaseModel):
+    n_episodes: int | None = Field(default=None, ge=1, le=100_000)
+    """First N episodes of every session; default: the length they have in common."""
+
+
 @router.post(f"{DASHBOARD_STUDIES}/{{study_id}}/report", dependencies=[LoginDep])
-def build_report(db: DbDep, settings: SettingsDep, study_id: StudyId) -> ReportPublic:
+def build_report(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, body: DashboardReport | None = None
+) -> ReportPublic:
     """The study's report over its finished sessions (advisors left out), autonomous
-    DeepRL as the baseline when there is one."""
-    description = reports.publish_report(
-        db, study_id, reports.reports_dir(settings), reports.ReportRequest()
-    )
+    DeepRL as the baseline when there is one. Sessions of different lengths are compared
+    over the episodes they have in common (the report says so), unless `n_episodes`."""
+    chosen = body.n_episodes if body is not None else None
+    request = reports.ReportRequest(n_episodes=chosen, common_length=chosen is None)
+    description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
     return report_routes.public_report(description, study_id, DASHBOARD_STUDIES)
 
 

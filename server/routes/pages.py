@@ -2,28 +2,36 @@
 advice page with the live 3-D view, and the thank-you page.
 
 Where a participant is comes from the session itself, so a reload or a new tab returns
-to the same point: before the session starts they read consent and induction (the page
-in the URL); once started they advise until the budget is spent; then they are thanked.
-Page texts come from the study's `texts` (keys in `TEXT_KEYS`), else from `web/texts/`.
+to the same point: until they consent (recorded on the server, whoever started the
+session) the link shows the consent page; then the induction (the page in the URL) until
+they press Start; then they advise until the budget is spent; then they are thanked.
+Opening the link starts the session's random pretraining, so the robot is ready when the
+induction ends. Page texts come from the study's `texts` (keys in `TEXT_KEYS`), else from
+`web/texts/`; once a participant consented, their pages show the stored version they
+consented to.
 """
 
 from __future__ import annotations
 
+import contextlib
 import html
 import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Form, Request
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 from markupsafe import Markup
 from sqlalchemy import func, select
+from starlette.concurrency import run_in_threadpool
 
 import sim
 from server.db.models import Advice, Status
+from server.services import consent as consent_service
+from server.services.errors import Conflict, Invalid
 from server.services.sessions import session_for_token
 from server.viewer.camera import viser_camera_params
 
@@ -46,26 +54,41 @@ class Visit:
 
     token: str
     session_id: int
+    study_id: int
     status: str
     advice_budget: int
     advice_given: int
     texts: dict[str, str]
     sort_rule: Any
+    consented: bool = False
+    ready: bool = False
+    shown_texts: dict[str, str] | None = None
+    """The stored texts version this participant consented to (None before consent)."""
 
     @property
     def started(self) -> bool:
-        return self.status != Status.created
+        """Consent given and the induction done: the participant may advise."""
+        return self.consented and self.ready
 
     @property
     def done(self) -> bool:
         return self.advice_given >= self.advice_budget or self.status == Status.finished
 
+    def resolved_texts(self) -> dict[str, str]:
+        """Every page text as it is shown now: the study's or the default, filled in."""
+        rule = describe_rule(self.sort_rule)
+        out = {}
+        for key in TEXT_KEYS:
+            raw = self.texts.get(key) or (WEB_DIR / "texts" / f"{key}.txt").read_text()
+            raw = raw.replace("{advice_budget}", str(self.advice_budget))
+            out[key] = raw.replace("{sorting_rule}", rule)
+        return out
+
     def text(self, key: str) -> Markup:
         assert key in TEXT_KEYS, key
-        raw = self.texts.get(key) or (WEB_DIR / "texts" / f"{key}.txt").read_text()
-        raw = raw.replace("{advice_budget}", str(self.advice_budget))
-        raw = raw.replace("{sorting_rule}", describe_rule(self.sort_rule))
-        return render_text(raw)
+        if self.shown_texts is not None and key in self.shown_texts:
+            return render_text(self.shown_texts[key])
+        return render_text(self.resolved_texts()[key])
 
 
 def _visit(request: Request, token: str) -> Visit | None:
@@ -74,15 +97,45 @@ def _visit(request: Request, token: str) -> Visit | None:
         if session is None:
             return None
         given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+        version = session.texts_version
         return Visit(
             token=token,
             session_id=session.id,
+            study_id=session.study_id,
             status=request.app.state.manager.status(session.id),
             advice_budget=session.advice_budget,
             advice_given=int(given),
             texts={k: str(v) for k, v in (session.study.texts or {}).items()},
             sort_rule=session.sort_rule,
+            consented=session.consented_at is not None,
+            ready=session.induction_done_at is not None,
+            shown_texts=(
+                dict(version.texts)
+                if version is not None and session.consented_at is not None
+                else None
+            ),
         )
+
+
+visit_for_token = _visit
+
+
+async def _load(request: Request, token: str, warm_up: bool = True) -> Visit | None:
+    """The visit; opening the link starts the session's random pretraining (the robot
+    practises while the participant reads), advice waits for consent and induction."""
+    visit = await run_in_threadpool(_visit, request, token)
+    if visit is not None and warm_up and visit.status == Status.created:
+        await warm_up_session(request.app.state.manager, visit.session_id)
+    return visit
+
+
+async def warm_up_session(manager: Any, session_id: int) -> None:
+    """Start a human session's worker if it is not running yet (a second start at the
+    same moment, or one that cannot start now, is left to the researcher)."""
+    if session_id in manager.handles or manager.status(session_id) != Status.created:
+        return
+    with contextlib.suppress(Conflict):
+        await manager.start(session_id)
 
 
 def _page(request: Request, name: str, visit: Visit | None, **context: Any) -> HTMLResponse:
@@ -103,26 +156,64 @@ def _go(visit: Visit, where: str) -> RedirectResponse:
 
 
 def _resume_point(visit: Visit) -> str:
-    if not visit.started:
+    if not visit.consented:
         return "consent"
+    if not visit.ready:
+        return "induction/1"
     return "thanks" if visit.done else "advise"
 
 
 @router.get("/p/{token}")
-def entry(request: Request, token: str) -> Response:
+async def entry(request: Request, token: str) -> Response:
     """The participant link: continue where this participant is."""
-    visit = _visit(request, token)
+    visit = await _load(request, token)
     return _error(request) if visit is None else _go(visit, _resume_point(visit))
 
 
 @router.get("/p/{token}/consent")
-def consent(request: Request, token: str) -> Response:
-    visit = _visit(request, token)
+async def consent(request: Request, token: str) -> Response:
+    visit = await _load(request, token)
     if visit is None:
         return _error(request)
-    if visit.started:
+    if visit.consented:
         return _go(visit, _resume_point(visit))
-    return _page(request, "participant/consent.html", visit, body=visit.text("consent"))
+    texts = visit.resolved_texts()
+    version = await run_in_threadpool(_texts_version, request, visit.study_id, texts)
+    return _page(
+        request,
+        "participant/consent.html",
+        visit,
+        body=render_text(texts["consent"]),
+        texts_version=version,
+    )
+
+
+def _texts_version(request: Request, study_id: int, texts: dict[str, str]) -> int:
+    with request.app.state.session_factory() as db:
+        return consent_service.texts_version(db, study_id, texts).id
+
+
+@router.post("/p/{token}/consent")
+def decide(
+    request: Request,
+    token: str,
+    decision: str = Form(default=""),
+    texts_version: int | None = Form(default=None),
+) -> Response:
+    """The consent form: 'agree' or 'decline', with the texts version the page showed."""
+    with request.app.state.session_factory() as db:
+        session = session_for_token(db, token)
+        if session is None:
+            return _error(request)
+        if decision not in ("agree", "decline"):
+            return RedirectResponse(f"/p/{token}/consent", status_code=303)
+        try:
+            consent_service.record_decision(db, session, decision == "agree", texts_version)
+        except (Conflict, Invalid):  # a stale page: consent given meanwhile, a bad version
+            db.rollback()
+            return RedirectResponse(f"/p/{token}", status_code=303)
+    where = "induction/1" if decision == "agree" else "declined"
+    return RedirectResponse(f"/p/{token}/{where}", status_code=303)
 
 
 @router.get("/p/{token}/declined")
@@ -132,10 +223,12 @@ def declined(request: Request, token: str) -> Response:
 
 
 @router.get("/p/{token}/induction/{step}")
-def induction(request: Request, token: str, step: int) -> Response:
-    visit = _visit(request, token)
+async def induction(request: Request, token: str, step: int) -> Response:
+    visit = await _load(request, token)
     if visit is None:
         return _error(request)
+    if not visit.consented:
+        return _go(visit, "consent")
     if not 1 <= step <= 3:
         return _go(visit, "induction/1")
     return _page(
@@ -169,7 +262,7 @@ def thanks(request: Request, token: str) -> Response:
     visit = _visit(request, token)
     if visit is None:
         return _error(request)
-    if not visit.done:
+    if not visit.started or not visit.done:
         return _go(visit, _resume_point(visit))
     return _page(request, "participant/thanks.html", visit, body=visit.text("thanks"))
 

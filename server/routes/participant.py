@@ -2,12 +2,22 @@
 
 import contextlib
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
+from starlette.concurrency import run_in_threadpool
 
-from server.db.models import Status
+from server.db.models import Status, StudySession
 from server.deps import ManagerDep, ParticipantDep
-from server.schemas.participant import AdviceCreate, AdviceReceipt, ParticipantState
+from server.routes.pages import visit_for_token, warm_up_session
+from server.schemas.participant import (
+    AdviceCreate,
+    AdviceReceipt,
+    ConsentCreate,
+    ConsentState,
+    ParticipantState,
+    Readiness,
+)
+from server.services import consent as consent_service
 from server.services.errors import Conflict, NotFound
 from server.sessions import advising
 
@@ -29,14 +39,84 @@ async def get_state(
     return advising.participant_state(manager, session)
 
 
+def _consent_state(request: Request, session_id: int, record: ConsentCreate | None) -> ConsentState:
+    """The texts shown (the stored version once consented), and any decision recorded."""
+    with request.app.state.session_factory() as db:
+        session = db.get(StudySession, session_id)
+        if session is None or not session.participant_token:
+            raise NotFound("this session no longer exists")
+        visit = visit_for_token(request, session.participant_token)
+        assert visit is not None, "a valid token has a visit"
+        if session.consented_at is not None and session.texts_version is not None:
+            version = session.texts_version
+        else:
+            version = consent_service.texts_version(db, visit.study_id, visit.resolved_texts())
+        if record is not None:
+            chosen = record.texts_version or version.id
+            consent_service.record_decision(db, session, record.agree, chosen)
+            db.refresh(session)
+            version = session.texts_version or version
+        return ConsentState(
+            texts_version=version.id,
+            texts=dict(version.texts),
+            consented_at=session.consented_at,
+            declined_at=session.declined_at,
+            induction_done_at=session.induction_done_at,
+        )
+
+
+@router.get("/consent")
+def get_consent(session: ParticipantDep, request: Request) -> ConsentState:
+    """The consent and induction texts exactly as shown to this participant, with the id
+    of their stored version (send it back with the decision)."""
+    return _consent_state(request, session.id, None)
+
+
+@router.post("/consent")
+def give_consent(session: ParticipantDep, request: Request, body: ConsentCreate) -> ConsentState:
+    """Consent (agree) or decline, recorded with the time and the texts version shown.
+    Advice is asked only after consent and the induction (`POST /start`)."""
+    return _consent_state(request, session.id, body)
+
+
+def _finish_induction(manager: ManagerDep, session_id: int) -> None:
+    with manager.factory() as db:
+        row = db.get(StudySession, session_id)
+        if row is None:
+            raise NotFound("this session no longer exists")
+        consent_service.finish_induction(db, row)
+
+
 @router.post("/start")
 async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantState:
-    """Start the session when the participant is ready (after consent and induction);
-    a session already under way is left as it is."""
+    """The participant finished the induction (after consent; 409 before it): start the
+    session if its link has not already, and let it ask for advice."""
+    await run_in_threadpool(_finish_induction, manager, session.id)
     if session.id not in manager.handles and manager.status(session.id) == Status.created:
         with contextlib.suppress(Conflict):  # started by a second click meanwhile
             await manager.start(session.id)
+    manager.set_ready(session.id)
     return advising.participant_state(manager, session)
+
+
+@router.get("/readiness")
+async def readiness(session: ParticipantDep, manager: ManagerDep) -> Readiness:
+    """How far the robot's random pretraining is before the first turn; the advice page
+    shows it while the robot is not ready yet. Starts the session if nobody has."""
+    await warm_up_session(manager, session.id)
+    handle = manager.handles.get(session.id)
+    if handle is None:
+        state = advising.participant_state(manager, session)
+        return Readiness(status=state.status, steps_done=0, steps_before_first_turn=0, ready=False)
+    progress = handle.progress
+    done = progress.global_step if progress is not None else 0
+    waiting = progress is not None and progress.waiting_for_participant
+    return Readiness(
+        status=handle.status,
+        steps_done=done,
+        steps_before_first_turn=handle.steps_before_first_turn,
+        ready=handle.request is not None or waiting or done >= handle.steps_before_first_turn,
+    )
 
 
 @router.post("/advice")

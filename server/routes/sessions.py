@@ -119,6 +119,8 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
         advice_budget=session.advice_budget,
         advice_left=max(0, session.advice_budget - given),
         advice_wanted=handle is not None and handle.request is not None,
+        queued=handle.queued if handle is not None else False,
+        consented=session.consented_at is not None,
     )
 
 

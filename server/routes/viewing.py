@@ -23,6 +23,9 @@ class CurvePoint(BaseModel):
 
 class LearningCurve(BaseModel):
     status: str
+    queued: bool = Field(
+        default=False, description="Waiting in the server's queue for a free trainer slot."
+    )
     episodes: int = Field(description="Training episodes the session will run.")
     curve: list[CurvePoint] = Field(description="Collected reward per finished episode.")
 
@@ -48,8 +51,10 @@ def learning_curve(session: ParticipantDep, db: DbDep, manager: ManagerDep) -> L
         .where(Episode.session_id == session.id, Episode.phase == "train")
         .order_by(Episode.episode)
     ).all()
+    handle = manager.handles.get(session.id)
     return LearningCurve(
         status=manager.status(session.id),
+        queued=handle is not None and handle.queued,
         episodes=row.episodes,
         curve=[CurvePoint(episode=e, collected_reward=r) for e, r in episodes],
     )

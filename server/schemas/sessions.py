@@ -132,6 +132,18 @@ class SessionPublic(BaseModel):
     finished_at: datetime | None
     worker_pid: int | None
     checkpoint_step: int
+    consented_at: datetime | None = Field(
+        default=None, description="When the participant consented (human sessions)."
+    )
+    declined_at: datetime | None = Field(
+        default=None, description="When the participant last declined (human sessions)."
+    )
+    induction_done_at: datetime | None = Field(
+        default=None, description="When they finished the induction: advice may be asked."
+    )
+    texts_version: int | None = Field(
+        default=None, description="Version of the study's texts the participant was shown."
+    )
 
 
 class SessionCreated(SessionPublic):
@@ -156,6 +168,11 @@ class Progress(BaseModel):
     advice_budget: int = 0
     advice_left: int = 0
     advice_wanted: bool = False
+    queued: bool = Field(
+        default=False,
+        description="Advice over; waiting in the server's queue for a free trainer slot.",
+    )
+    consented: bool = Field(default=False, description="The participant consented (human).")
 
 
 class EpisodePublic(BaseModel):
@@ -190,5 +207,6 @@ class AdvicePublic(BaseModel):
     action: int
     greedy_action: int | None
     response_time_s: float
+    decision_time_s: float | None = None
     requested_at: datetime
     answered_at: datetime

@@ -54,6 +54,43 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     "created_at": ("datetime", "When the session was created (UTC)."),
     "started_at": ("datetime", "When it first started (UTC)."),
     "finished_at": ("datetime", "When it finished (UTC)."),
+    "texts_version": (
+        "integer",
+        "Version of the study's texts the participant was shown when they consented or "
+        "declined (texts_versions has them); empty for machine sessions.",
+    ),
+    "consented_at": (
+        "datetime",
+        "When the participant consented, recorded by the server; no advice is asked "
+        "before it (UTC).",
+    ),
+    "declined_at": ("datetime", "When the participant last declined (UTC)."),
+    "induction_done_at": (
+        "datetime",
+        "When the participant finished the three-step induction (pressed Start); advice "
+        "is asked only after it (UTC).",
+    ),
+}
+TEXT_KEYS = ("title", "consent", "induction_1", "induction_2", "induction_3", "thanks")
+TEXTS_COLUMNS: dict[str, tuple[str, str]] = {
+    "study_id": ("integer", "Study the texts belong to."),
+    "texts_version": (
+        "integer",
+        "Version number within the study, from 1; a new version is stored whenever the "
+        "texts shown change (e.g. edited after sessions ran).",
+    ),
+    "content_hash": ("string", "SHA-256 of the version's texts (JSON, sorted keys)."),
+    "created_at": ("datetime", "When this version was first shown (UTC)."),
+    "title": ("string", "Page title, exactly as shown."),
+    "consent": (
+        "string",
+        "Consent text, exactly as shown (placeholders filled in; plain text with ## "
+        "headings, - bullets, **bold**).",
+    ),
+    "induction_1": ("string", "Induction step 1 (the scenario and expected results), as shown."),
+    "induction_2": ("string", "Induction step 2 (the problem and how to solve it), as shown."),
+    "induction_3": ("string", "Induction step 3 (how to use the interface), as shown."),
+    "thanks": ("string", "Thank-you page text, as shown."),
 }
 ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session the advice belongs to."),
@@ -68,10 +105,17 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
     ),
     "response_time_s": (
         "number",
-        "Time from showing the observation to receiving the advice; for people measured "
-        "by the server, so network time is included [s].",
+        "Server side: time from the page first reading the request to the advice arriving; "
+        "for people this includes the 3-D replay of the robot's last move (buttons still "
+        "off) and network time; for machine advisors their compute time [s].",
     ),
-    "requested_at": ("datetime", "When the observation was shown (UTC)."),
+    "decision_time_s": (
+        "number",
+        "Browser side (people only): time from the action buttons becoming active to the "
+        "click or key, on the browser's monotonic clock (performance.now()): the "
+        "participant's own decision time; empty for machine advisors [s].",
+    ),
+    "requested_at": ("datetime", "Server side: when the page first read the request (UTC)."),
     "answered_at": ("datetime", "When the advice arrived (UTC)."),
     "observation_file": ("string", "PNG (64x64 RGB, lossless) of what the advisor saw."),
 }
@@ -194,4 +238,5 @@ def table_columns(configs: list[dict[str, Any]]) -> dict[str, list[Column]]:
         "episodes": _record_columns("episodes"),
         "steps": _record_columns("steps"),
         "advice": [column(name, *spec) for name, spec in ADVICE_COLUMNS.items()],
+        "texts_versions": [column(name, *spec) for name, spec in TEXTS_COLUMNS.items()],
     }

@@ -22,20 +22,21 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from server.db.models import Advice, Episode, Step, StudySession
+from server.db.models import Advice, Episode, Step, StudySession, StudyTexts
 from server.services import learning
-from server.services.columns import table_columns
+from server.services.columns import TEXT_KEYS, table_columns
 from server.services.studies import get_study
 from server.services.tables import column, resource, write_csv, write_parquet
 
 ACTION_NAMES = ("grab", "move right", "move left", "drop")
 FORMATS = ("csv", "parquet")
-TABLES = ("sessions", "episodes", "steps", "advice")
+TABLES = ("sessions", "episodes", "steps", "advice", "texts_versions")
 KEYS: dict[str, dict[str, Any]] = {
     "sessions": {"primaryKey": ["session_id"]},
     "episodes": {"primaryKey": ["session_id", "phase", "episode"]},
     "steps": {"primaryKey": ["session_id", "global_step"]},
     "advice": {"primaryKey": ["session_id", "advice_index"]},
+    "texts_versions": {"primaryKey": ["study_id", "texts_version"]},
 }
 BATCH = 5000
 DICTIONARY_COLUMNS = [
@@ -79,6 +80,10 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "created_at": s.created_at,
             "started_at": s.started_at,
             "finished_at": s.finished_at,
+            "texts_version": s.texts_version.version if s.texts_version else None,
+            "consented_at": s.consented_at,
+            "declined_at": s.declined_at,
+            "induction_done_at": s.induction_done_at,
             **{f"config_{k}": v for k, v in (s.config or {}).items()},
         }
 
@@ -126,10 +131,24 @@ def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterat
                 "action_name": ACTION_NAMES[a.action],
                 "greedy_action": a.greedy_action,
                 "response_time_s": a.response_time_s,
+                "decision_time_s": a.decision_time_s,
                 "requested_at": a.requested_at,
                 "answered_at": a.answered_at,
                 "observation_file": f"advice/{name}",
             }
+
+
+def _texts_rows(db: Session, study_id: int) -> Iterator[dict[str, Any]]:
+    """Each distinct version of the study's texts that a participant was shown."""
+    query = select(StudyTexts).where(StudyTexts.study_id == study_id).order_by(StudyTexts.version)
+    for version in db.scalars(query):
+        yield {
+            "study_id": version.study_id,
+            "texts_version": version.version,
+            "content_hash": version.content_hash,
+            "created_at": version.created_at,
+            **{key: version.texts.get(key, "") for key in TEXT_KEYS},
+        }
 
 
 def export_study(db: Session, study_id: int, out: Path, fmt: str = "csv") -> dict[str, int]:
@@ -144,6 +163,7 @@ def export_study(db: Session, study_id: int, out: Path, fmt: str = "csv") -> dic
     columns = table_columns([s.config or {} for s in sessions])
     rows = {
         "sessions": _session_rows(sessions),
+        "texts_versions": _texts_rows(db, study.id),
         "episodes": _records(db, Episode, sessions, Episode.first_global_step),
         "steps": _records(db, Step, sessions, Step.global_step),
         "advice": _advice_rows(db, sessions, out),

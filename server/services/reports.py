@@ -47,6 +47,9 @@ class ReportRequest:
     """The method improvements are measured against: a method, `auto` or `none`."""
     n_episodes: int | None = None
     """Cut every agent to its first N episodes (to compare runs of different lengths)."""
+    common_length: bool = False
+    """Without `n_episodes`: when the sessions differ in length, cut all to the shortest
+    (and say so in the notes) instead of refusing."""
     title: str | None = None
     """The report's title; default: the study's name."""
     notes: tuple[str, ...] = ()
@@ -170,6 +173,16 @@ def build_report(
             f"session(s) {', '.join(map(str, empty))} have no training episodes yet; "
             "leave them out, or wait until they have run"
         )
+    n_episodes = request.n_episodes
+    if n_episodes is None and request.common_length:
+        lengths = episodes.groupby("session_id")["episode"].count()
+        if lengths.nunique() > 1:
+            n_episodes = int(lengths.min())
+            notes.append(
+                f"The sessions differ in length ({int(lengths.min())} to {int(lengths.max())} "
+                f"training episodes): every session is compared over its first {n_episodes} "
+                "episodes, the length they have in common."
+            )
     counts = ", ".join(
         f"{sum(s.method == m for s in sessions)} {method_name(m)}"
         for m in dict.fromkeys(s.method for s in sessions)
@@ -187,7 +200,7 @@ def build_report(
             title=request.title or f"{study.name}: the paper's analysis",
             baseline=baseline,
             notes=lines,
-            n_episodes=request.n_episodes,
+            n_episodes=n_episodes,
             settings=settings,
             steps=steps,
             allow_mismatch=request.allow_mismatch,

@@ -164,8 +164,10 @@ def session_public(session: StudySession, base_url: str) -> SessionPublic:
     data = {
         name: getattr(session, name)
         for name in SessionPublic.model_fields
-        if name not in ("participant", "participant_url")
+        if name not in ("participant", "participant_url", "texts_version")
     }
+    if session.texts_version is not None:
+        data["texts_version"] = session.texts_version.version
     if session.participant is not None:
         data["participant"] = session.participant.pseudonym
     if session.participant_token:

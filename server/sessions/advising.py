@@ -25,6 +25,7 @@ from server.schemas.participant import (
     HistoryItem,
     ParticipantState,
 )
+from server.services.consent import NOT_CONSENTED
 from server.services.errors import Conflict, NotFound
 from server.sessions.manager import HistoryEntry, SessionManager
 from server.sessions.messages import AdviceAnswer
@@ -65,9 +66,9 @@ def _history(entries: list[HistoryEntry]) -> list[HistoryItem]:
 
 def _arm(info: dict[str, Any]) -> dict[str, Any]:
     """What the robot holds and where, from the request's ground truth, for the page's words."""
-    held = info.get("held")
+    held = info.get("held")  # "" or "shape/color" (sim's info, docs/architecture.md)
     return {
-        "held": HeldObject(shape=held["shape"], color=held["color"]) if held else None,
+        "held": HeldObject(shape=info["held_shape"], color=info["held_color"]) if held else None,
         "station": info.get("station"),
     }
 
@@ -84,6 +85,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             if row is None:
                 raise NotFound("this session no longer exists")
             status, progress = row.status, row.progress
+            ready = row.ready_for_advice
         return ParticipantState(
             session_id=session.id,
             status=status,
@@ -96,8 +98,10 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             advice_left=max(0, budget - given),
             episode=int(progress.get("episode", 0)),
             phase=progress.get("phase"),
+            ready=ready,
+            queued=bool(progress.get("queued", False)) and status == Status.running,
         )
-    request = handle.request
+    request = handle.request if handle.ready else None
     wanted = request is not None and handle.status == Status.running
     if wanted and handle.shown_at is None:
         handle.shown_at = time.monotonic()
@@ -121,6 +125,8 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
         last_reward=handle.last_reward,
         episode=progress.episode if progress else 0,
         phase=progress.phase if progress else None,
+        ready=handle.ready,
+        queued=handle.queued,
         history=_history(list(handle.history)),
     )
 
@@ -137,6 +143,12 @@ def observation_png(manager: SessionManager, session: ParticipantSession) -> byt
             .order_by(Advice.advice_index.desc())
             .limit(1)
         )
+
+
+def _ready(manager: SessionManager, session_id: int) -> bool:
+    with manager.factory() as db:
+        row = db.get(StudySession, session_id)
+        return row is not None and row.ready_for_advice
 
 
 def _stored(manager: SessionManager, session_id: int, index: int) -> Advice | None:
@@ -182,6 +194,8 @@ async def submit_advice(
         if stored is not None:
             return _receipt(stored, body, manager.version(session.id))
         _refuse_over_budget(body, budget)
+        if not await run_in_threadpool(_ready, manager, session.id):
+            raise Conflict(NOT_CONSENTED)
         status = Status(manager.status(session.id))
         raise Conflict(f"no advice can be taken now: {MESSAGES.get(status, '')}")
     async with handle.advice_lock:
@@ -190,6 +204,8 @@ async def submit_advice(
             assert stored is not None, "advice given but not stored"
             return _receipt(stored, body, manager.version(session.id))
         _refuse_over_budget(body, budget)
+        if not handle.ready:
+            raise Conflict(NOT_CONSENTED)
         if handle.status == Status.paused:
             raise Conflict("the session is paused by the researcher; advise when it resumes")
         request = handle.request
@@ -215,6 +231,7 @@ async def submit_advice(
             greedy_action=None,  # the worker fills it in from its step record
             observation_png=request.observation_png,
             response_time_s=response_time,
+            decision_time_s=body.decision_time_s,
             requested_at=answered_at - timedelta(seconds=response_time),
             answered_at=answered_at,
         )

@@ -45,8 +45,14 @@ class HumanAdvisor:
         idle_limit_s: float,
         step_index: Callable[[], int],
         before_waiting: Callable[[], None] = lambda: None,
+        until_participant_ready: Callable[[], None] = lambda: None,
     ) -> None:
+        """`before_waiting()` runs before the request is sent (the worker flushes its
+        records there, so every step before the wait is in the database);
+        `until_participant_ready()` blocks until the participant consented and finished the
+        induction."""
         self._before_waiting = before_waiting
+        self._until_ready = until_participant_ready
         self._link = link
         self._given = given
         self.count = start_index
@@ -81,6 +87,7 @@ class HumanAdvisor:
                 info=dict(info),
                 advice_budget=self._budget,
             )
+            self._until_ready()
             self._before_waiting()
             self._link.send(request)
             action = self._link.wait_for_answer(index, self._idle_limit_s)

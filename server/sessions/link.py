@@ -54,6 +54,10 @@ class WorkerLink:
         self._on_idle = on_idle
         self.watching = False
         self.paused = False
+        self.participant_ready = False
+        """The participant consented and finished the induction (`Command("ready")`)."""
+        self.may_train = False
+        """The server granted a trainer slot (`Command("train")`)."""
 
     def send(self, message: WorkerMessage) -> None:
         try:
@@ -69,6 +73,19 @@ class WorkerLink:
             if self._ready(1.0):
                 self._handle(self._recv())
             self._on_idle()
+
+    def wait_for_participant(self) -> None:
+        """Block, obeying commands, until the participant may be asked for advice. No
+        idle limit: a researcher who started early waits for the participant to come."""
+        while not self.participant_ready or self.paused:
+            if self._ready(1.0):
+                self._handle(self._recv(), waiting_for_advice=True)
+
+    def wait_for_training_slot(self) -> None:
+        """Block, obeying commands, until the server lets this session train."""
+        while not self.may_train or self.paused:
+            if self._ready(1.0):
+                self._handle(self._recv())
 
     def wait_for_answer(self, advice_index: int, idle_limit_s: float) -> int:
         """Block until the participant answers `advice_index`; no limit per action, but
@@ -108,7 +125,11 @@ class WorkerLink:
         if isinstance(message, AdviceAnswer):
             return  # a late duplicate of an answer already used
         assert isinstance(message, Command), message
-        if message.name == "watch":
+        if message.name == "ready":
+            self.participant_ready = True
+        elif message.name == "train":
+            self.may_train = True
+        elif message.name == "watch":
             self.watching = True
             self._on_watch()
         elif message.name == "unwatch":

@@ -4,6 +4,11 @@ over their pipes, publishes what they say on the hub, and notices when one dies.
 State that the participant endpoints read (the pending advice request, whether the robot
 moves, recent history) lives on a `WorkerHandle` and changes only on the event loop's
 thread; each pipe has a reader thread that publishes to the hub and hands messages over.
+
+A human session asks for advice only once its participant is ready (consent and induction
+recorded; the manager then sends `Command("ready")`), and trains after its advice only in
+one of `max_trainers` slots: the others wait in a queue (`queued`), so the people still
+advising never share the cores with more trainers than there are cores.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import contextlib
 import itertools
 import logging
 import multiprocessing
+import os
 import threading
 import time
 from collections import deque
@@ -44,6 +50,7 @@ from server.sessions.messages import (
     SceneReset,
     SceneStep,
     StatusChanged,
+    TrainingWanted,
 )
 from server.sessions.worker import WorkerOptions, worker_main
 
@@ -84,6 +91,14 @@ class WorkerHandle:
     request_arrived: float = 0.0
     shown_at: float | None = None
     moving: bool = False
+    ready: bool = False
+    """The participant consented and finished the induction (human sessions)."""
+    queued: bool = False
+    """Waiting for a trainer slot after its advice."""
+    training: bool = False
+    """Holds a trainer slot."""
+    steps_before_first_turn: int = 0
+    """Random pretraining steps before the first advice (what the page's progress counts)."""
     last_reward: float | None = None
     history: deque[HistoryEntry] = field(default_factory=lambda: deque(maxlen=HISTORY))
     started: float = field(default_factory=time.monotonic)
@@ -109,7 +124,12 @@ class SessionManager:
         hub: Hub,
         options: WorkerOptions,
         stale_after_s: float,
+        max_trainers: int = 0,
     ) -> None:
+        """`max_trainers`: human sessions training at once after their advice (0: the
+        cores this process may use)."""
+        self.max_trainers = max_trainers or len(os.sched_getaffinity(0))
+        self._train_queue: deque[int] = deque()
         self.factory = factory
         self.database_url = database_url
         self.hub = hub
@@ -201,8 +221,13 @@ class SessionManager:
             ).all()
             budget = session.advice_budget
             human = session.method == Method.human
-        # People wait on human sessions; machine sessions yield the CPU to them.
-        options = replace(self.options, nice=0) if human else self.options
+            ready = human and session.ready_for_advice
+            first_turn = first_advice_step(session.config, session.strategy, budget) - 1
+        # People wait on human sessions; machine sessions yield the CPU to them, and so
+        # does a human session once its advice is over.
+        options = (
+            replace(self.options, nice=0, train_nice=self.options.nice) if human else self.options
+        )
         process = self._context.Process(
             target=worker_main,
             args=(session_id, self.database_url, options, token, child),
@@ -213,6 +238,7 @@ class SessionManager:
             session_id, token, process, parent, budget, {a.advice_index: a.action for a in advice}
         )
         handle.history.extend(HistoryEntry(a.advice_index, a.action) for a in advice)
+        handle.steps_before_first_turn = first_turn
         try:
             process.start()
         except Exception as error:
@@ -225,8 +251,31 @@ class SessionManager:
         ).start()
         if self.hub.watchers(session_id):
             handle.send(Command("watch"))
+        if ready:
+            self.set_ready(session_id)
         self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
         self.notify(session_id)
+
+    def set_ready(self, session_id: int) -> None:
+        """The participant consented and finished the induction: advice may be asked."""
+        handle = self.handles.get(session_id)
+        if handle is not None and not handle.ready:
+            handle.ready = True
+            handle.send(Command("ready"))
+            self.notify(session_id)
+
+    def _grant_training(self) -> None:
+        """Hand free trainer slots to the sessions queued longest."""
+        busy = sum(1 for h in self.handles.values() if h.training)
+        while busy < self.max_trainers and self._train_queue:
+            handle = self.handles.get(self._train_queue.popleft())
+            if handle is None or not handle.queued:
+                continue
+            handle.queued = False
+            handle.training = True
+            busy += 1
+            handle.send(Command("train"))
+            self.notify(handle.session_id)
 
     def _claim(self, session_id: int, resume: bool) -> str:
         with self.factory() as db:
@@ -386,6 +435,10 @@ class SessionManager:
             return
         elif isinstance(message, StatusChanged):
             handle.status = message.status
+        elif isinstance(message, TrainingWanted):
+            handle.queued = True
+            self._train_queue.append(handle.session_id)
+            self._grant_training()
         else:
             return
         self.notify(handle.session_id)
@@ -393,9 +446,21 @@ class SessionManager:
     def _drop(self, handle: WorkerHandle) -> None:
         if self.handles.get(handle.session_id) is handle:
             del self.handles[handle.session_id]
+        if handle.training or handle.queued:
+            handle.training = handle.queued = False
+            self._grant_training()
         self.notify(handle.session_id)
 
     def _watch(self, session_id: int, watched: bool) -> None:
         handle = self.handles.get(session_id)
         if handle is not None:
             handle.send(Command("watch" if watched else "unwatch"))
+
+
+def first_advice_step(config: dict[str, Any], strategy: str | None, budget: int) -> int:
+    """The global step of a session's first advice: early advising gives its budget at the
+    end of pretraining; the other strategies advise from the training stage on."""
+    pretraining = int(config.get("pretraining_steps", 0))
+    if strategy == "early":
+        return max(1, pretraining - budget + 1)
+    return pretraining + 1

@@ -1,8 +1,9 @@
 """What travels over the duplex pipe between the web process and a session's worker.
 
 Plain frozen dataclasses, pickled by multiprocessing. Worker -> web: `Progress`,
-`AdviceRequest`, `AdviceResult`, `EpisodeDone`, `SceneReset`, `SceneStep`, `StatusChanged`.
-Web -> worker: `AdviceAnswer`, `Command`.
+`AdviceRequest`, `AdviceResult`, `EpisodeDone`, `SceneReset`, `SceneStep`, `StatusChanged`,
+`TrainingWanted`. Web -> worker: `AdviceAnswer`, `Command` (`ready`: the participant
+consented and finished the induction; `train`: a trainer slot is free).
 """
 
 from __future__ import annotations
@@ -31,6 +32,10 @@ class Progress:
     """Advice received so far."""
     advice_budget: int
     """Advice the strategy may ask for in all."""
+    queued: bool = False
+    """Waiting in the server's queue for a free trainer slot (human sessions after advice)."""
+    waiting_for_participant: bool = False
+    """Ready for advice, waiting for the participant's consent and induction."""
 
 
 @dataclass(frozen=True)
@@ -99,6 +104,12 @@ class StatusChanged:
 
 
 @dataclass(frozen=True)
+class TrainingWanted:
+    """A human session's advice is over: it asks for one of the server's trainer slots
+    and waits (queued) until `Command("train")` grants it."""
+
+
+@dataclass(frozen=True)
 class AdviceAnswer:
     advice_index: int
     action: int
@@ -106,10 +117,17 @@ class AdviceAnswer:
 
 @dataclass(frozen=True)
 class Command:
-    name: Literal["pause", "resume", "stop", "watch", "unwatch", "shutdown"]
+    name: Literal["pause", "resume", "stop", "watch", "unwatch", "shutdown", "ready", "train"]
     args: dict[str, Any] = field(default_factory=dict)
 
 
 WorkerMessage = (
-    Progress | AdviceRequest | AdviceResult | EpisodeDone | SceneReset | SceneStep | StatusChanged
+    Progress
+    | AdviceRequest
+    | AdviceResult
+    | EpisodeDone
+    | SceneReset
+    | SceneStep
+    | StatusChanged
+    | TrainingWanted
 )

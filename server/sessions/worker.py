@@ -28,7 +28,7 @@ from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, set_status
 from server.sessions.advisors import HumanAdvisor, RecordingAdvisor
 from server.sessions.link import ParentGone, WorkerExit, WorkerLink
-from server.sessions.messages import EpisodeDone, Progress, StatusChanged
+from server.sessions.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
 from server.sessions.recorder import TRAINING, LeaseLost, Recorder
 from server.sessions.scene import SceneBroadcast
 
@@ -58,6 +58,9 @@ class WorkerOptions:
     """Added to the process's niceness (the server lowers machine sessions' priority)."""
     keep_replay_memory: bool = False
     """Keep the replay memory in final checkpoints (a session's own choice wins)."""
+    train_nice: int = 0
+    """Added to a human session's niceness once its advice is over and it trains alone, so
+    the participants still advising keep the CPU."""
 
 
 class _Reporter:
@@ -132,6 +135,8 @@ class _Run:
         resume = bool(s.checkpoint_path) and Path(s.checkpoint_path or "").is_file()
         start_advice = s.checkpoint_advice if resume else 0
         self.advisor: Any = None
+        self.queued = False
+        self.waiting_for_participant = False
         if s.method == Method.human:
             if self.link is None:
                 raise Conflict("a human session needs the server: start it through the API")
@@ -142,7 +147,8 @@ class _Run:
                 s.advice_budget,
                 s.idle_limit_s or options.idle_limit_s,
                 lambda: self.recorder.steps + 1,
-                self.send_progress,  # the live view shows where it waits
+                self._before_waiting,
+                self._until_participant_ready,
             )
             self.env.after_step.append(self.advisor.after_step)
         elif s.method != Method.autonomous:
@@ -186,6 +192,8 @@ class _Run:
             last_episode_reward=self.reporter.last_episode_reward,
             advice_given=self.advice_given,
             advice_budget=self.session.advice_budget,
+            queued=self.queued,
+            waiting_for_participant=self.waiting_for_participant,
         )
 
     def progress_dict(self) -> dict[str, Any]:
@@ -222,6 +230,41 @@ class _Run:
     def _on_watch(self) -> None:
         self.env.announce()
 
+    def _before_waiting(self) -> None:
+        """Before blocking on a person: the live view shows where it waits, and every step
+        taken so far is in the database."""
+        self.send_progress()
+        self.recorder.flush()
+
+    def _until_participant_ready(self) -> None:
+        assert self.link is not None
+        if self.link.participant_ready:
+            return
+        self.waiting_for_participant = True
+        self._before_waiting()
+        self.link.wait_for_participant()
+        self.waiting_for_participant = False
+
+    def _needs_training_slot(self) -> bool:
+        """A human session whose advice is over trains only in one of the server's slots."""
+        return (
+            self.link is not None
+            and self.session.method == Method.human
+            and not self.link.may_train
+            and self.advice_given >= self.session.advice_budget
+        )
+
+    def _wait_for_training_slot(self) -> None:
+        assert self.link is not None
+        self.queued = True
+        self.send(TrainingWanted())
+        self._before_waiting()
+        self.link.wait_for_training_slot()
+        self.queued = False
+        if self.options.train_nice:
+            os.nice(self.options.train_nice)
+        self.send_progress()
+
     def run(self) -> Status:
         self.send(StatusChanged(Status.running.value))
         self.send_progress()
@@ -240,6 +283,8 @@ class _Run:
                     if self.link is not None:
                         self.link.poll()
                     self.recorder.tick()
+                    if self._needs_training_slot():
+                        self._wait_for_training_slot()
                     if self.recorder.episodes_since_checkpoint >= (
                         self.options.checkpoint_every_episodes
                     ):

@@ -76,6 +76,18 @@ class Live:
             assert response.status_code == 201, response.text
             return response.json()
 
+    def begin(self, session: dict[str, Any]) -> None:
+        """What the participant does before advising, over their API: consent (to the
+        texts as shown) and the induction's Start."""
+        with self.api(session["participant_token"]) as participant:
+            version = participant.get("/api/participant/consent").json()["texts_version"]
+            agreed = participant.post(
+                "/api/participant/consent", json={"agree": True, "texts_version": version}
+            )
+            assert agreed.status_code == 200, agreed.text
+            started = participant.post("/api/participant/start")
+            assert started.status_code == 200, started.text
+
 
 @pytest.fixture(scope="package")
 def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:

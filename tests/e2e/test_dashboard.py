@@ -108,6 +108,14 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
     human = section.locator("tr", has_text="P01")
     expect(human.locator("a.link")).to_have_attribute("href", re.compile(r"/p/[\w-]{20,}$"))
     human_id = int(human.get_attribute("data-session"))
+    # Not before the participant's consent: the button is off, and the server refuses too.
+    expect(human.locator("button.start")).to_be_disabled()
+    expect(human).to_contain_text("not consented yet")
+    token = human.locator("a.link").get_attribute("href").rsplit("/", 1)[1]
+    with live.api(token) as participant:
+        version = participant.get("/api/participant/consent").json()["texts_version"]
+        participant.post("/api/participant/consent", json={"agree": True, "texts_version": version})
+    expect(human.locator("button.start")).to_be_enabled(timeout=30_000)
     for command, status in (("start", "running"), ("pause", "paused"), ("resume", "running")):
         human.locator(f"button.{command}").click()
         expect(human.locator(".badge")).to_have_text(status, timeout=180_000)

@@ -54,6 +54,8 @@ def pair(live: Live, browser: Any) -> Iterator[tuple[Participant, Participant]]:
     with live.api() as api:
         for session in sessions:
             assert api.post(f"/api/sessions/{session['id']}/start").status_code == 200
+    for session in sessions:
+        live.begin(session)
     a, b = (Participant(live, browser, s) for s in sessions)
     yield a, b
     for p in (a, b):

@@ -18,15 +18,30 @@ def _get(live: Live, path: str) -> httpx.Response:
         return client.get(path)
 
 
+def _consent(live: Live, token: str, decision: str = "agree") -> httpx.Response:
+    """The consent form as the page posts it, with the texts version it showed."""
+    page = _get(live, f"/p/{token}/consent").text
+    version = re.search(r'name="texts_version" value="(\d+)"', page)
+    assert version is not None, "the consent page carries its texts version"
+    with httpx.Client(base_url=live.url, timeout=60) as client:
+        return client.post(
+            f"/p/{token}/consent", data={"decision": decision, "texts_version": version[1]}
+        )
+
+
 def test_a_link_leads_to_consent_then_induction_before_the_start(live: Live) -> None:
     session = live.human_session("pages", advice_budget=7)
     token = session["participant_token"]
     entry = _get(live, f"/p/{token}")
     assert entry.status_code == 303 and entry.headers["location"] == f"/p/{token}/consent"
-    for path in ("advise", "thanks"):
+    for path in ("advise", "thanks", "induction/1", "induction/3"):
         assert _get(live, f"/p/{token}/{path}").headers["location"] == f"/p/{token}/consent"
     consent = _get(live, f"/p/{token}/consent")
     assert consent.status_code == 200 and "7 times" in consent.text
+    agreed = _consent(live, token)
+    assert agreed.status_code == 303 and agreed.headers["location"] == f"/p/{token}/induction/1"
+    assert _get(live, f"/p/{token}/consent").headers["location"] == f"/p/{token}/induction/1"
+    assert _get(live, f"/p/{token}/advise").headers["location"] == f"/p/{token}/induction/1"
     assert _get(live, f"/p/{token}/induction/9").headers["location"].endswith("/induction/1")
     third = _get(live, f"/p/{token}/induction/3")
     assert 'id="start"' in third.text and "Choices left: 7" in third.text
@@ -53,6 +68,7 @@ def test_a_study_sets_its_own_texts_and_sorting_rule(live: Live) -> None:
     assert "<title>Before you begin · Robot &lt;helper&gt;</title>" in consent
     assert "<h2>Hello</h2>" in consent and "<strong>4</strong>" in consent
     assert "<ul><li>one</li><li>two</li></ul>" in consent
+    _consent(live, token)
     second = _get(live, f"/p/{token}/induction/2").text
     rule = "put the cylinders and disks on the right table and the cubes on the left table"
     assert rule in second

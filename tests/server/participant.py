@@ -16,6 +16,22 @@ class SimulatedParticipant:
         self.version: int | None = None
         self.pending: dict[str, Any] | None = None
 
+    def consent(self, agree: bool = True) -> dict[str, Any]:
+        """Read the texts and decide, as the consent page does."""
+        shown = self.client.get("/api/participant/consent")
+        assert shown.status_code == 200, shown.text
+        version = shown.json()["texts_version"]
+        response = self.client.post(
+            "/api/participant/consent", json={"agree": agree, "texts_version": version}
+        )
+        assert response.status_code == 200, response.text
+        return response.json()
+
+    def begin(self) -> httpx.Response:
+        """Consent, then the induction's Start: the session may now ask for advice."""
+        self.consent()
+        return self.client.post("/api/participant/start")
+
     def state(self) -> dict[str, Any]:
         response = self.client.get("/api/participant/state")
         assert response.status_code == 200, response.text

@@ -27,7 +27,7 @@ def test_a_participant_gives_100_advice_each_stored_once_and_the_101st_is_refuse
     participant = SimulatedParticipant(server.url, created["participant_token"])
 
     assert participant.state()["status"] == "created"
-    started = participant.client.post("/api/participant/start")
+    started = participant.begin()
     assert started.status_code == 200 and started.json()["status"] == "running"
 
     for index in range(BUDGET):
@@ -82,7 +82,7 @@ def test_a_token_reaches_only_its_own_session(server: LiveServer, api: httpx.Cli
     assert first["participant_token"] != second["participant_token"]
     a = SimulatedParticipant(server.url, first["participant_token"])
     b = SimulatedParticipant(server.url, second["participant_token"])
-    a.client.post("/api/participant/start")
+    a.begin()
     state = a.next_request()
     assert state["session_id"] == first["id"]
     assert a.advise(0, 1).status_code == 200

@@ -67,7 +67,7 @@ def test_an_idle_participant_abandons_the_session_which_resumes(
     body = session_body("human", advice_budget=3, idle_limit_s=2, episodes=1)
     session = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
     participant = SimulatedParticipant(server.url, session["participant_token"])
-    participant.client.post("/api/participant/start")
+    participant.begin()
     assert participant.next_request()["advice_index"] == 0
 
     abandoned = wait_for_status(api, session["id"], {"abandoned"}, timeout=60)

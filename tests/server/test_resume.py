@@ -96,7 +96,7 @@ def test_a_human_session_survives_a_server_crash_without_asking_again(live: Live
         crashed = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
         reference = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
         participant = SimulatedParticipant(live.url, crashed["participant_token"])
-        participant.client.post("/api/participant/start")
+        participant.begin()
         for index in range(before_crash):
             state = participant.next_request()
             assert participant.advise(state["advice_index"], actions[index]).status_code == 200
@@ -117,7 +117,7 @@ def test_a_human_session_survives_a_server_crash_without_asking_again(live: Live
             state = participant.next_request()
             assert participant.advise(state["advice_index"], actions[index]).status_code == 200
         other = SimulatedParticipant(live.url, reference["participant_token"])
-        other.client.post("/api/participant/start")
+        other.begin()
         for index in range(budget):
             state = other.next_request()
             assert other.advise(state["advice_index"], actions[index]).status_code == 200

@@ -77,7 +77,7 @@ def test_a_viewer_receives_the_scene_and_the_arm_moving(app: tuple[FastAPI, str]
     subscription = hub.subscribe(session["id"], events.arrived.put)
 
     participant = SimulatedParticipant(url, session["participant_token"])
-    participant.client.post("/api/participant/start")
+    participant.begin()
     reset = events.first("scene_reset")
     names = {body.name for body in reset.payload.bodies}
     assert all(isinstance(b, sim.BodySpec) for b in reset.payload.bodies)

@@ -15,6 +15,9 @@
   let generation = 0; // bumps on every state, so stale waits give up
   let finished = false;
   let sentIndex = null;
+  let activeSince = null; // performance.now() when the buttons became active
+  let readinessPolling = false;
+  let beforeFirstTurn = false; // the latest state: no advice asked yet, robot practising
 
   function api(path, options = {}) {
     const headers = { Authorization: `Bearer ${config.token}` };
@@ -111,13 +114,16 @@
       s.status === "running" && s.advice_wanted && !s.robot_moving && s.advice_index !== sentIndex;
     if (!ready) {
       enabledFor = null;
+      beforeFirstTurn = false;
       setButtons(false);
       showArm(s, false);
       if (s.status !== "running") setStatus(s.message || `The session is ${s.status}.`, "paused");
       else if (s.robot_moving || sentIndex !== null) setStatus("The robot is moving…", "busy");
+      else if (s.advice_given === 0) showReadiness();
       else setStatus("The robot is exploring on its own. Your first turn comes in a moment…", "busy");
       return;
     }
+    hideReadiness();
     if (enabledFor === s.advice_index) return;
     setButtons(false);
     setStatus("The robot is moving…", "busy");
@@ -128,6 +134,7 @@
     enabledFor = s.advice_index;
     sentIndex = null;
     setButtons(true);
+    activeSince = performance.now();
     setStatus("Your turn: what should the robot do?", "turn");
   }
 
@@ -145,8 +152,45 @@
     window.location.assign(`/p/${config.token}/thanks`);
   }
 
+  // Before the first turn the robot practises with random moves; show how far it is.
+  async function showReadiness() {
+    beforeFirstTurn = true;
+    if (readinessPolling) return;
+    readinessPolling = true;
+    try {
+      while (beforeFirstTurn && !finished) {
+        const response = await api("/api/participant/readiness").catch(() => null);
+        if (!response || !response.ok) break;
+        const r = await response.json();
+        if (r.ready || !beforeFirstTurn) break;
+        const total = Math.max(1, r.steps_before_first_turn);
+        const done = Math.min(r.steps_done, total);
+        setStatus(`Getting the robot ready: ${done} of ${total} practice moves done. Your first turn comes next.`, "busy");
+        $("scene-wait").hidden = false;
+        $("scene-wait-fill").style.width = `${((100 * done) / total).toFixed(1)}%`;
+        $("scene-wait-text").textContent = `The robot practises on its own: ${done} of ${total} moves`;
+        await sleep(500);
+      }
+    } finally {
+      readinessPolling = false;
+    }
+    if (beforeFirstTurn && !finished) {
+      setStatus("The robot is getting ready. Your first turn comes in a moment…", "busy");
+    }
+    $("scene-wait").hidden = true;
+  }
+
+  function hideReadiness() {
+    beforeFirstTurn = false;
+    $("scene-wait").hidden = true;
+  }
+
   async function send(action) {
     if (enabledFor === null) return;
+    // The participant's decision time: from the buttons becoming active to this click or
+    // key, on the browser's monotonic clock (the server's time also counts the replay).
+    const decision = activeSince === null ? null : (performance.now() - activeSince) / 1000;
+    activeSince = null;
     const index = enabledFor;
     enabledFor = null;
     sentIndex = index;
@@ -162,7 +206,7 @@
       try {
         response = await api("/api/participant/advice", {
           method: "POST",
-          body: JSON.stringify({ advice_index: index, action }),
+          body: JSON.stringify({ advice_index: index, action, decision_time_s: decision }),
         });
       } catch {
         await sleep(1000 * (attempt + 1));

@@ -43,7 +43,9 @@
     const p = s.progress;
     const parts = [];
     if (s.method !== "autonomous" && p.advice_budget) parts.push(`advice ${p.advice_given}/${p.advice_budget}`);
+    if (s.method === "human" && !p.consented) parts.push(s.declined ? "declined" : "not consented yet");
     if (p.advice_wanted) parts.push("waiting for the participant");
+    if (p.queued) parts.push("advice done, queued for a trainer");
     if (p.phase === "training" || p.episode) parts.push(`episode ${p.episode}/${p.episodes}`);
     else if (p.phase) parts.push(p.phase);
     if (p.last_episode_reward !== null && p.last_episode_reward !== undefined) {
@@ -62,8 +64,9 @@
     cells[0].querySelector(".session-label").textContent = s.participant || s.label || `seed ${s.seed}`;
     cells[1].textContent = s.method;
     cells[2].innerHTML = `<span class="badge"></span>`;
-    cells[2].firstChild.textContent = s.status;
-    cells[2].firstChild.dataset.status = s.status;
+    const shown = s.status === "running" && s.progress.queued ? "queued" : s.status;
+    cells[2].firstChild.textContent = shown;
+    cells[2].firstChild.dataset.status = shown;
     if (s.status_detail) cells[2].firstChild.title = s.status_detail;
     cells[3].textContent = progressText(s);
     if (s.participant_url) {
@@ -83,6 +86,11 @@
       button.type = "button";
       button.className = `command ${command}`;
       button.textContent = command;
+      if (command === "start" && s.method === "human" && !s.progress.consented) {
+        // The participant's link starts it after consent; the server refuses it too (409).
+        button.disabled = true;
+        button.title = "Waits for the participant's consent: their link starts the session.";
+      }
       button.addEventListener("click", async () => {
         button.disabled = true;
         try {

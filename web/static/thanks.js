@@ -19,7 +19,9 @@
       empty: "The first round is under way…",
     });
     const done = data.curve.length;
-    status.textContent = ENDED[data.status] || (data.status === "running"
+    status.textContent = ENDED[data.status] || (data.queued
+      ? "Queued: the robot waits for a free processor to practise"
+      : data.status === "running"
       ? `Learning: round ${Math.min(done + 1, data.episodes)} of ${data.episodes}`
       : `Session ${data.status}`);
     status.dataset.mood = data.status === "running" ? "busy" : "done";
