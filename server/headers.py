@@ -42,12 +42,23 @@ def page_policy(frame_origin: str | None) -> str:
     )
 
 
-VIEWER_POLICY = (
-    "default-src 'self'; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:; "
-    "worker-src 'self' blob:; style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; "
-    "connect-src 'self' ws: wss: data: blob:; font-src 'self' data:; "
-    "frame-ancestors 'self'; object-src 'none'; base-uri 'self'"
-)
+def viewer_policy(framed_from_anywhere: bool) -> str:
+    """The relayed viser client's policy. It is framed by our own pages; only when
+    `viewer_public_url` sends browsers to another host name for it (the tests do, so that
+    Chromium renders it in a process of its own) may another origin frame it."""
+    ancestors = "*" if framed_from_anywhere else "'self'"
+    return (
+        "default-src 'self'; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:; "
+        "worker-src 'self' blob:; style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; "
+        "connect-src 'self' ws: wss: data: blob:; font-src 'self' data:; "
+        f"frame-ancestors {ancestors}; object-src 'none'; base-uri 'self'"
+    )
+
+
+def _viewer_elsewhere(scope: Scope) -> bool:
+    app = scope.get("app")
+    settings = getattr(getattr(app, "state", None), "settings", None)
+    return bool(getattr(settings, "viewer_public_url", None))
 
 
 DOCS_POLICY = (
@@ -84,6 +95,8 @@ class SecurityHeaders:
             if message["type"] == "http.response.start":
                 headers = list(message.get("headers", []))
                 names = {name.lower() for name, _ in headers}
+                if scope.get("path", "").startswith(VIEWER_PATH) and _viewer_elsewhere(scope):
+                    names.add(b"x-frame-options")  # framed by another host: frame-ancestors
                 headers.extend(h for h in BASE_HEADERS if h[0] not in names)
                 if b"content-security-policy" not in names:
                     headers.append((b"content-security-policy", self._policy(scope, headers)))
@@ -98,7 +111,7 @@ class SecurityHeaders:
         if path.startswith(DOCS_PATHS):
             return DOCS_POLICY.encode()
         if path.startswith(VIEWER_PATH):
-            return VIEWER_POLICY.encode()
+            return viewer_policy(_viewer_elsewhere(scope)).encode()
         html = any(n.lower() == b"content-type" and v.startswith(b"text/html") for n, v in headers)
         origin = _viewer_origin(scope) if html and path.startswith("/p/") else None
         if origin and origin == _own_origin(scope):
