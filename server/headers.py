@@ -22,7 +22,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 DOCS_PATHS = ("/docs", "/redoc")
 VIEWER_PATH = "/viewer/"
 """Where the app relays viser's client (server/viewer/proxy.py): a prebuilt bundle that
-needs inline styles, workers from blobs and WebAssembly, so it gets its own policy."""
+evaluates code and uses inline styles and blob workers, so it gets its own policy."""
 DOCS_CDN = "https://cdn.jsdelivr.net"
 BASE_HEADERS = [
     (b"x-content-type-options", b"nosniff"),
@@ -48,7 +48,7 @@ def viewer_policy(framed_from_anywhere: bool) -> str:
     Chromium renders it in a process of its own) may another origin frame it."""
     ancestors = "*" if framed_from_anywhere else "'self'"
     return (
-        "default-src 'self'; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:; "
+        "default-src 'self'; script-src 'self' 'unsafe-inline' 'unsafe-eval' blob:; "
         "worker-src 'self' blob:; style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; "
         "connect-src 'self' ws: wss: data: blob:; font-src 'self' data:; "
         f"frame-ancestors {ancestors}; object-src 'none'; base-uri 'self'"

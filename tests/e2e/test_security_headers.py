@@ -36,6 +36,7 @@ def test_the_advice_page_and_its_3d_view_run_under_the_policy(live: Live, browse
     session = live.human_session("csp")
     with live.api() as api:
         assert api.post(f"/api/sessions/{session['id']}/start").status_code == 200
+    live.begin(session)  # consent and induction, so the link leads to the advice page
     context = browser.new_context(viewport=VIEWPORT)
     context.add_init_script(RECORD_VIOLATIONS)
     page = context.new_page()

@@ -30,7 +30,9 @@ def upgrade() -> None:
         sa.UniqueConstraint("study_id", "content_hash"),
         sa.UniqueConstraint("study_id", "version"),
     )
-    with op.batch_alter_table("sessions", schema=None) as batch_op:
+    with op.batch_alter_table(  # a rebuilt table keeps AUTOINCREMENT (0003)
+        "sessions", schema=None, table_kwargs={"sqlite_autoincrement": True}
+    ) as batch_op:
         batch_op.add_column(sa.Column("texts_version_id", sa.Integer(), nullable=True))
         batch_op.add_column(sa.Column("consented_at", sa.DateTime(timezone=True), nullable=True))
         batch_op.add_column(sa.Column("declined_at", sa.DateTime(timezone=True), nullable=True))
@@ -51,7 +53,9 @@ def upgrade() -> None:
 def downgrade() -> None:
     with op.batch_alter_table("advice", schema=None) as batch_op:
         batch_op.drop_column("decision_time_s")
-    with op.batch_alter_table("sessions", schema=None) as batch_op:
+    with op.batch_alter_table(
+        "sessions", schema=None, table_kwargs={"sqlite_autoincrement": True}
+    ) as batch_op:
         batch_op.drop_constraint("fk_sessions_texts_version_id", type_="foreignkey")
         batch_op.drop_column("induction_done_at")
         batch_op.drop_column("declined_at")
