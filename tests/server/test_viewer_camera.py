@@ -19,8 +19,10 @@ OLD_CAMERA = CameraPose((-0.12, -0.5, 1.72), (0.42, 0.02, 0.4), fov=75.0)
 """The view before issue 10, whose arm hid the center table when at the right station."""
 
 
-def _name(obj: dict) -> str:
-    return f"objects/{obj['shape']}_{obj['color']}"
+def _name(held: str) -> str:
+    """The scene path of a held object, from sim's info ("shape/color")."""
+    shape, color = held.split("/")
+    return f"objects/{shape}_{color}"
 
 
 def _hidden_and_held(camera: CameraPose, seed: int) -> tuple[list[str], list[int]]:
@@ -41,8 +43,8 @@ def _hidden_and_held(camera: CameraPose, seed: int) -> tuple[list[str], list[int
             where = f"{info['station']} holding {held}"
             hidden += [
                 f"{_name(o)} ({where})"
-                for o in info["remaining"]
-                if _name(o) != held and pixels[_name(o)] < MIN_OBJECT_PX
+                for o, on_center in zip(sim.OBJECTS, info["on_center"], strict=True)
+                if on_center and _name(o) != held and pixels[_name(o)] < MIN_OBJECT_PX
             ]
         return hidden, held_px
     finally:
