@@ -27,7 +27,7 @@ DOCS_CDN = "https://cdn.jsdelivr.net"
 BASE_HEADERS = [
     (b"x-content-type-options", b"nosniff"),
     (b"x-frame-options", b"SAMEORIGIN"),
-    (b"referrer-policy", b"no-referrer"),
+    (b"referrer-policy", b"same-origin"),  # tokens are in paths: never to another site
     (b"cross-origin-opener-policy", b"same-origin"),
 ]
 
