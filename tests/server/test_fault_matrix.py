@@ -141,7 +141,7 @@ def test_an_abandoned_human_session_resumed(live: LiveServer) -> None:
         body = session_body("human", episodes=EPISODES, advice_budget=budget, idle_limit_s=4)
         faulty = api.post(f"/api/studies/{study}/sessions", json=body).json()
         participant = SimulatedParticipant(live.url, faulty["participant_token"])
-        participant.client.post("/api/participant/start")
+        participant.begin()  # consent, then the induction's Start
         for index in range(3):
             state = participant.next_request()
             assert participant.advise(state["advice_index"], actions[index]).status_code == 200
@@ -153,7 +153,7 @@ def test_an_abandoned_human_session_resumed(live: LiveServer) -> None:
             assert state["advice_index"] == index
             assert participant.advise(index, actions[index]).status_code == 200
         other = SimulatedParticipant(live.url, twin["participant_token"])
-        other.client.post("/api/participant/start")
+        other.begin()
         for index in range(budget):
             state = other.next_request()
             assert other.advise(state["advice_index"], actions[index]).status_code == 200

@@ -117,7 +117,7 @@ def test_waiting_for_advice_or_paused_keeps_the_worker_alive(stale_server: LiveS
         body = session_body("human", advice_budget=2, episodes=1)
         human = api.post(f"/api/studies/{study}/sessions", json=body).json()
         participant = SimulatedParticipant(stale_server.url, human["participant_token"])
-        participant.client.post("/api/participant/start")
+        participant.begin()  # consent, then the induction's Start
         assert participant.next_request()["advice_index"] == 0
         paused = _running(api, study)
         assert api.post(f"/api/sessions/{paused['id']}/pause").json()["status"] == "paused"
