@@ -48,8 +48,12 @@ def ideeprl(*args: str, cwd: Path, **env: str) -> subprocess.CompletedProcess[st
 
 
 @pytest.fixture
-def data_dir(tmp_path: Path) -> Path:
-    """A data folder as `serve` leaves it: a migrated database holding one study."""
+def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A data folder as `serve` leaves it: a migrated database holding one study. A database
+    URL in the environment would win over the folder (as it does for `serve`), so the
+    in-process commands here run without one."""
+    monkeypatch.delenv("DATABASE_URL", raising=False)
+    monkeypatch.delenv("IDEEPRL_DATABASE_URL", raising=False)
     folder = tmp_path / "data"
     folder.mkdir()
     engine = make_engine(f"sqlite:///{folder / 'ideeprl.sqlite3'}")
