@@ -13,7 +13,6 @@ consented to.
 
 from __future__ import annotations
 
-import contextlib
 import html
 import re
 from dataclasses import dataclass
@@ -124,18 +123,10 @@ async def _load(request: Request, token: str, warm_up: bool = True) -> Visit | N
     """The visit; opening the link starts the session's random pretraining (the robot
     practises while the participant reads), advice waits for consent and induction."""
     visit = await run_in_threadpool(_visit, request, token)
-    if visit is not None and warm_up and visit.status == Status.created:
-        await warm_up_session(request.app.state.manager, visit.session_id)
+    if visit is not None and warm_up and visit.status in (Status.created, Status.abandoned):
+        await request.app.state.manager.welcome(visit.session_id)
+        visit = await run_in_threadpool(_visit, request, token)
     return visit
-
-
-async def warm_up_session(manager: Any, session_id: int) -> None:
-    """Start a human session's worker if it is not running yet (a second start at the
-    same moment, or one that cannot start now, is left to the researcher)."""
-    if session_id in manager.handles or manager.status(session_id) != Status.created:
-        return
-    with contextlib.suppress(Conflict):
-        await manager.start(session_id)
 
 
 def _page(request: Request, name: str, visit: Visit | None, **context: Any) -> HTMLResponse:

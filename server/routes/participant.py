@@ -1,14 +1,12 @@
 """What a participant's page calls, with the token from their link (one session only)."""
 
-import contextlib
-
 from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 
-from server.db.models import Status, StudySession
+from server.db.models import StudySession
 from server.deps import ManagerDep, ParticipantDep
-from server.routes.pages import visit_for_token, warm_up_session
+from server.routes.pages import visit_for_token
 from server.schemas.participant import (
     AdviceCreate,
     AdviceReceipt,
@@ -18,7 +16,7 @@ from server.schemas.participant import (
     Readiness,
 )
 from server.services import consent as consent_service
-from server.services.errors import Conflict, NotFound
+from server.services.errors import NotFound
 from server.sessions import advising
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
@@ -92,9 +90,7 @@ async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantStat
     """The participant finished the induction (after consent; 409 before it): start the
     session if its link has not already, and let it ask for advice."""
     await run_in_threadpool(_finish_induction, manager, session.id)
-    if session.id not in manager.handles and manager.status(session.id) == Status.created:
-        with contextlib.suppress(Conflict):  # started by a second click meanwhile
-            await manager.start(session.id)
+    await manager.welcome(session.id)
     manager.set_ready(session.id)
     return advising.participant_state(manager, session)
 
@@ -103,7 +99,7 @@ async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantStat
 async def readiness(session: ParticipantDep, manager: ManagerDep) -> Readiness:
     """How far the robot's random pretraining is before the first turn; the advice page
     shows it while the robot is not ready yet. Starts the session if nobody has."""
-    await warm_up_session(manager, session.id)
+    await manager.welcome(session.id)
     handle = manager.handles.get(session.id)
     if handle is None:
         state = advising.participant_state(manager, session)

@@ -29,6 +29,11 @@ class SessionAbandoned(WorkerExit):
     status = "abandoned"
 
 
+WAITED_FOR_PARTICIPANT = "the participant did not consent and start"
+"""How an abandonment before the first advice begins its detail (the server resumes such
+a session by itself when the participant comes back)."""
+
+
 class ParentGone(WorkerExit):
     """The web process died or closed the pipe: nobody can advise or watch any more."""
 
@@ -74,18 +79,33 @@ class WorkerLink:
                 self._handle(self._recv())
             self._on_idle()
 
-    def wait_for_participant(self) -> None:
-        """Block, obeying commands, until the participant may be asked for advice. No
-        idle limit: a researcher who started early waits for the participant to come."""
+    def wait_for_participant(self, idle_limit_s: float) -> None:
+        """Block, obeying commands and marking itself alive, until the participant may be
+        asked for advice. A participant who has not come after `idle_limit_s` (pauses not
+        counted: a visitor who opened the link and left) abandons the session, so nobody
+        holds a worker; the server starts it again when the participant comes back."""
+        waited = 0.0
         while not self.participant_ready or self.paused:
-            if self._ready(1.0):
+            started = time.monotonic()
+            ready = self._ready(1.0)
+            if not self.paused:
+                waited += time.monotonic() - started
+            self._on_idle()
+            if ready:
                 self._handle(self._recv(), waiting_for_advice=True)
+            elif waited >= idle_limit_s and not self.participant_ready:
+                raise SessionAbandoned(
+                    f"{WAITED_FOR_PARTICIPANT} for {idle_limit_s:.0f} s (the idle limit); "
+                    "it starts again when they come"
+                )
 
     def wait_for_training_slot(self) -> None:
-        """Block, obeying commands, until the server lets this session train."""
+        """Block, obeying commands and marking itself alive, until the server lets this
+        session train (its queue may take longer than the stale limit)."""
         while not self.may_train or self.paused:
             if self._ready(1.0):
                 self._handle(self._recv())
+            self._on_idle()
 
     def wait_for_answer(self, advice_index: int, idle_limit_s: float) -> int:
         """Block until the participant answers `advice_index`; no limit per action, but

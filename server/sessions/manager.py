@@ -41,6 +41,7 @@ from server.services.sessions import (
     silent_sessions,
 )
 from server.sessions.hub import Hub
+from server.sessions.link import WAITED_FOR_PARTICIPANT
 from server.sessions.messages import (
     AdviceRequest,
     AdviceResult,
@@ -284,6 +285,25 @@ class SessionManager:
     def _set_status(self, session_id: int, status: Status, detail: str, token: str) -> None:
         with self.factory() as db:
             set_status(db, session_id, status, detail, token=token)
+
+    async def welcome(self, session_id: int) -> None:
+        """The participant opened their link or finished the induction: make sure a worker
+        runs for their session. A new session starts (its random pretraining runs while they
+        read); one abandoned because they did not come before its first advice resumes.
+        A start at the same moment elsewhere, or one that cannot start, is left alone."""
+        handle = self.handles.get(session_id)
+        if handle is not None and handle.status in LIVE_STATUSES:
+            return
+        with self.factory() as db:
+            session = get_session(db, session_id)
+            waited_for_them = (
+                session.status == Status.abandoned
+                and session.status_detail.startswith(WAITED_FOR_PARTICIPANT)
+            )
+            if session.status != Status.created and not waited_for_them:
+                return
+        with contextlib.suppress(Conflict):
+            await self.start(session_id, resume=waited_for_them)
 
     async def pause(self, session_id: int) -> None:
         handle = self._live(session_id, "pause")

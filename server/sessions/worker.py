@@ -242,7 +242,7 @@ class _Run:
             return
         self.waiting_for_participant = True
         self._before_waiting()
-        self.link.wait_for_participant()
+        self.link.wait_for_participant(self.session.idle_limit_s or self.options.idle_limit_s)
         self.waiting_for_participant = False
 
     def _needs_training_slot(self) -> bool:

@@ -131,3 +131,35 @@ def test_waiting_for_advice_or_paused_keeps_the_worker_alive(stale_server: LiveS
         wait_for_status(api, human["id"], {"finished"})
         participant.close()
         assert api.post(f"/api/sessions/{paused['id']}/stop").json()["status"] == "stopped"
+
+
+def test_a_visitor_who_never_consents_holds_no_worker_for_long(stale_server: LiveServer) -> None:
+    """Opening the link starts the pretraining; waiting for the participant, the worker
+    keeps beating past the stale limit, then abandons after the idle limit and exits; when
+    the participant comes back, the session resumes by itself and asks for advice."""
+    idle_limit = STALE_S + 8
+    with stale_server.client() as api:
+        study = api.post("/api/studies", json={"name": "no-show"}).json()["id"]
+        body = session_body("human", advice_budget=2, episodes=1, idle_limit_s=idle_limit)
+        human = api.post(f"/api/studies/{study}/sessions", json=body).json()
+        participant = SimulatedParticipant(stale_server.url, human["participant_token"])
+        deadline = time.monotonic() + 120
+        while not participant.client.get("/api/participant/readiness").json()["ready"]:
+            assert time.monotonic() < deadline, "the pretraining never reached the first turn"
+            time.sleep(0.2)
+        waiting_since = time.monotonic()
+        pid = api.get(f"/api/sessions/{human['id']}").json()["worker_pid"]
+        time.sleep(STALE_S + 2)
+        assert api.get(f"/api/sessions/{human['id']}").json()["status"] == "running"
+        abandoned = wait_for_status(api, human["id"], {"abandoned"}, timeout=60)
+        assert time.monotonic() - waiting_since >= idle_limit - 1
+        assert abandoned["status_detail"].startswith("the participant did not consent")
+        assert _gone(pid), "the abandoned worker exited"
+        participant.begin()  # they come back: consent, then the induction's Start
+        for index in range(2):
+            state = participant.next_request()
+            assert state["advice_index"] == index
+            assert participant.advise(index, 1).status_code == 200
+        wait_for_status(api, human["id"], {"finished"})
+        assert api.get(f"/api/sessions/{human['id']}/progress").json()["advice_given"] == 2
+        participant.close()
