@@ -22,6 +22,7 @@ the sessions still advising while the others train. Aim: p95 < 100 ms.
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import os
 import statistics
@@ -203,33 +204,45 @@ def _one_first_turn(server: LiveServer, session: dict, reading_s: float) -> tupl
 STUDY_SESSIONS = 11
 
 
-def study(runs: int, motion: str = "physics") -> None:
+def study(runs: int, motion: str = "physics", think_s: float = 0.0) -> None:
     """11 participants; each advises its budget, then its session trains in a queue."""
-    p50s, p95s, counts, peaks = [], [], [], []
+    client: list[list[float]] = []
+    server: list[list[float]] = []
+    peaks = []
     for _ in range(runs):
-        trips, peak = _one_study(motion)
-        p50s.append(percentile(trips, 50) * 1000)
-        p95s.append(percentile(trips, 95) * 1000)
-        counts.append(len(trips))
+        trips, turnarounds, peak = _one_study(motion, think_s)
+        client.append(trips)
+        server.append(turnarounds)
         peaks.append(peak)
     print(
-        f"{STUDY_SESSIONS} human sessions ({motion} motion), advising 10-40 advice each, then "
-        f"training queued for {len(os.sched_getaffinity(0))} trainer slots; {runs} runs"
+        f"{STUDY_SESSIONS} human sessions ({motion} motion), advising 10-40 advice each "
+        f"({think_s:.1f} s to decide each), then training queued for "
+        f"{len(os.sched_getaffinity(0))} trainer slots; {runs} runs"
     )
-    print(f"  advice round trips per run: {counts}")
-    print(f"  p50 ms per run: {[round(v, 1) for v in p50s]}; median {statistics.median(p50s):.1f}")
-    print(f"  p95 ms per run: {[round(v, 1) for v in p95s]}; median {statistics.median(p95s):.1f}")
+    for name, values in (
+        ("server side: advice received -> next advice asked", server),
+        ("participant's round trip: click -> next turn shown", client),
+    ):
+        p50s = [percentile(v, 50) * 1000 for v in values]
+        p95s = [percentile(v, 95) * 1000 for v in values]
+        print(f"  {name} ({[len(v) for v in values]} per run)")
+        for q, per_run in (("p50", p50s), ("p95", p95s)):
+            rounded = [round(v, 1) for v in per_run]
+            print(f"    {q} ms per run: {rounded}; median {statistics.median(per_run):.1f}")
     print(
         "  most seen at once (training, queued, advising): "
         + ", ".join(f"({t}, {q}, {a})" for t, q, a in peaks)
     )
 
 
-def _one_study(motion: str) -> tuple[list[float], tuple[int, int, int]]:
+def _one_study(
+    motion: str, think_s: float
+) -> tuple[list[float], list[float], tuple[int, int, int]]:
     trips: list[float] = []
     peak = [0, 0, 0]
     with tempfile.TemporaryDirectory() as tmp:
-        server = LiveServer(Path(tmp), f"sqlite:///{tmp}/bench.sqlite3").start()
+        database = f"{tmp}/bench.sqlite3"
+        server = LiveServer(Path(tmp), f"sqlite:///{database}").start()
         try:
             with server.client() as api:
                 study_id = api.post("/api/studies", json={"name": "study"}).json()["id"]
@@ -251,7 +264,14 @@ def _one_study(motion: str) -> tuple[list[float], tuple[int, int, int]]:
                 threads = [
                     threading.Thread(
                         target=_advise_budget,
-                        args=(server.url, m["participant_token"], m["advice_budget"], trips, ready),
+                        args=(
+                            server.url,
+                            m["participant_token"],
+                            m["advice_budget"],
+                            trips,
+                            ready,
+                            think_s,
+                        ),
                     )
                     for m in made
                 ]
@@ -271,20 +291,47 @@ def _one_study(motion: str) -> tuple[list[float], tuple[int, int, int]]:
                     thread.join()
         finally:
             server.stop()
-    return trips, (peak[0], peak[1], peak[2])
+        turnarounds = _server_turnarounds(database)
+    return trips, turnarounds, (peak[0], peak[1], peak[2])
+
+
+def _server_turnarounds(database: str) -> list[float]:
+    """From the server's own stamps: each advice's answer to the next advice's request, in
+    the same session (the worker's step, the database, the message to the web process)."""
+    import sqlite3
+    from datetime import datetime
+
+    with sqlite3.connect(database) as db:
+        rows = db.execute(
+            "select session_id, advice_index, requested_at, answered_at from advice "
+            "order by session_id, advice_index"
+        ).fetchall()
+    out = []
+    for before, after in itertools.pairwise(rows):
+        if before[0] == after[0] and after[1] == before[1] + 1:
+            asked = datetime.fromisoformat(after[2])
+            answered = datetime.fromisoformat(before[3])
+            out.append((asked - answered).total_seconds())
+    return out
 
 
 def _advise_budget(
-    url: str, token: str, budget: int, out: list[float], ready: threading.Barrier
+    url: str,
+    token: str,
+    budget: int,
+    out: list[float],
+    ready: threading.Barrier,
+    think_s: float = 0.0,
 ) -> None:
-    """Advise every advice of the budget, timing each round trip but the last (after it
-    the session trains and no request follows)."""
+    """Advise every advice of the budget, `think_s` after each turn is shown, timing each
+    round trip but the last (after it the session trains and no request follows)."""
     participant = SimulatedParticipant(url, token)
     participant.begin()
     state = participant.next_request(timeout=600)
     ready.wait()  # every worker started: measure advising, not process start-up
     for index in range(budget):
         assert state["advice_index"] == index, state
+        time.sleep(think_s)
         if index == budget - 1:
             assert participant.advise(index, index % 4).status_code == 200
             break
@@ -309,13 +356,16 @@ def main() -> None:
         "--reading", type=float, nargs="+", default=[0.0, 20.0, 60.0], help="first-turn: seconds"
     )
     parser.add_argument("--study-motion", choices=["fast", "physics"], default="physics")
+    parser.add_argument(
+        "--think", type=float, default=0.0, help="study: seconds each participant takes to decide"
+    )
     args = parser.parse_args([] if __name__ != "__main__" else None)
     if args.scenario in ("advice", "all"):
         run(args.participants, args.trainers, args.advice, args.motion)
     if args.scenario in ("first-turn", "all"):
         first_turn(args.reading, args.runs)
     if args.scenario in ("study", "all"):
-        study(args.runs, args.study_motion)
+        study(args.runs, args.study_motion, args.think)
 
 
 if __name__ == "__main__":

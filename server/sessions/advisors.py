@@ -88,8 +88,11 @@ class HumanAdvisor:
                 advice_budget=self._budget,
             )
             self._until_ready()
-            self._before_waiting()
+            # The request first: the flush of the steps before it then overlaps the
+            # person's decision instead of delaying the turn (it ends before the answer
+            # is read, so the steps are stored before the wait for it).
             self._link.send(request)
+            self._before_waiting()
             action = self._link.wait_for_answer(index, self._idle_limit_s)
             self._given[index] = action
             self._answered = index
