@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 from sqlalchemy import select
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session
 
 from server.cli import main
@@ -23,6 +24,7 @@ from tests.server.batch.helpers import (
     is_png,
     read_csv,
     sessions,
+    start_ideeprl,
     study_id,
     training_totals,
 )
@@ -151,3 +153,58 @@ def test_without_stable_baselines3_the_batch_says_how_to_install_it(
     assert "error: the sb3-dqn baseline needs Stable-Baselines3: pip install 'ideeprl[sb3]'" in out
     code, out = in_process(place, capsys, "batch", "--study", "no sb3", "--dry-run", *SCALE)
     assert code == 0, out  # the other methods do not need it
+
+
+def _steps(place: Place, session_id: int) -> list[tuple[object, ...]]:
+    """A session's steps as the learner made them (no times, no ids)."""
+    columns = (Step.global_step, Step.phase, Step.action, Step.action_source, Step.reward)
+    columns += (Step.truncated, Step.epsilon, Step.loss, Step.q_grab)
+    with Session(place.engine()) as db:
+        query = select(*columns).where(Step.session_id == session_id)
+        return [tuple(row) for row in db.execute(query.order_by(Step.global_step))]
+
+
+def test_a_killed_sb3_run_resumes_to_the_records_of_an_uninterrupted_one(
+    place: Place, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tests.server.batch.test_interrupted_batch import wait_for
+
+    episodes = 8
+    run = ["--methods", "sb3-dqn", "--agents", "1", "--seed", "7", "--workers", "1"]
+    run += ["--episodes", str(episodes), *SCALE[2:]]
+    engine = place.engine()
+    log = tmp_path / "runner.log"
+    runner = start_ideeprl(place, "batch", "--study", "sb3 killed", *run, log=log)
+
+    def checkpointed() -> bool:
+        assert runner.poll() is None, log.read_text()
+        try:
+            rows = sessions(engine, study_id(engine, "sb3 killed"))
+        except (AssertionError, OperationalError):
+            return False  # no study yet (or, on a fresh database, no tables)
+        return bool(rows) and rows[0].status == "running" and rows[0].checkpoint_episodes >= 1
+
+    wait_for("the sb3-dqn run to checkpoint", checkpointed, log)
+    runner.kill()
+    runner.wait()
+    study = study_id(engine, "sb3 killed")
+    wait_for(
+        "the orphaned worker to interrupt its session",
+        lambda: sessions(engine, study)[0].status == "interrupted",
+        log,
+        timeout=60,
+    )
+    (interrupted,) = sessions(engine, study)
+    assert interrupted.checkpoint_episodes < episodes
+
+    code, again = in_process(place, capsys, "batch", "--study", "sb3 killed", *run)
+    assert code == 0, again
+    assert "1 runs (1 sb3-dqn): 1 to resume" in again
+    (resumed,) = sessions(engine, study)
+    assert resumed.id == interrupted.id and resumed.status == "finished"
+
+    code, whole = in_process(place, capsys, "batch", "--study", "sb3 whole", *run)
+    assert code == 0, whole
+    (uninterrupted,) = sessions(engine, study_id(engine, "sb3 whole"))
+    assert _steps(place, resumed.id) == _steps(place, uninterrupted.id)
+    assert training_totals(engine, [resumed.id])[resumed.id][0] == episodes
