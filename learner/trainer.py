@@ -337,38 +337,42 @@ class Trainer:
         self._env_rng.bit_generator.state = state["rngs"]["env"]
         self._action_rng.bit_generator.state = state["rngs"]["action"]
         self._memory_rng.bit_generator.state = state["rngs"]["memory"]
-        self._episode = None if state["episode"] is None else self._replay(state["episode"])
+        in_progress = state["episode"]
+        self._episode = None if in_progress is None else replay_episode(self.env, in_progress)
         self.episode_record = None
         self._stopped = False
 
-    def _replay(self, saved: dict[str, Any]) -> _Episode:
-        obs, info = self.env.reset(seed=int(saved["reset_seed"]))
-        actions = [int(a) for a in saved["actions"]]
-        ended = False
-        for action in actions:
-            if ended:
-                break
-            obs, _, terminated, truncated, info = self.env.step(action)
-            ended = terminated or truncated
-        if ended or not np.array_equal(obs, saved["obs"].numpy()):
-            raise RuntimeError(
-                "replaying the checkpoint's episode from its reset seed and actions did not "
-                "give the saved image: the environment is not deterministic, or not the one "
-                "(or not configured as the one) the checkpoint was made with"
-            )
-        return _Episode(
-            stage=saved["stage"],
-            number=int(saved["number"]),
-            reset_seed=int(saved["reset_seed"]),
-            obs=obs,
-            info=info,
-            first_global_step=int(saved["first_global_step"]),
-            actions=actions,
-            collected_reward=float(saved["collected_reward"]),
-            advised_steps=int(saved["advised_steps"]),
-            loss_sum=float(saved["loss_sum"]),
-            loss_count=int(saved["loss_count"]),
+
+def replay_episode(env: gym.Env, saved: dict[str, Any]) -> _Episode:
+    """The checkpointed episode in progress, rebuilt by resetting `env` with its seed and
+    replaying its actions (any learner whose checkpoint keeps `_episode_state`)."""
+    obs, info = env.reset(seed=int(saved["reset_seed"]))
+    actions = [int(a) for a in saved["actions"]]
+    ended = False
+    for action in actions:
+        if ended:
+            break
+        obs, _, terminated, truncated, info = env.step(action)
+        ended = terminated or truncated
+    if ended or not np.array_equal(obs, saved["obs"].numpy()):
+        raise RuntimeError(
+            "replaying the checkpoint's episode from its reset seed and actions did not "
+            "give the saved image: the environment is not deterministic, or not the one "
+            "(or not configured as the one) the checkpoint was made with"
         )
+    return _Episode(
+        stage=saved["stage"],
+        number=int(saved["number"]),
+        reset_seed=int(saved["reset_seed"]),
+        obs=obs,
+        info=info,
+        first_global_step=int(saved["first_global_step"]),
+        actions=actions,
+        collected_reward=float(saved["collected_reward"]),
+        advised_steps=int(saved["advised_steps"]),
+        loss_sum=float(saved["loss_sum"]),
+        loss_count=int(saved["loss_count"]),
+    )
 
 
 def _episode_state(episode: _Episode) -> dict[str, Any]:

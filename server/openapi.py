@@ -14,6 +14,9 @@ Which errors a route can return:
 - 404: a path id that names nothing, a participant whose session was deleted, or an
   entry of `EXTRA_ERRORS` (`NotFound`);
 - 409: the entries of `EXTRA_ERRORS` (a service's `Conflict`: a state that forbids it);
+- 413: a body larger than the server accepts, refused by `server.guard` before it is read:
+  any POST, PUT, PATCH or DELETE (`guard.BODY_METHODS`), whether or not the route takes a
+  body (a client that sends none never meets it);
 - 422: a parameter or body that does not validate (FastAPI), or a service's `Invalid`.
 """
 
@@ -25,6 +28,8 @@ from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from fastapi.routing import APIRoute
 from pydantic import BaseModel, ConfigDict, Field
+
+from server.guard import BODY_METHODS
 
 
 class ErrorItem(BaseModel):
@@ -41,7 +46,7 @@ class ErrorBody(BaseModel):
     """Every error response: a sentence that says what to do, or (422) the problems."""
 
     detail: str | list[ErrorItem] = Field(
-        description="A message (401, 403, 404, 409, ...) or, for 422, one item per problem."
+        description="A message (401, 403, 404, 409, 413, ...) or, for 422, one item per problem."
     )
 
 
@@ -50,6 +55,7 @@ ERROR_DESCRIPTIONS: dict[int, str] = {
     403: "Wrong credentials: the key or token is not valid.",
     404: "Nothing with that id (or not yet: e.g. no report built).",
     409: "The resource's state forbids this now (e.g. a session already running).",
+    413: "The request body is larger than the server accepts (IDEEPRL_MAX_REQUEST_BYTES).",
     422: "The parameters or the body are not valid.",
 }
 
@@ -86,10 +92,13 @@ def operation_id(route: APIRoute) -> str:
     return route.name
 
 
-def route_errors(operation: dict[str, Any]) -> list[int]:
+def route_errors(operation: dict[str, Any], method: str = "") -> list[int]:
     """The error statuses an operation can return, by the rules in the module's docstring,
-    read from its OpenAPI description (security, parameters, body) and `EXTRA_ERRORS`."""
+    read from its HTTP method and OpenAPI description (security, parameters, body) and
+    `EXTRA_ERRORS`."""
     codes: set[int] = set(EXTRA_ERRORS.get(operation.get("operationId", ""), ()))
+    if method.upper() in BODY_METHODS:
+        codes.add(413)
     schemes = {name for need in operation.get("security", []) for name in need}
     if schemes:
         codes |= {401, 403}
@@ -129,8 +138,8 @@ def _declare(schema: dict[str, Any]) -> dict[str, Any]:
     components["ErrorBody"] = body
     error_content = {"application/json": {"schema": {"$ref": _REF + "ErrorBody"}}}
     for operations in schema.get("paths", {}).values():
-        for operation in operations.values():
-            codes = route_errors(operation)
+        for method, operation in operations.items():
+            codes = route_errors(operation, method)
             responses = operation.setdefault("responses", {})
             responses.pop("422", None)  # FastAPI's HTTPValidationError: one model instead
             for code in codes:

@@ -32,7 +32,7 @@ OPTIONAL_COLUMNS: tuple[str, ...] = (
 OUTCOME_COLUMNS: tuple[str, ...] = ("steps", "placed_correct", "misplaced", "lost")
 """Per-episode counts that the per-method table averages when present."""
 
-METHOD_ORDER: tuple[str, ...] = ("autonomous", "agent", "human", "oracle", "random")
+METHOD_ORDER: tuple[str, ...] = ("autonomous", "agent", "human", "oracle", "random", "sb3-dqn")
 """The order methods appear in tables and legends; other methods follow alphabetically."""
 
 METHOD_NAMES: dict[str, str] = {
@@ -41,8 +41,10 @@ METHOD_NAMES: dict[str, str] = {
     "human": "human-IDeepRL",
     "oracle": "oracle-IDeepRL",
     "random": "random-IDeepRL",
+    "sb3-dqn": "SB3 DQN",
 }
-"""Display names in the paper's words."""
+"""Display names in the paper's words (and Stable-Baselines3's DQN, the independent
+baseline)."""
 
 _LABEL_STEMS: dict[str, str] = {"autonomous": "DeepRL"}
 

@@ -34,10 +34,12 @@ METHOD_COLORS: dict[str, str] = {
     "human": "tab:red",
     "oracle": "tab:green",
     "random": "tab:gray",
+    "sb3-dqn": "tab:purple",
 }
-"""The paper's colours (black, blue, red) and two more for our extra advisors."""
+"""The paper's colours (black, blue, red), two more for our extra advisors and one for
+Stable-Baselines3's DQN."""
 
-_SPARE_COLORS = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:orange")
+_SPARE_COLORS = ("tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:orange")
 _AGENT_COLORS = (
     "tab:orange",
     "tab:green",

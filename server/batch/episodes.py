@@ -71,25 +71,32 @@ def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame
 def session_settings(sessions: Sequence[StudySession]) -> pd.DataFrame:
     """What each session ran under, for the report's comparability audit
     (`server.analysis.audit.SETTINGS_COLUMNS`)."""
+    from learner import sb3_dqn
     from learner.config import PRESETS, DQNConfig
 
     presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
     rows = []
     for s in sessions:
         scenario = parse_scenario(s.scenario)
+        config, sb3 = sb3_dqn.split_config(s.config)
+        learner = (
+            sb3_dqn.describe(sb3, config)  # another learner altogether: the audit flags it
+            if sb3
+            else describe_learner(DQNConfig.from_dict(config).to_dict(), presets)
+        )
         rows.append(
             {
                 "session_id": s.id,
                 "method": s.method,
                 "reward_scheme": scenario["reward_scheme"],
-                "learner": describe_learner(DQNConfig.from_dict(s.config).to_dict(), presets),
+                "learner": learner,
                 "scenario": describe_scenario(scenario),
                 "motion": s.motion,
                 "sort_rule": json.dumps(s.sort_rule, sort_keys=True)
                 if not isinstance(s.sort_rule, str)
                 else s.sort_rule,
                 "advice": "none"
-                if s.method == "autonomous"
+                if s.strategy is None
                 else f"{s.strategy}, budget {s.advice_budget}",
             }
         )

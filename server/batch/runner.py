@@ -28,7 +28,7 @@ from server.batch.sessions import (
     find_session,
     take_back,
 )
-from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, session_body
+from server.batch.spec import UNADVISED, BatchError, BatchSpec, Run, plan_runs, session_body
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
@@ -195,7 +195,7 @@ class BatchRunner:
         for state in self.states:
             body = session_body(self.spec, state.run, self.advisor_checkpoint or "-")
             config = body_identity(body)["config"]
-            early = body.method != "autonomous" and body.strategy == "early"
+            early = body.method not in UNADVISED and body.strategy == "early"
             if early and config["advice_budget"] > config["pretraining_steps"]:
                 raise BatchError(
                     f"early advising gives its {config['advice_budget']} advice at the end of "

@@ -18,7 +18,13 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
+from server.db.models import (
+    LIVE_STATUSES,
+    RESUMABLE_STATUSES,
+    UNADVISED_METHODS,
+    Status,
+    StudySession,
+)
 from server.schemas.sessions import SessionCreate
 from server.services import learning
 from server.services.sessions import create_session, pid_alive, set_status
@@ -46,8 +52,9 @@ def _path(value: str | None) -> str | None:
 
 def body_identity(body: SessionCreate) -> dict[str, Any]:
     """What a session created from `body` would store, in the fields that identify a run."""
-    advised = body.method != "autonomous"
-    config = learning.build_config(
+    advised = body.method not in UNADVISED_METHODS
+    config = learning.session_config(
+        str(body.method),
         body.preset,
         body.config,
         episodes=body.episodes,
@@ -69,11 +76,14 @@ def body_identity(body: SessionCreate) -> dict[str, Any]:
 
 def _stored_config(config: dict[str, Any]) -> dict[str, Any]:
     """A stored learner config as the learner reads it back: fields added to the learner
-    since it was stored take their defaults (as when a checkpoint is resumed)."""
+    since it was stored take their defaults (as when a checkpoint is resumed); an sb3-dqn
+    session's `sb3_*` fields are compared as stored."""
     from learner import DQNConfig
+    from learner.sb3_dqn import split_config
 
+    learner, sb3 = split_config(config)
     try:
-        return _plain(DQNConfig.from_dict(config).to_dict())
+        return _plain({**DQNConfig.from_dict(learner).to_dict(), **sb3})
     except (ValueError, TypeError):  # a field the learner no longer has: never the same run
         return _plain(config)
 

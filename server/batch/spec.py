@@ -15,8 +15,11 @@ from typing import Any
 from server.schemas.sessions import Motion, Scenario, SessionCreate, Strategy
 from sim.scenario import ScenarioOptions
 
-BATCH_METHODS: tuple[str, ...] = ("autonomous", "agent", "oracle", "random")
-"""Methods a batch can run: every machine advisor, and no advisor at all."""
+BATCH_METHODS: tuple[str, ...] = ("autonomous", "agent", "oracle", "random", "sb3-dqn")
+"""Methods a batch can run: every machine advisor, no advisor at all, and Stable-Baselines3's
+DQN (an independent baseline learner, the optional `sb3` extra)."""
+UNADVISED: tuple[str, ...] = ("autonomous", "sb3-dqn")
+"""Methods without an advisor (no strategy, no advice budget)."""
 
 MAX_SEED = 2**31 - 1
 ADVISOR_SEED_OFFSET = 100_000
@@ -85,6 +88,11 @@ class BatchSpec:
             )
         if not self.methods:
             raise BatchError(f"no method to run; choose from {', '.join(BATCH_METHODS)}")
+        if "sb3-dqn" in self.methods:
+            from learner.sb3_dqn import MISSING, available
+
+            if not available():
+                raise BatchError(MISSING)
         if len(set(self.methods)) != len(self.methods):
             raise BatchError(f"methods repeat: {', '.join(self.methods)}; name each once")
         if not 1 <= self.agents <= MAX_AGENTS:
@@ -176,7 +184,7 @@ def plan_runs(spec: BatchSpec) -> list[Run]:
 
 def session_body(spec: BatchSpec, run: Run, advisor_checkpoint: str | None) -> SessionCreate:
     """The session a run becomes; `advisor_checkpoint` for `agent` runs (an absolute path)."""
-    advised = run.method != "autonomous"
+    advised = run.method not in UNADVISED
     return SessionCreate(
         method=run.method,  # type: ignore[arg-type]
         seed=run.seed,

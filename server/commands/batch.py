@@ -1,5 +1,5 @@
-"""`ideeprl batch`: the autonomous and machine-advised baselines, N agents per method, as
-sessions of a study; run it again to finish an interrupted batch."""
+"""`ideeprl batch`: the autonomous and machine-advised baselines (and Stable-Baselines3's DQN),
+N agents per method, as sessions of a study; run it again to finish an interrupted batch."""
 
 from __future__ import annotations
 
@@ -13,11 +13,13 @@ from typing import Any
 from server.commands.common import service_exit_code, show_progress
 
 DESCRIPTION = """\
-Run N agents per method (autonomous, agent, oracle, random) as sessions of a study, in
-parallel worker processes on this machine or on Ray. Agent i of every method gets seed
-BASE+i, so runs pair up across methods. The 'agent' method needs a trained advisor: without
---advisor-checkpoint the batch first trains one (autonomous, same settings, seed
-BASE+100000) and stores it as a session too.
+Run N agents per method (autonomous, agent, oracle, random, sb3-dqn) as sessions of a
+study, in parallel worker processes on this machine or on Ray. Agent i of every method gets
+seed BASE+i, so runs pair up across methods. The 'agent' method needs a trained advisor:
+without --advisor-checkpoint the batch first trains one (autonomous, same settings, seed
+BASE+100000) and stores it as a session too. 'sb3-dqn' is Stable-Baselines3's DQN, unadvised,
+on the same scenario, seeds and scale, its hyperparameters mapped from the paper's (the
+optional extra: pip install 'ideeprl[sb3]'); the report flags it as another learner.
 
 Runs are identified by study, method, seed and configuration: the same command again skips
 finished runs, resumes interrupted ones from their checkpoints and creates only the missing
@@ -60,7 +62,8 @@ def settings_from(args: argparse.Namespace) -> Any:
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "batch",
-        help="run baseline agents (autonomous, agent, oracle, random) as a study's sessions",
+        help="run baseline agents (autonomous, agent, oracle, random, sb3-dqn) as a study's "
+        "sessions",
         description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -75,7 +78,7 @@ def register(subparsers: Any) -> None:
         nargs="+",
         default=["autonomous,agent"],
         metavar="METHOD",
-        help="autonomous, agent, oracle, random (space or comma separated; "
+        help="autonomous, agent, oracle, random, sb3-dqn (space or comma separated; "
         "default autonomous agent)",
     )
     what.add_argument("--agents", type=int, default=10, help="agents per method (default 10)")

@@ -55,6 +55,12 @@ class Method(enum.StrEnum):
     human = "human"
     oracle = "oracle"
     random = "random"
+    sb3_dqn = "sb3-dqn"
+    """Stable-Baselines3's DQN unadvised: an independent baseline learner (`learner.sb3_dqn`)."""
+
+
+UNADVISED_METHODS = (Method.autonomous, Method.sb3_dqn)
+"""Methods without an advisor: no strategy, no advice budget."""
 
 
 class Status(enum.StrEnum):

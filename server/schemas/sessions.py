@@ -43,7 +43,10 @@ class SessionCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    method: Method = Field(description="Who advises: autonomous, agent, human, oracle, random.")
+    method: Method = Field(
+        description="Who advises: autonomous, agent, human, oracle, random; or sb3-dqn, "
+        "Stable-Baselines3's DQN unadvised (an independent baseline; needs the sb3 extra)."
+    )
     seed: Int = Field(default=0, ge=0, le=2**31 - 1, description="Fixes scene, network, sampling.")
     label: str = Field(default="", max_length=200, description="Free text, e.g. a batch name.")
     preset: str = Field(

@@ -197,15 +197,17 @@ def _record_columns(table: str) -> list[Column]:
 
 def _config_columns(configs: list[dict[str, Any]]) -> list[Column]:
     """One column per learner config field (`config_lr`, ...), typed by the config's own
-    dataclass, in its field order; fields only old sessions have come after."""
+    dataclass, in its field order; fields only some sessions have (old ones, or the `sb3_*`
+    hyperparameters of sb3-dqn sessions) come after."""
     import dataclasses
     import typing
 
     from learner.config import DQNConfig
     from learner.config import field_docs as config_docs
+    from learner.sb3_dqn import FIELDS as SB3_FIELDS
 
     hints = typing.get_type_hints(DQNConfig)
-    docs = config_docs()
+    docs = {**config_docs(), **SB3_FIELDS}
     names = [f.name for f in dataclasses.fields(DQNConfig)]
     names += sorted({k for c in configs for k in c} - set(names))
     columns = []

@@ -7,6 +7,8 @@ from typing import Any
 
 from server.services.errors import Invalid
 
+SB3_DQN = "sb3-dqn"
+
 
 def build_config(preset: str, overrides: dict[str, Any], **fields: int | None) -> dict[str, Any]:
     """The full learner config as a dict: preset, then `overrides`, then the session's own
@@ -30,6 +32,32 @@ def build_config(preset: str, overrides: dict[str, Any], **fields: int | None) -
         return DQNConfig.from_dict(data).to_dict()
     except (ValueError, TypeError) as error:
         raise Invalid("config", str(error)) from None
+
+
+def session_config(
+    method: str, preset: str, overrides: dict[str, Any], **fields: int | None
+) -> dict[str, Any]:
+    """What a session of `method` stores as its config: the learner config
+    (`build_config`); for `sb3-dqn` also the Stable-Baselines3 DQN hyperparameters mapped
+    from it (`sb3_*` fields, `learner.sb3_dqn`), so an audit and an export show them."""
+    config = build_config(preset, overrides, **fields)
+    if method != SB3_DQN:
+        return config
+    from learner import DQNConfig
+    from learner.sb3_dqn import sb3_hyperparameters
+
+    try:
+        return {**config, **sb3_hyperparameters(DQNConfig.from_dict(config))}
+    except ValueError as error:
+        raise Invalid("config", str(error)) from None
+
+
+def require_sb3(method: str) -> None:
+    """`sb3-dqn` sessions need the optional Stable-Baselines3; say how to install it."""
+    from learner.sb3_dqn import MISSING, available
+
+    if method == SB3_DQN and not available():
+        raise Invalid("method", MISSING)
 
 
 def parse_sort_rule(spec: str | dict[str, str]) -> Any:
@@ -97,8 +125,14 @@ def make_trainer(
     torch_threads: int | None,
 ) -> Any:
     from learner import DQNConfig, Trainer
+    from learner.sb3_dqn import split_config
 
-    config = DQNConfig.from_dict(session.config)
+    stored, sb3 = split_config(session.config)
+    config = DQNConfig.from_dict(stored)
     if torch_threads:  # a runtime field: a checkpoint resumes under any thread count
         config = config.replace(torch_threads=torch_threads)
+    if session.method == SB3_DQN:
+        from learner.sb3_dqn import SB3DQNTrainer
+
+        return SB3DQNTrainer(env, config, session.seed, callbacks, hyperparameters=sb3)
     return Trainer(env, config, advisor, strategy, seed=session.seed, callbacks=callbacks)

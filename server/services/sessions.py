@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session
 from server.db.models import (
     LIVE_STATUSES,
     RESUMABLE_STATUSES,
+    UNADVISED_METHODS,
     Episode,
     Method,
     Participant,
@@ -49,6 +50,12 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
                 f"{spec!r} is not a session of this installation with a "
                 "checkpoint; name a finished session, e.g. session:12",
             )
+        if found.method == Method.sb3_dqn:
+            raise Invalid(
+                "advisor_checkpoint",
+                f"{spec!r} is an sb3-dqn session: its checkpoint is Stable-Baselines3's, "
+                "which cannot advise; name a session of the paper's learner",
+            )
         return str(Path(found.checkpoint_path).resolve())
     try:
         path = Path(spec).resolve()
@@ -74,8 +81,10 @@ def create_session(
     `data_dir`: where an advisor's checkpoint file must lie (see `advisor_path`)."""
     get_study(db, study_id)
     method = Method(body.method)
-    advised = method not in (Method.autonomous,)
-    config = learning.build_config(
+    advised = method not in UNADVISED_METHODS
+    learning.require_sb3(method.value)
+    config = learning.session_config(
+        method.value,
         body.preset,
         body.config,
         episodes=body.episodes,

@@ -22,7 +22,7 @@ from typing import Any
 from sqlalchemy import select, update
 
 from server.db.engine import make_engine, make_session_factory
-from server.db.models import Advice, Method, Status, StudySession, utcnow
+from server.db.models import UNADVISED_METHODS, Advice, Method, Status, StudySession, utcnow
 from server.services import learning
 from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, set_status
@@ -151,7 +151,7 @@ class _Run:
                 self._until_participant_ready,
             )
             self.env.after_step.append(self.advisor.after_step)
-        elif s.method != Method.autonomous:
+        elif s.method not in UNADVISED_METHODS:
             self.advisor = RecordingAdvisor(
                 learning.make_machine_advisor(s, self.env),
                 s.method,

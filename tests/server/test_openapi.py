@@ -92,6 +92,30 @@ def test_every_operation_returns_only_statuses_it_declares(
     assert {401, 403, 404, 422} <= seen
 
 
+def test_a_body_too_large_is_a_declared_413_on_every_route_that_reads_one(
+    server: LiveServer, spec: dict[str, Any]
+) -> None:
+    """The guard refuses any POST, PUT, PATCH or DELETE over the size limit (1 MiB by
+    default) before the route sees it: each such operation declares it, the others not."""
+    too_large = b"{" + b" " * 1_048_576 + b"}"
+    bodies = 0
+    with server.client() as client:
+        for path, method, operation in operations(spec):
+            declared = {int(code) for code in operation["responses"]}
+            if method.upper() not in {"POST", "PUT", "PATCH", "DELETE"}:
+                assert 413 not in declared, f"{method.upper()} {path}"
+                continue
+            assert 413 in declared, f"{method.upper()} {path}"
+            bodies += "requestBody" in operation
+            url = re.sub(r"\{[^}]+\}", str(PROBE_ID), path)
+            response = client.request(
+                method, url, content=too_large, headers={"Content-Type": "application/json"}
+            )
+            assert response.status_code == 413, f"{method.upper()} {path}: {response.text}"
+            assert "IDEEPRL_MAX_REQUEST_BYTES" in response.json()["detail"]
+    assert bodies >= 3  # create_study, create_session, participant_give_advice at least
+
+
 def test_list_endpoints_page_with_limit_and_offset(api: httpx.Client) -> None:
     ids = [api.post("/api/studies", json={"name": f"paged {i}"}).json()["id"] for i in range(3)]
     everything = [s["id"] for s in api.get("/api/studies").json()]

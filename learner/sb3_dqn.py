@@ -1,0 +1,490 @@
+"""An independent baseline: Stable-Baselines3's DQN, stepped like the paper's learner.
+
+A study shows how the paper's learner compares with a standard one only if both meet the
+same scenes under the same stages and are recorded the same way. So this trainer has the
+`Trainer`'s contract (`step()`, `done`, `stage`, the same `StepRecord`s and
+`EpisodeRecord`s to its callbacks, checkpoints that resume exactly), its stages
+(`pretraining_steps` random actions, the last pretraining episode cut, then `episodes`
+training episodes), and its episode reset seeds; the learner itself is SB3's: its
+`CnnPolicy` (NatureCNN), replay buffer, linear exploration schedule, target network, Huber
+loss and Adam, and its own `train()` and `_on_step()`. Only SB3's rollout loop is spelled
+out here (one environment, no VecEnv), as `OffPolicyAlgorithm.collect_rollouts` and
+`learn` do it, so that every step can be recorded and the run paused between steps.
+
+The paper's hyperparameters become SB3's where SB3 has the same knob
+(`sb3_hyperparameters`); the session stores them, and the report's audit shows them.
+Stable-Baselines3 is an optional extra (`pip install 'ideeprl[sb3]'`), imported only when
+a trainer is made.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import random
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from learner.config import DQNConfig
+from learner.records import EpisodeRecord, StepRecord
+
+METHOD = "sb3-dqn"
+PREFIX = "sb3_"
+FORMAT = "ideeprl-sb3-dqn-checkpoint"
+VERSION = 1
+N_ACTIONS = 4
+MISSING = (
+    "the sb3-dqn baseline needs Stable-Baselines3: pip install 'ideeprl[sb3]' "
+    "(or pip install stable-baselines3 --no-deps, keeping this torch)"
+)
+
+FIELDS: dict[str, str] = {
+    "sb3_policy": "Stable-Baselines3 policy: CnnPolicy, SB3's standard for images (NatureCNN: "
+    "convolutions of 32, 64 and 64 filters, a dense layer of 512; pixels divided by 255).",
+    "sb3_learning_rate": "SB3 DQN learning_rate (the config's learning_rate).",
+    "sb3_gamma": "SB3 DQN gamma (the config's gamma).",
+    "sb3_batch_size": "SB3 DQN batch_size (the config's batch_size).",
+    "sb3_buffer_size": "SB3 DQN buffer_size, replay transitions kept (the config's memory_size).",
+    "sb3_learning_starts": "SB3 DQN learning_starts: random actions before the first update "
+    "(the config's pretraining_steps).",
+    "sb3_train_freq": "SB3 DQN train_freq in steps: 1, an update after every action as the "
+    "paper's Algorithm 2.",
+    "sb3_gradient_steps": "SB3 DQN gradient_steps per update: 1.",
+    "sb3_target_update_interval": "SB3 DQN target_update_interval in steps: 1 without the "
+    "config's target_network (the target is the network itself, as in the paper's learner), "
+    "else the config's target_update_interval.",
+    "sb3_tau": "SB3 DQN tau: 1.0, the target is copied, not averaged.",
+    "sb3_exploration_initial_eps": "SB3 DQN exploration_initial_eps (the config's epsilon_start).",
+    "sb3_exploration_final_eps": "SB3 DQN exploration_final_eps (the config's epsilon_min).",
+    "sb3_exploration_steps": "Training steps over which SB3's linear schedule goes from the "
+    "initial to the final epsilon: as many as the config's multiplicative decay takes to reach "
+    "its floor (9,209 at the paper's 0.9995 and 1 %); SB3's exploration_fraction of a total of "
+    "this many training steps.",
+    "sb3_loss": "SB3 DQN's loss: huber (smooth L1), fixed by SB3.",
+    "sb3_optimizer": "SB3 DQN's optimizer: adam (PyTorch's defaults), fixed by SB3.",
+    "sb3_max_grad_norm": "SB3 DQN max_grad_norm: its default 10, or the config's grad_clip_norm.",
+}
+"""The `sb3_*` fields of an `sb3-dqn` session's config: the export's column dictionary."""
+
+RUNTIME_FIELDS = ("device", "torch_threads", "episodes")
+
+
+def available() -> bool:
+    """Whether Stable-Baselines3 can be imported here (without importing it)."""
+    return importlib.util.find_spec("stable_baselines3") is not None
+
+
+def exploration_steps(config: DQNConfig) -> int:
+    """Training steps the config's `epsilon_decay` takes from `epsilon_start` to
+    `epsilon_min` (0: epsilon does not move)."""
+    start, floor, decay = config.epsilon_start, config.epsilon_min, config.epsilon_decay
+    if decay >= 1.0 or start <= floor:
+        return 0
+    if floor <= 0.0:
+        raise ValueError("sb3-dqn needs epsilon_min above 0 to map the decay onto SB3's schedule")
+    return math.ceil(math.log(floor / start) / math.log(decay))
+
+
+def sb3_hyperparameters(config: DQNConfig) -> dict[str, Any]:
+    """SB3 DQN's arguments for the paper's config: its numbers where SB3 has the same knob,
+    SB3's own choices (network, loss, optimizer) where the paper's learner is its own."""
+    return {
+        "sb3_policy": "CnnPolicy",
+        "sb3_learning_rate": config.learning_rate,
+        "sb3_gamma": config.gamma,
+        "sb3_batch_size": config.batch_size,
+        "sb3_buffer_size": config.memory_size,
+        "sb3_learning_starts": config.pretraining_steps,
+        "sb3_train_freq": 1,
+        "sb3_gradient_steps": 1,
+        "sb3_target_update_interval": (
+            config.target_update_interval if config.target_network else 1
+        ),
+        "sb3_tau": 1.0,
+        "sb3_exploration_initial_eps": config.epsilon_start,
+        "sb3_exploration_final_eps": config.epsilon_min,
+        "sb3_exploration_steps": exploration_steps(config),
+        "sb3_loss": "huber",
+        "sb3_optimizer": "adam",
+        "sb3_max_grad_norm": (
+            float(config.grad_clip_norm) if config.grad_clip_norm is not None else 10.0
+        ),
+    }
+
+
+def split_config(stored: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A stored session config as (the learner config it was mapped from, the `sb3_*`
+    fields); the second is empty for the paper's learner."""
+    base = {k: v for k, v in stored.items() if not k.startswith(PREFIX)}
+    return base, {k: v for k, v in stored.items() if k.startswith(PREFIX)}
+
+
+def describe(hyper: dict[str, Any], config: dict[str, Any]) -> str:
+    """The learner in one line, for the report's audit: SB3's hyperparameters and the
+    episode limit its stages share with the paper's learner."""
+    items = ", ".join(f"{k.removeprefix(PREFIX)}={v}" for k, v in sorted(hyper.items()))
+    limit = config.get("max_episode_steps")
+    return f"{METHOD} (Stable-Baselines3 DQN: {items}; max_episode_steps={limit})"
+
+
+class SB3DQNTrainer:
+    """Trains SB3's DQN on one environment with the `Trainer`'s contract; see the module
+    docstring. `hyperparameters`: the `sb3_*` fields (default `sb3_hyperparameters(config)`);
+    the config gives the stages (`pretraining_steps`, `episodes`, `max_episode_steps`) and
+    where to compute (`device`, `torch_threads`)."""
+
+    def __init__(
+        self,
+        env: Any,
+        config: DQNConfig | None = None,
+        seed: int = 0,
+        callbacks: Iterable[Any] = (),
+        hyperparameters: dict[str, Any] | None = None,
+    ) -> None:
+        try:
+            from gymnasium import spaces
+            from stable_baselines3 import DQN
+            from stable_baselines3.common.logger import configure
+        except ImportError:
+            raise RuntimeError(MISSING) from None
+        from learner.device import configure_threads, resolve_device
+        from learner.trainer import _check_spaces
+
+        self.config = config = config or DQNConfig()
+        self.env = env
+        _check_spaces(env)
+        self.hyperparameters = h = dict(hyperparameters or sb3_hyperparameters(config))
+        self.device = resolve_device(config.device)
+        self.threads = configure_threads(config.torch_threads)
+        self.callbacks = list(callbacks)
+        self.seed = seed
+        _, env_seeds, _, _ = np.random.SeedSequence(seed).spawn(4)
+        self._env_rng = np.random.default_rng(env_seeds)  # the Trainer's reset seeds
+        model = DQN(
+            h["sb3_policy"],
+            None,
+            learning_rate=h["sb3_learning_rate"],
+            buffer_size=h["sb3_buffer_size"],
+            learning_starts=h["sb3_learning_starts"],
+            batch_size=h["sb3_batch_size"],
+            tau=h["sb3_tau"],
+            gamma=h["sb3_gamma"],
+            train_freq=h["sb3_train_freq"],
+            gradient_steps=h["sb3_gradient_steps"],
+            target_update_interval=h["sb3_target_update_interval"],
+            exploration_fraction=1.0,
+            exploration_initial_eps=h["sb3_exploration_initial_eps"],
+            exploration_final_eps=h["sb3_exploration_final_eps"],
+            max_grad_norm=h["sb3_max_grad_norm"],
+            device=self.device,
+            seed=seed,
+            _init_setup_model=False,
+        )
+        height, width, channels = env.observation_space.shape
+        # SB3 builds its networks from the spaces; the env is stepped here, not by SB3.
+        model.observation_space = spaces.Box(0, 255, (channels, height, width), np.uint8)
+        model.action_space = spaces.Discrete(N_ACTIONS)
+        model.n_envs = 1
+        model._setup_model()
+        model.set_logger(configure(None, []))
+        model.exploration_rate = h["sb3_exploration_initial_eps"]
+        self.model = model
+        self.global_step = 0
+        self.episodes_done = {"pretraining": 0, "training": 0}
+        self.episode_record: EpisodeRecord | None = None
+        self._episode: Any = None
+        self._stopped = False
+
+    # --- the Trainer's contract ----------------------------------------------------------
+    @property
+    def stage(self) -> str:
+        return "pretraining" if self.global_step < self.config.pretraining_steps else "training"
+
+    @property
+    def done(self) -> bool:
+        return self._stopped or self.episodes_done["training"] >= self.config.episodes
+
+    @property
+    def observation(self) -> np.ndarray | None:
+        return None if self._episode is None else self._episode.obs
+
+    def stop(self) -> None:
+        self._stopped = True
+
+    def run(self) -> list[EpisodeRecord]:
+        finished = []
+        while not self.done:
+            self.step()
+            if self.episode_record is not None and self.episode_record.phase == "train":
+                finished.append(self.episode_record)
+        return finished
+
+    def _progress_remaining(self) -> float:
+        """SB3's progress, counted in training steps: its linear schedule then reaches the
+        final epsilon after `sb3_exploration_steps` of them, as the paper's decay does."""
+        steps = self.hyperparameters["sb3_exploration_steps"]
+        trained = max(0, self.model.num_timesteps - self.model.learning_starts)
+        return 1.0 - trained / steps if steps else 0.0
+
+    def step(self) -> StepRecord:
+        """One environment step: SB3's action choice, transition storage, `_on_step` and
+        `train`, in `collect_rollouts`' and `learn`'s order."""
+        import torch
+
+        if self.done:
+            raise RuntimeError("the trainer is done (all episodes run, or stopped)")
+        if self._episode is None:
+            self._begin_episode()
+        episode = self._episode
+        model = self.model
+        pretraining = episode.stage == "pretraining"
+        model.policy.set_training_mode(False)
+        obs = _channels_first(episode.obs)
+        with torch.no_grad():
+            tensor, _ = model.policy.obs_to_tensor(obs)
+            q_values = model.q_net(tensor)[0].cpu().numpy()
+        greedy = int(np.argmax(q_values))
+        epsilon = float(model.exploration_rate)
+        if model.num_timesteps < model.learning_starts:  # SB3's `_sample_action`
+            phase, source = "pretrain", "random"
+            action = int(model.action_space.sample())
+        elif np.random.rand() < model.exploration_rate:  # `DQN.predict`, spelled out
+            phase, source = "train", "exploration"
+            action = int(model.action_space.sample())
+        else:
+            phase, source = "train", "greedy"
+            action = greedy
+
+        next_obs, reward, terminated, truncated, info = self.env.step(action)
+        reward, terminated = float(reward), bool(terminated)
+        self.global_step += 1
+        episode.actions.append(action)
+        truncated = bool(truncated) or len(episode.actions) >= self.config.max_episode_steps
+        if pretraining and self.global_step == self.config.pretraining_steps:
+            truncated = truncated or not terminated  # pretraining ends: cut its last episode
+        model.num_timesteps += 1
+        model.replay_buffer.add(
+            obs,
+            _channels_first(next_obs),
+            np.array([[action]]),
+            np.array([reward], dtype=np.float32),
+            np.array([terminated or truncated]),
+            [{"TimeLimit.truncated": truncated and not terminated}],
+        )
+        model._current_progress_remaining = self._progress_remaining()
+        model._on_step()
+        loss = None
+        if model.num_timesteps > model.learning_starts:
+            model.train(gradient_steps=model.gradient_steps, batch_size=model.batch_size)
+            loss = float(model.logger.name_to_value["train/loss"])
+            episode.loss_sum += loss
+            episode.loss_count += 1
+        episode.collected_reward += reward
+        record = StepRecord(
+            global_step=self.global_step,
+            phase=phase,  # type: ignore[arg-type]
+            episode=episode.number,
+            episode_step=len(episode.actions),
+            action=action,
+            action_source=source,  # type: ignore[arg-type]
+            greedy_action=greedy,
+            q_grab=float(q_values[0]),
+            q_move_right=float(q_values[1]),
+            q_move_left=float(q_values[2]),
+            q_drop=float(q_values[3]),
+            advised_action=None,
+            advice_remaining=0,
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            epsilon=epsilon,
+            loss=loss,
+        )
+        self.episode_record = None
+        if terminated or truncated:
+            self.episode_record = self._finish_episode(info, terminated, truncated)
+        else:
+            episode.obs, episode.info = next_obs, info
+        self._notify("on_step", record)
+        if self.episode_record is not None:
+            self._notify("on_episode", self.episode_record)
+        return record
+
+    def _begin_episode(self) -> None:
+        from learner.trainer import _Episode
+
+        stage = self.stage
+        reset_seed = int(self._env_rng.integers(2**31 - 1))
+        obs, info = self.env.reset(seed=reset_seed)
+        number = self.episodes_done[stage] + 1
+        self._episode = _Episode(stage, number, reset_seed, obs, info, self.global_step + 1)
+
+    def _finish_episode(
+        self, info: dict[str, Any], terminated: bool, truncated: bool
+    ) -> EpisodeRecord:
+        episode = self._episode
+        self._episode = None
+        self.episodes_done[episode.stage] += 1
+        misplaced = int(info.get("misplaced", 0))
+        return EpisodeRecord(
+            phase="pretrain" if episode.stage == "pretraining" else "train",
+            episode=episode.number,
+            collected_reward=episode.collected_reward,
+            steps=len(episode.actions),
+            placed_correct=int(info.get("placed_correct", 0)),
+            misplaced=misplaced,
+            lost=int(info.get("lost", 0)),
+            success=terminated and misplaced == 0,
+            terminated=terminated,
+            truncated=truncated,
+            advised_steps=0,
+            epsilon=float(self.model.exploration_rate),
+            mean_loss=episode.loss_sum / episode.loss_count if episode.loss_count else None,
+            first_global_step=episode.first_global_step,
+            last_global_step=self.global_step,
+            reset_seed=episode.reset_seed,
+        )
+
+    def _notify(self, method: str, record: StepRecord | EpisodeRecord) -> None:
+        for callback in self.callbacks:
+            handler = getattr(callback, method, None)
+            if handler is not None and handler(record) is False:
+                self._stopped = True
+
+    # --- checkpoints -----------------------------------------------------------------------
+    def save_checkpoint(
+        self, path: str | Path, metadata: dict[str, Any] | None = None, memory: bool = True
+    ) -> None:
+        """Everything needed to continue exactly: SB3's networks, optimizer, counters and
+        replay buffer, and every random generator SB3 draws from (numpy's and torch's
+        global ones, the action space's). `memory=False` leaves the buffer out."""
+        import torch
+
+        from learner.checkpoint import write_checkpoint
+        from learner.trainer import _episode_state
+
+        model = self.model
+        numpy_state = np.random.get_state(legacy=False)
+        numpy_state["state"]["key"] = numpy_state["state"]["key"].tolist()
+        write_checkpoint(
+            path,
+            {
+                "format": FORMAT,
+                "version": VERSION,
+                "metadata": metadata or {},
+                "config": self.config.to_dict(),
+                "hyperparameters": dict(self.hyperparameters),
+                "seed": self.seed,
+                "policy": model.policy.state_dict(),
+                "optimizer": model.policy.optimizer.state_dict(),
+                "buffer": _buffer_state(model.replay_buffer) if memory else None,
+                "counters": {
+                    "num_timesteps": model.num_timesteps,
+                    "n_calls": model._n_calls,
+                    "n_updates": model._n_updates,
+                    "exploration_rate": float(model.exploration_rate),
+                },
+                "global_step": self.global_step,
+                "episodes_done": dict(self.episodes_done),
+                "rngs": {
+                    "env": self._env_rng.bit_generator.state,
+                    "numpy": numpy_state,
+                    "python": random.getstate(),
+                    "torch": torch.get_rng_state(),
+                    "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else [],
+                    "action_space": model.action_space.np_random.bit_generator.state,
+                },
+                "episode": None if self._episode is None else _episode_state(self._episode),
+            },
+        )
+
+    def load_checkpoint(self, path: str | Path) -> None:
+        """Continue from a checkpoint of a run with the same config and hyperparameters (the
+        config's runtime fields aside); the episode in progress is replayed."""
+        import torch
+
+        from learner.trainer import replay_episode
+
+        state = torch.load(Path(path), map_location="cpu", weights_only=True)
+        if not isinstance(state, dict) or state.get("format") != FORMAT:
+            raise ValueError(f"{path} is not an sb3-dqn checkpoint")
+        if state["buffer"] is None:
+            raise ValueError(
+                f"{path} was saved without its replay buffer (a finished run's final "
+                "checkpoint): it cannot resume; keep_replay_memory keeps it"
+            )
+        saved, mine = state["config"], self.config.to_dict()
+        differ = [k for k in mine if k not in RUNTIME_FIELDS and saved.get(k) != mine[k]]
+        if differ or state["hyperparameters"] != self.hyperparameters:
+            raise ValueError(
+                "the checkpoint was made with another config: "
+                + (", ".join(differ) or "the sb3_* hyperparameters")
+            )
+        model = self.model
+        model.policy.load_state_dict(state["policy"])
+        model.policy.optimizer.load_state_dict(state["optimizer"])
+        _load_buffer(model.replay_buffer, state["buffer"])
+        counters = state["counters"]
+        model.num_timesteps = int(counters["num_timesteps"])
+        model._n_calls = int(counters["n_calls"])
+        model._n_updates = int(counters["n_updates"])
+        model.exploration_rate = float(counters["exploration_rate"])
+        model._current_progress_remaining = self._progress_remaining()
+        self.seed = int(state["seed"])
+        self.global_step = int(state["global_step"])
+        self.episodes_done = dict(state["episodes_done"])
+        rngs = state["rngs"]
+        self._env_rng.bit_generator.state = rngs["env"]
+        numpy_state = dict(rngs["numpy"])
+        numpy_state["state"] = {
+            **numpy_state["state"],
+            "key": np.array(numpy_state["state"]["key"], dtype=np.uint32),
+        }
+        np.random.set_state(numpy_state)
+        random.setstate(_tuples(rngs["python"]))
+        torch.set_rng_state(rngs["torch"])
+        if rngs["cuda"] and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(rngs["cuda"])
+        model.action_space.np_random.bit_generator.state = rngs["action_space"]
+        self._episode = (
+            None if state["episode"] is None else replay_episode(self.env, state["episode"])
+        )
+        self.episode_record = None
+        self._stopped = False
+
+
+def _channels_first(image: np.ndarray) -> np.ndarray:
+    """An (H, W, 3) frame as SB3's image policies take it: a batch of one (1, 3, H, W)."""
+    return np.ascontiguousarray(np.asarray(image).transpose(2, 0, 1))[None]
+
+
+_BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+
+
+def _buffer_state(buffer: Any) -> dict[str, Any]:
+    """The filled part of SB3's replay buffer, as tensors (the checkpoint loads weights-only)."""
+    import torch
+
+    size = buffer.buffer_size if buffer.full else buffer.pos
+    return {
+        "pos": int(buffer.pos),
+        "full": bool(buffer.full),
+        **{name: torch.from_numpy(getattr(buffer, name)[:size].copy()) for name in _BUFFER_ARRAYS},
+    }
+
+
+def _load_buffer(buffer: Any, state: dict[str, Any]) -> None:
+    for name in _BUFFER_ARRAYS:
+        values = state[name].numpy()
+        getattr(buffer, name)[: len(values)] = values
+    buffer.pos, buffer.full = int(state["pos"]), bool(state["full"])
+
+
+def _tuples(value: Any) -> Any:
+    """`random.getstate()` back from a checkpoint, which may give its tuples as lists."""
+    if isinstance(value, list | tuple):
+        return tuple(_tuples(v) for v in value)
+    return value
