@@ -548,7 +548,7 @@ class _Extras:
 
 def _withhold_tests(analysis: Analysis, checked: Audit, allow_mismatch: bool) -> Analysis:
     """The analysis with the t-tests of pairs that differ in their settings withheld (t,
-    p and df left empty, the reason in `withheld`), unless `allow_mismatch`."""
+    p and df of every test, Student's and Welch's, left empty, the reason in `withheld`), unless `allow_mismatch`."""
     tests = analysis.t_tests.copy()
     reasons = [
         "" if allow_mismatch or not checked.differ(a, b)
@@ -557,7 +557,8 @@ def _withhold_tests(analysis: Analysis, checked: Audit, allow_mismatch: bool) ->
     ]  # fmt: skip
     tests["withheld"] = reasons
     mask = tests["withheld"] != ""
-    tests.loc[mask, ["t", "df", "p"]] = np.nan
+    statistics = [c for c in tests.columns if c.split("_")[0] in ("t", "df", "p")]
+    tests.loc[mask, statistics] = np.nan
     paper = paper_comparison(analysis.methods, tests, baseline=analysis.baseline)
     return dataclasses.replace(analysis, t_tests=tests, paper=paper)
 

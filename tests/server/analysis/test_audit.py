@@ -53,6 +53,8 @@ def test_different_schemes_are_flagged_and_their_t_tests_withheld(tmp_path: Path
     tests = result.analysis.t_tests
     against_base = tests["method_b"].eq("autonomous") | tests["method_a"].eq("autonomous")
     assert tests.loc[against_base, "p"].isna().all()
+    assert tests.loc[against_base, ["t_welch", "p_welch", "df_welch"]].isna().all().all()
+    assert tests.loc[~against_base, "p_welch"].notna().all()
     assert (tests.loc[against_base, "withheld"].str.contains("reward scheme")).all()
     same_scheme = ~against_base  # agent vs human: both authors-interactive
     assert tests.loc[same_scheme, "p"].notna().all()
