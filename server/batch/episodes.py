@@ -76,7 +76,7 @@ def session_settings(sessions: Sequence[StudySession]) -> pd.DataFrame:
     presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
     rows = []
     for s in sessions:
-        scenario = parse_scenario(s.scenario)
+        scenario = parse_scenario(s.scenario).to_dict()
         rows.append(
             {
                 "session_id": s.id,

@@ -98,6 +98,10 @@ def register(subparsers: Any) -> None:
         help="learner config field (VALUE as JSON), repeatable",
     )
     what.add_argument("--strategy", default="early", help="advising strategy (default early)")
+    what.add_argument("--interval", type=int, help="alternating: advise every Nth step (2)")
+    what.add_argument(
+        "--threshold", type=float, help="importance, mistake_correcting: Q-value spread (0.1)"
+    )
     what.add_argument(
         "--oracle-error-rate", type=float, default=0.0, help="oracle's wrong-advice rate"
     )
@@ -170,6 +174,11 @@ def spec_from(args: argparse.Namespace) -> Any:
         max_episode_steps=args.max_episode_steps,
         advice_budget=args.advice_budget,
         strategy=args.strategy,
+        strategy_options={
+            name: value
+            for name, value in (("interval", args.interval), ("threshold", args.threshold))
+            if value is not None
+        },
         oracle_error_rate=args.oracle_error_rate,
         advisor_checkpoint=args.advisor_checkpoint,
         motion=args.motion,
@@ -197,7 +206,10 @@ def command_line(args: argparse.Namespace, spec: Any) -> str:
         parts += ["--set", f"{name}={json.dumps(value)}"]
     if "oracle" in spec.methods:
         parts += ["--oracle-error-rate", str(spec.oracle_error_rate)]
-    parts += ["--strategy", spec.strategy, "--motion", spec.motion]
+    parts += ["--strategy", spec.strategy]
+    for name, value in spec.strategy_options.items():
+        parts += [f"--{name}", str(value)]
+    parts += ["--motion", spec.motion]
     if spec.sort_rule != "color":
         parts += ["--sort-rule", json.dumps(spec.sort_rule)]
     schemes = [spec.scenario.get("reward_scheme", "paper")]

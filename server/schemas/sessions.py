@@ -7,12 +7,16 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from learner.run import MOTIONS
+from learner.strategies import STRATEGY_NAMES
 from server.db.models import Method
 from server.schemas.types import Int, Key, Number
+from sim.rewards import REWARD_SCHEMES
 
-Strategy = Literal["early", "alternating", "importance", "mistake_correcting"]
-Motion = Literal["physics", "fast"]
-RewardSchemeName = Literal["paper", "authors-autonomous", "authors-interactive"]
+# The names are the learner's and the scenario's, never restated here.
+Strategy = Literal[STRATEGY_NAMES]  # type: ignore[valid-type]
+Motion = Literal[MOTIONS]  # type: ignore[valid-type]
+RewardSchemeName = Literal[REWARD_SCHEMES]  # type: ignore[valid-type]
 
 
 class Scenario(BaseModel):
@@ -36,6 +40,28 @@ class Scenario(BaseModel):
         le=1.0,
         description="Chance that a grab knocks one other object off the center table (lost).",
     )
+
+
+class StrategyOptions(BaseModel):
+    """The advising strategy's options besides its budget (`learner.run.STRATEGY_OPTIONS`;
+    a test keeps the two the same). Unset ones take the strategy's defaults; one the
+    chosen strategy does not take is a 422."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    interval: Int | None = Field(
+        default=None, ge=1, le=100_000, description="alternating: advise every Nth step (2)."
+    )
+    threshold: Number | None = Field(
+        default=None,
+        ge=0.0,
+        description="importance, mistake_correcting: the advisor's Q-value spread (max - min) "
+        "from which a state is important (0.1).",
+    )
+
+    def given(self) -> dict[str, Any]:
+        """The options set, by name."""
+        return self.model_dump(exclude_none=True)
 
 
 class SessionCreate(BaseModel):
@@ -65,6 +91,10 @@ class SessionCreate(BaseModel):
         | Annotated[dict[Key, Annotated[str, Field(max_length=10)]], Field(max_length=12)]
     ) = Field(default="color", description='"color", "shape", or a map {"cube/red": "left", ...}.')
     strategy: Strategy = Field(default="early", description="Advising strategy (advised methods).")
+    strategy_options: StrategyOptions = Field(
+        default_factory=StrategyOptions,
+        description="The strategy's options (interval, threshold); unset: its defaults.",
+    )
     advice_budget: Int | None = Field(
         default=None, ge=0, le=100_000, description="Advice in all (default: the preset's)."
     )
@@ -113,6 +143,9 @@ class SessionPublic(BaseModel):
     config: dict[str, Any]
     sort_rule: Any
     strategy: str | None
+    strategy_options: dict[str, Any] | None = Field(
+        default=None, description="The strategy's options, defaults spelled out."
+    )
     advice_budget: int
     advisor_checkpoint: str | None
     oracle_error_rate: float | None

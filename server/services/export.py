@@ -73,7 +73,7 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "oracle_error_rate": s.oracle_error_rate,
             "motion": s.motion,
             "sort_rule": plain_sort_rule(s.sort_rule),
-            **learning.parse_scenario(s.scenario),
+            **learning.parse_scenario(s.scenario).to_dict(),
             "episodes": s.episodes,
             "max_episode_steps": s.max_episode_steps,
             "status": s.status,

@@ -13,6 +13,7 @@ from pathlib import Path
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
+from learner.run import RunSpec
 from server.db.models import (
     LIVE_STATUSES,
     RESUMABLE_STATUSES,
@@ -29,7 +30,6 @@ from server.services.errors import Conflict, Invalid, NotFound
 from server.services.studies import get_study
 
 HOST = socket.gethostname()
-VALUE_STRATEGIES = ("importance", "mistake_correcting")
 
 
 def participant_url(base_url: str, token: str) -> str:
@@ -68,38 +68,17 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
 
 
 def create_session(
-    db: Session, study_id: int, body: SessionCreate, data_dir: Path | None = None
+    db: Session,
+    study_id: int,
+    body: SessionCreate,
+    data_dir: Path | None = None,
+    spec: RunSpec | None = None,
 ) -> StudySession:
     """A new session in `created` state; a human one gets its participant and token.
-    `data_dir`: where an advisor's checkpoint file must lie (see `advisor_path`)."""
+    `data_dir`: where an advisor's checkpoint file must lie (see `advisor_path`). `spec`:
+    the run `body` describes when the caller has it already (`learning.spec_from_body`)."""
     get_study(db, study_id)
     method = Method(body.method)
-    advised = method not in (Method.autonomous,)
-    config = learning.build_config(
-        body.preset,
-        body.config,
-        episodes=body.episodes,
-        max_episode_steps=body.max_episode_steps,
-        advice_budget=body.advice_budget if advised else 0,
-    )
-    sort_rule = learning.parse_sort_rule(body.sort_rule)
-    if advised and body.strategy in VALUE_STRATEGIES and method != Method.agent:
-        raise Invalid(
-            "strategy",
-            f"the {body.strategy} strategy weighs the advisor's Q-values, which only an "
-            "'agent' advisor has; use early or alternating advising",
-        )
-    if (
-        advised
-        and body.strategy == "early"
-        and config["advice_budget"] > config["pretraining_steps"]
-    ):
-        raise Invalid(
-            "advice_budget",
-            f"early advising gives its {config['advice_budget']} advice at the end of "
-            f"pretraining, which has only {config['pretraining_steps']} steps; lower "
-            "advice_budget or raise config.pretraining_steps",
-        )
     if method == Method.agent:
         if not body.advisor_checkpoint:
             raise Invalid(
@@ -113,23 +92,17 @@ def create_session(
         advisor = None
     if body.participant and method != Method.human:
         raise Invalid("participant", "only method 'human' has a participant")
+    if spec is None:
+        spec = learning.spec_from_body(body, advisor)
+    else:
+        spec = learning.validated(spec.replace(advisor_checkpoint=advisor))
     session = StudySession(
         study_id=study_id,
         label=body.label,
         method=method.value,
-        seed=body.seed,
-        config=config,
-        sort_rule=sort_rule,
-        strategy=body.strategy if advised else None,
-        advice_budget=config["advice_budget"],
-        advisor_checkpoint=advisor,
         keep_replay_memory=body.keep_replay_memory,
-        oracle_error_rate=body.oracle_error_rate if method == Method.oracle else None,
-        motion=body.motion or ("physics" if method == Method.human else "fast"),
-        scenario=learning.parse_scenario(body.scenario.model_dump()),
-        episodes=config["episodes"],
-        max_episode_steps=config["max_episode_steps"],
         idle_limit_s=body.idle_limit_s,
+        **learning.stored(spec),
     )
     if method == Method.human:
         pseudonym = body.participant or f"p-{secrets.token_hex(4)}"
