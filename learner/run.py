@@ -19,7 +19,13 @@ from typing import TYPE_CHECKING, Any
 
 from learner.advisors import ADVISOR_KINDS, Advisor, make_advisor
 from learner.config import DQNConfig
-from learner.strategies import _STRATEGIES, STRATEGY_NAMES, AdvisingStrategy, make_strategy
+from learner.strategies import (
+    _STRATEGIES,
+    STRATEGY_NAMES,
+    AdvisingStrategy,
+    early_budget_problem,
+    make_strategy,
+)
 from sim.rules import SortRule
 from sim.scenario import ScenarioOptions
 
@@ -63,18 +69,6 @@ class RunSpecError(ValueError):
     def __init__(self, field: str, message: str) -> None:
         super().__init__(message)
         self.field = field
-
-
-def check_early_budget(budget: int, pretraining_steps: int) -> None:
-    """Early advising gives its advice at the end of pretraining, so it can give at most
-    `pretraining_steps` of it (the one place this rule is written)."""
-    if budget > pretraining_steps:
-        raise RunSpecError(
-            "advice_budget",
-            f"early advising gives its {budget} advice at the end of pretraining, which has "
-            f"only {pretraining_steps} steps; lower the advice budget or raise "
-            "pretraining_steps",
-        )
 
 
 @dataclass(frozen=True)
@@ -172,7 +166,9 @@ class RunSpec:
                 "'agent' advisor has; use early or alternating advising",
             )
         if spec.strategy == "early":
-            check_early_budget(spec.advice_budget, spec.config.pretraining_steps)
+            problem = early_budget_problem(spec.advice_budget, spec.config.pretraining_steps)
+            if problem:
+                raise RunSpecError("advice_budget", problem)
         try:
             spec.make_strategy()
         except ValueError as error:

@@ -7,11 +7,15 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from learner.docstrings import field_docstrings
 from learner.run import MOTIONS
 from learner.strategies import STRATEGY_NAMES
 from server.db.models import Method
 from server.schemas.types import Int, Key, Number
 from sim.rewards import REWARD_SCHEMES
+from sim.scenario import ScenarioOptions
+
+SCENARIO_DOCS = field_docstrings(ScenarioOptions)
 
 # The names are the learner's and the scenario's, never restated here.
 Strategy = Literal[STRATEGY_NAMES]  # type: ignore[valid-type]
@@ -25,20 +29,13 @@ class Scenario(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     reward_scheme: RewardSchemeName = Field(
-        default="paper",
-        description="What a step without a placement costs: paper (the paper's text: -0.01 "
-        "after the 18th step), authors-autonomous (the authors' DeepRL script: 0 up to the "
-        "19th step, then -0.01 x (n - 19)), authors-interactive (their IDeepRL scripts: -0.01 "
-        "from the first step).",
+        default="paper", description=SCENARIO_DOCS["reward_scheme"]
     )
     grasp_failure_rate: Number = Field(
-        default=0.0, ge=0.0, le=1.0, description="Chance that a grab comes back empty."
+        default=0.0, ge=0.0, le=1.0, description=SCENARIO_DOCS["grasp_failure_rate"]
     )
     knock_off_rate: Number = Field(
-        default=0.0,
-        ge=0.0,
-        le=1.0,
-        description="Chance that a grab knocks one other object off the center table (lost).",
+        default=0.0, ge=0.0, le=1.0, description=SCENARIO_DOCS["knock_off_rate"]
     )
 
 

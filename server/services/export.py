@@ -27,8 +27,8 @@ from server.services import learning
 from server.services.columns import TEXT_KEYS, table_columns
 from server.services.studies import get_study
 from server.services.tables import column, resource, write_csv, write_parquet
+from sim.actions import ACTION_NAMES
 
-ACTION_NAMES = ("grab", "move right", "move left", "drop")
 FORMATS = ("csv", "parquet")
 TABLES = ("sessions", "episodes", "steps", "advice", "texts_versions")
 KEYS: dict[str, dict[str, Any]] = {

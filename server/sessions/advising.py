@@ -29,8 +29,7 @@ from server.services.consent import NOT_CONSENTED
 from server.services.errors import Conflict, NotFound
 from server.sessions.manager import HistoryEntry, SessionManager
 from server.sessions.messages import AdviceAnswer
-
-ACTION_NAMES = ("grab", "move right", "move left", "drop")
+from sim.actions import ACTION_NAMES
 
 
 @dataclass(frozen=True)

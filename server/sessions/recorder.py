@@ -138,9 +138,7 @@ class Recorder:
         self.flush()
         self._dir.mkdir(parents=True, exist_ok=True)
         path = self._dir / (name or f"step-{self.steps:09d}.pt")
-        partial = path.with_name(path.name + ".partial")
-        trainer.save_checkpoint(partial, memory=memory)
-        os.replace(partial, path)
+        trainer.save_checkpoint(path, memory=memory)  # atomic: learner.checkpoint
         with self._factory() as db:
             self._own(
                 db,
