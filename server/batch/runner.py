@@ -23,14 +23,14 @@ from sqlalchemy.orm import Session, sessionmaker
 from learner.run import RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.progress import BatchProgress
-from server.batch.sessions import ensure_session, find_session, take_back
+from server.batch.sessions import ensure_session, find_session
 from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, session_body
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
 from server.services import learning
 from server.services.errors import Invalid
-from server.services.sessions import set_status
+from server.services.ownership import set_status, take_back
 from server.services.studies import get_study
 from server.sessions.worker import WorkerOptions
 

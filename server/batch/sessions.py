@@ -1,5 +1,5 @@
 """A batch's runs in the database: find the session a run already has, create the missing
-ones, and take back sessions whose worker died.
+ones (taking back those whose worker died is `server.services.ownership.take_back`).
 
 A run's identity is its study, method and `learning.identity` (seed, learner config,
 sorting rule, strategy and its options, advisor, error rate, motion, scenario options),
@@ -9,8 +9,6 @@ finds its runs.
 
 from __future__ import annotations
 
-import socket
-from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 from sqlalchemy import select
@@ -20,9 +18,7 @@ from learner.run import RunSpec
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
 from server.schemas.sessions import SessionCreate
 from server.services import learning
-from server.services.sessions import create_session, pid_alive, set_status
-
-HOST = socket.gethostname()
+from server.services.sessions import create_session
 
 _RANK = {
     Status.finished.value: 0,
@@ -63,39 +59,3 @@ def ensure_session(
         path = str(Path(body.advisor_checkpoint).resolve())
         body = body.model_copy(update={"advisor_checkpoint": path})
     return create_session(db, study_id, body, spec=spec), True
-
-
-def worker_gone(session: StudySession, stale_after_s: float) -> bool:
-    """A running or paused session whose worker cannot be alive: its process is gone on
-    this host, or it has not written for `stale_after_s` (a worker on another host)."""
-    if session.worker_host == HOST and session.worker_pid is not None:
-        return not pid_alive(session.worker_pid)
-    heartbeat = session.heartbeat_at
-    if heartbeat is None:
-        return True
-    if heartbeat.tzinfo is None:
-        heartbeat = heartbeat.replace(tzinfo=UTC)
-    return heartbeat < datetime.now(UTC) - timedelta(seconds=stale_after_s)
-
-
-def take_back(db: Session, session_ids: list[int], stale_after_s: float) -> list[int]:
-    """Mark this batch's sessions whose worker died `interrupted`, so they can resume.
-
-    Only the given sessions: a paused human session of the study server is none of ours."""
-    if not session_ids:
-        return []
-    query = select(StudySession).where(
-        StudySession.id.in_(session_ids),
-        StudySession.status.in_([s.value for s in LIVE_STATUSES]),
-    )
-    marked = []
-    for session in list(db.scalars(query)):
-        if worker_gone(session, stale_after_s) and set_status(
-            db,
-            session.id,
-            Status.interrupted,
-            "its batch worker stopped without finishing; the batch resumes it",
-            token=session.worker_token,
-        ):
-            marked.append(session.id)
-    return marked
