@@ -32,7 +32,7 @@ from server.services import learning
 from server.services.errors import Invalid
 from server.services.ownership import set_status, take_back
 from server.services.studies import get_study
-from server.sessions.worker import WorkerOptions
+from server.worker.worker import WorkerOptions
 
 TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
 LIVE = {s.value for s in LIVE_STATUSES}

@@ -17,7 +17,7 @@ from server.analysis.audit import describe_learner, describe_scenario
 from server.analysis.rescoring import STEP_COLUMNS
 from server.db.models import Episode, Step, StudySession
 from server.services.learning import parse_scenario
-from server.sessions.recorder import TRAINING
+from server.worker.recorder import TRAINING
 
 EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
     "session_id",

@@ -26,11 +26,11 @@ from server.db.models import Advice, Method, Status, StudySession, utcnow
 from server.services import learning
 from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, set_status
-from server.sessions.advisors import HumanAdvisor, RecordingAdvisor
-from server.sessions.link import ParentGone, WorkerExit, WorkerLink
-from server.sessions.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
-from server.sessions.recorder import TRAINING, LeaseLost, Recorder
-from server.sessions.scene import SceneBroadcast
+from server.worker.advisors import HumanAdvisor, RecordingAdvisor
+from server.worker.link import ParentGone, WorkerExit, WorkerLink
+from server.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
+from server.worker.recorder import TRAINING, LeaseLost, Recorder
+from server.worker.scene import SceneBroadcast
 
 log = logging.getLogger(__name__)
 PROGRESS_EVERY_S = 0.2

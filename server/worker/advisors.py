@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from server.sessions.link import WorkerLink
-from server.sessions.messages import AdviceRequest, AdviceResult
+from server.worker.link import WorkerLink
+from server.worker.messages import AdviceRequest, AdviceResult
 
 log = logging.getLogger(__name__)
 
