@@ -8,9 +8,15 @@ import json
 import shlex
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from server.commands.common import service_exit_code, show_progress
+
+if TYPE_CHECKING:  # the command line starts without the batch's imports
+    from sqlalchemy.orm import Session
+
+    from server.batch import BatchResult, BatchSpec, RunnerOptions
+    from server.settings import Settings
 
 DESCRIPTION = """\
 Run N agents per method (autonomous, agent, oracle, random) as sessions of a study, in
@@ -50,7 +56,7 @@ def add_database_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def settings_from(args: argparse.Namespace) -> Any:
+def settings_from(args: argparse.Namespace) -> Settings:
     from server.settings import Settings
 
     overrides = {"data_dir": args.data_dir, "database_url": args.database_url}
@@ -143,7 +149,7 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=batch)
 
 
-def spec_from(args: argparse.Namespace) -> Any:
+def spec_from(args: argparse.Namespace) -> BatchSpec:
     from server.batch import BatchSpec
 
     config = dict(args.overrides)
@@ -188,7 +194,7 @@ def spec_from(args: argparse.Namespace) -> Any:
     )
 
 
-def command_line(args: argparse.Namespace, spec: Any) -> str:
+def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     """The command that reruns (or resumes) exactly this batch, every choice spelled out."""
     parts = ["ideeprl", "batch", "--study", str(args.study), "--methods", *spec.methods]
     parts += ["--agents", str(spec.agents), "--seed", str(spec.base_seed), "--label", spec.label]
@@ -237,7 +243,7 @@ def command_line(args: argparse.Namespace, spec: Any) -> str:
     return shlex.join(parts)
 
 
-def resolve_study(db: Any, study: str) -> tuple[int, str]:
+def resolve_study(db: Session, study: str) -> tuple[int, str]:
     """The study named by id or name; a new name creates the study. Returns (id, what)."""
     from sqlalchemy import select
 
@@ -322,7 +328,7 @@ def _check_counts(args: argparse.Namespace) -> None:
         raise BatchError("--address is for the Ray backend: add --backend ray")
 
 
-def _options(args: argparse.Namespace, settings: Any) -> Any:
+def _options(args: argparse.Namespace, settings: Settings) -> RunnerOptions:
     from server.batch import RunnerOptions
 
     return RunnerOptions(
@@ -339,7 +345,7 @@ def _options(args: argparse.Namespace, settings: Any) -> Any:
     )
 
 
-def _run(args: argparse.Namespace, spec: Any, study_id: int, settings: Any) -> int:
+def _run(args: argparse.Namespace, spec: BatchSpec, study_id: int, settings: Settings) -> int:
     from server.batch import describe
     from server.batch.runner import BatchRunner
 
@@ -355,7 +361,9 @@ def _run(args: argparse.Namespace, spec: Any, study_id: int, settings: Any) -> i
     return 0
 
 
-def _report(args: argparse.Namespace, spec: Any, result: Any, settings: Any) -> int:
+def _report(
+    args: argparse.Namespace, spec: BatchSpec, result: BatchResult, settings: Settings
+) -> int:
     from server.batch.provenance import describe_times, environment, training_times
     from server.db.engine import make_engine, make_session_factory
     from server.services.reports import ReportRequest, build_report

@@ -138,7 +138,7 @@ class SessionPublic(BaseModel):
     method: str
     seed: int
     config: dict[str, Any]
-    sort_rule: Any
+    sort_rule: str | dict[str, str]
     strategy: str | None
     strategy_options: dict[str, Any] | None = Field(
         default=None, description="The strategy's options, defaults spelled out."

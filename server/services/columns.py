@@ -8,7 +8,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from learner.config import DQNConfig
+from learner.config import field_docs as config_docs
 from learner.docstrings import field_docstrings
+from learner.records import EpisodeRecord, StepRecord
 from learner.strategies import STRATEGY_NAMES
 from server.services.tables import Column, column
 from sim.scenario import ScenarioOptions
@@ -151,7 +154,6 @@ def _sql_type(column: Any) -> str:
 def _record_columns(table: str) -> list[Column]:
     """Step or episode columns: types from the database model, descriptions from the
     docstrings under the learner's record fields."""
-    from learner import EpisodeRecord, StepRecord
     from server.db.models import Episode, Step
 
     model, record = (Step, StepRecord) if table == "steps" else (Episode, EpisodeRecord)
@@ -173,9 +175,6 @@ def _config_columns(configs: list[dict[str, Any]]) -> list[Column]:
     dataclass, in its field order; fields only old sessions have come after."""
     import dataclasses
     import typing
-
-    from learner.config import DQNConfig
-    from learner.config import field_docs as config_docs
 
     hints = typing.get_type_hints(DQNConfig)
     docs = config_docs()

@@ -13,6 +13,7 @@ import pandas as pd
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from learner.config import PRESETS, DQNConfig
 from server.analysis.audit import describe_learner, describe_scenario
 from server.analysis.rescoring import STEP_COLUMNS
 from server.db.models import Episode, Step, StudySession
@@ -71,7 +72,6 @@ def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame
 def session_settings(sessions: Sequence[StudySession]) -> pd.DataFrame:
     """What each session ran under, for the report's comparability audit
     (`server.analysis.audit.SETTINGS_COLUMNS`)."""
-    from learner.config import PRESETS, DQNConfig
 
     presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
     rows = []

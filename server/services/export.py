@@ -28,6 +28,7 @@ from server.services.columns import TEXT_KEYS, table_columns
 from server.services.studies import get_study
 from server.services.tables import column, resource, write_csv, write_parquet
 from sim.actions import ACTION_NAMES
+from sim.rules import SortRule
 
 FORMATS = ("csv", "parquet")
 TABLES = ("sessions", "episodes", "steps", "advice", "texts_versions")
@@ -48,9 +49,8 @@ DICTIONARY_COLUMNS = [
 ]
 
 
-def plain_sort_rule(spec: Any) -> str:
+def plain_sort_rule(spec: str | dict[str, str]) -> str:
     """`color`, `shape`, or `cube/red=left;cube/blue=right;...` for an explicit map."""
-    from sim.rules import SortRule
 
     rule = SortRule.parse(spec)
     if rule.name != "map":

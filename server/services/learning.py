@@ -48,7 +48,7 @@ def build_config(preset: str, overrides: dict[str, Any], **fields: int | None) -
         raise Invalid("config", str(error)) from None
 
 
-def parse_sort_rule(spec: str | dict[str, str]) -> Any:
+def parse_sort_rule(spec: str | dict[str, str]) -> str | dict[str, str]:
     try:
         return SortRule.parse(spec).to_spec()
     except (ValueError, TypeError, KeyError) as error:

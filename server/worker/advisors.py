@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from learner.advisors import Advisor
 from server.worker.link import WorkerLink
 from server.worker.messages import AdviceRequest, AdviceResult
 
@@ -103,7 +104,7 @@ class RecordingAdvisor:
 
     def __init__(
         self,
-        inner: Any,
+        inner: Advisor,
         kind: str,
         start_index: int,
         record: Callable[[dict[str, Any]], None],
