@@ -17,10 +17,10 @@ depends_on: str | Sequence[str] | None = None
 
 def upgrade() -> None:
     # Sessions stored before this revision ran their strategy's defaults: NULL reads as them.
-    with op.batch_alter_table("sessions") as batch:
+    with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
         batch.add_column(sa.Column("strategy_options", sa.JSON(), nullable=True))
 
 
 def downgrade() -> None:
-    with op.batch_alter_table("sessions") as batch:
+    with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
         batch.drop_column("strategy_options")
