@@ -22,9 +22,12 @@ from tqdm import tqdm
 from learner.checkpoint import read_checkpoint
 from learner.config import PRESETS, DQNConfig
 from learner.records import EpisodeRecord, StepRecord
+from learner.run import ADVISORS, MOTIONS, STRATEGY_OPTIONS, RunSpec
 from learner.strategies import STRATEGY_NAMES
+from sim.rewards import REWARD_SCHEMES
+from sim.scenario import ScenarioOptions
 
-ADVISOR_CHOICES = ("none", "agent", "oracle", "random")
+ADVISOR_CHOICES = tuple(name for name in ADVISORS if name != "human")
 
 
 def register(subparsers: Any) -> None:
@@ -58,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--interval", type=int, default=2, help="alternating: advise every Nth step"
     )
     parser.add_argument("--threshold", type=float, default=0.1, help="importance: Q-value spread")
-    parser.add_argument("--motion", choices=("fast", "physics"), default="fast")
+    parser.add_argument("--motion", choices=MOTIONS, default="fast")
     parser.add_argument("--sort-rule", default="color", help="color, shape, or a JSON object map")
     add_scenario_arguments(parser)
     parser.add_argument(
@@ -83,8 +86,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     """The scenario's options (`sim.ScenarioOptions`); `scenario_options(args)` reads them."""
-    from sim.rewards import REWARD_SCHEMES
-
     parser.add_argument(
         "--reward-scheme",
         choices=REWARD_SCHEMES,
@@ -105,8 +106,6 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
 
 def scenario_options(args: argparse.Namespace) -> dict[str, Any]:
     """The scenario options the arguments give, checked (`ValueError` otherwise)."""
-    from sim.scenario import ScenarioOptions
-
     return ScenarioOptions(
         args.reward_scheme, args.grasp_failure_rate, args.knock_off_rate
     ).to_dict()
@@ -114,28 +113,20 @@ def scenario_options(args: argparse.Namespace) -> dict[str, Any]:
 
 def train(args: argparse.Namespace) -> int:
     try:
-        config, settings, resume_state = _settings(args)
-        import sim
-
-        env = sim.SortingEnv(
-            motion=settings["motion"],
-            sort_rule=settings["sort_rule"],
-            max_episode_steps=config.max_episode_steps,
-            **settings.get("scenario", {}),
-        )
-        advisor, strategy = _advising(settings)
+        spec, resume_state = run_spec(args)
+        spec = spec.validate()
     except (ValueError, FileNotFoundError) as error:
         print(f"ideeprl train: error: {error}", file=sys.stderr)
         return 2
     from learner.recording import CsvRecorder, plot_learning_curve, read_episodes
-    from learner.trainer import Trainer
 
+    config, settings = spec.config, spec.settings()
     out = args.out or (args.resume.parent if args.resume else _default_out())
     resumed_step = resume_state["global_step"] if resume_state else None
     recorder = CsvRecorder(out, resume_from_step=resumed_step)
     # Bars only for a person at a terminal, never into a pipe or a log file.
     progress = Progress(config, resume_state, disable=args.no_progress or not sys.stderr.isatty())
-    trainer = Trainer(env, config, advisor, strategy, settings["seed"], [recorder, progress])
+    trainer, _env = spec.build([recorder, progress])
     if args.resume:
         trainer.load_checkpoint(args.resume)
     (out / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
@@ -158,7 +149,7 @@ def train(args: argparse.Namespace) -> int:
     trainer.save_checkpoint(checkpoint, settings)
     rows = [row for row in read_episodes(recorder.episodes_path) if row["phase"] == "train"]
     rewards = [row["collected_reward"] for row in rows]
-    label = "DeepRL" if settings["advisor"] == "none" else f"{settings['advisor']}-IDeepRL"
+    label = "DeepRL" if spec.advisor == "none" else f"{spec.advisor}-IDeepRL"
     plot = plot_learning_curve(
         rewards, [row["epsilon"] for row in rows], out / "learning_curve.png", label
     )
@@ -171,9 +162,9 @@ def train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _settings(args: argparse.Namespace) -> tuple[DQNConfig, dict[str, Any], dict[str, Any] | None]:
-    """The config and how to build env and advisor: from the arguments, or from the
-    checkpoint when resuming (then only --episodes, --device, --threads may change)."""
+def run_spec(args: argparse.Namespace) -> tuple[RunSpec, dict[str, Any] | None]:
+    """The run the arguments describe, or the checkpoint's when resuming (then only
+    --episodes, --device, --threads may change), and where a resumed run stands."""
     runtime: dict[str, Any] = {}
     if args.episodes is not None:
         runtime["episodes"] = args.episodes
@@ -187,52 +178,28 @@ def _settings(args: argparse.Namespace) -> tuple[DQNConfig, dict[str, Any], dict
         settings = dict(state["metadata"])
         if "advisor" not in settings:
             raise ValueError(f"{args.resume} was not written by ideeprl train")
-        return config, settings, {"global_step": int(state["global_step"])}
+        return RunSpec.from_settings(settings, config), {"global_step": int(state["global_step"])}
     overrides = dict(_parse_assignment(item) for item in args.set)
     config = DQNConfig.preset(args.preset, **{**overrides, **runtime})
-    import sim
-
-    settings = {
-        "advisor": args.advisor,
-        "advisor_checkpoint": str(args.advisor_checkpoint) if args.advisor_checkpoint else None,
-        "error_rate": args.error_rate,
-        "strategy": args.strategy,
-        "budget": config.advice_budget if args.budget is None else args.budget,
-        "interval": args.interval,
-        "threshold": args.threshold,
-        "motion": args.motion,
-        "sort_rule": sim.SortRule.parse(_parse_json(args.sort_rule)).to_spec(),
-        "seed": args.seed,
-        "preset": args.preset,
-        "scenario": scenario_options(args),
-    }
-    return config, settings, None
-
-
-def _advising(settings: dict[str, Any]) -> tuple[Any, Any]:
-    from learner.advisors import make_advisor
-    from learner.strategies import make_strategy
-
-    kind = settings["advisor"]
-    if kind == "none":
-        return None, None
-    seed = settings["seed"]
-    if kind == "agent":
-        if not settings["advisor_checkpoint"]:
-            raise ValueError("--advisor agent needs --advisor-checkpoint PATH")
-        advisor = make_advisor("agent", checkpoint=settings["advisor_checkpoint"])
-    elif kind == "oracle":
-        advisor = make_advisor(
-            "oracle", sort_rule=settings["sort_rule"], error_rate=settings["error_rate"], seed=seed
-        )
-    else:
-        advisor = make_advisor("random", seed=seed)
-    options: dict[str, Any] = {}
-    if settings["strategy"] == "alternating":
-        options["interval"] = settings["interval"]
-    elif settings["strategy"] in ("importance", "mistake_correcting"):
-        options["threshold"] = settings["threshold"]
-    return advisor, make_strategy(settings["strategy"], settings["budget"], **options)
+    given = {"interval": args.interval, "threshold": args.threshold}
+    if args.advisor == "agent" and not args.advisor_checkpoint:
+        raise ValueError("--advisor agent needs --advisor-checkpoint PATH")
+    spec = RunSpec(
+        seed=args.seed,
+        config=config,
+        preset=args.preset,
+        advisor=args.advisor,
+        advisor_checkpoint=str(args.advisor_checkpoint) if args.advisor_checkpoint else None,
+        error_rate=args.error_rate,
+        strategy=args.strategy,
+        # the flags have defaults; each strategy takes the ones it knows
+        strategy_options={k: v for k, v in given.items() if k in STRATEGY_OPTIONS[args.strategy]},
+        budget=args.budget,
+        motion=args.motion,
+        sort_rule=_parse_json(args.sort_rule),
+        scenario=ScenarioOptions(**scenario_options(args)),
+    )
+    return spec, None
 
 
 def _checkpoint_due(finished: EpisodeRecord | None, every: int) -> bool:

@@ -18,6 +18,20 @@ from learner.advisors import Advisor
 STRATEGY_NAMES = ("early", "alternating", "importance", "mistake_correcting")
 
 
+def early_budget_problem(budget: int, pretraining_steps: int) -> str | None:
+    """Why early advising cannot give `budget` advice in `pretraining_steps` steps, or None.
+    Its advice closes the pretraining stage, so there must be room for all of it (the one
+    place this rule is written: the trainer, `RunSpec.validate` and so the server and the
+    batch ask it)."""
+    if budget <= pretraining_steps:
+        return None
+    return (
+        f"early advising gives its {budget} advice at the end of pretraining, which has only "
+        f"{pretraining_steps} steps (its budget cannot exceed pretraining_steps); lower the "
+        "advice budget or raise pretraining_steps"
+    )
+
+
 @dataclass(frozen=True)
 class AdviceMoment:
     """What a strategy may look at when deciding to ask for advice."""
@@ -126,11 +140,9 @@ class EarlyAdvising(AdvisingStrategy):
 
     def check(self, pretraining_steps: int, advisor: Advisor) -> None:
         super().check(pretraining_steps, advisor)
-        if self.budget > pretraining_steps:
-            raise ValueError(
-                f"early advising's budget ({self.budget}) cannot exceed pretraining_steps "
-                f"({pretraining_steps}): the advice closes the pretraining stage"
-            )
+        problem = early_budget_problem(self.budget, pretraining_steps)
+        if problem:
+            raise ValueError(problem)
 
 
 class AlternatingAdvising(AdvisingStrategy):

@@ -11,10 +11,10 @@ from fastapi import Depends, HTTPException, Request, Security
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
+from server.live.advising import ParticipantSession
+from server.live.hub import Hub
+from server.live.manager import SessionManager
 from server.services.sessions import session_for_token
-from server.sessions.advising import ParticipantSession
-from server.sessions.hub import Hub
-from server.sessions.manager import SessionManager
 from server.settings import Settings
 
 API_KEY_HEADER = "X-API-Key"

@@ -20,18 +20,18 @@ from server.db.migrate import upgrade
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
 from server.guard import LOGIN, RequestGuard
 from server.headers import SecurityHeaders, validation_error
+from server.live.hub import Hub
+from server.live.manager import SessionManager
 from server.logins import Logins
 from server.openapi import install as install_openapi
 from server.openapi import operation_id
 from server.routes import ROUTERS, dashboard, pages, reports, viewing
 from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
-from server.sessions.hub import Hub
-from server.sessions.manager import SessionManager
-from server.sessions.worker import WorkerOptions
 from server.settings import Settings
 from server.viewer import proxy as viewer_proxy
 from server.viewer import viewer_from_settings
+from server.worker.worker import WorkerOptions
 
 UVICORN_OPTIONS: dict[str, Any] = {"ws_per_message_deflate": False}
 """How uvicorn must run this app: its only websocket is the 3-D view's relay, whose stream of

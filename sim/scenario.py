@@ -20,11 +20,14 @@ class ScenarioOptions:
     """What a step costs and how imperfect the scene is (`SortingEnv`'s docstring)."""
 
     reward_scheme: RewardScheme = "paper"
-    """`paper`, `authors-autonomous` or `authors-interactive` (`sim.rewards`)."""
+    """What a step without a placement costs (`sim.rewards`): paper (the paper's text: -0.01
+    after the 18th step), authors-autonomous (the authors' DeepRL script: 0 up to the 19th
+    step, then -0.01 x (n - 19)), authors-interactive (their IDeepRL scripts: -0.01 from the
+    first step)."""
     grasp_failure_rate: float = 0.0
     """Chance that a grab comes back empty."""
     knock_off_rate: float = 0.0
-    """Chance that a grab knocks one other object off the center table (lost)."""
+    """Chance that a grab knocks one other object off the center table (it is lost)."""
 
     def __post_init__(self) -> None:
         check_reward_scheme(self.reward_scheme)

@@ -548,7 +548,8 @@ class _Extras:
 
 def _withhold_tests(analysis: Analysis, checked: Audit, allow_mismatch: bool) -> Analysis:
     """The analysis with the t-tests of pairs that differ in their settings withheld (t,
-    p and df of every test, Student's and Welch's, left empty, the reason in `withheld`), unless `allow_mismatch`."""
+    p and df of every test, Student's and Welch's, left empty, the reason in
+    `withheld`), unless `allow_mismatch`."""
     tests = analysis.t_tests.copy()
     reasons = [
         "" if allow_mismatch or not checked.differ(a, b)

@@ -4,13 +4,13 @@ a study in the platform's database (so exports and the report treat them like hu
     from server.batch import BatchSpec, RunnerOptions, run_batch
     result = run_batch(BatchSpec(methods=("autonomous", "agent"), agents=10), study_id, url)
 
-`ideeprl batch` is the command line; `server.batch.episodes.load_episodes` gives the
+`ideeprl batch` is the command line; `server.services.episodes.load_episodes` gives the
 analysis package its episode table.
 """
 
-from server.batch.episodes import EPISODE_TABLE_COLUMNS, load_episodes
 from server.batch.runner import BatchResult, RunnerOptions, RunState, describe, run_batch
 from server.batch.spec import BATCH_METHODS, BatchError, BatchSpec, Run, plan_runs
+from server.services.episodes import EPISODE_TABLE_COLUMNS, load_episodes
 
 __all__ = [
     "BATCH_METHODS",

@@ -1,6 +1,6 @@
 """Where a batch's runs execute: worker processes on this machine, or tasks on Ray.
 
-Either way a run is `server.sessions.worker.run_session` in a process of its own, writing
+Either way a run is `server.worker.worker.run_session` in a process of its own, writing
 to the shared database; a backend only starts runs, says which have ended, and stops the
 rest so they can resume later.
 """
@@ -19,8 +19,8 @@ from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import Any, Protocol
 
-from server.sessions.messages import Command
-from server.sessions.worker import WorkerOptions, run_session
+from server.worker.messages import Command
+from server.worker.worker import WorkerOptions, run_session
 
 ROOT = Path(__file__).absolute().parents[2]
 STOP_WAIT_S = 60.0

@@ -20,21 +20,19 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
+from learner.run import RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.progress import BatchProgress
-from server.batch.sessions import (
-    body_identity,
-    ensure_session,
-    find_session,
-    take_back,
-)
-from server.batch.spec import UNADVISED, BatchError, BatchSpec, Run, plan_runs, session_body
+from server.batch.sessions import ensure_session, find_session
+from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, session_body
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
-from server.services.sessions import set_status
+from server.services import learning
+from server.services.errors import Invalid
+from server.services.ownership import set_status, take_back
 from server.services.studies import get_study
-from server.sessions.worker import WorkerOptions
+from server.worker.worker import WorkerOptions
 
 TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
 LIVE = {s.value for s in LIVE_STATUSES}
@@ -84,6 +82,9 @@ class RunState:
     """Why it failed or stopped."""
     done_before: bool = False
     """It had finished before this invocation."""
+    spec: RunSpec | None = None
+    """The run, described once (`BatchRunner.prepare` checks it before anything runs); an
+    `agent` run's advisor checkpoint is filled in when the advisor has trained."""
 
 
 @dataclass(frozen=True)
@@ -144,9 +145,22 @@ class BatchRunner:
         self.log: Callable[[str], None] = print
 
     # --- the runs' sessions ------------------------------------------------------------
+    def _run_spec(self, state: RunState, checkpoint: str | None) -> RunSpec:
+        """The run's `RunSpec` (its config built once), with `checkpoint` advising."""
+        if state.spec is None:
+            body = session_body(self.spec, state.run, checkpoint or "-")
+            try:
+                state.spec = learning.spec_from_body(body, body.advisor_checkpoint)
+            except Invalid as error:
+                raise BatchError(error.message) from None
+        if state.run.method != "agent" or checkpoint is None:
+            return state.spec
+        return state.spec.replace(advisor_checkpoint=checkpoint)
+
     def _ensure(self, db: Session, state: RunState) -> None:
         body = session_body(self.spec, state.run, self.advisor_checkpoint)
-        session, _ = ensure_session(db, self.study_id, body)
+        spec = self._run_spec(state, self.advisor_checkpoint)
+        session, _ = ensure_session(db, self.study_id, body, spec)
         state.session_id, state.status = session.id, session.status
         state.done_before = session.status == Status.finished.value
 
@@ -181,7 +195,9 @@ class BatchRunner:
                 if run.method == "agent" and checkpoint is None:
                     lines.append(f"{head} waits for the advisor")
                     continue
-                found = find_session(db, self.study_id, session_body(self.spec, run, checkpoint))
+                found = find_session(
+                    db, self.study_id, run.method, self._run_spec(state, checkpoint)
+                )
                 if run.is_advisor and found is not None and found.status == Status.finished:
                     checkpoint = found.checkpoint_path
                 lines.append(
@@ -193,15 +209,7 @@ class BatchRunner:
         """Every run's config checked before any starts: an `agent` run's session is only
         created after the advisor has trained, which should not be when a typo shows."""
         for state in self.states:
-            body = session_body(self.spec, state.run, self.advisor_checkpoint or "-")
-            config = body_identity(body)["config"]
-            early = body.method not in UNADVISED and body.strategy == "early"
-            if early and config["advice_budget"] > config["pretraining_steps"]:
-                raise BatchError(
-                    f"early advising gives its {config['advice_budget']} advice at the end of "
-                    f"pretraining, which has only {config['pretraining_steps']} steps; lower "
-                    "--advice-budget or raise --pretraining-steps"
-                )
+            self._run_spec(state, self.advisor_checkpoint)
 
     def prepare(self) -> None:
         """Find or create every run's session; take back the ones whose worker died."""

@@ -7,12 +7,13 @@ ones are skipped, the interrupted ones resume, only the missing ones are created
 
 from __future__ import annotations
 
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from server.schemas.sessions import Motion, Scenario, SessionCreate, Strategy
+from learner.run import MOTIONS
+from learner.strategies import STRATEGY_NAMES
+from server.schemas.sessions import Scenario, SessionCreate, StrategyOptions
 from sim.scenario import ScenarioOptions
 
 BATCH_METHODS: tuple[str, ...] = ("autonomous", "agent", "oracle", "random", "sb3-dqn")
@@ -57,6 +58,8 @@ class BatchSpec:
     """Advice per advised run; None: the preset's (100)."""
     strategy: str = "early"
     """Advising strategy of advised runs (the paper's early advising)."""
+    strategy_options: dict[str, Any] = field(default_factory=dict)
+    """The strategy's options (`interval`, `threshold`); unset ones take its defaults."""
     oracle_error_rate: float = 0.0
     """Chance that the `oracle` advisor names a wrong action."""
     advisor_checkpoint: str | None = None
@@ -104,8 +107,8 @@ class BatchSpec:
                 f"got {self.base_seed}"
             )
         for name, value, valid in (
-            ("strategy", self.strategy, typing.get_args(Strategy)),
-            ("motion", self.motion, typing.get_args(Motion)),
+            ("strategy", self.strategy, STRATEGY_NAMES),
+            ("motion", self.motion, MOTIONS),
         ):
             if value not in valid:
                 raise BatchError(f"unknown {name} {value!r}; choose from {', '.join(valid)}")
@@ -195,6 +198,7 @@ def session_body(spec: BatchSpec, run: Run, advisor_checkpoint: str | None) -> S
         max_episode_steps=spec.max_episode_steps,
         sort_rule=spec.sort_rule,
         strategy=spec.strategy if advised else "early",  # type: ignore[arg-type]
+        strategy_options=StrategyOptions(**(spec.strategy_options if advised else {})),
         advice_budget=spec.advice_budget if advised else None,
         advisor_checkpoint=advisor_checkpoint if run.method == "agent" else None,
         oracle_error_rate=spec.oracle_error_rate if run.method == "oracle" else 0.0,

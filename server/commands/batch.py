@@ -8,9 +8,15 @@ import json
 import shlex
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from server.commands.common import service_exit_code, show_progress
+
+if TYPE_CHECKING:  # the command line starts without the batch's imports
+    from sqlalchemy.orm import Session
+
+    from server.batch import BatchResult, BatchSpec, RunnerOptions
+    from server.settings import Settings
 
 DESCRIPTION = """\
 Run N agents per method (autonomous, agent, oracle, random, sb3-dqn) as sessions of a
@@ -52,7 +58,7 @@ def add_database_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def settings_from(args: argparse.Namespace) -> Any:
+def settings_from(args: argparse.Namespace) -> Settings:
     from server.settings import Settings
 
     overrides = {"data_dir": args.data_dir, "database_url": args.database_url}
@@ -101,6 +107,10 @@ def register(subparsers: Any) -> None:
         help="learner config field (VALUE as JSON), repeatable",
     )
     what.add_argument("--strategy", default="early", help="advising strategy (default early)")
+    what.add_argument("--interval", type=int, help="alternating: advise every Nth step (2)")
+    what.add_argument(
+        "--threshold", type=float, help="importance, mistake_correcting: Q-value spread (0.1)"
+    )
     what.add_argument(
         "--oracle-error-rate", type=float, default=0.0, help="oracle's wrong-advice rate"
     )
@@ -142,7 +152,7 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=batch)
 
 
-def spec_from(args: argparse.Namespace) -> Any:
+def spec_from(args: argparse.Namespace) -> BatchSpec:
     from server.batch import BatchSpec
 
     config = dict(args.overrides)
@@ -173,6 +183,11 @@ def spec_from(args: argparse.Namespace) -> Any:
         max_episode_steps=args.max_episode_steps,
         advice_budget=args.advice_budget,
         strategy=args.strategy,
+        strategy_options={
+            name: value
+            for name, value in (("interval", args.interval), ("threshold", args.threshold))
+            if value is not None
+        },
         oracle_error_rate=args.oracle_error_rate,
         advisor_checkpoint=args.advisor_checkpoint,
         motion=args.motion,
@@ -182,7 +197,7 @@ def spec_from(args: argparse.Namespace) -> Any:
     )
 
 
-def command_line(args: argparse.Namespace, spec: Any) -> str:
+def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     """The command that reruns (or resumes) exactly this batch, every choice spelled out."""
     parts = ["ideeprl", "batch", "--study", str(args.study), "--methods", *spec.methods]
     parts += ["--agents", str(spec.agents), "--seed", str(spec.base_seed), "--label", spec.label]
@@ -200,7 +215,10 @@ def command_line(args: argparse.Namespace, spec: Any) -> str:
         parts += ["--set", f"{name}={json.dumps(value)}"]
     if "oracle" in spec.methods:
         parts += ["--oracle-error-rate", str(spec.oracle_error_rate)]
-    parts += ["--strategy", spec.strategy, "--motion", spec.motion]
+    parts += ["--strategy", spec.strategy]
+    for name, value in spec.strategy_options.items():
+        parts += [f"--{name}", str(value)]
+    parts += ["--motion", spec.motion]
     if spec.sort_rule != "color":
         parts += ["--sort-rule", json.dumps(spec.sort_rule)]
     schemes = [spec.scenario.get("reward_scheme", "paper")]
@@ -228,7 +246,7 @@ def command_line(args: argparse.Namespace, spec: Any) -> str:
     return shlex.join(parts)
 
 
-def resolve_study(db: Any, study: str) -> tuple[int, str]:
+def resolve_study(db: Session, study: str) -> tuple[int, str]:
     """The study named by id or name; a new name creates the study. Returns (id, what)."""
     from sqlalchemy import select
 
@@ -313,7 +331,7 @@ def _check_counts(args: argparse.Namespace) -> None:
         raise BatchError("--address is for the Ray backend: add --backend ray")
 
 
-def _options(args: argparse.Namespace, settings: Any) -> Any:
+def _options(args: argparse.Namespace, settings: Settings) -> RunnerOptions:
     from server.batch import RunnerOptions
 
     return RunnerOptions(
@@ -330,7 +348,7 @@ def _options(args: argparse.Namespace, settings: Any) -> Any:
     )
 
 
-def _run(args: argparse.Namespace, spec: Any, study_id: int, settings: Any) -> int:
+def _run(args: argparse.Namespace, spec: BatchSpec, study_id: int, settings: Settings) -> int:
     from server.batch import describe
     from server.batch.runner import BatchRunner
 
@@ -346,7 +364,9 @@ def _run(args: argparse.Namespace, spec: Any, study_id: int, settings: Any) -> i
     return 0
 
 
-def _report(args: argparse.Namespace, spec: Any, result: Any, settings: Any) -> int:
+def _report(
+    args: argparse.Namespace, spec: BatchSpec, result: BatchResult, settings: Settings
+) -> int:
     from server.batch.provenance import describe_times, environment, training_times
     from server.db.engine import make_engine, make_session_factory
     from server.services.reports import ReportRequest, build_report

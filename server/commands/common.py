@@ -10,9 +10,15 @@ sense, or a value the database refuses as invalid; argparse's own errors are 2 t
 from __future__ import annotations
 
 import sys
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from sqlalchemy.engine import make_url
+
+if TYPE_CHECKING:
+    from sqlalchemy.engine import Engine
+    from sqlalchemy.orm import Session
+
+    from server.settings import Settings
 
 EXIT_RUNTIME = 1
 EXIT_USAGE = 2
@@ -48,7 +54,7 @@ def show_progress(disabled: bool, stream: TextIO | None = None) -> bool:
     return not disabled and bool(getattr(stream, "isatty", lambda: False)())
 
 
-def existing_database(settings: Any) -> Any:
+def existing_database(settings: Settings) -> Engine:
     """An engine on the database `serve` uses with these settings, migrated, for a command
     that only reads: a SQLite file that does not exist is an error that says where we
     looked, never a new empty database."""
@@ -71,7 +77,7 @@ def existing_database(settings: Any) -> Any:
     return engine
 
 
-def find_study(db: Any, study: str) -> tuple[int, str]:
+def find_study(db: Session, study: str) -> tuple[int, str]:
     """The study named by id or by name (never created); returns (id, description)."""
     from sqlalchemy import select
 

@@ -152,8 +152,11 @@ class StudySession(Base):
     method: Mapped[str] = mapped_column(String(20))
     seed: Mapped[int] = mapped_column(Integer)
     config: Mapped[dict[str, Any]] = mapped_column()
-    sort_rule: Mapped[Any] = mapped_column(JSON)
+    sort_rule: Mapped[str | dict[str, str]] = mapped_column(JSON)
     strategy: Mapped[str | None] = mapped_column(String(40))
+    strategy_options: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    """The strategy's options besides its budget (`learner.run.STRATEGY_OPTIONS`), spelled
+    out; None (stored before 0006) reads as the strategy's defaults."""
     advice_budget: Mapped[int] = mapped_column(Integer, default=0)
     advisor_checkpoint: Mapped[str | None] = mapped_column(Text)
     oracle_error_rate: Mapped[float | None] = mapped_column(Float)

@@ -6,6 +6,7 @@ from starlette.concurrency import run_in_threadpool
 
 from server.db.models import StudySession
 from server.deps import ManagerDep, ParticipantDep
+from server.live import advising
 from server.routes.pages import visit_for_token
 from server.schemas.participant import (
     AdviceCreate,
@@ -17,7 +18,6 @@ from server.schemas.participant import (
 )
 from server.services import consent as consent_service
 from server.services.errors import NotFound
-from server.sessions import advising
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
 MAX_WAIT_S = 30.0

@@ -7,6 +7,7 @@ from datetime import datetime
 from pydantic import BaseModel, ConfigDict, Field
 
 from server.schemas.types import Int, Number
+from sim.actions import ACTION_NAMES
 
 MAX_DECISION_TIME_S = 86_400.0
 """A decision time beyond a day is a broken clock, not a decision."""
@@ -72,9 +73,7 @@ class ParticipantState(BaseModel):
         default=False, description="Advice over; the learner waits for a free trainer slot."
     )
     history: list[HistoryItem] = Field(default_factory=list)
-    action_names: list[str] = Field(
-        default_factory=lambda: ["grab", "move right", "move left", "drop"]
-    )
+    action_names: list[str] = Field(default_factory=lambda: list(ACTION_NAMES))
 
 
 class AdviceReceipt(BaseModel):

@@ -7,12 +7,20 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from learner.docstrings import field_docstrings
+from learner.run import MOTIONS
+from learner.strategies import STRATEGY_NAMES
 from server.db.models import Method
 from server.schemas.types import Int, Key, Number
+from sim.rewards import REWARD_SCHEMES
+from sim.scenario import ScenarioOptions
 
-Strategy = Literal["early", "alternating", "importance", "mistake_correcting"]
-Motion = Literal["physics", "fast"]
-RewardSchemeName = Literal["paper", "authors-autonomous", "authors-interactive"]
+SCENARIO_DOCS = field_docstrings(ScenarioOptions)
+
+# The names are the learner's and the scenario's, never restated here.
+Strategy = Literal[STRATEGY_NAMES]  # type: ignore[valid-type]
+Motion = Literal[MOTIONS]  # type: ignore[valid-type]
+RewardSchemeName = Literal[REWARD_SCHEMES]  # type: ignore[valid-type]
 
 
 class Scenario(BaseModel):
@@ -21,21 +29,36 @@ class Scenario(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     reward_scheme: RewardSchemeName = Field(
-        default="paper",
-        description="What a step without a placement costs: paper (the paper's text: -0.01 "
-        "after the 18th step), authors-autonomous (the authors' DeepRL script: 0 up to the "
-        "19th step, then -0.01 x (n - 19)), authors-interactive (their IDeepRL scripts: -0.01 "
-        "from the first step).",
+        default="paper", description=SCENARIO_DOCS["reward_scheme"]
     )
     grasp_failure_rate: Number = Field(
-        default=0.0, ge=0.0, le=1.0, description="Chance that a grab comes back empty."
+        default=0.0, ge=0.0, le=1.0, description=SCENARIO_DOCS["grasp_failure_rate"]
     )
     knock_off_rate: Number = Field(
-        default=0.0,
-        ge=0.0,
-        le=1.0,
-        description="Chance that a grab knocks one other object off the center table (lost).",
+        default=0.0, ge=0.0, le=1.0, description=SCENARIO_DOCS["knock_off_rate"]
     )
+
+
+class StrategyOptions(BaseModel):
+    """The advising strategy's options besides its budget (`learner.run.STRATEGY_OPTIONS`;
+    a test keeps the two the same). Unset ones take the strategy's defaults; one the
+    chosen strategy does not take is a 422."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    interval: Int | None = Field(
+        default=None, ge=1, le=100_000, description="alternating: advise every Nth step (2)."
+    )
+    threshold: Number | None = Field(
+        default=None,
+        ge=0.0,
+        description="importance, mistake_correcting: the advisor's Q-value spread (max - min) "
+        "from which a state is important (0.1).",
+    )
+
+    def given(self) -> dict[str, Any]:
+        """The options set, by name."""
+        return self.model_dump(exclude_none=True)
 
 
 class SessionCreate(BaseModel):
@@ -68,6 +91,10 @@ class SessionCreate(BaseModel):
         | Annotated[dict[Key, Annotated[str, Field(max_length=10)]], Field(max_length=12)]
     ) = Field(default="color", description='"color", "shape", or a map {"cube/red": "left", ...}.')
     strategy: Strategy = Field(default="early", description="Advising strategy (advised methods).")
+    strategy_options: StrategyOptions = Field(
+        default_factory=StrategyOptions,
+        description="The strategy's options (interval, threshold); unset: its defaults.",
+    )
     advice_budget: Int | None = Field(
         default=None, ge=0, le=100_000, description="Advice in all (default: the preset's)."
     )
@@ -114,8 +141,11 @@ class SessionPublic(BaseModel):
     method: str
     seed: int
     config: dict[str, Any]
-    sort_rule: Any
+    sort_rule: str | dict[str, str]
     strategy: str | None
+    strategy_options: dict[str, Any] | None = Field(
+        default=None, description="The strategy's options, defaults spelled out."
+    )
     advice_budget: int
     advisor_checkpoint: str | None
     oracle_error_rate: float | None

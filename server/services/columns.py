@@ -6,13 +6,19 @@ model); the learner config's columns from `DQNConfig`; the rest are documented h
 
 from __future__ import annotations
 
-import ast
-import inspect
-import itertools
-import textwrap
 from typing import Any
 
+from learner.config import DQNConfig
+from learner.config import field_docs as config_docs
+from learner.docstrings import field_docstrings
+from learner.records import EpisodeRecord, StepRecord
+from learner.sb3_dqn import FIELDS as SB3_FIELDS
+from learner.strategies import STRATEGY_NAMES
 from server.services.tables import Column, column
+from sim.scenario import ScenarioOptions
+
+SCENARIO_DOCS = field_docstrings(ScenarioOptions)
+"""The scenario options' meanings, written once under `sim.ScenarioOptions`'s fields."""
 
 SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session id (unique in the database)."),
@@ -21,10 +27,7 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     "method": ("string", "Who advised: autonomous, agent, human, oracle or random."),
     "participant": ("string", "Pseudonym of the human advisor (human sessions)."),
     "seed": ("integer", "Seed of the scene, network init, memory sampling and exploration."),
-    "strategy": (
-        "string",
-        "Advising strategy (early, alternating, importance, mistake_correcting).",
-    ),
+    "strategy": ("string", f"Advising strategy ({', '.join(STRATEGY_NAMES)})."),
     "advice_budget": ("integer", "Advice the strategy may ask for in all [count]."),
     "advisor_checkpoint": ("string", "Trained learner that advised (agent sessions)."),
     "oracle_error_rate": (
@@ -37,17 +40,14 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
         "Sorting rule: color (blue right, red left), shape (cubes left, the rest right), "
         "or a map written shape/color=side;... for all six objects.",
     ),
-    "reward_scheme": (
-        "string",
-        "What a step without a placement cost: paper (-0.01 after the 18th step), "
-        "authors-autonomous (0 up to the 19th, then -0.01 x (n - 19)), authors-interactive "
-        "(-0.01 from the first step).",
-    ),
-    "grasp_failure_rate": ("number", "Chance that a grab came back empty [probability]."),
-    "knock_off_rate": (
-        "number",
-        "Chance that a grab knocked another object off the center table [probability].",
-    ),
+    **{
+        name: (kind, SCENARIO_DOCS[name] + unit)
+        for name, kind, unit in (
+            ("reward_scheme", "string", ""),
+            ("grasp_failure_rate", "number", " [probability]"),
+            ("knock_off_rate", "number", " [probability]"),
+        )
+    },
     "episodes": ("integer", "Training episodes the session was set to run [count]."),
     "max_episode_steps": ("integer", "Steps after which an episode is truncated [count]."),
     "status": ("string", "Final or current status (finished, running, stopped, ...)."),
@@ -142,29 +142,6 @@ UNITS = {
 }
 
 
-def field_docs(cls: type) -> dict[str, str]:
-    """Docstrings written under the fields of a (data)class, by field name."""
-    try:
-        source = textwrap.dedent(inspect.getsource(cls))
-    except (OSError, TypeError):
-        return {}
-    tree = ast.parse(source)
-    klass = tree.body[0]
-    assert isinstance(klass, ast.ClassDef)
-    docs: dict[str, str] = {}
-    body = klass.body
-    for node, following in itertools.pairwise(body):
-        if (
-            isinstance(node, ast.AnnAssign)
-            and isinstance(node.target, ast.Name)
-            and isinstance(following, ast.Expr)
-            and isinstance(following.value, ast.Constant)
-            and isinstance(following.value.value, str)
-        ):
-            docs[node.target.id] = " ".join(following.value.value.split())
-    return docs
-
-
 def _sql_type(column: Any) -> str:
     from sqlalchemy import Boolean, DateTime, Float, Integer
 
@@ -178,11 +155,10 @@ def _sql_type(column: Any) -> str:
 def _record_columns(table: str) -> list[Column]:
     """Step or episode columns: types from the database model, descriptions from the
     docstrings under the learner's record fields."""
-    from learner import EpisodeRecord, StepRecord
     from server.db.models import Episode, Step
 
     model, record = (Step, StepRecord) if table == "steps" else (Episode, EpisodeRecord)
-    docs = field_docs(record)
+    docs = field_docstrings(record)
     docs["phase"] = PHASES[table]
     columns = [column("session_id", "integer", "Session the record belongs to.")]
     for c in model.__table__.columns:
@@ -201,10 +177,6 @@ def _config_columns(configs: list[dict[str, Any]]) -> list[Column]:
     hyperparameters of sb3-dqn sessions) come after."""
     import dataclasses
     import typing
-
-    from learner.config import DQNConfig
-    from learner.config import field_docs as config_docs
-    from learner.sb3_dqn import FIELDS as SB3_FIELDS
 
     hints = typing.get_type_hints(DQNConfig)
     docs = {**config_docs(), **SB3_FIELDS}

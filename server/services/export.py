@@ -27,8 +27,9 @@ from server.services import learning
 from server.services.columns import TEXT_KEYS, table_columns
 from server.services.studies import get_study
 from server.services.tables import column, resource, write_csv, write_parquet
+from sim.actions import ACTION_NAMES
+from sim.rules import SortRule
 
-ACTION_NAMES = ("grab", "move right", "move left", "drop")
 FORMATS = ("csv", "parquet")
 TABLES = ("sessions", "episodes", "steps", "advice", "texts_versions")
 KEYS: dict[str, dict[str, Any]] = {
@@ -48,9 +49,8 @@ DICTIONARY_COLUMNS = [
 ]
 
 
-def plain_sort_rule(spec: Any) -> str:
+def plain_sort_rule(spec: str | dict[str, str]) -> str:
     """`color`, `shape`, or `cube/red=left;cube/blue=right;...` for an explicit map."""
-    from sim.rules import SortRule
 
     rule = SortRule.parse(spec)
     if rule.name != "map":
@@ -73,7 +73,7 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "oracle_error_rate": s.oracle_error_rate,
             "motion": s.motion,
             "sort_rule": plain_sort_rule(s.sort_rule),
-            **learning.parse_scenario(s.scenario),
+            **learning.parse_scenario(s.scenario).to_dict(),
             "episodes": s.episodes,
             "max_episode_steps": s.max_episode_steps,
             "status": s.status,

@@ -1,21 +1,44 @@
-"""Where the server meets the scenario and the learner, through their documented contracts
-(docs/architecture.md): configs, sorting rules, environments, advisors, strategies."""
+"""Where the server meets the learner: a session is a `learner.run.RunSpec`, read from the
+REST body when it is created, stored in the session row's columns, and read back by the
+worker that runs it and by the batch that looks for it (docs/architecture.md)."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import Any
 
+from learner.config import DQNConfig
+from learner.run import RunSpec, RunSpecError
+from learner.sb3_dqn import split_config
+from server.db.models import UNADVISED_METHODS, Method, StudySession
+from server.schemas.sessions import SessionCreate
 from server.services.errors import Invalid
+from sim.rules import SortRule
+from sim.scenario import ScenarioOptions
 
 SB3_DQN = "sb3-dqn"
 
 
-def build_config(preset: str, overrides: dict[str, Any], **fields: int | None) -> dict[str, Any]:
-    """The full learner config as a dict: preset, then `overrides`, then the session's own
-    fields (`episodes`, `max_episode_steps`, `advice_budget`) where set; errors name the
-    field."""
-    from learner import DQNConfig
+def advisor_of(method: str) -> str:
+    """The run's advisor for a session's method (the autonomous DeepRL and the SB3
+    baseline have none)."""
+    return "none" if method in UNADVISED_METHODS else str(method)
 
+
+def learner_of(method: str) -> str:
+    """The run's learner for a session's method (`learner.run.LEARNERS`)."""
+    return SB3_DQN if method == SB3_DQN else "dqn"
+
+
+def default_motion(method: str) -> str:
+    """A person watches a human session move; machines need no motion."""
+    return "physics" if method == Method.human else "fast"
+
+
+def build_config(preset: str, overrides: dict[str, Any], **fields: int | None) -> DQNConfig:
+    """The learner config: preset, then `overrides`, then the session's own fields
+    (`episodes`, `max_episode_steps`, `advice_budget`) where set; errors name the field."""
     try:
         base = DQNConfig.preset(preset)
     except (ValueError, KeyError) as error:
@@ -29,26 +52,8 @@ def build_config(preset: str, overrides: dict[str, Any], **fields: int | None) -
     data = {**defaults, **overrides}
     data.update({name: value for name, value in fields.items() if value is not None})
     try:
-        return DQNConfig.from_dict(data).to_dict()
+        return DQNConfig.from_dict(data)
     except (ValueError, TypeError) as error:
-        raise Invalid("config", str(error)) from None
-
-
-def session_config(
-    method: str, preset: str, overrides: dict[str, Any], **fields: int | None
-) -> dict[str, Any]:
-    """What a session of `method` stores as its config: the learner config
-    (`build_config`); for `sb3-dqn` also the Stable-Baselines3 DQN hyperparameters mapped
-    from it (`sb3_*` fields, `learner.sb3_dqn`), so an audit and an export show them."""
-    config = build_config(preset, overrides, **fields)
-    if method != SB3_DQN:
-        return config
-    from learner import DQNConfig
-    from learner.sb3_dqn import sb3_hyperparameters
-
-    try:
-        return {**config, **sb3_hyperparameters(DQNConfig.from_dict(config))}
-    except ValueError as error:
         raise Invalid("config", str(error)) from None
 
 
@@ -60,79 +65,130 @@ def require_sb3(method: str) -> None:
         raise Invalid("method", MISSING)
 
 
-def parse_sort_rule(spec: str | dict[str, str]) -> Any:
-    import sim
-
+def parse_sort_rule(spec: str | dict[str, str]) -> str | dict[str, str]:
     try:
-        return sim.SortRule.parse(spec).to_spec()
+        return SortRule.parse(spec).to_spec()
     except (ValueError, TypeError, KeyError) as error:
         raise Invalid("sort_rule", str(error)) from None
 
 
-def parse_scenario(values: dict[str, Any] | None) -> dict[str, Any]:
-    """The scenario options, every one spelled out (defaults filled in), as JSON."""
-    import sim
-
+def parse_scenario(values: dict[str, Any] | None) -> ScenarioOptions:
     try:
-        return sim.ScenarioOptions.from_dict(values).to_dict()
+        return ScenarioOptions.from_dict(values)
     except (ValueError, TypeError) as error:
         raise Invalid("scenario", str(error)) from None
 
 
-def make_env(session: Any, record_motion: bool) -> Any:
-    import sim
+def validated(spec: RunSpec) -> RunSpec:
+    """`spec.validate()`, its errors as the API's (naming the body's field)."""
+    try:
+        return spec.validate()
+    except RunSpecError as error:
+        raise Invalid(error.field, str(error)) from None
 
-    return sim.SortingEnv(
-        motion=session.motion,
-        sort_rule=session.sort_rule,
-        max_episode_steps=session.max_episode_steps,
-        record_motion=record_motion,
-        **parse_scenario(session.scenario),
+
+def spec_from_body(body: SessionCreate, advisor_checkpoint: str | None = None) -> RunSpec:
+    """The run a REST session body describes, checked (`Invalid` names the field).
+    `advisor_checkpoint`: the checkpoint file the body's `advisor_checkpoint` resolves to."""
+    require_sb3(str(body.method))
+    advised = body.method not in UNADVISED_METHODS
+    config = build_config(
+        body.preset,
+        body.config,
+        episodes=body.episodes,
+        max_episode_steps=body.max_episode_steps,
+        advice_budget=body.advice_budget if advised else 0,
+    )
+    return validated(
+        RunSpec(
+            seed=body.seed,
+            config=config,
+            preset=body.preset,
+            advisor=advisor_of(body.method),
+            advisor_checkpoint=advisor_checkpoint,
+            error_rate=body.oracle_error_rate if body.method == Method.oracle else 0.0,
+            strategy=body.strategy,
+            strategy_options=body.strategy_options.given(),
+            motion=body.motion or default_motion(body.method),
+            sort_rule=parse_sort_rule(body.sort_rule),
+            scenario=parse_scenario(body.scenario.model_dump()),
+            learner=learner_of(body.method),
+        )
     )
 
 
-def make_machine_advisor(session: Any, env: Any) -> Any:
-    """The advisor of an `agent`, `oracle` or `random` session."""
-    from learner import make_advisor
-
-    if session.method == "agent":
-        return make_advisor("agent", checkpoint=session.advisor_checkpoint)
-    if session.method == "oracle":
-        return make_advisor(
-            "oracle",
-            sort_rule=session.sort_rule,
-            error_rate=session.oracle_error_rate or 0.0,
-            seed=session.seed,
-        )
-    assert session.method == "random", session.method
-    return make_advisor("random", seed=session.seed)
-
-
-def make_strategy(session: Any) -> Any:
-    from learner import make_strategy
-
-    if session.strategy is None:
-        return None
-    return make_strategy(session.strategy, session.advice_budget)
+def stored(spec: RunSpec) -> dict[str, Any]:
+    """The session row's columns that hold the run (`spec_of` reads them back)."""
+    oracle = spec.advisor == "oracle"
+    return {
+        "seed": spec.seed,
+        "config": {**spec.config.to_dict(), **spec.sb3},  # sb3-dqn's mapped settings too
+        "sort_rule": spec.sort_rule,
+        "strategy": spec.strategy if spec.advised else None,
+        "strategy_options": dict(spec.strategy_options) if spec.advised else None,
+        "advice_budget": spec.advice_budget,
+        "advisor_checkpoint": spec.advisor_checkpoint,
+        "oracle_error_rate": spec.error_rate if oracle else None,
+        "motion": spec.motion,
+        "scenario": spec.scenario.to_dict(),
+        "episodes": spec.config.episodes,
+        "max_episode_steps": spec.config.max_episode_steps,
+    }
 
 
-def make_trainer(
-    env: Any,
-    session: Any,
-    advisor: Any,
-    strategy: Any,
-    callbacks: list[Any],
-    torch_threads: int | None,
-) -> Any:
-    from learner import DQNConfig, Trainer
-    from learner.sb3_dqn import split_config
-
-    stored, sb3 = split_config(session.config)
-    config = DQNConfig.from_dict(stored)
-    if torch_threads:  # a runtime field: a checkpoint resumes under any thread count
+def spec_of(session: StudySession, torch_threads: int | None = None) -> RunSpec:
+    """The run a stored session describes, as the learner reads it back: config fields
+    added since it was stored take their defaults, as do a strategy's options stored before
+    they could be set. `torch_threads` is a runtime field (a checkpoint resumes under any)."""
+    stored_config, sb3 = split_config(session.config)
+    config = DQNConfig.from_dict(stored_config)
+    if torch_threads:
         config = config.replace(torch_threads=torch_threads)
-    if session.method == SB3_DQN:
-        from learner.sb3_dqn import SB3DQNTrainer
+    return RunSpec(
+        seed=session.seed,
+        config=config,
+        advisor=advisor_of(session.method),
+        advisor_checkpoint=session.advisor_checkpoint,
+        error_rate=session.oracle_error_rate or 0.0,
+        strategy=session.strategy or "early",
+        strategy_options=session.strategy_options or {},
+        budget=session.advice_budget,
+        motion=session.motion,
+        sort_rule=session.sort_rule,
+        scenario=ScenarioOptions.from_dict(session.scenario),
+        learner=learner_of(session.method),
+        sb3=sb3,
+    ).normalized()
 
-        return SB3DQNTrainer(env, config, session.seed, callbacks, hyperparameters=sb3)
-    return Trainer(env, config, advisor, strategy, seed=session.seed, callbacks=callbacks)
+
+def identity(method: str, spec: RunSpec) -> dict[str, Any]:
+    """What identifies a run among a study's sessions (the batch finds its runs by it):
+    the method and every stored choice that decides the run's course, in the JSON form the
+    database gives back; the label is a name, not part of it."""
+    columns = stored(spec)
+    path = columns["advisor_checkpoint"]
+    return json.loads(
+        json.dumps(
+            {
+                "method": str(method),
+                "seed": columns["seed"],
+                "config": columns["config"],
+                "sort_rule": columns["sort_rule"],
+                "strategy": columns["strategy"],
+                "strategy_options": columns["strategy_options"],
+                "advisor_checkpoint": None if path is None else str(Path(path).resolve()),
+                "oracle_error_rate": columns["oracle_error_rate"],
+                "motion": columns["motion"],
+                "scenario": columns["scenario"],
+            }
+        )
+    )
+
+
+def session_identity(session: StudySession) -> dict[str, Any] | None:
+    """`identity` of a stored session; None when the learner or the scenario can no longer
+    read it (a field since removed): then it is never the same run as a new one."""
+    try:
+        return identity(session.method, spec_of(session))
+    except (ValueError, TypeError):
+        return None

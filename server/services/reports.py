@@ -20,8 +20,8 @@ import pandas as pd
 from sqlalchemy.orm import Session
 
 from server.analysis import EpisodeTableError, ReportResult, method_name, write_report
-from server.batch.episodes import load_episodes, load_training_steps, session_settings
 from server.db.models import Status, StudySession
+from server.services.episodes import load_episodes, load_training_steps, session_settings
 from server.services.errors import Conflict, Invalid, NotFound
 from server.services.sessions import list_sessions
 from server.services.studies import get_study

@@ -1,36 +1,29 @@
-"""Sessions: create (validated against the learner and the scenario), read, claim for a
-worker, and find the ones whose worker died."""
+"""Sessions: create (the run checked once, `learning.spec_from_body`) and read. Who owns a
+running one is `server.services.ownership`'s (its names are re-exported here)."""
 
 from __future__ import annotations
 
-import os
 import secrets
-import socket
-import uuid
-from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
-from sqlalchemy import select, update
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from learner.run import RunSpec
 from server.db.models import (
-    LIVE_STATUSES,
-    RESUMABLE_STATUSES,
-    UNADVISED_METHODS,
     Episode,
     Method,
     Participant,
-    Status,
     StudySession,
-    utcnow,
 )
 from server.schemas.sessions import SessionCreate, SessionPublic
 from server.services import learning
-from server.services.errors import Conflict, Invalid, NotFound
+from server.services.errors import Invalid, NotFound
+from server.services.ownership import claim as claim
+from server.services.ownership import mark_dead_interrupted as mark_dead_interrupted
+from server.services.ownership import set_status as set_status
+from server.services.ownership import silent_sessions as silent_sessions
 from server.services.studies import get_study
-
-HOST = socket.gethostname()
-VALUE_STRATEGIES = ("importance", "mistake_correcting")
 
 
 def participant_url(base_url: str, token: str) -> str:
@@ -75,40 +68,17 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
 
 
 def create_session(
-    db: Session, study_id: int, body: SessionCreate, data_dir: Path | None = None
+    db: Session,
+    study_id: int,
+    body: SessionCreate,
+    data_dir: Path | None = None,
+    spec: RunSpec | None = None,
 ) -> StudySession:
     """A new session in `created` state; a human one gets its participant and token.
-    `data_dir`: where an advisor's checkpoint file must lie (see `advisor_path`)."""
+    `data_dir`: where an advisor's checkpoint file must lie (see `advisor_path`). `spec`:
+    the run `body` describes when the caller has it already (`learning.spec_from_body`)."""
     get_study(db, study_id)
     method = Method(body.method)
-    advised = method not in UNADVISED_METHODS
-    learning.require_sb3(method.value)
-    config = learning.session_config(
-        method.value,
-        body.preset,
-        body.config,
-        episodes=body.episodes,
-        max_episode_steps=body.max_episode_steps,
-        advice_budget=body.advice_budget if advised else 0,
-    )
-    sort_rule = learning.parse_sort_rule(body.sort_rule)
-    if advised and body.strategy in VALUE_STRATEGIES and method != Method.agent:
-        raise Invalid(
-            "strategy",
-            f"the {body.strategy} strategy weighs the advisor's Q-values, which only an "
-            "'agent' advisor has; use early or alternating advising",
-        )
-    if (
-        advised
-        and body.strategy == "early"
-        and config["advice_budget"] > config["pretraining_steps"]
-    ):
-        raise Invalid(
-            "advice_budget",
-            f"early advising gives its {config['advice_budget']} advice at the end of "
-            f"pretraining, which has only {config['pretraining_steps']} steps; lower "
-            "advice_budget or raise config.pretraining_steps",
-        )
     if method == Method.agent:
         if not body.advisor_checkpoint:
             raise Invalid(
@@ -122,23 +92,17 @@ def create_session(
         advisor = None
     if body.participant and method != Method.human:
         raise Invalid("participant", "only method 'human' has a participant")
+    if spec is None:
+        spec = learning.spec_from_body(body, advisor)
+    else:
+        spec = learning.validated(spec.replace(advisor_checkpoint=advisor))
     session = StudySession(
         study_id=study_id,
         label=body.label,
         method=method.value,
-        seed=body.seed,
-        config=config,
-        sort_rule=sort_rule,
-        strategy=body.strategy if advised else None,
-        advice_budget=config["advice_budget"],
-        advisor_checkpoint=advisor,
         keep_replay_memory=body.keep_replay_memory,
-        oracle_error_rate=body.oracle_error_rate if method == Method.oracle else None,
-        motion=body.motion or ("physics" if method == Method.human else "fast"),
-        scenario=learning.parse_scenario(body.scenario.model_dump()),
-        episodes=config["episodes"],
-        max_episode_steps=config["max_episode_steps"],
         idle_limit_s=body.idle_limit_s,
+        **learning.stored(spec),
     )
     if method == Method.human:
         pseudonym = body.participant or f"p-{secrets.token_hex(4)}"
@@ -203,113 +167,3 @@ def list_episodes(db: Session, session_id: int) -> list[Episode]:
         select(Episode).where(Episode.session_id == session_id).order_by(Episode.first_global_step)
     )
     return list(db.scalars(query))
-
-
-def claim(db: Session, session_id: int, resume: bool) -> str:
-    """Mark the session running under a new worker token, or say why it cannot run.
-
-    The conditional UPDATE makes the claim atomic: two starts of one session (two clicks,
-    a server and a batch runner) cannot both get it."""
-    session = get_session(db, session_id)
-    allowed = [Status.created] if not resume else list(RESUMABLE_STATUSES)
-    if session.status not in [s.value for s in allowed]:
-        if session.status in [s.value for s in LIVE_STATUSES]:
-            raise Conflict(f"session {session_id} is {session.status} already")
-        if session.status == Status.finished:
-            raise Conflict(f"session {session_id} has finished; create a new session to rerun it")
-        if not resume:
-            raise Conflict(f"session {session_id} is {session.status}; resume it instead of start")
-        raise Conflict(f"session {session_id} is {session.status} and cannot be resumed")
-    token = uuid.uuid4().hex
-    now = utcnow()
-    result = db.execute(
-        update(StudySession)
-        .where(StudySession.id == session_id, StudySession.status == session.status)
-        .values(
-            status=Status.running.value,
-            status_detail="",
-            worker_token=token,
-            worker_host=HOST,
-            worker_pid=None,
-            heartbeat_at=now,
-            started_at=session.started_at or now,
-        )
-    )
-    db.commit()
-    if result.rowcount != 1:  # type: ignore[attr-defined]
-        raise Conflict(f"session {session_id} was started by someone else just now")
-    return token
-
-
-def set_status(
-    db: Session, session_id: int, status: Status, detail: str = "", token: str | None = None
-) -> bool:
-    """Set the status, only if `token` (when given) still owns the session."""
-    query = update(StudySession).where(StudySession.id == session_id)
-    if token is not None:
-        query = query.where(StudySession.worker_token == token)
-    values: dict[str, object] = {"status": status.value, "status_detail": detail}
-    if status == Status.finished:
-        values["finished_at"] = utcnow()
-    result = db.execute(query.values(**values))
-    db.commit()
-    return result.rowcount == 1  # type: ignore[attr-defined]
-
-
-def pid_alive(pid: int) -> bool:
-    """Whether a process of this id runs on this host (one we may not signal counts)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def mark_dead_interrupted(db: Session, stale_after_s: float, owned: set[int]) -> list[int]:
-    """Sessions marked running/paused whose worker is gone become `interrupted` (resumable).
-
-    Gone: on this host and its pid is dead, or silent for `stale_after_s` (other hosts,
-    e.g. a Ray batch). Sessions whose worker this process owns are the manager's to judge
-    (`silent_sessions`): it kills a hung worker before marking its session."""
-    stale = datetime.now(UTC) - timedelta(seconds=stale_after_s)
-    query = select(StudySession).where(StudySession.status.in_([s.value for s in LIVE_STATUSES]))
-    marked = []
-    for session in db.scalars(query):
-        if session.id in owned:
-            continue
-        heartbeat = session.heartbeat_at
-        if heartbeat is not None and heartbeat.tzinfo is None:
-            heartbeat = heartbeat.replace(tzinfo=UTC)
-        dead_here = (
-            session.worker_host == HOST
-            and session.worker_pid is not None
-            and not pid_alive(session.worker_pid)
-        )
-        silent = heartbeat is None or heartbeat < stale
-        if dead_here or silent:
-            session.status = Status.interrupted.value
-            session.status_detail = "its worker stopped without finishing; resume it"
-            marked.append(session.id)
-    db.commit()
-    return marked
-
-
-def silent_sessions(db: Session, stale_after_s: float, ids: set[int]) -> list[tuple[int, str]]:
-    """(id, worker token) of the live sessions among `ids` whose worker has not marked
-    itself alive for `stale_after_s`: hung (stopped, deadlocked, swapped out for good)."""
-    if not ids:
-        return []
-    stale = datetime.now(UTC) - timedelta(seconds=stale_after_s)
-    query = select(StudySession).where(
-        StudySession.id.in_(ids), StudySession.status.in_([s.value for s in LIVE_STATUSES])
-    )
-    found = []
-    for session in db.scalars(query):
-        heartbeat = session.heartbeat_at
-        if heartbeat is not None and heartbeat.tzinfo is None:
-            heartbeat = heartbeat.replace(tzinfo=UTC)
-        if (heartbeat is None or heartbeat < stale) and session.worker_token:
-            found.append((session.id, session.worker_token))
-    return found

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import viser
 from sqlalchemy.orm import Session, sessionmaker
 
+from server.live.hub import Hub, HubEvent, Subscription
 from server.services.sessions import session_for_token
-from server.sessions.hub import Hub, HubEvent, Subscription
 from server.settings import Settings
 from server.viewer import connection
 from server.viewer.mirror import SceneMirror

@@ -12,7 +12,7 @@ import viser
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
-from server.sessions.hub import Hub
+from server.live.hub import Hub
 from server.viewer import ParticipantViewer, ViewerConfig
 from server.viewer.connection import CLOSE_FORBIDDEN, VERIFIED_VISER, token_from_path
 

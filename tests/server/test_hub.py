@@ -1,6 +1,6 @@
 import asyncio
 
-from server.sessions.hub import Hub, HubEvent
+from server.live.hub import Hub, HubEvent
 
 
 def test_subscribers_get_their_session_only_and_late_ones_get_the_scene_first() -> None:

@@ -16,7 +16,7 @@ from server.schemas.studies import StudyCreate
 from server.services.errors import Conflict
 from server.services.sessions import create_session
 from server.services.studies import create_study
-from server.sessions.worker import WorkerOptions, run_session
+from server.worker.worker import WorkerOptions, run_session
 from tests.server.live import fresh_database
 from tests.server.scale import EPISODES, session_body
 

@@ -11,7 +11,7 @@ import pandas as pd
 
 import sim
 from server.schemas.sessions import Scenario
-from server.services.learning import make_env
+from server.services.learning import spec_of
 from tests.server.scale import export, session_body, wait_for_status
 
 
@@ -33,7 +33,7 @@ def test_a_session_runs_under_its_scenario_options(api: httpx.Client) -> None:
     assert created.status_code == 201, created.text
     session = created.json()
     assert session["scenario"] == {**scenario, "grasp_failure_rate": 0.0}
-    env = make_env(type("Row", (), session)(), record_motion=False)
+    env = spec_of(type("Row", (), session)()).make_env()
     assert (env.reward_scheme, env.knock_off_rate) == ("authors-interactive", 0.25)
     env.close()
     assert api.post(f"/api/sessions/{session['id']}/start").status_code == 200

@@ -15,8 +15,8 @@ import pytest
 import uvicorn
 from fastapi import FastAPI
 
+from server.live.hub import HubEvent
 from server.main import create_app
-from server.sessions.hub import HubEvent
 from server.settings import Settings
 from tests.server.live import API_KEY, free_port, fresh_database
 from tests.server.participant import SimulatedParticipant

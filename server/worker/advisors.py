@@ -13,8 +13,9 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from server.sessions.link import WorkerLink
-from server.sessions.messages import AdviceRequest, AdviceResult
+from learner.advisors import Advisor
+from server.worker.link import WorkerLink
+from server.worker.messages import AdviceRequest, AdviceResult
 
 log = logging.getLogger(__name__)
 
@@ -106,7 +107,7 @@ class RecordingAdvisor:
 
     def __init__(
         self,
-        inner: Any,
+        inner: Advisor,
         kind: str,
         start_index: int,
         record: Callable[[dict[str, Any]], None],

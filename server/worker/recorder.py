@@ -17,6 +17,7 @@ from typing import Any, Protocol
 from sqlalchemy import bindparam, delete, insert, update
 from sqlalchemy.orm import Session, sessionmaker
 
+from learner.records import EpisodeRecord, StepRecord
 from server.db.models import Advice, Episode, Method, Step, StudySession, utcnow
 
 STEP_COLUMNS = frozenset(c.name for c in Step.__table__.columns) - {"id"}
@@ -31,10 +32,12 @@ class LeaseLost(Exception):
 
 
 class Checkpointable(Protocol):
-    def save_checkpoint(self, path: str | os.PathLike[str], *, memory: bool = ...) -> Any: ...
+    def save_checkpoint(self, path: str | os.PathLike[str], *, memory: bool = ...) -> None: ...
 
 
-def _row(record: Any, columns: frozenset[str], session_id: int) -> dict[str, Any]:
+def _row(
+    record: StepRecord | EpisodeRecord, columns: frozenset[str], session_id: int
+) -> dict[str, Any]:
     row = {k: v for k, v in record.to_dict().items() if k in columns}
     row["session_id"] = session_id
     row["wall_time"] = time.time()
@@ -76,13 +79,13 @@ class Recorder:
         self.episodes_since_checkpoint = 0
 
     # --- learner callbacks -------------------------------------------------------------
-    def on_step(self, record: Any) -> None:
+    def on_step(self, record: StepRecord) -> None:
         self._steps.append(_row(record, STEP_COLUMNS, self.session_id))
         self.steps = record.global_step
         if len(self._steps) >= self._flush_every:
             self.flush()
 
-    def on_episode(self, record: Any) -> None:
+    def on_episode(self, record: EpisodeRecord) -> None:
         self._episodes.append(_row(record, EPISODE_COLUMNS, self.session_id))
         if record.phase == TRAINING:
             self.episodes += 1
@@ -138,9 +141,7 @@ class Recorder:
         self.flush()
         self._dir.mkdir(parents=True, exist_ok=True)
         path = self._dir / (name or f"step-{self.steps:09d}.pt")
-        partial = path.with_name(path.name + ".partial")
-        trainer.save_checkpoint(partial, memory=memory)
-        os.replace(partial, path)
+        trainer.save_checkpoint(path, memory=memory)  # atomic: learner.checkpoint
         with self._factory() as db:
             self._own(
                 db,

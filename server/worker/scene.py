@@ -8,8 +8,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from server.sessions.link import WorkerLink
-from server.sessions.messages import SceneReset, SceneStep
+from server.worker.link import WorkerLink
+from server.worker.messages import SceneReset, SceneStep
 
 
 class SceneBroadcast(gym.Wrapper):

@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 
-from server.sessions.messages import AdviceAnswer, Command, StatusChanged, WorkerMessage
+from server.worker.messages import AdviceAnswer, Command, StatusChanged, WorkerMessage
 
 
 class WorkerExit(Exception):

@@ -13,11 +13,13 @@ import pandas as pd
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from learner import sb3_dqn
+from learner.config import PRESETS, DQNConfig
 from server.analysis.audit import describe_learner, describe_scenario
 from server.analysis.rescoring import STEP_COLUMNS
 from server.db.models import Episode, Step, StudySession
 from server.services.learning import parse_scenario
-from server.sessions.recorder import TRAINING
+from server.worker.recorder import TRAINING
 
 EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
     "session_id",
@@ -71,13 +73,10 @@ def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame
 def session_settings(sessions: Sequence[StudySession]) -> pd.DataFrame:
     """What each session ran under, for the report's comparability audit
     (`server.analysis.audit.SETTINGS_COLUMNS`)."""
-    from learner import sb3_dqn
-    from learner.config import PRESETS, DQNConfig
-
     presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
     rows = []
     for s in sessions:
-        scenario = parse_scenario(s.scenario)
+        scenario = parse_scenario(s.scenario).to_dict()
         config, sb3 = sb3_dqn.split_config(s.config)
         learner = (
             sb3_dqn.describe(sb3, config)  # another learner altogether: the audit flags it

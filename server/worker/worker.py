@@ -22,15 +22,15 @@ from typing import Any
 from sqlalchemy import select, update
 
 from server.db.engine import make_engine, make_session_factory
-from server.db.models import UNADVISED_METHODS, Advice, Method, Status, StudySession, utcnow
+from server.db.models import Advice, Method, Status, StudySession, utcnow
 from server.services import learning
 from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, set_status
-from server.sessions.advisors import HumanAdvisor, RecordingAdvisor
-from server.sessions.link import ParentGone, WorkerExit, WorkerLink
-from server.sessions.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
-from server.sessions.recorder import TRAINING, LeaseLost, Recorder
-from server.sessions.scene import SceneBroadcast
+from server.worker.advisors import HumanAdvisor, RecordingAdvisor
+from server.worker.link import ParentGone, WorkerExit, WorkerLink
+from server.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
+from server.worker.recorder import TRAINING, LeaseLost, Recorder
+from server.worker.scene import SceneBroadcast
 
 log = logging.getLogger(__name__)
 PROGRESS_EVERY_S = 0.2
@@ -120,7 +120,6 @@ class _Run:
         self.link = (
             WorkerLink(conn, self._on_pause, self._on_watch, self._on_idle) if conn else None
         )
-        self.env = SceneBroadcast(learning.make_env(s, record_motion=conn is not None), self.link)
         self.reporter = _Reporter(self)
         self.recorder = Recorder(
             self.factory,
@@ -133,39 +132,17 @@ class _Run:
             advice_written_elsewhere=s.method == Method.human,
         )
         resume = bool(s.checkpoint_path) and Path(s.checkpoint_path or "").is_file()
-        start_advice = s.checkpoint_advice if resume else 0
+        self.start_advice = s.checkpoint_advice if resume else 0
         self.advisor: Any = None
         self.queued = False
         self.waiting_for_participant = False
-        if s.method == Method.human:
-            if self.link is None:
-                raise Conflict("a human session needs the server: start it through the API")
-            self.advisor = HumanAdvisor(
-                self.link,
-                self.given,
-                start_advice,
-                s.advice_budget,
-                s.idle_limit_s or options.idle_limit_s,
-                lambda: self.recorder.steps + 1,
-                self._before_waiting,
-                self._until_participant_ready,
-            )
-            self.env.after_step.append(self.advisor.after_step)
-        elif s.method not in UNADVISED_METHODS:
-            self.advisor = RecordingAdvisor(
-                learning.make_machine_advisor(s, self.env),
-                s.method,
-                start_advice,
-                self.recorder.add_advice,
-                lambda: self.recorder.steps + 1,
-            )
-        self.trainer = learning.make_trainer(
-            self.env,
-            s,
-            self.advisor,
-            learning.make_strategy(s),
+        if s.method == Method.human and self.link is None:
+            raise Conflict("a human session needs the server: start it through the API")
+        self.trainer, self.env = learning.spec_of(s, options.torch_threads).build(
             [self.recorder, self.reporter],
-            options.torch_threads,
+            record_motion=conn is not None,
+            wrap_env=self._broadcast,
+            wrap_advisor=self._advisor,
         )
         if resume:
             self.trainer.load_checkpoint(s.checkpoint_path)
@@ -176,6 +153,38 @@ class _Run:
         self.env.episode = self.recorder.episodes
         self.reporter.phase = str(getattr(self.trainer, "stage", "pretraining"))
         self.bar: Any = None
+
+    def _broadcast(self, env: Any) -> SceneBroadcast:
+        """The environment as the trainer sees it: each step also goes to the live view."""
+        self.env = SceneBroadcast(env, self.link)
+        return self.env
+
+    def _advisor(self, machine: Any) -> Any:
+        """The session's advisor: a person through the web process (human), or the machine
+        advisor with its advice recorded."""
+        s = self.session
+        if s.method == Method.human:
+            assert self.link is not None
+            self.advisor = HumanAdvisor(
+                self.link,
+                self.given,
+                self.start_advice,
+                s.advice_budget,
+                s.idle_limit_s or self.options.idle_limit_s,
+                lambda: self.recorder.steps + 1,
+                self._before_waiting,
+                self._until_participant_ready,
+            )
+            self.env.after_step.append(self.advisor.after_step)
+        elif machine is not None:
+            self.advisor = RecordingAdvisor(
+                machine,
+                s.method,
+                self.start_advice,
+                self.recorder.add_advice,
+                lambda: self.recorder.steps + 1,
+            )
+        return self.advisor
 
     @property
     def advice_given(self) -> int:

@@ -18,6 +18,7 @@ from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
 
 from server.db.models import Advice, Status, StudySession
+from server.live.manager import HistoryEntry, SessionManager
 from server.schemas.participant import (
     AdviceCreate,
     AdviceReceipt,
@@ -27,10 +28,8 @@ from server.schemas.participant import (
 )
 from server.services.consent import NOT_CONSENTED
 from server.services.errors import Conflict, NotFound
-from server.sessions.manager import HistoryEntry, SessionManager
-from server.sessions.messages import AdviceAnswer
-
-ACTION_NAMES = ("grab", "move right", "move left", "drop")
+from server.worker.messages import AdviceAnswer
+from sim.actions import ACTION_NAMES
 
 
 @dataclass(frozen=True)

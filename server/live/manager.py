@@ -32,6 +32,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
+from server.live.hub import Hub
 from server.services.errors import Conflict
 from server.services.sessions import (
     claim,
@@ -40,9 +41,8 @@ from server.services.sessions import (
     set_status,
     silent_sessions,
 )
-from server.sessions.hub import Hub
-from server.sessions.link import WAITED_FOR_PARTICIPANT
-from server.sessions.messages import (
+from server.worker.link import WAITED_FOR_PARTICIPANT
+from server.worker.messages import (
     AdviceRequest,
     AdviceResult,
     Command,
@@ -53,7 +53,7 @@ from server.sessions.messages import (
     StatusChanged,
     TrainingWanted,
 )
-from server.sessions.worker import WorkerOptions, worker_main
+from server.worker.worker import WorkerOptions, worker_main
 
 log = logging.getLogger(__name__)
 HUB_KINDS: dict[type, str] = {

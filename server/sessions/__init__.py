@@ -1,1 +1,0 @@
-"""Running sessions beside the web process: workers, the channel to them, the event hub."""
