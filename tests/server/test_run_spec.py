@@ -29,6 +29,8 @@ REST_FIELD = {
     "motion": "motion",
     "sort_rule": "sort_rule",
     "scenario": "scenario",
+    "learner": "method",  # sb3-dqn's method picks Stable-Baselines3's learner
+    "sb3": "config",  # its sb3_* settings are mapped from the config
 }
 """Where each of the run's fields is set in the REST body."""
 NOT_THE_RUN = {"label", "participant", "keep_replay_memory", "idle_limit_s"}
