@@ -120,3 +120,47 @@ class EpisodeRecord:
 def column_docs(record_type: type) -> dict[str, str]:
     """Field name -> docstring of a record class: the export's column dictionary."""
     return field_docstrings(record_type)
+
+
+class StagedRun:
+    """The stage-and-episode loop a trainer offers its callers (the worker, the batch, the
+    CLI), shared by `learner.trainer.Trainer` and `learner.sb3_dqn.SB3DQNTrainer`: they set
+    `config`, `global_step`, `episodes_done`, `episode_record`, `_episode` and `_stopped`,
+    and define `step()`."""
+
+    config: Any
+    global_step: int
+    episodes_done: dict[str, int]
+    episode_record: EpisodeRecord | None
+    _episode: Any
+    _stopped: bool
+
+    def step(self) -> StepRecord:
+        raise NotImplementedError
+
+    @property
+    def stage(self) -> str:
+        """`pretraining` or `training`: the stage of the next step."""
+        return "pretraining" if self.global_step < self.config.pretraining_steps else "training"
+
+    @property
+    def done(self) -> bool:
+        return self._stopped or self.episodes_done["training"] >= self.config.episodes
+
+    @property
+    def observation(self) -> Any:
+        """The image the learner sees now; None between episodes."""
+        return None if self._episode is None else self._episode.obs
+
+    def stop(self) -> None:
+        """Make `done` true; `run` returns after the current step."""
+        self._stopped = True
+
+    def run(self) -> list[EpisodeRecord]:
+        """Step until done; returns the training episodes finished in this call."""
+        finished = []
+        while not self.done:
+            self.step()
+            if self.episode_record is not None and self.episode_record.phase == "train":
+                finished.append(self.episode_record)
+        return finished

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from learner.config import DQNConfig
-from learner.records import EpisodeRecord, StepRecord
+from learner.records import EpisodeRecord, StagedRun, StepRecord
 
 METHOD = "sb3-dqn"
 PREFIX = "sb3_"
@@ -130,7 +130,7 @@ def describe(hyper: dict[str, Any], config: dict[str, Any]) -> str:
     return f"{METHOD} (Stable-Baselines3 DQN: {items}; max_episode_steps={limit})"
 
 
-class SB3DQNTrainer:
+class SB3DQNTrainer(StagedRun):
     """Trains SB3's DQN on one environment with the `Trainer`'s contract; see the module
     docstring. `hyperparameters`: the `sb3_*` fields (default `sb3_hyperparameters(config)`);
     the config gives the stages (`pretraining_steps`, `episodes`, `max_episode_steps`) and
@@ -197,30 +197,6 @@ class SB3DQNTrainer:
         self.episode_record: EpisodeRecord | None = None
         self._episode: Any = None
         self._stopped = False
-
-    # --- the Trainer's contract ----------------------------------------------------------
-    @property
-    def stage(self) -> str:
-        return "pretraining" if self.global_step < self.config.pretraining_steps else "training"
-
-    @property
-    def done(self) -> bool:
-        return self._stopped or self.episodes_done["training"] >= self.config.episodes
-
-    @property
-    def observation(self) -> np.ndarray | None:
-        return None if self._episode is None else self._episode.obs
-
-    def stop(self) -> None:
-        self._stopped = True
-
-    def run(self) -> list[EpisodeRecord]:
-        finished = []
-        while not self.done:
-            self.step()
-            if self.episode_record is not None and self.episode_record.phase == "train":
-                finished.append(self.episode_record)
-        return finished
 
     def _progress_remaining(self) -> float:
         """SB3's progress, counted in training steps: its linear schedule then reaches the

@@ -27,7 +27,7 @@ from learner.checkpoint import read_checkpoint, write_checkpoint
 from learner.config import DQNConfig
 from learner.device import configure_threads, resolve_device
 from learner.exploration import EpsilonSchedule
-from learner.records import EpisodeRecord, StepRecord
+from learner.records import EpisodeRecord, StagedRun, StepRecord
 from learner.replay import ReplayMemory
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
 
@@ -54,7 +54,7 @@ class _Episode:
     loss_count: int = 0
 
 
-class Trainer:
+class Trainer(StagedRun):
     """Trains one learner on one environment; see the module docstring.
 
     `callbacks` are objects with `on_step(StepRecord)` and/or `on_episode(EpisodeRecord)`;
@@ -106,33 +106,6 @@ class Trainer:
         """The record of the episode the last step ended, else None."""
         self._episode: _Episode | None = None
         self._stopped = False
-
-    @property
-    def stage(self) -> str:
-        """`pretraining` or `training`: the stage of the next step."""
-        return "pretraining" if self.global_step < self.config.pretraining_steps else "training"
-
-    @property
-    def done(self) -> bool:
-        return self._stopped or self.episodes_done["training"] >= self.config.episodes
-
-    @property
-    def observation(self) -> np.ndarray | None:
-        """The image the learner sees now; None between episodes."""
-        return None if self._episode is None else self._episode.obs
-
-    def stop(self) -> None:
-        """Make `done` true; `run` returns after the current step."""
-        self._stopped = True
-
-    def run(self) -> list[EpisodeRecord]:
-        """Step until done; returns the training episodes finished in this call."""
-        finished = []
-        while not self.done:
-            self.step()
-            if self.episode_record is not None and self.episode_record.phase == "train":
-                finished.append(self.episode_record)
-        return finished
 
     def step(self) -> StepRecord:
         """Take one environment step (resetting first if no episode is in progress)."""
