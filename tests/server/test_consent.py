@@ -7,6 +7,8 @@ from __future__ import annotations
 import csv
 import io
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 import pytest
@@ -14,7 +16,7 @@ from sqlalchemy import func, select
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.models import Step
-from tests.server.live import API_KEY, LiveServer
+from tests.server.live import API_KEY, LiveServer, fresh_database
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import export, session_body
 
@@ -34,9 +36,29 @@ def _steps_in_database(server: LiveServer, session_id: int) -> int:
         engine.dispose()
 
 
+@pytest.fixture(scope="module")
+def quiet_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """A server whose workers' heartbeat (which also flushes) is too slow to store a step
+    within the test's wait: only the flush before waiting for advice can."""
+    data_dir: Path = tmp_path_factory.mktemp("quiet")
+    with fresh_database(data_dir) as url:
+        live = LiveServer(data_dir, url, heartbeat_s=30, stale_after_s=120).start()
+        try:
+            yield live
+        finally:
+            live.stop()
+
+
+@pytest.fixture
+def quiet_api(quiet_server: LiveServer) -> Iterator[httpx.Client]:
+    with quiet_server.client() as client:
+        yield client
+
+
 def test_a_session_started_by_the_researcher_asks_no_advice_before_consent_and_induction(
-    server: LiveServer, api: httpx.Client
+    quiet_server: LiveServer, quiet_api: httpx.Client
 ) -> None:
+    server, api = quiet_server, quiet_api
     study = api.post("/api/studies", json={"name": "consent gate"}).json()
     body = session_body("human", advice_budget=3)
     session = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
@@ -75,10 +97,20 @@ def test_a_session_started_by_the_researcher_asks_no_advice_before_consent_and_i
     assert participant.client.post("/api/participant/start").status_code == 200
     state = participant.next_request(timeout=60)
     assert state["advice_wanted"] and state["advice_index"] == 0 and state["ready"]
-    assert participant.advise(0, 1).status_code == 200
-    state = participant.next_request(timeout=60)
-    assert state["advice_index"] == 1
-    assert _steps_in_database(server, session["id"]) == first_turn + 1, "the advised step too"
+    # The request goes out first and the flush overlaps the person's decision: while the
+    # worker waits for an answer, the steps before it (the last advised one included)
+    # reach the database (the heartbeat's own flush comes every 30 s here).
+    for index in (1, 2):
+        assert participant.advise(index - 1, 1).status_code == 200
+        state = participant.next_request(timeout=60)
+        assert state["advice_index"] == index
+        deadline = time.monotonic() + 2
+        while (stored := _steps_in_database(server, session["id"])) < first_turn + index:
+            assert time.monotonic() < deadline, f"advised step {index} not stored in the wait"
+            time.sleep(0.05)
+        assert stored == first_turn + index, "only the steps before the wait"
+        waiting = participant.state()
+        assert waiting["advice_wanted"] and waiting["advice_index"] == index
 
     shown = api.get(f"/api/sessions/{session['id']}").json()
     assert shown["consented_at"] and shown["induction_done_at"] and shown["texts_version"] == 1
