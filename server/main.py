@@ -3,13 +3,11 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI, Request
-from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.security import HTTPAuthorizationCredentials
@@ -134,12 +132,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_openapi(app)
     add_docs(app)
 
-    @app.exception_handler(RequestValidationError)
-    async def invalid_request(_: Request, error: RequestValidationError) -> JSONResponse:
-        # FastAPI echoes the input, which JSON cannot carry when it is NaN or infinite.
-        detail = jsonable_encoder(_finite(error.errors()))
-        return JSONResponse({"detail": detail}, status_code=422)
-
     @app.exception_handler(ServiceError)
     async def service_error(_: Request, error: ServiceError) -> JSONResponse:
         if isinstance(error, Invalid):
@@ -148,17 +140,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return JSONResponse({"detail": error.message}, status_code=error.status_code)
 
     return app
-
-
-def _finite(value: Any) -> Any:
-    """`value` with every NaN or infinite float written as text."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
 
 
 def app_from_env() -> FastAPI:

@@ -209,6 +209,23 @@ def test_numbers_are_strict(server: LiveServer, participant_token: tuple[int, st
         assert response.status_code == 422
 
 
+def test_a_422_names_the_field_without_echoing_what_was_sent(
+    server: LiveServer, participant_token: tuple[int, str]
+) -> None:
+    study, _ = participant_token
+    sent = "echo-me-" + "x" * 40
+    with server.client() as api:
+        for body in [
+            {"method": sent},
+            {"method": "oracle", "seed": sent},
+            {"method": "oracle", "scenario": {"reward_scheme": sent}},
+        ]:
+            response = api.post(f"/api/studies/{study}/sessions", json=body)
+            assert response.status_code == 422, response.text
+            assert sent not in response.text and '"input"' not in response.text
+            assert response.json()["detail"][0]["loc"][0] == "body"
+
+
 def test_every_text_field_is_bounded(
     server: LiveServer, participant_token: tuple[int, str]
 ) -> None:
