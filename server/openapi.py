@@ -17,7 +17,9 @@ Which errors a route can return:
 - 413: a body larger than the server accepts, refused by `server.guard` before it is read:
   any POST, PUT, PATCH or DELETE (`guard.BODY_METHODS`), whether or not the route takes a
   body (a client that sends none never meets it);
-- 422: a parameter or body that does not validate (FastAPI), or a service's `Invalid`.
+- 422: a parameter or body that does not validate (FastAPI), or a service's `Invalid`; and on
+  any POST, PUT, PATCH or DELETE, a JSON body that JSON does not allow (NaN, a lone
+  surrogate), refused by `server.guard` whether or not the route reads a body.
 """
 
 from __future__ import annotations
@@ -63,6 +65,7 @@ EXTRA_ERRORS: dict[str, tuple[int, ...]] = {
     "create_study": (409,),
     "update_study": (409,),
     "delete_study": (409,),
+    "delete_session": (409,),
     "start_session": (409,),
     "pause_session": (409,),
     "resume_session": (409,),
@@ -72,6 +75,8 @@ EXTRA_ERRORS: dict[str, tuple[int, ...]] = {
     "get_report_file": (404,),
     "get_report_zip": (404,),
     "advice_observation": (404,),
+    "participant_get_consent": (409,),
+    "participant_give_consent": (409,),
     "participant_give_advice": (409,),
     "participant_start": (409,),
 }
@@ -107,7 +112,7 @@ def route_errors(operation: dict[str, Any], method: str = "") -> list[int]:
     places = {p.get("in") for p in operation.get("parameters", [])}
     if "path" in places:
         codes.add(404)
-    if places or "requestBody" in operation:
+    if places or "requestBody" in operation or method.upper() in BODY_METHODS:
         codes.add(422)
     return sorted(codes)
 

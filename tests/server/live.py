@@ -18,6 +18,8 @@ import httpx
 from sqlalchemy import create_engine, text
 from sqlalchemy.engine import make_url
 
+from tests.server.contract import checked_client
+
 ROOT = Path(__file__).absolute().parents[2]
 API_KEY = "test-researcher-key"
 
@@ -119,4 +121,4 @@ class LiveServer:
             headers["X-API-Key"] = key
         if token is not None:
             headers["Authorization"] = f"Bearer {token}"
-        return httpx.Client(base_url=self.url, headers=headers, timeout=120)
+        return checked_client(base_url=self.url, headers=headers, timeout=120)

@@ -7,10 +7,12 @@ from typing import Any
 
 import httpx
 
+from tests.server.contract import checked_client
+
 
 class SimulatedParticipant:
     def __init__(self, base_url: str, token: str) -> None:
-        self.client = httpx.Client(
+        self.client = checked_client(
             base_url=base_url, headers={"Authorization": f"Bearer {token}"}, timeout=60
         )
         self.version: int | None = None
