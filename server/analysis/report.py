@@ -61,6 +61,7 @@ TABLE_FILES: dict[str, str] = {
 OPTIONAL_TABLE_FILES: dict[str, str] = {
     "settings": "settings_per_method.csv",
     "rescored": "r_t_rescored.csv",
+    "rescored_agents": "r_t_rescored_per_agent.csv",
     "reference": "authors_reference.csv",
 }
 """Tables written when their input is given: the sessions' settings (the audit), the step
@@ -460,13 +461,14 @@ def write_report(
         kept = settings[settings["session_id"].isin(analysis.episodes["session_id"])]
         checked = audit(kept, baseline)
         analysis = _withhold_tests(analysis, checked, allow_mismatch)
-    rescored = None
+    rescored = rescored_agents = None
     if steps is not None and settings is not None:
         schemes = dict(zip(settings["session_id"], settings["reward_scheme"], strict=True))
         methods = dict(zip(settings["session_id"], settings["method"], strict=True))
         kept_steps = steps[steps["session_id"].isin(analysis.episodes["session_id"])]
         totals = rescored_totals(kept_steps, schemes, n_episodes=analysis.n_episodes)
         rescored = rescoring_table(totals, methods, baseline)
+        rescored_agents = totals.assign(method=totals["session_id"].map(methods))
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise EpisodeTableError(f"{out} is a file; pass a folder for the report")
@@ -492,6 +494,7 @@ def write_report(
         tables["settings"] = checked.methods
     if rescored is not None:
         tables["rescored"] = rescored
+        tables["rescored_agents"] = rescored_agents
     if reference == "authors":
         tables["reference"] = authors_totals(analysis.n_episodes)
     table_paths = {}
@@ -609,6 +612,8 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
             if f"improvement_{scheme}" in extra.rescored:
                 columns[f"improvement_{scheme}"] = f"vs baseline under {scheme}"
                 formats[f"improvement_{scheme}"] = md.signed_pct
+                columns[f"p_welch_{scheme}"] = f"Welch's p under {scheme}"
+                formats[f"p_welch_{scheme}"] = md.p_value
         out += [
             "## R_T rescored under each reward scheme",
             "",

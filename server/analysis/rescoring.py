@@ -12,6 +12,7 @@ from __future__ import annotations
 import pandas as pd
 
 from server.analysis.episodes import method_name, order_methods
+from server.analysis.stats import student_t_test
 from sim.rewards import REWARD_SCHEMES, rescore
 
 STEP_COLUMNS: tuple[str, ...] = (
@@ -59,7 +60,9 @@ def rescoring_table(
     totals: pd.DataFrame, methods: dict[int, str], baseline: str | None = None
 ) -> pd.DataFrame:
     """Per method: the schemes its sessions were scored under, mean R_T as logged and under
-    each scheme, and (with a baseline) the improvement in percent under each scheme."""
+    each scheme, and (with a baseline) the improvement in percent under each scheme and,
+    under each scheme, Welch's p for the agents' R_T against the baseline's (NaN with
+    fewer than two agents on a side)."""
     frame = totals.assign(method=totals["session_id"].map(methods))
     out = []
     for method in order_methods(frame["method"], baseline):
@@ -83,5 +86,19 @@ def rescoring_table(
             table[f"improvement_{scheme}"] = [
                 100.0 * (value - reference) / abs(reference) if reference else float("nan")
                 for value in table[column]
+            ]
+        # Under one scheme the agents' R_T are comparable, so they can be tested.
+        ours = frame["method"] == baseline
+        for scheme in REWARD_SCHEMES:
+            column = f"R_T_{scheme}"
+            table[f"p_welch_{scheme}"] = [
+                float("nan")
+                if method == baseline
+                else student_t_test(
+                    frame.loc[frame["method"] == method, column].to_numpy(),
+                    frame.loc[ours, column].to_numpy(),
+                    equal_var=False,
+                )[1]
+                for method in table["method"]
             ]
     return table

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
+from scipy import stats
 
 from server.analysis import write_report
 from server.analysis.audit import audit, describe_learner
 from server.analysis.rescoring import rescored_totals, rescoring_table
-from sim.rewards import step_penalty
+from sim.rewards import REWARD_SCHEMES, step_penalty
 from tests.server.analysis.test_report import study_episodes
 
 
@@ -127,3 +129,33 @@ def test_rescored_r_t_of_a_constructed_episode() -> None:
     # as logged, the same behaviour looks 110 % worse for agent; under one rule, equal
     assert table.loc["agent", "improvement_logged"] == pytest.approx(-110.0)
     assert table.loc["agent", "improvement_paper"] == pytest.approx(0.0)
+
+
+def test_rescored_r_t_are_tested_under_each_scheme_with_welch() -> None:
+    rng = np.random.default_rng(3)
+    rows = []
+    for session_id in range(1, 9):
+        method = "autonomous" if session_id <= 4 else "agent"
+        shift = 0.0 if method == "autonomous" else 10.0
+        rows.append(
+            {
+                "session_id": session_id,
+                "scheme": "paper",
+                "R_T_logged": 0.0,
+                **{
+                    f"R_T_{s}": 100 + shift * k + rng.normal() for k, s in enumerate(REWARD_SCHEMES)
+                },
+            }
+        )
+    totals = pd.DataFrame(rows)
+    methods = {i: ("autonomous" if i <= 4 else "agent") for i in range(1, 9)}
+    table = rescoring_table(totals, methods, "autonomous").set_index("method")
+    for scheme in REWARD_SCHEMES:
+        column = f"R_T_{scheme}"
+        expected = stats.ttest_ind(
+            totals.loc[4:, column], totals.loc[:3, column], equal_var=False
+        ).pvalue
+        assert table.loc["agent", f"p_welch_{scheme}"] == pytest.approx(expected)
+        assert np.isnan(table.loc["autonomous", f"p_welch_{scheme}"])
+    # the first scheme has no shift, the last a large one
+    assert table.loc["agent", f"p_welch_{REWARD_SCHEMES[-1]}"] < 0.001
