@@ -16,7 +16,8 @@
 2. A paper-scale run (300 episodes) on the fast simulator, extrapolated from measured
    pretraining and >= 2,000 training steps to 6,700 training steps: what 300 episodes
    took the autonomous agents of docs/results/ (6,637 to 6,731; their epsilon is still
-   3.5 % at the end. The paper's agents reached 1 % near episode 150, >= 9,200 updates).
+   3.5 % at the end; the authors' logs show 0.08-0.13 at episode 150 and 1 % only after
+   episode 325, whatever the paper's text says).
 3. Resident memory with a full 20,000-transition replay memory (in a fresh process), in
    stages: torch alone is about 280 MiB, the memory adds its frames (235 MiB) and no more.
 4. With --curves N: collected reward of N training episodes, the fast update against the

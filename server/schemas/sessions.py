@@ -7,6 +7,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from learner.config import PRESETS
 from learner.docstrings import field_docstrings
 from learner.run import MOTIONS
 from learner.strategies import STRATEGY_NAMES
@@ -73,7 +74,9 @@ class SessionCreate(BaseModel):
     seed: Int = Field(default=0, ge=0, le=2**31 - 1, description="Fixes scene, network, sampling.")
     label: str = Field(default="", max_length=200, description="Free text, e.g. a batch name.")
     preset: str = Field(
-        default="paper", max_length=40, description="Learner config preset (paper, modern)."
+        default="paper",
+        max_length=40,
+        description=f"Learner config preset ({', '.join(PRESETS)}).",
     )
     config: dict[Key, Any] = Field(
         default_factory=dict,

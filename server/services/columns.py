@@ -24,7 +24,11 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session id (unique in the database)."),
     "study_id": ("integer", "Study the session belongs to."),
     "label": ("string", "Free text set by the researcher (e.g. a batch name)."),
-    "method": ("string", "Who advised: autonomous, agent, human, oracle or random."),
+    "method": (
+        "string",
+        "Who advised: autonomous, agent, human, oracle or random; sb3-dqn for "
+        "Stable-Baselines3's DQN (unadvised).",
+    ),
     "participant": ("string", "Pseudonym of the human advisor (human sessions)."),
     "seed": ("integer", "Seed of the scene, network init, memory sampling and exploration."),
     "strategy": ("string", f"Advising strategy ({', '.join(STRATEGY_NAMES)})."),

@@ -265,7 +265,8 @@ def test_security_headers_on_every_page(
             policy = response.headers["content-security-policy"]
             assert "frame-ancestors 'self'" in policy and "script-src 'self';" in policy, path
         docs = browser.get("/docs")
-        assert "cdn.jsdelivr.net" in docs.headers["content-security-policy"]
+        policy = docs.headers["content-security-policy"]
+        assert "script-src 'self' 'unsafe-inline';" in policy and "https:" not in policy
 
 
 FORMULAS = ['=HYPERLINK("http://evil.example","click")', "+cmd|' /C calc'!A0", "@SUM(A1)", "-2+3"]
