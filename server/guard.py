@@ -81,6 +81,8 @@ def check_json(body: bytes) -> None:
         raise
     except RecursionError:
         raise UnacceptableJson("the JSON is nested too deeply") from None
+    except UnicodeDecodeError:
+        raise UnacceptableJson("the body is not text in UTF-8 (nor UTF-16 or UTF-32)") from None
     except ValueError:
         return
     _check_text(parsed)

@@ -209,6 +209,16 @@ def test_numbers_are_strict(server: LiveServer, participant_token: tuple[int, st
         assert response.status_code == 422
 
 
+@pytest.mark.parametrize("body", [b"\xc2", b'{"name": "\xff\xfe"}', b"\x92\x8f\xca'"])
+def test_a_body_that_is_not_utf8_is_422(server: LiveServer, body: bytes) -> None:
+    with server.client() as api:
+        response = api.post(
+            "/api/studies", content=body, headers={"Content-Type": "application/json"}
+        )
+    assert response.status_code == 422, response.text
+    assert "UTF-8" in response.json()["detail"][0]["msg"]
+
+
 def test_a_422_names_the_field_without_echoing_what_was_sent(
     server: LiveServer, participant_token: tuple[int, str]
 ) -> None:

@@ -83,7 +83,11 @@ def _runner(
         if response.status_code >= 500:
             bad.append(f"{where}: {response.text[:300]}")
         if str(response.status_code) not in declared:
-            bad.append(f"{where}: not declared ({', '.join(sorted(declared))})")
+            sent = f"{case.media_type} {str(case.body)[:120]!r}"
+            bad.append(
+                f"{where}: not declared ({', '.join(sorted(declared))}); sent {sent}; "
+                f"answer {response.text[:200]!r}"
+            )
         if researcher and "X-API-Key" not in headers and 200 <= response.status_code < 300:
             bad.append(f"{where} without the key")
 
