@@ -96,6 +96,11 @@ class AdvisingStrategy:
     def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
         raise NotImplementedError
 
+    def first_advice_step(self, pretraining_steps: int) -> int:
+        """The earliest global step it may advise at (from 1): the training stage's first
+        step, unless a strategy advises in pretraining."""
+        return pretraining_steps + 1
+
     def check(self, pretraining_steps: int, advisor: Advisor) -> None:
         """Raise a `ValueError` if this strategy cannot work with this run."""
         if self.needs_values and not callable(getattr(advisor, "q_values", None)):
@@ -134,9 +139,12 @@ class EarlyAdvising(AdvisingStrategy):
     def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
         if moment.stage != "pretraining":
             return None
-        if moment.global_step <= moment.pretraining_steps - self.budget:
+        if moment.global_step < self.first_advice_step(moment.pretraining_steps):
             return None
         return advisor.advise(moment.obs, moment.info)
+
+    def first_advice_step(self, pretraining_steps: int) -> int:
+        return max(1, pretraining_steps - self.budget + 1)
 
     def check(self, pretraining_steps: int, advisor: Advisor) -> None:
         super().check(pretraining_steps, advisor)

@@ -31,6 +31,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
+from learner.strategies import make_strategy
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
 from server.live.hub import Hub
 from server.services.errors import Conflict
@@ -223,7 +224,9 @@ class SessionManager:
             budget = session.advice_budget
             human = session.method == Method.human
             ready = human and session.ready_for_advice
-            first_turn = first_advice_step(session.config, session.strategy, budget) - 1
+            pretraining = int(session.config.get("pretraining_steps", 0))
+            strategy = make_strategy(session.strategy or "early", budget)
+            first_turn = strategy.first_advice_step(pretraining) - 1
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
@@ -475,12 +478,3 @@ class SessionManager:
         handle = self.handles.get(session_id)
         if handle is not None:
             handle.send(Command("watch" if watched else "unwatch"))
-
-
-def first_advice_step(config: dict[str, Any], strategy: str | None, budget: int) -> int:
-    """The global step of a session's first advice: early advising gives its budget at the
-    end of pretraining; the other strategies advise from the training stage on."""
-    pretraining = int(config.get("pretraining_steps", 0))
-    if strategy == "early":
-        return max(1, pretraining - budget + 1)
-    return pretraining + 1

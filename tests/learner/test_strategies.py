@@ -41,6 +41,17 @@ def test_early_advising_takes_the_last_budget_steps_of_pretraining() -> None:
     )
 
 
+@pytest.mark.parametrize("name", STRATEGY_NAMES)
+def test_first_advice_step_is_the_first_step_a_strategy_advises_at(name: str) -> None:
+    """What the server tells a waiting participant (the steps before their first turn)."""
+    for pretraining, budget in [(1000, 100), (200, 30)]:
+        strategy = make_strategy(name, budget)
+        steps = advised_steps(
+            strategy, ScriptedAdvisor(spread=1.0, action=1), pretraining=pretraining
+        )
+        assert steps and steps[0] == make_strategy(name, budget).first_advice_step(pretraining)
+
+
 def test_alternating_advises_every_interval_from_the_first_training_step() -> None:
     steps = advised_steps(make_strategy("alternating", 5), ScriptedAdvisor())
     assert steps == [1001, 1003, 1005, 1007, 1009]
