@@ -33,6 +33,12 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     "seed": ("integer", "Seed of the scene, network init, memory sampling and exploration."),
     "strategy": ("string", f"Advising strategy ({', '.join(STRATEGY_NAMES)})."),
     "advice_budget": ("integer", "Advice the strategy may ask for in all [count]."),
+    "strategy_interval": ("integer", "alternating: advice on every Nth training step [steps]."),
+    "strategy_threshold": (
+        "number",
+        "importance, mistake_correcting: the advisor's Q-value spread (max - min) from "
+        "which a state is important.",
+    ),
     "advisor_checkpoint": ("string", "Trained learner that advised (agent sessions)."),
     "oracle_error_rate": (
         "number",

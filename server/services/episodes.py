@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from typing import Any
 
 import pandas as pd
 from sqlalchemy import select
@@ -96,7 +97,13 @@ def session_settings(sessions: Sequence[StudySession]) -> pd.DataFrame:
                 else s.sort_rule,
                 "advice": "none"
                 if s.strategy is None
-                else f"{s.strategy}, budget {s.advice_budget}",
+                else f"{s.strategy}{_options(s.strategy_options)}, budget {s.advice_budget}",
             }
         )
     return pd.DataFrame(rows)
+
+
+def _options(options: dict[str, Any] | None) -> str:
+    """A strategy's options in words, e.g. " (interval 3)"; "" when it has none."""
+    given = ", ".join(f"{k} {v}" for k, v in sorted((options or {}).items()))
+    return f" ({given})" if given else ""

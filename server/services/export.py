@@ -69,6 +69,10 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "seed": s.seed,
             "strategy": s.strategy,
             "advice_budget": s.advice_budget,
+            **{
+                f"strategy_{name}": (s.strategy_options or {}).get(name)
+                for name in ("interval", "threshold")
+            },
             "advisor_checkpoint": s.advisor_checkpoint,
             "oracle_error_rate": s.oracle_error_rate,
             "motion": s.motion,

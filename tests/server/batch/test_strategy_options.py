@@ -7,8 +7,9 @@ import pytest
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from server.db.models import Advice
-from tests.server.batch.helpers import SCALE, Place, sessions, study_id
+from server.db.models import Advice, StudySession
+from server.services.episodes import session_settings
+from tests.server.batch.helpers import SCALE, Place, read_csv, sessions, study_id
 from tests.server.batch.helpers import in_process as run
 
 pytestmark = pytest.mark.slow
@@ -30,6 +31,15 @@ def test_the_interval_reaches_the_trainer_and_names_the_run(
         steps = list(db.scalars(select(Advice.global_step).where(Advice.session_id == session.id)))
     training = [step - PRETRAINING for step in steps]
     assert len(training) >= 2 and all((t - 1) % 3 == 0 for t in training), training
+
+    out_dir = place.data_dir / "options-export"
+    code, out = run(place, capsys, "export", "--study", "options", "--out", str(out_dir))
+    assert code == 0, out
+    (row,) = read_csv(out_dir / "sessions.csv")
+    assert row["strategy_interval"] == "3" and row["strategy_threshold"] == ""
+    with Session(engine) as db:
+        (settings,) = session_settings([db.get(StudySession, session.id)]).to_dict("records")
+    assert settings["advice"] == "alternating (interval 3), budget 8", settings
 
     code, out = run(place, capsys, *args, "--dry-run")  # the same batch finds its run
     assert code == 0 and f"session {session.id}: finished" in out, out
