@@ -40,7 +40,19 @@ authors() {
     --reward-scheme autonomous=authors-autonomous agent=authors-interactive \
     --grasp-failure-rate 0.05 --knock-off-rate 0.05 \
     --advisor-checkpoint "$DATA/advisor-authors.pt" \
-    --workers 1 --threads 1 --checkpoint-every 25 --nice 10 --no-progress --data-dir "$DATA"
+    --workers "${WORKERS:-1}" --threads 1 --checkpoint-every 25 --nice 10 --no-progress \
+    --data-dir "$DATA"
+}
+
+# (a') the authors' learner and scene with autonomous DeepRL trained and scored under the
+#     advised arm's rule (authors-interactive): (a)'s agent-IDeepRL against it differs in
+#     the advice only, which tells the advice apart from the reward each arm learned from.
+authors_one_rule() {
+  $BIN/ideeprl batch --study replication-authors --label authors-one-rule \
+    --methods autonomous --agents "${AGENTS_ONE_RULE:-4}" --seed 0 --preset authors \
+    --reward-scheme authors-interactive --grasp-failure-rate 0.05 --knock-off-rate 0.05 \
+    --workers "${WORKERS:-1}" --threads 1 --checkpoint-every 25 --nice 10 --no-progress \
+    --data-dir "$DATA"
 }
 
 # (b) the same methods under one rule (the paper's text), the paper's learner settings.
@@ -49,14 +61,33 @@ paper() {
   $BIN/ideeprl batch --study replication-paper --label paper \
     --methods autonomous agent --agents "${AGENTS:-10}" --seed 0 --preset paper \
     --reward-scheme paper --advisor-checkpoint "$DATA/advisor-paper.pt" \
-    --workers 1 --threads 1 --checkpoint-every 25 --nice 10 --no-progress --data-dir "$DATA"
+    --workers "${WORKERS:-1}" --threads 1 --checkpoint-every 25 --nice 10 --no-progress \
+    --data-dir "$DATA"
+}
+
+# Finished sessions of the authors' study with this label and method.
+finished() {  # label, method
+  $BIN/python - "$DATA/ideeprl.sqlite3" "$1" "$2" <<'PY'
+import sqlite3, sys
+db = sqlite3.connect(sys.argv[1])
+rows = db.execute(
+    "select s.id from sessions s join studies t on t.id = s.study_id where t.name = "
+    "'replication-authors' and s.label = ? and s.method = ? and s.status = 'finished' "
+    "order by s.id", sys.argv[2:4])
+print(" ".join(str(r[0]) for r in rows))
+PY
 }
 
 # 2. The reports (what docs/results/ holds).
 reports() {
   $BIN/ideeprl report --study replication-authors --data-dir "$DATA" --out "$OUT/authors" \
-    --reference authors --allow-mismatch \
+    --label authors --reference authors --allow-mismatch \
     --title "(a) The paper's comparison as the authors made it"
+  # shellcheck disable=SC2046
+  $BIN/ideeprl report --study replication-authors --data-dir "$DATA" \
+    --out "$OUT/authors-one-rule" --reference authors \
+    --sessions $(finished authors agent) $(finished authors-one-rule autonomous) \
+    --title "(a') The authors' learner and scene under one rule (authors-interactive)"
   $BIN/ideeprl report --study replication-paper --data-dir "$DATA" --out "$OUT/paper" \
     --reference authors --title "(b) The same methods under one rule (paper)"
 }
@@ -87,7 +118,8 @@ case "${1:-all}" in
   save) save ;;
   restore) restore ;;
   authors) authors ;;
+  authors-one-rule) authors_one_rule ;;
   paper) paper ;;
   reports) reports ;;
-  all) authors & paper & wait; reports ;;
+  all) authors & authors_one_rule & paper & wait; reports ;;
 esac
