@@ -765,6 +765,7 @@ def _markdown(
             for name, part in (
                 ("settings", extra.audit),
                 ("rescored", extra.rescored),
+                ("rescored_agents", extra.rescored),
                 ("reference", extra.reference),
             )
             if part is not None

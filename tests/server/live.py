@@ -122,3 +122,14 @@ class LiveServer:
         if token is not None:
             headers["Authorization"] = f"Bearer {token}"
         return checked_client(base_url=self.url, headers=headers, timeout=120)
+
+
+@contextmanager
+def serving(data_dir: Path, **settings: Any) -> Iterator[LiveServer]:
+    """A started `LiveServer` on a fresh database in `data_dir`, stopped afterwards."""
+    with fresh_database(data_dir) as url:
+        live = LiveServer(data_dir, url, **settings).start()
+        try:
+            yield live
+        finally:
+            live.stop()

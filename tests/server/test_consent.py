@@ -16,7 +16,7 @@ from sqlalchemy import func, select
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.models import Step
-from tests.server.live import API_KEY, LiveServer, fresh_database
+from tests.server.live import API_KEY, LiveServer, serving
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import export, session_body
 
@@ -41,12 +41,8 @@ def quiet_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServe
     """A server whose workers' heartbeat (which also flushes) is too slow to store a step
     within the test's wait: only the flush before waiting for advice can."""
     data_dir: Path = tmp_path_factory.mktemp("quiet")
-    with fresh_database(data_dir) as url:
-        live = LiveServer(data_dir, url, heartbeat_s=30, stale_after_s=120).start()
-        try:
-            yield live
-        finally:
-            live.stop()
+    with serving(data_dir, heartbeat_s=30, stale_after_s=120) as live:
+        yield live
 
 
 @pytest.fixture

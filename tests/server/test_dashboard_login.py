@@ -11,7 +11,7 @@ import httpx
 import pytest
 
 from server.routes.dashboard import COOKIE
-from tests.server.live import API_KEY, LiveServer, fresh_database
+from tests.server.live import API_KEY, LiveServer, serving
 
 LIFETIME_S = 3
 
@@ -19,12 +19,8 @@ LIFETIME_S = 3
 @pytest.fixture(scope="module")
 def short_logins(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     data_dir = tmp_path_factory.mktemp("logins")
-    with fresh_database(data_dir) as url:
-        live = LiveServer(data_dir, url, dashboard_login_s=LIFETIME_S).start()
-        try:
-            yield live
-        finally:
-            live.stop()
+    with serving(data_dir, dashboard_login_s=LIFETIME_S) as live:
+        yield live
 
 
 def _login(server: LiveServer, **headers: str) -> httpx.Response:

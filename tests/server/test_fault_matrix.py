@@ -14,7 +14,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.server.live import LiveServer, fresh_database
+from tests.server.live import LiveServer, serving
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import export, session_body, wait_for_status
 from tests.server.test_resume import records
@@ -28,14 +28,9 @@ LONGER = 10
 @pytest.fixture(scope="module")
 def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     data_dir = tmp_path_factory.mktemp("faults")
-    with fresh_database(data_dir) as url:
-        server = LiveServer(
-            data_dir, url, checkpoint_every_episodes=2, heartbeat_s=0.5, stale_after_s=30
-        ).start()
-        try:
-            yield server
-        finally:
-            server.stop()
+    settings = {"checkpoint_every_episodes": 2, "heartbeat_s": 0.5, "stale_after_s": 30}
+    with serving(data_dir, **settings) as server:
+        yield server
 
 
 def _episode(api: httpx.Client, session_id: int) -> int:

@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from tests.server.live import API_KEY, LiveServer, fresh_database
+from tests.server.live import API_KEY, LiveServer, serving
 from tests.server.scale import session_body
 
 schemathesis = pytest.importorskip("schemathesis")
@@ -38,12 +38,8 @@ LONG_POLL = ("timeout", "wait")
 @pytest.fixture(scope="module")
 def fuzz_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     data_dir = tmp_path_factory.mktemp("fuzz")
-    with fresh_database(data_dir) as url:
-        live = LiveServer(data_dir, url).start()
-        try:
-            yield live
-        finally:
-            live.stop()
+    with serving(data_dir) as live:
+        yield live
 
 
 def _runner(

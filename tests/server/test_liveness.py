@@ -14,7 +14,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.server.live import LiveServer, fresh_database
+from tests.server.live import LiveServer, serving
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import session_body, wait_for_status
 
@@ -25,12 +25,8 @@ STALE_S = 12.0
 @pytest.fixture(scope="module")
 def stale_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     data_dir = tmp_path_factory.mktemp("liveness")
-    with fresh_database(data_dir) as url:
-        live = LiveServer(data_dir, url, heartbeat_s=1, stale_after_s=STALE_S).start()
-        try:
-            yield live
-        finally:
-            live.stop()
+    with serving(data_dir, heartbeat_s=1, stale_after_s=STALE_S) as live:
+        yield live
 
 
 def _alive(pid: int) -> bool:

@@ -11,7 +11,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.server.live import API_KEY, LiveServer, fresh_database
+from tests.server.live import API_KEY, LiveServer, serving
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import session_body, wait_for_status
 
@@ -20,12 +20,8 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture
 def one_trainer(tmp_path: Path) -> Iterator[LiveServer]:
-    with fresh_database(tmp_path) as url:
-        live = LiveServer(tmp_path, url, max_trainers=1, heartbeat_s=1).start()
-        try:
-            yield live
-        finally:
-            live.stop()
+    with serving(tmp_path, max_trainers=1, heartbeat_s=1) as live:
+        yield live
 
 
 def _advise_all(participant: SimulatedParticipant, budget: int) -> None:
