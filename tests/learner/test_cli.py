@@ -50,6 +50,26 @@ def test_train_writes_records_plot_and_checkpoint_and_resumes(tmp_path: Path) ->
     ]  # fmt: skip
 
 
+def test_train_runs_the_scenario_options_it_is_given(tmp_path: Path) -> None:
+    """--reward-scheme and the realism rates reach the scene: under authors-interactive a
+    step without a placement costs -0.01 from the first step (the paper's rule: 0 up to
+    step 18), and the checkpoint records the options."""
+    small = [("advice_budget=0" if a == "advice_budget=20" else a) for a in SMALL]
+    for scheme, first_cost in (("authors-interactive", -0.01), ("paper", 0.0)):
+        out = tmp_path / scheme
+        done = train(
+            "--out", str(out), "--episodes", "1", "--reward-scheme", scheme,
+            "--grasp-failure-rate", "0.5", "--knock-off-rate", "0.2", *small,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        first = rows(out / "steps.csv")[0]
+        assert first["episode_step"] == "1" and float(first["reward"]) == first_cost
+        scenario = read_checkpoint(out / "checkpoint.pt")["metadata"]["scenario"]
+        assert scenario == {
+            "reward_scheme": scheme, "grasp_failure_rate": 0.5, "knock_off_rate": 0.2,
+        }  # fmt: skip
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
