@@ -25,6 +25,7 @@ from server.services.episodes import load_episodes, load_training_steps, session
 from server.services.errors import Conflict, Invalid, NotFound
 from server.services.sessions import list_sessions
 from server.services.studies import get_study
+from server.services.tables import iso_z
 from server.settings import Settings
 
 AUTO = "auto"
@@ -229,7 +230,7 @@ def describe_report(study_id: int, built: StudyReport) -> dict[str, Any]:
     files += [("table", p) for p in result.tables.values()]
     return {
         "study_id": study_id,
-        "created_at": datetime.now(UTC).isoformat(),
+        "created_at": iso_z(datetime.now(UTC)),
         "sessions": sorted(int(i) for i in result.analysis.episodes["session_id"].unique()),
         "baseline": result.analysis.baseline,
         "n_episodes": result.analysis.n_episodes,

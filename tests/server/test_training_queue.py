@@ -95,7 +95,7 @@ def test_the_dashboard_report_compares_sessions_of_different_lengths(
         built = dashboard.post(path, headers=headers)
         assert built.status_code == 200, built.text
         report = built.json()
-        assert report["n_episodes"] == 2
+        assert report["n_episodes"] == 2 and report["created_at"].endswith("Z")
         assert any("differ in length" in note and "first 2" in note for note in report["notes"])
         chosen = dashboard.post(path, headers=headers, json={"n_episodes": 1})
         assert chosen.status_code == 200 and chosen.json()["n_episodes"] == 1
