@@ -4,6 +4,7 @@ one frees. Also the dashboard's report over sessions of different lengths."""
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -95,7 +96,9 @@ def test_the_dashboard_report_compares_sessions_of_different_lengths(
         built = dashboard.post(path, headers=headers)
         assert built.status_code == 200, built.text
         report = built.json()
-        assert report["n_episodes"] == 2 and report["created_at"].endswith("Z")
+        assert report["n_episodes"] == 2
+        stored = json.loads((server.data_dir / "reports" / f"study-{study['id']}.json").read_text())
+        assert stored["created_at"].endswith("Z"), "one timestamp format, on disk too"
         assert any("differ in length" in note and "first 2" in note for note in report["notes"])
         chosen = dashboard.post(path, headers=headers, json={"n_episodes": 1})
         assert chosen.status_code == 200 and chosen.json()["n_episodes"] == 1
