@@ -65,16 +65,20 @@ paper() {
     --data-dir "$DATA"
 }
 
-# Finished sessions of the authors' study with this label and method.
-finished() {  # label, method
-  $BIN/python - "$DATA/ideeprl.sqlite3" "$1" "$2" <<'PY'
+# (a')'s sessions: the finished authors-one-rule autonomous runs and (a)'s finished
+# agent-IDeepRL runs of the same seeds, so the two arms pair up.
+one_rule_sessions() {
+  $BIN/python - "$DATA/ideeprl.sqlite3" <<'PY'
 import sqlite3, sys
 db = sqlite3.connect(sys.argv[1])
-rows = db.execute(
-    "select s.id from sessions s join studies t on t.id = s.study_id where t.name = "
-    "'replication-authors' and s.label = ? and s.method = ? and s.status = 'finished' "
-    "order by s.id", sys.argv[2:4])
-print(" ".join(str(r[0]) for r in rows))
+def finished(label, method):
+    return dict(db.execute(
+        "select s.seed, s.id from sessions s join studies t on t.id = s.study_id where "
+        "t.name = 'replication-authors' and s.label = ? and s.method = ? and "
+        "s.status = 'finished'", (label, method)).fetchall())
+autonomous, agent = finished("authors-one-rule", "autonomous"), finished("authors", "agent")
+seeds = sorted(set(autonomous) & set(agent))
+print(" ".join(str(ids[seed]) for seed in seeds for ids in (autonomous, agent)))
 PY
 }
 
@@ -86,7 +90,7 @@ reports() {
   # shellcheck disable=SC2046
   $BIN/ideeprl report --study replication-authors --data-dir "$DATA" \
     --out "$OUT/authors-one-rule" --reference authors \
-    --sessions $(finished authors agent) $(finished authors-one-rule autonomous) \
+    --sessions $(one_rule_sessions) \
     --title "(a') The authors' learner and scene under one rule (authors-interactive)"
   $BIN/ideeprl report --study replication-paper --data-dir "$DATA" --out "$OUT/paper" \
     --reference authors --title "(b) The same methods under one rule (paper)"
