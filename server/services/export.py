@@ -22,6 +22,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from learner.run import STRATEGY_OPTIONS
 from server.db.models import Advice, Episode, Step, StudySession, StudyTexts
 from server.services import learning
 from server.services.columns import TEXT_KEYS, table_columns
@@ -58,6 +59,10 @@ def plain_sort_rule(spec: str | dict[str, str]) -> str:
     return ";".join(f"{shape}/{color}={side}" for shape, color, side in rule.sides)
 
 
+STRATEGY_OPTION_NAMES = sorted({name for options in STRATEGY_OPTIONS.values() for name in options})
+"""Every strategy option, one `strategy_<name>` column each (declared in `columns`)."""
+
+
 def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
     for s in sessions:
         yield {
@@ -71,7 +76,7 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "advice_budget": s.advice_budget,
             **{
                 f"strategy_{name}": (s.strategy_options or {}).get(name)
-                for name in ("interval", "threshold")
+                for name in STRATEGY_OPTION_NAMES
             },
             "advisor_checkpoint": s.advisor_checkpoint,
             "oracle_error_rate": s.oracle_error_rate,
