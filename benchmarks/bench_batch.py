@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from sqlalchemy import select
 
+from learner.run import RunSpec
 from server.batch import BatchSpec, RunnerOptions, run_batch
 from server.batch.backends import usable_cores
 from server.db.engine import make_engine, make_session_factory
@@ -78,7 +79,8 @@ def main(argv: list[str] | None = None) -> None:
         upgrade(engine)
         with make_session_factory(engine)() as db:
             study = create_study(db, StudyCreate(name="bench")).id
-        spec = BatchSpec(methods=("autonomous",), agents=args.workers, episodes=args.episodes)
+        template = RunSpec.from_json({"config": {"episodes": args.episodes, "torch_threads": 1}})
+        spec = BatchSpec(template=template, methods=("autonomous",), agents=args.workers)
         load_before = os.getloadavg()[0]
         started = time.perf_counter()
         result = run_batch(

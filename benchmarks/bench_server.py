@@ -87,18 +87,20 @@ def run(participants: int, trainers: int, advice: int, motion: str) -> None:
                 make = f"/api/studies/{study}/sessions"
                 trainer_ids = []
                 for seed in range(trainers):
-                    body = {"method": "oracle", "seed": seed, "config": CONFIG, "episodes": 300}
+                    run = {"method": "oracle", "seed": seed, "config": {**CONFIG, "episodes": 300}}
+                    body = {"run": run}
                     trainer_ids.append(api.post(make, json=body).json()["id"])
                     api.post(f"/api/sessions/{trainer_ids[-1]}/start")
                 wait_training(api, trainer_ids)
                 tokens = []
                 for seed in range(participants):
-                    body = {
-                        "method": "human",
-                        "seed": seed,
-                        "motion": motion,
+                    config = {
+                        **CONFIG,
+                        "pretraining_steps": advice + 20,
                         "advice_budget": advice + 1,
-                        "config": {**CONFIG, "pretraining_steps": advice + 20},
+                    }
+                    body = {
+                        "run": {"method": "human", "seed": seed, "motion": motion, "config": config}
                     }
                     tokens.append(api.post(make, json=body).json()["participant_token"])
                 round_trips: list[float] = []
@@ -157,7 +159,7 @@ def first_turn(reading_s: list[float], runs: int) -> None:
                 study = api.post("/api/studies", json={"name": "first turn"}).json()["id"]
                 for _ in range(runs):
                     for reading in reading_s:
-                        body = {"method": "human"}  # the paper's defaults, physics motion
+                        body = {"run": {"method": "human"}}  # the paper's defaults, physics motion
                         made = api.post(f"/api/studies/{study}/sessions", json=body).json()
                         results[reading].append(_one_first_turn(server, made, reading))
                         api.post(f"/api/sessions/{made['id']}/stop")
@@ -249,13 +251,14 @@ def _one_study(
                 made = []
                 for i in range(STUDY_SESSIONS):
                     budget = 10 + 3 * i
-                    body = {
-                        "method": "human",
-                        "seed": i,
-                        "motion": motion,
+                    config = {
+                        **CONFIG,
+                        "pretraining_steps": budget + 40,
                         "advice_budget": budget,
                         "episodes": 300,
-                        "config": {**CONFIG, "pretraining_steps": budget + 40},
+                    }
+                    body = {
+                        "run": {"method": "human", "seed": i, "motion": motion, "config": config}
                     }
                     response = api.post(f"/api/studies/{study_id}/sessions", json=body)
                     assert response.status_code == 201, response.text
@@ -267,7 +270,7 @@ def _one_study(
                         args=(
                             server.url,
                             m["participant_token"],
-                            m["advice_budget"],
+                            m["run"]["config"]["advice_budget"],
                             trips,
                             ready,
                             think_s,

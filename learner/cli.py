@@ -20,95 +20,107 @@ from typing import Any
 from tqdm import tqdm
 
 from learner.checkpoint import read_checkpoint
-from learner.config import PRESETS, DQNConfig
+from learner.config import DQNConfig
+from learner.fields import FieldError, given_arguments, leaves, nest, parse_text
+from learner.fields import add_arguments as add_spec_arguments
 from learner.records import EpisodeRecord, StepRecord
-from learner.run import ADVISORS, MOTIONS, STRATEGY_OPTIONS, RunSpec
-from learner.strategies import STRATEGY_NAMES
-from sim.rewards import REWARD_SCHEMES
-from sim.scenario import ScenarioOptions
-
-ADVISOR_CHOICES = tuple(name for name in ADVISORS if name != "human")
+from learner.run import RunSpec, from_old_settings
 
 
-def register(subparsers: Any) -> None:
+def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     parser = subparsers.add_parser(
         "train",
         help="train one learner (autonomous, or advised) and write its records",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    add_arguments(parser)
-    parser.set_defaults(func=train)
+    add_arguments(parser, spec_class)
+    parser.set_defaults(func=train, spec_class=spec_class)
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
+DEPRECATED = {
+    "--threads": "torch_threads",
+    "--budget": "advice_budget",
+    "--oracle-error-rate": "error_rate",
+}
+"""Older names of some flags, still read (each prints that it is deprecated)."""
+
+
+def add_deprecated(parser: argparse.ArgumentParser, skip: tuple[str, ...] = ()) -> None:
+    """The older names of generated flags (`DEPRECATED`), hidden from --help."""
+    for flag, name in DEPRECATED.items():
+        if name not in skip:
+            parser.add_argument(flag, dest=f"deprecated__{name}", help=argparse.SUPPRESS)
+    if "method" not in skip:  # the advisor was a flag before the method was the run's
+        parser.add_argument("--advisor", dest="deprecated_advisor", help=argparse.SUPPRESS)
+
+
+def given_values(args: argparse.Namespace, spec_class: type[RunSpec]) -> dict[str, Any]:
+    """The run's leaves the flags gave (generated flags, `--set FIELD=VALUE`, deprecated
+    names), by leaf name, each checked; `FieldError` for a bad one."""
+    by_name = {leaf.name: leaf for leaf in leaves(spec_class)}
+    values: dict[str, Any] = {}
+    for name, text in getattr(args, "assignments", None) or []:
+        if name not in by_name:
+            raise FieldError(
+                name, f"--set: unknown field {name[:64]}; valid: {', '.join(sorted(by_name))}"
+            )
+        values[name] = parse_text(by_name[name], text)
+    for key, text in vars(args).items():
+        if key.startswith("deprecated__") and text is not None:
+            name = key.removeprefix("deprecated__")
+            print(
+                f"warning: {_old_flag(name)} is deprecated; use {by_name[name].flag}",
+                file=sys.stderr,
+            )
+            values[name] = parse_text(by_name[name], text)
+    advisor = getattr(args, "deprecated_advisor", None)
+    if advisor is not None:
+        print("warning: --advisor is deprecated; use --method", file=sys.stderr)
+        values["method"] = parse_text(
+            by_name["method"], "autonomous" if advisor == "none" else advisor
+        )
+    values.update(given_arguments(args))
+    return values
+
+
+def _old_flag(name: str) -> str:
+    return next(flag for flag, leaf in DEPRECATED.items() if leaf == name)
+
+
+def add_arguments(parser: argparse.ArgumentParser, spec_class: type[RunSpec] = RunSpec) -> None:
     parser.add_argument(
         "--out", type=Path, help="output folder (default: study_data/runs/train-DATE)"
     )
-    parser.add_argument("--preset", choices=PRESETS, default="paper", help="config preset")
-    parser.add_argument("--episodes", type=int, help="training episodes (default 300)")
-    parser.add_argument(
-        "--seed", type=int, default=0, help="fixes scene, network, memory, exploration"
+    run = parser.add_argument_group(
+        "the run", "every field of learner.run.RunSpec, one flag each (or --set FIELD=VALUE)"
     )
-    parser.add_argument("--advisor", choices=ADVISOR_CHOICES, default="none")
-    parser.add_argument(
-        "--advisor-checkpoint", type=Path, help="trained learner for --advisor agent"
-    )
-    parser.add_argument("--error-rate", type=float, default=0.0, help="oracle's wrong-advice rate")
-    parser.add_argument("--strategy", choices=STRATEGY_NAMES, default="early")
-    parser.add_argument("--budget", type=int, help="advice budget (default: advice_budget, 100)")
-    parser.add_argument(
-        "--interval", type=int, default=2, help="alternating: advise every Nth step"
-    )
-    parser.add_argument("--threshold", type=float, default=0.1, help="importance: Q-value spread")
-    parser.add_argument("--motion", choices=MOTIONS, default="fast")
-    parser.add_argument("--sort-rule", default="color", help="color, shape, or a JSON object map")
-    add_scenario_arguments(parser)
+    add_spec_arguments(run, spec_class)
+    add_deprecated(parser)
     parser.add_argument(
         "--set",
+        dest="assignments",
         action="append",
+        type=_parse_assignment,
         default=[],
         metavar="FIELD=VALUE",
-        help="override a config field (VALUE as JSON, else a string); repeatable",
+        help="set any field of the run by its name (VALUE as JSON, else a string); repeatable",
     )
-    parser.add_argument("--device", help="auto, cpu, cuda, cuda:N (default: the config's, auto)")
-    parser.add_argument("--threads", type=int, help="torch threads (default: half the cores, 1-4)")
     parser.add_argument("--checkpoint-every", type=int, default=25, metavar="EPISODES")
     parser.add_argument(
         "--resume",
         type=Path,
         metavar="CHECKPOINT",
-        help="continue a run; its settings come from the checkpoint (only --episodes, "
-        "--device, --threads and --out may change)",
+        help="continue a run; its settings come from the checkpoint (only --episodes and "
+        "--out may change)",
+    )
+    parser.add_argument(
+        "--override-numerics",
+        action="store_true",
+        help="resume on this machine's numerics although the run was pinned to others it "
+        "cannot honour",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-
-
-def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
-    """The scenario's options (`sim.ScenarioOptions`); `scenario_options(args)` reads them."""
-    parser.add_argument(
-        "--reward-scheme",
-        choices=REWARD_SCHEMES,
-        default="paper",
-        help="what a step without a placement costs: the paper's text (default), or the "
-        "authors' autonomous / interactive scripts",
-    )
-    parser.add_argument(
-        "--grasp-failure-rate", type=float, default=0.0, help="chance a grab comes back empty"
-    )
-    parser.add_argument(
-        "--knock-off-rate",
-        type=float,
-        default=0.0,
-        help="chance a grab knocks another object off the center table",
-    )
-
-
-def scenario_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The scenario options the arguments give, checked (`ValueError` otherwise)."""
-    return ScenarioOptions(
-        args.reward_scheme, args.grasp_failure_rate, args.knock_off_rate
-    ).to_dict()
 
 
 def train(args: argparse.Namespace) -> int:
@@ -118,9 +130,12 @@ def train(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as error:
         print(f"ideeprl train: error: {error}", file=sys.stderr)
         return 2
+    if spec.method == "human":
+        print("ideeprl train: error: a human run needs the server (ideeprl serve)", file=sys.stderr)
+        return 2
     from learner.recording import CsvRecorder, plot_learning_curve, read_episodes
 
-    config, settings = spec.config, spec.settings()
+    config, settings = spec.config, spec.to_json()
     out = args.out or (args.resume.parent if args.resume else _default_out())
     resumed_step = resume_state["global_step"] if resume_state else None
     recorder = CsvRecorder(out, resume_from_step=resumed_step)
@@ -149,7 +164,7 @@ def train(args: argparse.Namespace) -> int:
     trainer.save_checkpoint(checkpoint, settings)
     rows = [row for row in read_episodes(recorder.episodes_path) if row["phase"] == "train"]
     rewards = [row["collected_reward"] for row in rows]
-    label = "DeepRL" if spec.advisor == "none" else f"{spec.advisor}-IDeepRL"
+    label = "DeepRL" if not spec.advised else f"{spec.method}-IDeepRL"
     plot = plot_learning_curve(
         rewards, [row["epsilon"] for row in rows], out / "learning_curve.png", label
     )
@@ -163,43 +178,39 @@ def train(args: argparse.Namespace) -> int:
 
 
 def run_spec(args: argparse.Namespace) -> tuple[RunSpec, dict[str, Any] | None]:
-    """The run the arguments describe, or the checkpoint's when resuming (then only
-    --episodes, --device, --threads may change), and where a resumed run stands."""
-    runtime: dict[str, Any] = {}
-    if args.episodes is not None:
-        runtime["episodes"] = args.episodes
-    if args.device is not None:
-        runtime["device"] = args.device
-    if args.threads is not None:
-        runtime["torch_threads"] = args.threads
+    """The run the arguments describe, validated and pinned on this machine; or the
+    checkpoint's when resuming (then only --episodes may change, and numerics this machine
+    cannot honour are refused unless --override-numerics), and where a resumed run stands."""
+    spec_class: type[RunSpec] = getattr(args, "spec_class", RunSpec)
+    values = given_values(args, spec_class)
     if args.resume:
         state = read_checkpoint(args.resume)
-        config = DQNConfig.from_dict({**state["config"], **runtime})
         settings = dict(state["metadata"])
-        if "advisor" not in settings:
+        if "advisor" not in settings and "method" not in settings:
             raise ValueError(f"{args.resume} was not written by ideeprl train")
-        return RunSpec.from_settings(settings, config), {"global_step": int(state["global_step"])}
-    overrides = dict(_parse_assignment(item) for item in args.set)
-    config = DQNConfig.preset(args.preset, **{**overrides, **runtime})
-    given = {"interval": args.interval, "threshold": args.threshold}
-    if args.advisor == "agent" and not args.advisor_checkpoint:
-        raise ValueError("--advisor agent needs --advisor-checkpoint PATH")
-    spec = RunSpec(
-        seed=args.seed,
-        config=config,
-        preset=args.preset,
-        advisor=args.advisor,
-        advisor_checkpoint=str(args.advisor_checkpoint) if args.advisor_checkpoint else None,
-        error_rate=args.error_rate,
-        strategy=args.strategy,
-        # the flags have defaults; each strategy takes the ones it knows
-        strategy_options={k: v for k, v in given.items() if k in STRATEGY_OPTIONS[args.strategy]},
-        budget=args.budget,
-        motion=args.motion,
-        sort_rule=_parse_json(args.sort_rule),
-        scenario=ScenarioOptions(**scenario_options(args)),
-    )
-    return spec, None
+        config = DQNConfig.from_dict(state["config"])
+        spec = (
+            spec_class.from_json(settings)
+            if "version" in settings
+            else from_old_settings(settings, config)
+        )
+        changed = sorted(set(values) - {"episodes"})
+        if changed:
+            raise ValueError(
+                "a resumed run keeps its settings; only --episodes may change, not "
+                + ", ".join("--" + name.replace("_", "-") for name in changed)
+            )
+        if "episodes" in values:
+            spec = spec.with_values({"episodes": values["episodes"]})
+        problem = spec.numerics_problem()
+        if problem and not args.override_numerics:
+            raise ValueError(f"cannot resume {args.resume}: {problem}")
+        if problem:
+            config = spec.config.replace(device="auto", precision="auto")
+            spec = spec.replace(config=config).pinned(spec.config.torch_threads)
+            print(f"warning: numerics overridden ({problem})", file=sys.stderr)
+        return spec.validate().pinned(), {"global_step": int(state["global_step"])}
+    return spec_class.from_json(nest(values, spec_class)).validate().pinned(), None
 
 
 def _checkpoint_due(finished: EpisodeRecord | None, every: int) -> bool:
@@ -211,16 +222,9 @@ def _checkpoint_due(finished: EpisodeRecord | None, every: int) -> bool:
 
 def _parse_assignment(item: str) -> tuple[str, Any]:
     name, sep, value = item.partition("=")
-    if not sep or not name:
-        raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
-    return name.strip(), _parse_json(value)
-
-
-def _parse_json(value: str) -> Any:
-    try:
-        return json.loads(value)
-    except json.JSONDecodeError:
-        return value
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError("--set takes FIELD=VALUE")
+    return name.strip(), value
 
 
 def _default_out() -> Path:

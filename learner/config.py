@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import dataclasses
 import re
-import types
-import typing
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Literal
 
 from learner.docstrings import field_docstrings
+from learner.fields import FieldError, bounded, build, check_object
 
 Head = Literal["linear", "softmax"]
 Loss = Literal["mse", "huber"]
@@ -25,6 +24,7 @@ Fit = Literal["td", "keras"]
 Init = Literal["torch", "glorot"]
 
 PRESETS = ("paper", "modern", "authors")
+Preset = Literal["paper", "modern", "authors"]
 AUTHORS = {
     "head": "softmax",
     "fit": "keras",
@@ -46,123 +46,101 @@ class DQNConfig:
     code (IthanMoreira/DeppRL) where the paper is silent (no target network, MSE, RMSprop).
     """
 
-    episodes: int = 300
+    episodes: int = bounded(300, 1, 100_000, role="scale")
     """Training episodes (the paper's 300); pretraining episodes are not counted."""
-    max_episode_steps: int = 250
+    max_episode_steps: int = bounded(250, 1, 10_000)
     """An episode is truncated after this many steps (the paper's 250)."""
-    pretraining_steps: int = 1000
+    pretraining_steps: int = bounded(1000, 0, 10_000_000)
     """Actions taken to fill the memory before training (Algorithm 1): all random for
     the autonomous agent; the last `advice_budget` of them advised under early advising."""
-    advice_budget: int = 100
+    advice_budget: int = bounded(100, 0, 1_000_000, role="treatment")
     """Advised actions a strategy may use when none is given explicitly (the paper's 100)."""
-    batch_size: int = 128
+    batch_size: int = bounded(128, 1, 4096)
     """Transitions <s, a, r, s'> sampled from memory for each update (the paper's 128)."""
-    learning_rate: float = 1e-3
+    learning_rate: float = bounded(1e-3, 0.0, 10.0)
     """Optimizer step size (the paper's 1e-3)."""
-    gamma: float = 0.9
+    gamma: float = bounded(0.9, 0.0, 1.0)
     """Discount factor (the paper's 0.9)."""
-    epsilon_start: float = 1.0
+    epsilon_start: float = bounded(1.0, 0.0, 1.0)
     """Exploration rate at the first training step (the paper's 1.0)."""
-    epsilon_decay: float = 0.9995
+    epsilon_decay: float = bounded(0.9995, 0.0, 1.0, exclusive_minimum=True)
     """Epsilon is multiplied by this after every training update (the paper's 0.9995,
     which reaches 1 % after about 9,200 updates: near episode 150 in the paper)."""
-    epsilon_min: float = 0.01
+    epsilon_min: float = bounded(0.01, 0.0, 1.0)
     """Floor of epsilon (1 %)."""
-    memory_size: int = 20_000
+    memory_size: int = bounded(20_000, 1, 10_000_000)
     """Replay memory capacity in transitions (not in the paper; the authors' code keeps
     20,000). Frames are stored once as uint8: about 246 MB at 64x64x3."""
-    head: Head = "linear"
+    head: Head = bounded("linear")
     """Output layer: `linear` Q-values (default), or the paper's `softmax`. A softmax
     squeezes the outputs into [0, 1] summing to 1, so they cannot be Q-values whose
     returns reach 3; the authors used it, we offer it to reproduce them."""
-    loss: Loss = "mse"
+    loss: Loss = bounded("mse")
     """TD loss on the taken action: `mse` (the authors' Keras code) or `huber`."""
-    optimizer: Optimizer = "rmsprop"
+    optimizer: Optimizer = bounded("rmsprop")
     """`rmsprop` (the authors' code) or `adam`."""
-    rmsprop_alpha: float = 0.9
+    rmsprop_alpha: float = bounded(0.9, 0.0, 1.0)
     """RMSprop's moving-average factor; 0.9 is Keras' `rho`, which the authors used."""
-    optimizer_eps: float = 1e-7
+    optimizer_eps: float = bounded(1e-7, 0.0, 1.0, exclusive_minimum=True)
     """Optimizer epsilon; 1e-7 is Keras' default."""
-    target_network: bool = False
+    target_network: bool = bounded(False)
     """Compute targets with a periodically synchronised copy of the network."""
-    target_update_interval: int = 500
+    target_update_interval: int = bounded(500, 1, 10_000_000)
     """Updates between target-network synchronisations (when `target_network`)."""
-    double_dqn: bool = False
+    double_dqn: bool = bounded(False)
     """Double DQN: the online network picks the next action, the target network values it
     (needs `target_network`)."""
-    grad_clip_norm: float | None = None
+    grad_clip_norm: float | None = bounded(None, 0.0, 1e9, exclusive_minimum=True)
     """Clip the gradient's global L2 norm to this value; None: no clipping."""
-    fit: Fit = "td"
+    fit: Fit = bounded("td")
     """How a sampled batch is fitted. `td`: one gradient step on the TD error of the taken
     actions. `keras`: as the authors' `Deep_NN.py:97-110` did with Keras' `fit`: targets for
     all outputs, the taken action's r + gamma max Q(s') and the others the network's own
     predictions (computed once, before the steps), MSE over all outputs, in minibatches of
     `keras_minibatch` (Keras' default 32: four gradient steps on a batch of 128, in a
     shuffled order, as `fit(shuffle=True)` does)."""
-    keras_minibatch: int = 32
+    keras_minibatch: int = bounded(32, 1, 4096)
     """Minibatch size of `fit="keras"` (Keras' default batch size, which the authors kept)."""
-    init: Init = "torch"
+    init: Init = bounded("torch")
     """Initial weights: `torch` (PyTorch's default, Kaiming-uniform) or `glorot` (Keras'
     default that the authors' model got: Glorot-uniform weights, zero biases)."""
-    update_during_advice: bool = False
+    update_during_advice: bool = bounded(False)
     """Also update after each advised pretraining step (the authors' agent-advised script,
     78a15b8:199-253, trains after every one of its advised steps; epsilon decays with each
     such update, as their `entrenar` does). Without it pretraining never updates."""
-    update_on_final_step: bool = True
+    update_on_final_step: bool = bounded(True)
     """Update after an episode's final step too. The authors' loop breaks out of the episode
     before training (`Deep_NN.py:238-252`), so their final steps never update (False)."""
-    update: UpdateImpl = "fast"
+    update: UpdateImpl = bounded("fast", role="numerics")
     """`fast`: convolution and pooling fused by space-to-depth, bfloat16 convolutions,
     uint8 frames converted inside the step (same network, same function); `plain`: the
     textbook float32 path, kept to show that the fast update learns the same."""
-    precision: Precision = "auto"
+    precision: Precision = bounded("auto", role="numerics")
     """Convolution precision of the fast update: `bf16` where the device supports it
     natively (`auto`), else `fp32`. Dense layers and the loss stay float32."""
-    device: str = "auto"
+    device: str = bounded("auto", role="numerics", max_length=16)
     """`auto` (CUDA when available, else CPU), `cpu`, `cuda` or `cuda:N`."""
-    torch_threads: int = 0
+    torch_threads: int = bounded(0, 0, 256, role="numerics")
     """Torch CPU threads for this process; 0 picks half the cores (1 to 4), leaving the
     rest to the simulator and other workers: 1 on a 2-core machine. Results are
     bit-identical only for the same thread count."""
 
     def __post_init__(self) -> None:
-        hints = typing.get_type_hints(DQNConfig)
-        for field in fields(self):
-            value = getattr(self, field.name)
-            _check_type(field.name, value, hints[field.name])
-            if hints[field.name] in (float, float | None) and isinstance(value, int):
-                object.__setattr__(self, field.name, float(value))
-        positive = ("episodes", "max_episode_steps", "batch_size", "memory_size", "keras_minibatch")
-        for name in positive:
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
-        for name in ("pretraining_steps", "advice_budget", "torch_threads"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be 0 or more, got {getattr(self, name)}")
-        if self.target_update_interval < 1:
-            raise ValueError("target_update_interval must be at least 1")
+        check_object(self)  # every field against its declaration (type, choices, range)
         if self.pretraining_steps < self.batch_size:
-            raise ValueError(
+            raise FieldError(
+                "pretraining_steps",
                 f"pretraining_steps ({self.pretraining_steps}) must be at least batch_size "
-                f"({self.batch_size}): the first update samples a full batch from memory"
+                f"({self.batch_size}): the first update samples a full batch from memory",
             )
         if self.memory_size < self.batch_size:
-            raise ValueError(f"memory_size must be at least batch_size ({self.batch_size})")
-        for name in ("gamma", "epsilon_start", "epsilon_min", "rmsprop_alpha"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
-        if not 0.0 < self.epsilon_decay <= 1.0:
-            raise ValueError(f"epsilon_decay must be in (0, 1], got {self.epsilon_decay}")
-        if self.learning_rate < 0 or self.optimizer_eps <= 0:
-            raise ValueError("learning_rate must be >= 0 and optimizer_eps > 0")
-        if self.grad_clip_norm is not None and self.grad_clip_norm <= 0:
-            raise ValueError("grad_clip_norm must be positive, or None for no clipping")
-        if self.double_dqn and not self.target_network:
-            raise ValueError("double_dqn needs target_network=True")
-        if not _DEVICE.match(self.device):
-            raise ValueError(
-                f"device must be 'auto', 'cpu', 'cuda' or 'cuda:N', got {self.device!r}"
+            raise FieldError(
+                "memory_size", f"memory_size must be at least batch_size ({self.batch_size})"
             )
+        if self.double_dqn and not self.target_network:
+            raise FieldError("double_dqn", "double_dqn needs target_network=True")
+        if not _DEVICE.match(self.device):
+            raise FieldError("device", "device must be 'auto', 'cpu', 'cuda' or 'cuda:N'")
 
     @classmethod
     def preset(cls, name: str, **overrides: Any) -> DQNConfig:
@@ -188,16 +166,9 @@ class DQNConfig:
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> DQNConfig:
-        """Build from JSON values; unknown fields raise a `ValueError` listing valid ones."""
-        if not isinstance(values, dict):
-            raise ValueError(f"a config must be a JSON object, got {type(values).__name__}")
-        known = [f.name for f in fields(cls)]
-        unknown = sorted(set(values) - set(known))
-        if unknown:
-            raise ValueError(
-                f"unknown config field(s) {', '.join(unknown)}; valid fields: {', '.join(known)}"
-            )
-        return cls(**values)
+        """Build from JSON values, each checked against its declaration; an unknown or
+        out-of-range field raises a `FieldError` (a `ValueError`) naming it."""
+        return build(cls, values)  # type: ignore[no-any-return]
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -209,29 +180,3 @@ class DQNConfig:
 def field_docs() -> dict[str, str]:
     """Each field's docstring, for help texts and the server's API documentation."""
     return field_docstrings(DQNConfig)
-
-
-def _check_type(name: str, value: Any, hint: Any) -> None:
-    origin = typing.get_origin(hint)
-    if origin is Literal:
-        choices = typing.get_args(hint)
-        if value not in choices:
-            raise ValueError(
-                f"{name} must be one of {', '.join(repr(c) for c in choices)}, got {value!r}"
-            )
-        return
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(hint)
-        if value is None and type(None) in args:
-            return
-        hint = next(a for a in args if a is not type(None))
-    if hint is bool:
-        ok = isinstance(value, bool)
-    elif hint is int:
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif hint is float:
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-    else:
-        ok = isinstance(value, hint)
-    if not ok:
-        raise ValueError(f"{name} must be {hint.__name__}, got {value!r}")

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import os
-
 import torch
+
+from learner.machine import default_threads
 
 
 def resolve_device(name: str) -> torch.device:
@@ -26,8 +26,7 @@ def configure_threads(threads: int) -> int:
     one (an idle one is 1.8x faster with 2). Beyond 4 the small convolutions gain little.
     """
     if threads == 0:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 2
-        threads = max(1, min(4, cores // 2))
+        threads = default_threads()
     if torch.get_num_threads() != threads:
         torch.set_num_threads(threads)
     return threads

@@ -1,10 +1,20 @@
-"""One run, described once: what `ideeprl train`, a server session, a batch run and the
-REST session body all mean by "train this learner".
+"""One run, described once: what `ideeprl train`, a server session, a batch run, a replay
+and the REST body all mean by "train this learner".
 
-Every entry point turns its own input (command-line flags, a stored session row, a batch
-plan, a JSON body) into a `RunSpec`, calls `validate()` once, and `build()` gives the
-environment and the trainer. An option added here reaches every entry point; the REST
-schema is checked against these fields by a test (tests/server/test_run_spec.py).
+`RunSpec` is a tree of frozen dataclasses (the run, its learner `config`, its
+`strategy_options`, its `scenario`); every field has its docstring under it and its range
+beside it (`learner.fields`). Everything that shows or takes a run is derived from it: the
+flags of `ideeprl train` and `ideeprl batch`, the REST body and its OpenAPI schema, the
+stored JSON document, the export's columns and their dictionary, and the report's settings
+audit. An option added here reaches all of them.
+
+- `RunSpec.from_json(data)`: a run from JSON (the REST body's `run`, a stored session, an
+  export's `run_spec` column), every value checked; fields left out take their defaults, the
+  learner config's the preset's.
+- `validate()`: the rules between fields, checked before anything is stored or started.
+- `pinned()`: the numerics (device, precision, threads) resolved on this machine; a session
+  stores its run pinned, and `numerics_problem()` says why another machine cannot honour it.
+- `build()`: the environment and the trainer.
 
 Torch is not imported by this module: `build()` imports the trainer when it is called.
 """
@@ -13,12 +23,14 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal
 
+from learner import machine
 from learner.advisors import ADVISOR_KINDS, Advisor, make_advisor
-from learner.config import DQNConfig
+from learner.config import DQNConfig, Preset
+from learner.fields import FieldError, bounded, build, check_object, flatten, group, nest, to_json
 from learner.strategies import (
     _STRATEGIES,
     STRATEGY_NAMES,
@@ -35,14 +47,29 @@ if TYPE_CHECKING:
     from learner.sb3_dqn import SB3DQNTrainer
     from learner.trainer import Trainer
 
+SPEC_VERSION = 1
+"""Version of the stored run document (`RunSpec.to_json`); `from_json` reads this and older."""
+METHODS = ("autonomous", "agent", "human", "oracle", "random", "sb3-dqn")
+"""A run's method: who advises it (nobody, a trained agent, a person, the oracle, a random
+advisor), or `sb3-dqn`, Stable-Baselines3's DQN unadvised (an independent baseline)."""
+Method = Literal["autonomous", "agent", "human", "oracle", "random", "sb3-dqn"]
+UNADVISED = ("autonomous", "sb3-dqn")
+"""Methods without an advisor: no strategy, no advice budget."""
 ADVISORS = ("none", *ADVISOR_KINDS, "human")
+"""Who advises: nobody, a machine advisor the learner builds, or a person (`human`: the
+caller supplies the advisor to `build`, the server's `HumanAdvisor`)."""
 LEARNERS = ("dqn", "sb3-dqn")
 """The paper's learner (`learner.trainer`), or Stable-Baselines3's DQN (`learner.sb3_dqn`,
 an independent baseline; the optional `sb3` extra)."""
-"""Who advises: nobody (the autonomous DeepRL), a machine advisor the learner builds, or a
-person (`human`: the caller supplies the advisor to `build`, the server's `HumanAdvisor`)."""
 MOTIONS = ("fast", "physics")
 """`sim.SortingEnv`'s motion modes."""
+Motion = Literal["fast", "physics"]
+Strategy = Literal[STRATEGY_NAMES]  # type: ignore[valid-type]
+MAX_SEED = 2**31 - 1
+FRAME_BYTES = 64 * 64 * 3
+"""One stored observation (uint8)."""
+PROCESS_BYTES = 600 * 2**20
+"""A run's process besides its replay memory: torch, the simulator, the network."""
 
 
 def strategy_defaults(strategy: str) -> dict[str, Any]:
@@ -51,7 +78,7 @@ def strategy_defaults(strategy: str) -> dict[str, Any]:
     if strategy not in _STRATEGIES:
         raise RunSpecError(
             "strategy",
-            f"unknown strategy {strategy!r}; valid strategies: {', '.join(STRATEGY_NAMES)}",
+            f"unknown strategy; valid strategies: {', '.join(STRATEGY_NAMES)}",
         )
     parameters = inspect.signature(_STRATEGIES[strategy].__init__).parameters
     return {
@@ -67,49 +94,84 @@ STRATEGY_OPTIONS: dict[str, dict[str, Any]] = {
 """Every strategy's options and their defaults: `{"alternating": {"interval": 2}, ...}`."""
 
 
-class RunSpecError(ValueError):
+class RunSpecError(FieldError):
     """A run cannot be built as described; `field` names what to change."""
 
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(message)
-        self.field = field
+
+@dataclass(frozen=True)
+class StrategyOptions:
+    """The advising strategy's options besides its budget; None: the strategy's default
+    (`STRATEGY_OPTIONS`), or the strategy takes no such option."""
+
+    interval: int | None = bounded(None, 1, 100_000, role="treatment")
+    """alternating: advise on every Nth training step (its default 2) [steps]."""
+    threshold: float | None = bounded(None, 0.0, 1_000_000.0, role="treatment")
+    """importance, mistake_correcting: the advisor's Q-value spread (max - min) from which a
+    state is important (their default 0.1)."""
+
+    def __post_init__(self) -> None:
+        check_object(self)
+
+    def given(self) -> dict[str, Any]:
+        """The options set, by name."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+
+_OPTION_NAMES = {f.name for f in dataclasses.fields(StrategyOptions)}
+assert all(set(options) <= _OPTION_NAMES for options in STRATEGY_OPTIONS.values()), (
+    "a strategy takes an option StrategyOptions does not declare"
+)
 
 
 @dataclass(frozen=True)
 class RunSpec:
-    """Everything that decides a run's course; two runs with equal specs take the same
-    steps (determinism), whatever entry point started them."""
+    """Everything that decides a run's course; two runs with equal specs on the same CPU kind
+    take the same steps (determinism), whatever entry point started them."""
 
-    seed: int = 0
+    method: Method = bounded("autonomous", role="treatment")
+    """Who advises: autonomous (nobody: the paper's DeepRL), agent (a trained learner's
+    checkpoint), human (a person in the browser), oracle (the correct action, with an error
+    rate), random; or sb3-dqn, Stable-Baselines3's DQN unadvised (needs the sb3 extra)."""
+    seed: int = bounded(0, 0, MAX_SEED, role="seed")
     """Fixes scene, network, memory, exploration and the machine advisors' draws."""
-    config: DQNConfig = field(default_factory=DQNConfig)
-    """The learner's hyperparameters (a preset with overrides), `advice_budget` included."""
-    preset: str = "paper"
-    """The preset `config` started from (a name for logs and checkpoints only)."""
-    advisor: str = "none"
-    """`ADVISORS`: none, agent, oracle, random, or human."""
-    advisor_checkpoint: str | None = None
-    """The trained learner's checkpoint that advises (`agent` only)."""
-    error_rate: float = 0.0
-    """Chance that the oracle advises a wrong action (`oracle` only)."""
-    strategy: str = "early"
-    """When to ask the advisor (`learner.strategies`); unused without an advisor."""
-    strategy_options: dict[str, Any] = field(default_factory=dict)
-    """The strategy's options besides its budget (`STRATEGY_OPTIONS`: `interval`,
-    `threshold`); missing ones take their defaults, `normalized()` spells them out."""
-    budget: int | None = None
-    """Advice budget; None: `config.advice_budget`."""
-    motion: str = "fast"
-    """`fast` (poses set directly) or `physics` (simulated motion)."""
-    sort_rule: str | dict[str, str] = "color"
-    """Anything `sim.SortRule.parse` takes; `normalized()` gives its JSON spec."""
-    scenario: ScenarioOptions = field(default_factory=ScenarioOptions)
-    """Reward scheme and realism rates."""
-    learner: str = "dqn"
-    """`LEARNERS`: the paper's learner, or `sb3-dqn` (never advised)."""
-    sb3: dict[str, Any] = field(default_factory=dict)
-    """`sb3-dqn` only: its `sb3_*` hyperparameters (`learner.sb3_dqn.sb3_hyperparameters`
-    of `config` when empty)."""
+    preset: Preset = bounded("paper")
+    """The learner preset the config starts from: paper, modern or authors (what the
+    authors' Keras code did); fields given in `config` override it."""
+    config: DQNConfig = group(DQNConfig, prefix="config_")
+    """The learner's hyperparameters (the preset's, with the fields given here)."""
+    strategy: Strategy = bounded("early", role="treatment")
+    """When to ask the advisor (`learner.strategies`): early (the paper's: the last
+    advice_budget pretraining steps), alternating, importance, mistake_correcting; unused
+    without an advisor."""
+    strategy_options: StrategyOptions = group(StrategyOptions, prefix="strategy_")
+    """The strategy's options besides its budget."""
+    advisor_checkpoint: str | None = bounded(None, role="treatment", max_length=1000)
+    """The trained learner whose checkpoint advises (method agent): `session:ID` through the
+    API, or a checkpoint file's path."""
+    error_rate: float = bounded(0.0, 0.0, 1.0, role="treatment", column="oracle_error_rate")
+    """Chance that the oracle advises a wrong action (method oracle) [probability]."""
+    motion: Motion | None = bounded(None)
+    """fast (poses set directly) or physics (simulated motion); none: physics for a human
+    session (a person watches it move), fast otherwise."""
+    sort_rule: str | dict[str, str] = bounded("color", max_length=400)
+    """The sorting rule: color (blue right, red left), shape (cubes left, the rest right),
+    or a map of all six objects to a side, as JSON or as cube/red=left;cube/blue=right;..."""
+    scenario: ScenarioOptions = group(ScenarioOptions)
+    """Reward scheme and realism rates (`sim.ScenarioOptions`)."""
+
+    def __post_init__(self) -> None:
+        check_object(self)
+
+    # --- what the run is ---------------------------------------------------------------
+    @property
+    def advisor(self) -> str:
+        """`ADVISORS`: none for the unadvised methods, else the method."""
+        return "none" if self.method in UNADVISED else self.method
+
+    @property
+    def learner(self) -> str:
+        """`LEARNERS`: Stable-Baselines3's for sb3-dqn, else the paper's."""
+        return "sb3-dqn" if self.method == "sb3-dqn" else "dqn"
 
     @property
     def advised(self) -> bool:
@@ -118,91 +180,201 @@ class RunSpec:
     @property
     def advice_budget(self) -> int:
         """The advice this run may get: 0 without an advisor."""
-        if not self.advised:
-            return 0
-        return self.config.advice_budget if self.budget is None else self.budget
+        return self.config.advice_budget if self.advised else 0
+
+    @property
+    def sb3(self) -> dict[str, Any]:
+        """sb3-dqn only: SB3's hyperparameters, mapped from the config."""
+        if self.learner != "sb3-dqn":
+            return {}
+        from learner.sb3_dqn import sb3_hyperparameters
+
+        return sb3_hyperparameters(self.config)
 
     def replace(self, **changes: Any) -> RunSpec:
         return dataclasses.replace(self, **changes)
 
+    # --- JSON ------------------------------------------------------------------------------
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> RunSpec:
+        """A run from JSON: every value checked (`FieldError` names the field and its range),
+        unknown names refused; fields left out take their defaults, and the config's the
+        preset's. Reads documents of `SPEC_VERSION` and older (`version` may be absent)."""
+        if not isinstance(data, Mapping):
+            raise RunSpecError("run", "a run must be a JSON object")
+        data = dict(data)
+        version = data.pop("version", SPEC_VERSION)
+        if version not in range(1, SPEC_VERSION + 1):
+            raise RunSpecError(
+                "version", f"run documents of version 1 to {SPEC_VERSION} can be read"
+            )
+        preset = data.get("preset", "paper")
+        try:
+            base = cls(config=DQNConfig.preset(preset))
+        except ValueError:
+            base = cls()  # `build` reports the bad preset by its field
+        return build(cls, data, base=base)  # type: ignore[no-any-return]
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored document: every field spelled out, with its `version`."""
+        return {"version": SPEC_VERSION, **to_json(self)}
+
+    def with_values(self, values: Mapping[str, Any]) -> RunSpec:
+        """This run with some fields changed, named by leaf (`batch_size`, `reward_scheme`,
+        `interval`), each checked; a new `preset` is refused (it would change config fields
+        this run set: describe such a run from scratch)."""
+        if "preset" in values and values["preset"] != self.preset:
+            raise RunSpecError(
+                "preset", "a preset cannot be changed on a described run; give it with the run"
+            )
+        merged = to_json(self)
+        for name, value in nest(values, type(self)).items():
+            if (
+                isinstance(value, dict)
+                and isinstance(merged.get(name), dict)
+                and name != "sort_rule"
+            ):
+                merged[name] = {**merged[name], **value}
+            else:
+                merged[name] = value
+        return type(self).from_json(merged)
+
+    def values(self) -> dict[str, Any]:
+        """Every leaf's value by leaf name (`with_values`' names)."""
+        return flatten(to_json(self), type(self))
+
+    # --- rules ---------------------------------------------------------------------------
     def normalized(self) -> RunSpec:
-        """The same run with every choice spelled out: the sort rule as its spec, the
-        strategy's options with their defaults (none without an advisor). Raises
-        `RunSpecError` for an unknown name or option."""
-        if self.advisor not in ADVISORS:
-            raise RunSpecError(
-                "advisor", f"unknown advisor {self.advisor!r}; valid: {', '.join(ADVISORS)}"
-            )
-        if self.learner not in LEARNERS:
-            raise RunSpecError(
-                "learner", f"unknown learner {self.learner!r}; valid: {', '.join(LEARNERS)}"
-            )
-        if self.learner == "sb3-dqn" and self.advisor != "none":
-            raise RunSpecError("advisor", "Stable-Baselines3's DQN takes no advice")
-        if self.motion not in MOTIONS:
-            raise RunSpecError(
-                "motion", f"unknown motion {self.motion!r}; valid: {', '.join(MOTIONS)}"
-            )
+        """The same run with every choice spelled out: the motion, the sort rule as its spec,
+        the strategy's options with their defaults (none without an advisor, and no advice
+        budget). Raises `RunSpecError` for an option the strategy does not take."""
         try:
             rule = SortRule.parse(self.sort_rule).to_spec()
-        except (ValueError, TypeError, KeyError) as error:
-            raise RunSpecError("sort_rule", str(error)) from None
+        except (ValueError, TypeError, KeyError):
+            raise RunSpecError(
+                "sort_rule",
+                "sort_rule must be color, shape, or a map of all six objects (cube, cylinder, "
+                "disk; red, blue) to left or right",
+            ) from None
         defaults = strategy_defaults(self.strategy)
-        unknown = sorted(set(self.strategy_options) - set(defaults))
-        if unknown:
+        given = self.strategy_options.given()
+        unknown = sorted(set(given) - set(defaults))
+        if unknown and self.advised:
             valid = ", ".join(defaults) or "none"
             raise RunSpecError(
-                "strategy_options",
+                f"strategy_options.{unknown[0]}",
                 f"the {self.strategy} strategy takes no option {', '.join(unknown)} "
                 f"(its options: {valid})",
             )
-        options = {**defaults, **self.strategy_options} if self.advised else {}
-        sb3 = dict(self.sb3) if self.learner == "sb3-dqn" else {}
-        if self.learner == "sb3-dqn" and not sb3:
+        options = StrategyOptions(**({**defaults, **given} if self.advised else {}))
+        config = self.config if self.advised else self.config.replace(advice_budget=0)
+        motion = self.motion or ("physics" if self.method == "human" else "fast")
+        return self.replace(
+            sort_rule=rule,
+            strategy=self.strategy if self.advised else "early",
+            strategy_options=options,
+            config=config,
+            motion=motion,
+            error_rate=self.error_rate if self.method == "oracle" else 0.0,
+        )
+
+    def validate(self) -> RunSpec:
+        """Every rule between fields, checked before anything is built or stored; returns the
+        normalized spec. Raises `RunSpecError` (a `ValueError`) naming the field."""
+        spec = self.normalized()
+        if spec.learner == "sb3-dqn":
             from learner.sb3_dqn import sb3_hyperparameters
 
             try:
-                sb3 = sb3_hyperparameters(self.config)
+                sb3_hyperparameters(spec.config)
             except ValueError as error:
-                raise RunSpecError("config", str(error)) from None
-        return self.replace(sort_rule=rule, strategy_options=options, sb3=sb3)
-
-    def validate(self) -> RunSpec:
-        """Every rule a run must satisfy, checked before anything is built; returns the
-        normalized spec. Raises `RunSpecError` (a `ValueError`) naming the field."""
-        spec = self.normalized()
+                raise RunSpecError("config.epsilon_min", str(error)) from None
+        if spec.method != "agent" and spec.advisor_checkpoint:
+            raise RunSpecError(
+                "advisor_checkpoint", "only method agent takes an advisor_checkpoint"
+            )
         if not spec.advised:
-            if spec.advisor_checkpoint:
-                raise RunSpecError("advisor_checkpoint", "only an agent advisor takes a checkpoint")
             return spec
-        if spec.advisor == "agent" and not spec.advisor_checkpoint:
+        if spec.method == "agent" and not spec.advisor_checkpoint:
             raise RunSpecError(
                 "advisor_checkpoint",
-                "an agent advisor needs a checkpoint: the path of a trained learner checkpoint",
+                "method agent needs advisor_checkpoint: the trained learner that advises",
             )
-        if spec.advisor != "agent" and spec.advisor_checkpoint:
-            raise RunSpecError("advisor_checkpoint", "only an agent advisor takes a checkpoint")
-        if _STRATEGIES[spec.strategy].needs_values and spec.advisor != "agent":
+        if _STRATEGIES[spec.strategy].needs_values and spec.method != "agent":
             raise RunSpecError(
                 "strategy",
                 f"the {spec.strategy} strategy weighs the advisor's Q-values, which only an "
-                "'agent' advisor has; use early or alternating advising",
+                "agent advisor has; use early or alternating advising",
             )
         if spec.strategy == "early":
             problem = early_budget_problem(spec.advice_budget, spec.config.pretraining_steps)
             if problem:
-                raise RunSpecError("advice_budget", problem)
+                raise RunSpecError("config.advice_budget", problem)
         try:
             spec.make_strategy()
         except ValueError as error:
             raise RunSpecError("strategy_options", str(error)) from None
         return spec
 
+    # --- numerics --------------------------------------------------------------------------
+    def pinned(self, threads: int | None = None) -> RunSpec:
+        """The run with its numerics decided on this machine, as a session stores it: the
+        device (`auto`: cuda when present, else cpu), the convolution precision (`auto`:
+        bf16 where the device runs it natively, else fp32) and the torch threads (0: half
+        the cores, 1 to 4, unless `threads` says how many a run gets here). Also checks
+        that the replay memory fits this machine."""
+        config = self.config
+        device = config.device
+        if device == "auto":
+            device = "cuda" if machine.cuda_present() else "cpu"
+        precision = config.precision
+        if precision == "auto":
+            native = device.startswith("cuda") or machine.bf16_native_cpu()
+            precision = "bf16" if native and config.update == "fast" else "fp32"
+        threads = config.torch_threads or threads or machine.default_threads()
+        spec = self.replace(
+            config=config.replace(device=device, precision=precision, torch_threads=threads)
+        )
+        spec.check_memory()
+        return spec
+
+    def numerics_problem(self) -> str | None:
+        """Why this machine cannot take the steps this pinned run takes, or None."""
+        config = self.config
+        if config.device.startswith("cuda") and not machine.cuda_present():
+            return f"the run was pinned to {config.device}, and this machine has no CUDA device"
+        if (
+            config.precision == "bf16"
+            and config.update == "fast"
+            and not config.device.startswith("cuda")
+            and not machine.bf16_native_cpu()
+        ):
+            return (
+                "the run was pinned to bfloat16 convolutions, which this CPU "
+                f"({machine.cpu_kind()}) does not run natively: its steps would differ. Resume "
+                "it on a CPU with AVX-512 BF16 or AMX, or override the numerics (recorded)"
+            )
+        return None
+
+    def memory_needed(self) -> int:
+        """Bytes the run's process needs: its replay memory's frames and the rest."""
+        return self.config.memory_size * FRAME_BYTES + PROCESS_BYTES
+
+    def check_memory(self, total: int | None = None) -> None:
+        """`RunSpecError` when the replay memory cannot fit the machine (`total` bytes)."""
+        total = machine.total_memory() if total is None else total
+        if total and self.memory_needed() > total:
+            raise RunSpecError(
+                "config.memory_size",
+                f"config.memory_size needs about {self.memory_needed() / 2**30:.1f} GiB for "
+                f"its frames and the process; this machine has {total / 2**30:.1f} GiB",
+            )
+
     def make_env(self, record_motion: bool = False) -> gym.Env[Any, Any]:
         import sim
 
         return sim.SortingEnv(
-            motion=self.motion,
+            motion=self.motion or "fast",
             sort_rule=self.sort_rule,
             max_episode_steps=self.config.max_episode_steps,
             record_motion=record_motion,
@@ -211,20 +383,20 @@ class RunSpec:
 
     def make_advisor(self) -> Advisor | None:
         """The machine advisor (None for none and human: a person is the caller's)."""
-        if self.advisor == "agent":
+        if self.method == "agent":
             return make_advisor("agent", checkpoint=self.advisor_checkpoint)
-        if self.advisor == "oracle":
+        if self.method == "oracle":
             return make_advisor(
                 "oracle", sort_rule=self.sort_rule, error_rate=self.error_rate, seed=self.seed
             )
-        if self.advisor == "random":
+        if self.method == "random":
             return make_advisor("random", seed=self.seed)
         return None
 
     def make_strategy(self) -> AdvisingStrategy | None:
         if not self.advised:
             return None
-        return make_strategy(self.strategy, self.advice_budget, **self.strategy_options)
+        return make_strategy(self.strategy, self.advice_budget, **self.strategy_options.given())
 
     def build(
         self,
@@ -257,47 +429,34 @@ class RunSpec:
         )
         return trainer, env
 
-    def settings(self) -> dict[str, Any]:
-        """Plain JSON (a checkpoint's metadata); `from_settings` reads it back."""
-        spec = self.normalized()
-        return {
-            "advisor": spec.advisor,
-            "advisor_checkpoint": spec.advisor_checkpoint,
-            "error_rate": spec.error_rate,
-            "strategy": spec.strategy,
-            "strategy_options": dict(spec.strategy_options),
-            "budget": spec.advice_budget,
-            "motion": spec.motion,
-            "sort_rule": spec.sort_rule,
-            "seed": spec.seed,
-            "preset": spec.preset,
-            "scenario": spec.scenario.to_dict(),
-            "learner": spec.learner,
-            "sb3": dict(spec.sb3),
-        }
 
-    @classmethod
-    def from_settings(cls, settings: dict[str, Any], config: DQNConfig) -> RunSpec:
-        """From `settings()`, or an older checkpoint's metadata (which kept `interval` and
-        `threshold` beside the strategy, and no scenario before it existed)."""
-        strategy = settings.get("strategy", "early")
-        options = settings.get("strategy_options")
-        if options is None:
-            defaults = strategy_defaults(strategy)
-            options = {name: settings[name] for name in defaults if name in settings}
-        return cls(
-            seed=int(settings.get("seed", 0)),
-            config=config,
-            preset=settings.get("preset", "paper"),
-            advisor=settings.get("advisor", "none"),
-            advisor_checkpoint=settings.get("advisor_checkpoint"),
-            error_rate=float(settings.get("error_rate", 0.0)),
-            strategy=strategy,
-            strategy_options=options,
-            budget=settings.get("budget"),
-            motion=settings.get("motion", "fast"),
-            sort_rule=settings.get("sort_rule", "color"),
-            scenario=ScenarioOptions.from_dict(settings.get("scenario")),
-            learner=settings.get("learner", "dqn"),
-            sb3=dict(settings.get("sb3") or {}),
-        )
+def from_old_settings(settings: Mapping[str, Any], config: DQNConfig) -> RunSpec:
+    """A run from an older checkpoint's metadata (before the run was one JSON document: an
+    `advisor` and a `budget` beside the config, the strategy's options loose or in
+    `strategy_options`, no scenario before it existed)."""
+    if "method" in settings:
+        return RunSpec.from_json({**settings, "config": config.to_dict()})
+    advisor = settings.get("advisor", "none")
+    learner = settings.get("learner", "dqn")
+    method = "sb3-dqn" if learner == "sb3-dqn" else ("autonomous" if advisor == "none" else advisor)
+    strategy = settings.get("strategy", "early")
+    options = settings.get("strategy_options")
+    if options is None:
+        defaults = strategy_defaults(strategy)
+        options = {name: settings[name] for name in defaults if name in settings}
+    budget = settings.get("budget")
+    if budget is not None and method not in UNADVISED:
+        config = config.replace(advice_budget=int(budget))
+    return RunSpec(
+        method=method,
+        seed=int(settings.get("seed", 0)),
+        preset=settings.get("preset", "paper"),
+        config=config,
+        strategy=strategy,
+        strategy_options=StrategyOptions(**options),
+        advisor_checkpoint=settings.get("advisor_checkpoint"),
+        error_rate=float(settings.get("error_rate", 0.0)),
+        motion=settings.get("motion", "fast"),
+        sort_rule=settings.get("sort_rule", "color"),
+        scenario=ScenarioOptions.from_dict(settings.get("scenario")),
+    )

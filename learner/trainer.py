@@ -32,7 +32,7 @@ from learner.replay import ReplayMemory
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
 
 N_ACTIONS = 4
-RUNTIME_FIELDS = ("device", "torch_threads", "episodes")
+RUNTIME_FIELDS = ("device", "torch_threads", "precision", "episodes")
 """Config fields a resumed run may change: where it computes, and how long it goes on."""
 
 

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import inspect
 import pkgutil
 from collections.abc import Sequence
 from importlib import metadata
 
+from learner.run import RunSpec
 from server import commands
 from server.commands.common import CommandError, fail
 
@@ -26,7 +28,9 @@ def version() -> str:
         return "unknown (not installed)"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(spec_class: type[RunSpec] = RunSpec) -> argparse.ArgumentParser:
+    """Every command's parser; the commands that take a run (`train`, `batch`) make their
+    flags from `spec_class`, the run's declaration."""
     parser = argparse.ArgumentParser(
         prog="ideeprl",
         description="Human advising studies in interactive deep reinforcement learning.",
@@ -39,13 +43,17 @@ def build_parser() -> argparse.ArgumentParser:
     for name in modules:
         module = importlib.import_module(name)
         register = getattr(module, "register", None)
-        if register is not None:
+        if register is None:
+            continue
+        if "spec_class" in inspect.signature(register).parameters:
+            register(subparsers, spec_class=spec_class)
+        else:
             register(subparsers)
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: Sequence[str] | None = None, spec_class: type[RunSpec] = RunSpec) -> int:
+    args = build_parser(spec_class).parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except CommandError as error:

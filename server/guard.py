@@ -37,25 +37,49 @@ class BodyTooLarge(HTTPException):
 
 
 class UnacceptableJson(ValueError):
-    pass
+    """JSON the standard does not allow; `loc` is where (a path in the body), when known."""
+
+    def __init__(self, message: str, loc: list[str] | None = None) -> None:
+        super().__init__(message)
+        self.loc = loc or []
 
 
-def _finite(text: str) -> float:
+class _NonFinite:
+    """Where the JSON held NaN, Infinity or a number too large for a float."""
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+
+
+def _finite(text: str) -> float | _NonFinite:
     value = float(text)
-    if not math.isfinite(value):
-        raise UnacceptableJson(f"the number {text[:40]} is too large for a float")
-    return value
+    return value if math.isfinite(value) else _NonFinite("a number too large for a float")
 
 
-def _constant(name: str) -> float:
-    raise UnacceptableJson(f"{name} is not a JSON number; numbers must be finite")
+def _constant(name: str) -> _NonFinite:
+    return _NonFinite(f"{name}, which is not a JSON number")
 
 
-def _check_text(value: Any, where: str = "body") -> None:
-    """Refuse strings that cannot be encoded as UTF-8 (lone surrogates), keys included."""
-    stack = [(value, where)]
+Describe = Callable[[list[str]], str | None]
+"""What a body's field allows, by its path (e.g. ['run', 'config', 'batch_size']), or None."""
+
+
+def _check_text(value: Any, where: str = "body", describe: Describe | None = None) -> None:
+    """Refuse strings that cannot be encoded as UTF-8 (lone surrogates), keys included, and
+    numbers that are not finite (naming the field, and what it allows where `describe`
+    knows it)."""
+    stack: list[tuple[Any, str, list[str]]] = [(value, where, [])]
     while stack:
-        item, at = stack.pop()
+        item, at, path = stack.pop()
+        if isinstance(item, _NonFinite):
+            allowed = describe(path) if describe is not None else None
+            field = ".".join(path) or "the body"
+            message = (
+                f"{field} must be {allowed}"
+                if allowed
+                else f"{field} holds {item.what}; numbers must be finite"
+            )
+            raise UnacceptableJson(message, path)
         if isinstance(item, str):
             try:
                 item.encode("utf-8")
@@ -66,13 +90,14 @@ def _check_text(value: Any, where: str = "body") -> None:
                 ) from None
         elif isinstance(item, dict):
             for key, child in item.items():
-                stack.append((key, f"{at} (a key)"))
-                stack.append((child, f"{at}.{key.encode('utf-8', 'backslashreplace').decode()}"))
+                name = key.encode("utf-8", "backslashreplace").decode()
+                stack.append((key, f"{at} (a key)", path))
+                stack.append((child, f"{at}.{name}", [*path, name[:64]]))
         elif isinstance(item, list):
-            stack.extend((child, f"{at}[{i}]") for i, child in enumerate(item))
+            stack.extend((child, f"{at}[{i}]", [*path, str(i)]) for i, child in enumerate(item))
 
 
-def check_json(body: bytes) -> None:
+def check_json(body: bytes, describe: Describe | None = None) -> None:
     """Raise `UnacceptableJson` for JSON Python would accept but the standard does not;
     leave malformed JSON to FastAPI, which explains it."""
     try:
@@ -85,7 +110,7 @@ def check_json(body: bytes) -> None:
         raise UnacceptableJson("the body is not text in UTF-8 (nor UTF-16 or UTF-32)") from None
     except ValueError:
         return
-    _check_text(parsed)
+    _check_text(parsed, describe=describe)
 
 
 def _json_error(status: int, detail: Any, headers: dict[str, str] | None = None) -> Any:
@@ -105,10 +130,12 @@ class RequestGuard:
         app: ASGIApp,
         max_body_bytes: int,
         guards: dict[Callable[..., Any], Callable[[Request], Any]],
+        describe: Describe | None = None,
     ) -> None:
         self.app = app
         self.max_body_bytes = max_body_bytes
         self.guards = guards
+        self.describe = describe
         self._table: list[tuple[re.Pattern[str], dict[str, list[str]]]] | None = None
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
@@ -132,9 +159,10 @@ class RequestGuard:
             return
         if _is_json(scope):
             try:
-                check_json(body)
+                check_json(body, self.describe)
             except UnacceptableJson as error:
-                detail = [{"loc": ["body"], "msg": str(error), "type": "json_invalid"}]
+                loc = ["body", *error.loc]
+                detail = [{"loc": loc, "msg": str(error), "type": "json_invalid"}]
                 await _json_error(422, detail)(scope, receive, send)
                 return
         await self.app(scope, _replay(body, receive), send)

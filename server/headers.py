@@ -134,12 +134,13 @@ def _printable(value: Any) -> Any:
 async def validation_error(_: Request, error: RequestValidationError) -> JSONResponse:
     """FastAPI's 422, without echoing the input: input it cannot encode (NaN, a lone
     surrogate) would turn the 422 into a 500, and a message need not repeat the input."""
-    detail = [
-        {
-            "loc": [_printable(part) for part in e.get("loc", ())],
-            "msg": _printable(e.get("msg", "")),
-            "type": _printable(e.get("type", "value_error")),
-        }
-        for e in error.errors()
-    ]
+    detail = []
+    for e in error.errors():
+        loc = [_printable(part) for part in e.get("loc", ())]
+        msg = _printable(e.get("msg", ""))
+        if e.get("type") == "extra_forbidden" and loc:
+            # the field's name is the sender's text: say where, not what
+            loc[-1] = "(unknown field)"
+            msg = "an unknown field; the API document (/openapi.json) lists the valid ones"
+        detail.append({"loc": loc, "msg": msg, "type": _printable(e.get("type", "value_error"))})
     return JSONResponse({"detail": detail}, status_code=422)

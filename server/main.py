@@ -3,7 +3,8 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
+from dataclasses import replace
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -13,6 +14,8 @@ from fastapi.responses import JSONResponse
 from fastapi.security import HTTPAuthorizationCredentials
 from fastapi.security.utils import get_authorization_scheme_param
 
+from learner.fields import leaves
+from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
@@ -23,7 +26,7 @@ from server.live.manager import SessionManager
 from server.logins import Logins
 from server.openapi import install as install_openapi
 from server.openapi import operation_id
-from server.routes import ROUTERS, dashboard, pages, reports, viewing
+from server.routes import ROUTERS, dashboard, pages, reports, sessions, viewing
 from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
 from server.settings import Settings
@@ -31,6 +34,9 @@ from server.viewer import proxy as viewer_proxy
 from server.viewer import viewer_from_settings
 from server.worker.worker import WorkerOptions
 
+API_VERSION = "2.0.0"
+"""The REST API's version (the OpenAPI document's `info.version`): 2.0 carries a session's
+run as one object, `run` (docs/api.md, "Changes")."""
 UVICORN_OPTIONS: dict[str, Any] = {"ws_per_message_deflate": False}
 """How uvicorn must run this app: its only websocket is the 3-D view's relay, whose stream of
 pose updates viser itself sends uncompressed ("compression can be too slow"); deflating it
@@ -44,10 +50,21 @@ def worker_options(settings: Settings) -> WorkerOptions:
         flush_every_steps=settings.flush_every_steps,
         heartbeat_s=settings.heartbeat_s,
         idle_limit_s=settings.idle_limit_s,
-        torch_threads=settings.worker_threads,
         nice=settings.trainer_nice,
         keep_replay_memory=settings.keep_replay_memory,
     )
+
+
+def describe_run_field(spec_class: type[RunSpec]) -> Callable[[list[str]], str | None]:
+    """What a field of a session body's `run` allows, by its path (for the guard's 422 on
+    NaN and infinities, which it refuses before the body is validated)."""
+    by_path = {leaf.path: leaf for leaf in leaves(spec_class)}
+
+    def describe(path: list[str]) -> str | None:
+        leaf = by_path.get(tuple(path[1:])) if path[:1] == ["run"] else None
+        return leaf.allowed() if leaf is not None else None
+
+    return describe
 
 
 def credential_guards(settings: Settings) -> dict[Any, Any]:
@@ -70,7 +87,9 @@ def credential_guards(settings: Settings) -> dict[Any, Any]:
     }
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
+def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = RunSpec) -> FastAPI:
+    """The web app. `spec_class`: the run's declaration (`learner.run.RunSpec`); the body
+    that creates a session, its schema and the exports are made from it."""
     settings = settings or Settings()
     settings.ensure_api_key()
     engine = make_engine(settings.db_url)
@@ -80,7 +99,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         factory,
         settings.db_url,
         hub,
-        worker_options(settings),
+        replace(worker_options(settings), spec_class=spec_class),
         settings.stale_after_s,
         settings.max_trainers,
     )
@@ -99,7 +118,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app = FastAPI(
         title="IDeepRL study platform",
         summary="Human advising studies in interactive deep reinforcement learning.",
-        version="0.1.0",
+        version=API_VERSION,
         lifespan=lifespan,
         generate_unique_id_function=operation_id,
         docs_url=None,  # served from local files by add_docs
@@ -111,9 +130,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.hub = hub
     app.state.manager = manager
     app.state.viewer = viewer
+    app.state.spec_class = spec_class
     app.state.participant_tokens = {}
     app.state.dashboard_logins = Logins(settings.dashboard_login_s)
-    for router in ROUTERS:
+    for router in (*ROUTERS, sessions.creation_router(spec_class)):
         app.include_router(router)
     for router in (
         reports.router,
@@ -125,7 +145,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.include_router(router)
     app.mount("/static", pages.static_files(), name="static")
     app.add_middleware(
-        RequestGuard, max_body_bytes=settings.max_request_bytes, guards=credential_guards(settings)
+        RequestGuard,
+        max_body_bytes=settings.max_request_bytes,
+        guards=credential_guards(settings),
+        describe=describe_run_field(spec_class),
     )
     app.add_middleware(SecurityHeaders)
     app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
@@ -135,7 +158,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.exception_handler(ServiceError)
     async def service_error(_: Request, error: ServiceError) -> JSONResponse:
         if isinstance(error, Invalid):
-            detail = [{"loc": ["body", error.field], "msg": error.message, "type": "value_error"}]
+            loc = ["body", *error.field.split(".")]
+            detail = [{"loc": loc, "msg": error.message, "type": "value_error"}]
             return JSONResponse({"detail": detail}, status_code=422)
         return JSONResponse({"detail": error.message}, status_code=error.status_code)
 

@@ -59,7 +59,8 @@ class Settings(BaseSettings):
     """A running session whose worker has not marked itself alive for this long is dead."""
 
     worker_threads: int = Field(default=1, ge=1)
-    """torch threads per session worker; several workers share the machine's cores."""
+    """torch threads of a session whose run leaves them open (`config.torch_threads` 0), pinned
+    in the run when it is created; several workers share the machine's cores."""
 
     trainer_nice: int = Field(default=10, ge=0, le=19)
     """Niceness of machine-advised workers, and of human sessions once their advice is

@@ -1,5 +1,7 @@
 """The scenario's options beyond motion and sorting rule, as one JSON-able value.
 
+Each rate's range is declared beside it (the `minimum`/`maximum` metadata that
+`learner.fields` reads, so the REST schema, the flags and the checks take it from here).
 A study stores them with each run and compares only runs that share them (the report's
 comparability audit), so they travel as one object, checked once, from every entry point
 (`ideeprl train`, the REST session body, `ideeprl batch`) to `SortingEnv(**options)`.
@@ -24,9 +26,13 @@ class ScenarioOptions:
     after the 18th step), authors-autonomous (the authors' DeepRL script: 0 up to the 19th
     step, then -0.01 x (n - 19)), authors-interactive (their IDeepRL scripts: -0.01 from the
     first step)."""
-    grasp_failure_rate: float = 0.0
+    grasp_failure_rate: float = dataclasses.field(
+        default=0.0, metadata={"minimum": 0.0, "maximum": 1.0}
+    )
     """Chance that a grab comes back empty."""
-    knock_off_rate: float = 0.0
+    knock_off_rate: float = dataclasses.field(
+        default=0.0, metadata={"minimum": 0.0, "maximum": 1.0}
+    )
     """Chance that a grab knocks one other object off the center table (it is lost)."""
 
     def __post_init__(self) -> None:

@@ -7,8 +7,9 @@ under, says at the top when compared methods differ in any setting that is not t
 treatment itself (who advises, how, how much), and withholds the t-tests of such pairs
 unless the caller asks for them (`allow_mismatch`), with the warning kept.
 
-Pure pandas over a settings table, one row per session (`SETTINGS_COLUMNS`), which the
-server builds from its session rows; nothing here reads the database.
+Pure pandas over a settings table, one row per session (`FIXED_COLUMNS` and a column per
+setting, which the server derives from the run's declaration, so a field added to the run
+is audited by itself); nothing here reads the database.
 """
 
 from __future__ import annotations
@@ -22,31 +23,37 @@ import pandas as pd
 
 from server.analysis.episodes import method_name, order_methods
 
-SETTINGS_COLUMNS: tuple[str, ...] = (
-    "session_id",
-    "method",
-    "reward_scheme",
-    "learner",
-    "scenario",
-    "motion",
-    "sort_rule",
-    "advice",
-)
-"""One row per session. `learner`: the preset and the fields that differ from it, as text;
-`scenario`: the realism rates as text; `advice`: strategy and budget (the treatment)."""
+FIXED_COLUMNS: tuple[str, ...] = ("session_id", "method", "learner", "advice")
+"""Columns every settings table has: `learner` (the preset and the config fields that differ
+from it, as text) and `advice` (strategy and budget: the treatment). Every other column is
+a setting compared methods must share, one per field of the run the server declares
+(`learner.run.RunSpec` leaves of role `setting` outside the learner config)."""
 
-COMPARED: dict[str, str] = {
-    "reward_scheme": "reward scheme",
+LABELS: dict[str, str] = {
     "learner": "learner preset and options",
-    "scenario": "scenario options",
+    "reward_scheme": "reward scheme",
     "motion": "motion mode",
     "sort_rule": "sorting rule",
 }
-"""Settings that must be equal for two methods' numbers to be compared (the label in words)."""
+"""A setting's name in words, where it is not its column's with spaces."""
 
 RUNTIME_FIELDS = ("device", "torch_threads", "update", "precision", "advice_budget", "episodes")
 """Learner config fields that do not change what is learned (where it runs, how fast the
 same function is computed), or are the treatment or the report's own cut."""
+
+
+def label(column: str) -> str:
+    """A setting's column in words."""
+    return LABELS.get(column, column.replace("_", " "))
+
+
+def compared(settings: pd.DataFrame) -> dict[str, str]:
+    """The settings table's compared columns and their labels, `learner` first."""
+    return {
+        c: label(c)
+        for c in ("learner", *settings.columns)
+        if c not in FIXED_COLUMNS or c == "learner"
+    }
 
 
 def describe_learner(config: dict[str, Any], presets: dict[str, dict[str, Any]]) -> str:
@@ -62,19 +69,6 @@ def describe_learner(config: dict[str, Any], presets: dict[str, dict[str, Any]])
     )
     extra = ", ".join(f"{k}={json.dumps(v)}" for k, v in sorted(diff.items()))
     return f"{name} + {extra}" if extra else name
-
-
-def describe_scenario(scenario: dict[str, Any]) -> str:
-    """Realism rates in words ("none" when off)."""
-    rates = [
-        f"{label} {scenario.get(key, 0.0):g}"
-        for key, label in (
-            ("grasp_failure_rate", "failed grasps"),
-            ("knock_off_rate", "knock-offs"),
-        )
-        if scenario.get(key, 0.0)
-    ]
-    return ", ".join(rates) or "no realism"
 
 
 @dataclass(frozen=True)
@@ -105,7 +99,7 @@ class Audit:
                 f"({', '.join(what)}): their numbers are not comparable as they stand"
                 + (
                     " (the rescoring table scores the same behaviour under one scheme)."
-                    if COMPARED["reward_scheme"] in what
+                    if label("reward_scheme") in what
                     else "."
                 )
             )
@@ -118,15 +112,17 @@ class Audit:
 
 
 def audit(settings: pd.DataFrame, baseline: str | None = None) -> Audit:
-    """The audit of the sessions in `settings` (`SETTINGS_COLUMNS`)."""
-    missing = [c for c in SETTINGS_COLUMNS if c not in settings]
+    """The audit of the sessions in `settings` (`FIXED_COLUMNS` and one column per compared
+    setting)."""
+    missing = [c for c in FIXED_COLUMNS if c not in settings]
     assert not missing, f"settings table lacks {missing}"
+    columns = compared(settings)
     order = order_methods(settings["method"], baseline)
     values: dict[str, dict[str, list[str]]] = {}
     rows = []
     for method in order:
         group = settings[settings["method"] == method]
-        values[method] = {c: sorted(set(map(str, group[c]))) for c in (*COMPARED, "advice")}
+        values[method] = {c: sorted(set(map(str, group[c]))) for c in (*columns, "advice")}
         rows.append(
             {
                 "method": method,
@@ -135,10 +131,10 @@ def audit(settings: pd.DataFrame, baseline: str | None = None) -> Audit:
                 **{c: " | ".join(v) for c, v in values[method].items()},
             }
         )
-    mixed = {m: [label for c, label in COMPARED.items() if len(values[m][c]) > 1] for m in order}
+    mixed = {m: [text for c, text in columns.items() if len(values[m][c]) > 1] for m in order}
     mismatches = {}
     for a, b in combinations(order, 2):
-        differ = [label for c, label in COMPARED.items() if values[a][c] != values[b][c]]
+        differ = [text for c, text in columns.items() if values[a][c] != values[b][c]]
         if differ:
             mismatches[(a, b)] = differ
     return Audit(

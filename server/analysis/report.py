@@ -19,7 +19,7 @@ import pandas as pd
 import scipy
 
 from server.analysis import markdown as md
-from server.analysis.audit import Audit, audit
+from server.analysis.audit import Audit, audit, label
 from server.analysis.episodes import EpisodeTableError, agents_of, method_name
 from server.analysis.figures import (
     example_agents,
@@ -444,9 +444,10 @@ def write_report(
     agent); `smoothing` is a moving-average window for Figures 5 and 6 only. Existing
     files of the same names are replaced; nothing is written if the table is invalid.
 
-    `settings` (one row per session, `server.analysis.audit.SETTINGS_COLUMNS`) adds the
-    comparability audit: the settings per method, a warning at the top for methods that
-    differ, and no t-test for such a pair unless `allow_mismatch` (the warning stays).
+    `settings` (one row per session: `server.analysis.audit.FIXED_COLUMNS` and one column
+    per setting) adds the comparability audit: the settings per method, a warning at the
+    top for methods that differ, and no t-test for such a pair unless `allow_mismatch`
+    (the warning stays).
     `steps` (training steps, `server.analysis.rescoring.STEP_COLUMNS`) with `settings` adds
     R_T rescored under each reward scheme. `reference="authors"` draws the authors' mean
     curves on Figure 5 and lists the paper's R_T beside them.
@@ -571,14 +572,10 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
     """The audit's warning (for the top) and its table; the rescoring and reference tables."""
     out: list[str] = []
     if extra.audit is not None:
+        shown = [c for c in extra.audit.methods.columns if c not in ("method", "name")]
         columns = {
             "name": "method",
-            "sessions": "sessions",
-            "reward_scheme": "reward scheme",
-            "learner": "learner preset and options",
-            "scenario": "scenario options",
-            "motion": "motion",
-            "sort_rule": "sorting rule",
+            **{c: c if c == "sessions" else label(c) for c in shown if c != "advice"},
             "advice": "advice (the treatment)",
         }
         out += [

@@ -24,11 +24,11 @@ from learner.run import RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.progress import BatchProgress
 from server.batch.sessions import ensure_session, find_session
-from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, session_body
+from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, run_spec
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
-from server.services import learning
+from server.services import numerics
 from server.services.errors import Invalid
 from server.services.ownership import set_status, take_back
 from server.services.studies import get_study
@@ -38,6 +38,7 @@ TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
 LIVE = {s.value for s in LIVE_STATUSES}
 WAITING = "waiting for the advisor"
 BLOCKED = "not run: the advisor did not finish"
+REFUSED = "not resumed: its pinned numerics"
 
 
 @dataclass(frozen=True)
@@ -49,9 +50,8 @@ class RunnerOptions:
     backend: str = "local"
     """`local` (worker processes on this machine) or `ray`."""
     workers: int | None = None
-    """Runs at once; None: this machine's cores / `threads` (local), the cluster's (Ray)."""
-    threads: int = 1
-    """torch threads per run."""
+    """Runs at once; None: this machine's cores / the runs' torch threads (local), the
+    cluster's (Ray)."""
     address: str | None = None
     """Ray cluster address (`ray://HOST:10001` or `auto`); None starts a local instance."""
     checkpoint_every_episodes: int = 10
@@ -66,6 +66,9 @@ class RunnerOptions:
     """How often the runner looks at its runs."""
     progress: bool = True
     """Show the tqdm bar."""
+    override_numerics: bool = False
+    """Resume runs whose pinned numerics this machine cannot honour, recording the override;
+    without it they are left as they are, with the reason."""
 
 
 @dataclass
@@ -83,7 +86,7 @@ class RunState:
     done_before: bool = False
     """It had finished before this invocation."""
     spec: RunSpec | None = None
-    """The run, described once (`BatchRunner.prepare` checks it before anything runs); an
+    """The run, described once (`BatchSpec.spec_of` checks it before anything runs); an
     `agent` run's advisor checkpoint is filled in when the advisor has trained."""
 
 
@@ -128,41 +131,53 @@ def absolute_database_url(url: str) -> str:
 
 
 class BatchRunner:
-    def __init__(self, spec: BatchSpec, study_id: int, database_url: str, options: RunnerOptions):
+    def __init__(
+        self,
+        spec: BatchSpec,
+        study_id: int,
+        database_url: str,
+        options: RunnerOptions,
+        spec_class: type[RunSpec] = RunSpec,
+        migrate: bool = True,
+    ):
         self.spec = spec
+        self.spec_class = spec_class
         self.study_id = study_id
         self.options = options
         self.database_url = absolute_database_url(database_url)
         engine = make_engine(self.database_url)
-        upgrade(engine)
+        if migrate:
+            upgrade(engine)
         self.factory: sessionmaker[Session] = make_session_factory(engine)
         self.states = [RunState(run) for run in plan_runs(spec)]
-        self.advisor_checkpoint: str | None = (
-            str(Path(spec.advisor_checkpoint).resolve()) if spec.advisor_checkpoint else None
-        )
+        given = spec.template.advisor_checkpoint
+        self.advisor_checkpoint: str | None = str(Path(given).resolve()) if given else None
         self.queue: list[RunState] = []
         self.elsewhere: list[RunState] = []
         self.log: Callable[[str], None] = print
 
     # --- the runs' sessions ------------------------------------------------------------
     def _run_spec(self, state: RunState, checkpoint: str | None) -> RunSpec:
-        """The run's `RunSpec` (its config built once), with `checkpoint` advising."""
+        """The run's `RunSpec`, with `checkpoint` advising an `agent` run."""
         if state.spec is None:
-            body = session_body(self.spec, state.run, checkpoint or "-")
-            try:
-                state.spec = learning.spec_from_body(body, body.advisor_checkpoint)
-            except Invalid as error:
-                raise BatchError(error.message) from None
+            state.spec = run_spec(self.spec, state.run, checkpoint)
         if state.run.method != "agent" or checkpoint is None:
             return state.spec
         return state.spec.replace(advisor_checkpoint=checkpoint)
 
     def _ensure(self, db: Session, state: RunState) -> None:
-        body = session_body(self.spec, state.run, self.advisor_checkpoint)
         spec = self._run_spec(state, self.advisor_checkpoint)
-        session, _ = ensure_session(db, self.study_id, body, spec)
+        label = f"{self.spec.label} advisor" if state.run.is_advisor else self.spec.label
+        try:
+            session, _ = ensure_session(db, self.study_id, spec, label, self.spec_class)
+        except Invalid as error:
+            raise BatchError(error.message) from None
         state.session_id, state.status = session.id, session.status
         state.done_before = session.status == Status.finished.value
+        if session.status in TO_RUN and session.status != Status.created.value:
+            problem = numerics.refusal(session, self.spec_class)
+            if problem and not self.options.override_numerics:
+                state.status, state.detail = REFUSED, problem
 
     def _advisor_ready(self, db: Session, advisor: RunState) -> None:
         """The trained advisor's final checkpoint becomes the `agent` runs' advisor."""
@@ -183,37 +198,37 @@ class BatchRunner:
             self._ensure(db, state)
         return waiting
 
-    def preview(self) -> list[str]:
+    def preview_rows(self) -> list[dict[str, Any]]:
         """Each run and the session it has (nothing is created or run)."""
-        lines = []
+        rows = []
         checkpoint = self.advisor_checkpoint
         with self.factory() as db:
             get_study(db, self.study_id)
             for state in self.states:
                 run = state.run
-                head = f"  {run.name:<18} seed {run.seed:<8}"
+                row: dict[str, Any] = {
+                    "run": run.name,
+                    "method": run.method,
+                    "seed": run.seed,
+                    "session": None,
+                    "status": "new",
+                }
+                rows.append(row)
                 if run.method == "agent" and checkpoint is None:
-                    lines.append(f"{head} waits for the advisor")
+                    row["status"] = "waits for the advisor"
                     continue
                 found = find_session(
-                    db, self.study_id, run.method, self._run_spec(state, checkpoint)
+                    db, self.study_id, self._run_spec(state, checkpoint), self.spec_class
                 )
                 if run.is_advisor and found is not None and found.status == Status.finished:
                     checkpoint = found.checkpoint_path
-                lines.append(
-                    f"{head} session {found.id}: {found.status}" if found else f"{head} new"
-                )
-        return lines
-
-    def _validate(self) -> None:
-        """Every run's config checked before any starts: an `agent` run's session is only
-        created after the advisor has trained, which should not be when a typo shows."""
-        for state in self.states:
-            self._run_spec(state, self.advisor_checkpoint)
+                if found is not None:
+                    row["session"], row["status"] = found.id, found.status
+        return rows
 
     def prepare(self) -> None:
-        """Find or create every run's session; take back the ones whose worker died."""
-        self._validate()
+        """Find or create every run's session; take back the ones whose worker died. (Every
+        run was checked when the `BatchSpec` was made, before anything is written.)"""
         with self.factory() as db:
             get_study(db, self.study_id)
             for state in self.states:
@@ -247,14 +262,20 @@ class BatchRunner:
         return rows
 
     # --- running -----------------------------------------------------------------------
+    @property
+    def threads(self) -> int:
+        """Torch threads of each run, as the runs are pinned on this machine."""
+        return self.spec.template.pinned().config.torch_threads
+
     def make_backend(self) -> Backend:
-        threads = max(1, self.options.threads)
+        threads = self.threads
         worker = WorkerOptions(
             data_dir=self.options.data_dir.resolve(),
             checkpoint_every_episodes=self.options.checkpoint_every_episodes,
             heartbeat_s=self.options.heartbeat_s,
-            torch_threads=threads,
             nice=self.options.nice,
+            override_numerics=self.options.override_numerics,
+            spec_class=self.spec_class,
         )
         if self.options.backend == "ray":
             return RayBackend(

@@ -1,10 +1,10 @@
 """A batch's runs in the database: find the session a run already has, create the missing
 ones (taking back those whose worker died is `server.services.ownership.take_back`).
 
-A run's identity is its study, method and `learning.identity` (seed, learner config,
-sorting rule, strategy and its options, advisor, error rate, motion, scenario options),
-compared as stored: the label is a name, not part of the identity, so a renamed batch still
-finds its runs.
+A run's identity is its study and `learning.identity` (every field of its `RunSpec` in its
+stored form, numerics only where the batch asked for them), compared with each stored run
+read back by the same declaration (fields added since take their defaults): the label is a
+name, not part of the identity, so a renamed batch still finds its runs.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from sqlalchemy.orm import Session
 
 from learner.run import RunSpec
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
-from server.schemas.sessions import SessionCreate
+from server.schemas.sessions import SessionOptions
 from server.services import learning
 from server.services.sessions import create_session
 
@@ -30,17 +30,20 @@ _RANK = {
 from its last checkpoint, like an interrupted one)."""
 
 
-def find_session(db: Session, study_id: int, method: str, spec: RunSpec) -> StudySession | None:
-    """The study's session for this run (`learning.identity`), the furthest along if
-    several match; None if the run has none yet."""
-    wanted = learning.identity(method, spec)
-    query = select(StudySession).where(
-        StudySession.study_id == study_id,
-        StudySession.method == str(method),
-        StudySession.seed == spec.seed,
-    )
+def find_session(
+    db: Session, study_id: int, spec: RunSpec, spec_class: type[RunSpec] = RunSpec
+) -> StudySession | None:
+    """The study's session for this run (`learning.same_run`), the furthest along if several
+    match; None if the run has none yet."""
+    wanted = learning.identity(spec)
+    query = select(StudySession).where(StudySession.study_id == study_id)
     matches = [
-        s for s in db.scalars(query) if s.status in _RANK and learning.session_identity(s) == wanted
+        s
+        for s in db.scalars(query)
+        if s.status in _RANK
+        and s.method == spec.method
+        and s.seed == spec.seed
+        and learning.same_run(wanted, s, spec_class)
     ]
     if not matches:
         return None
@@ -48,14 +51,12 @@ def find_session(db: Session, study_id: int, method: str, spec: RunSpec) -> Stud
 
 
 def ensure_session(
-    db: Session, study_id: int, body: SessionCreate, spec: RunSpec
+    db: Session, study_id: int, spec: RunSpec, label: str, spec_class: type[RunSpec] = RunSpec
 ) -> tuple[StudySession, bool]:
-    """The run's session (`spec`, what `body` describes), created if missing; True if
-    created now."""
-    found = find_session(db, study_id, body.method, spec)
+    """The run's session, created (pinned on this machine) if missing; True if created now."""
+    found = find_session(db, study_id, spec, spec_class)
     if found is not None:
         return found, False
-    if body.advisor_checkpoint is not None:
-        path = str(Path(body.advisor_checkpoint).resolve())
-        body = body.model_copy(update={"advisor_checkpoint": path})
-    return create_session(db, study_id, body, spec=spec), True
+    if spec.advisor_checkpoint is not None:
+        spec = spec.replace(advisor_checkpoint=str(Path(spec.advisor_checkpoint).resolve()))
+    return create_session(db, study_id, spec, SessionOptions(label=label)), True

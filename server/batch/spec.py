@@ -7,20 +7,17 @@ ones are skipped, the interrupted ones resume, only the missing ones are created
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from learner.run import MOTIONS
-from learner.strategies import STRATEGY_NAMES
-from server.schemas.sessions import Scenario, SessionCreate, StrategyOptions
-from sim.scenario import ScenarioOptions
+from learner.fields import FieldError
+from learner.run import RunSpec
 
 BATCH_METHODS: tuple[str, ...] = ("autonomous", "agent", "oracle", "random", "sb3-dqn")
 """Methods a batch can run: every machine advisor, no advisor at all, and Stable-Baselines3's
 DQN (an independent baseline learner, the optional `sb3` extra)."""
-UNADVISED: tuple[str, ...] = ("autonomous", "sb3-dqn")
-"""Methods without an advisor (no strategy, no advice budget)."""
 
 MAX_SEED = 2**31 - 1
 ADVISOR_SEED_OFFSET = 100_000
@@ -35,47 +32,25 @@ class BatchError(ValueError):
 
 @dataclass(frozen=True)
 class BatchSpec:
-    """The runs of one batch: `agents` learners for each of `methods`, all on the same
-    settings, agent i of every method on the same seed (so runs pair up across methods)."""
+    """The runs of one batch: `agents` learners for each of `methods`, all described by one
+    `template` run (the same settings), with some fields changed for some methods
+    (`per_method`), agent i of every method on seed `template.seed + i` (so runs pair up).
+    Only what is the batch's own is declared here; every run field is `RunSpec`'s."""
 
+    template: RunSpec = field(default_factory=RunSpec)
+    """The run every method's agents share; its `method` is each method's, its `seed` the
+    base seed."""
     methods: tuple[str, ...] = ("autonomous", "agent")
     """Methods to run (`BATCH_METHODS`); the paper compares autonomous and agent."""
     agents: int = 10
     """Learners per method (the paper's ten)."""
-    base_seed: int = 0
-    """Agent i of every method gets seed `base_seed + i`."""
     label: str = "baselines"
     """The batch's name, stored as every run's session label."""
-    preset: str = "paper"
-    """Learner config preset (`paper`, `modern`)."""
-    config: dict[str, Any] = field(default_factory=dict)
-    """Learner config fields overriding the preset (e.g. `pretraining_steps`, `batch_size`)."""
-    episodes: int | None = None
-    """Training episodes per run; None: the preset's (300)."""
-    max_episode_steps: int | None = None
-    """Truncation per episode; None: the preset's (250)."""
-    advice_budget: int | None = None
-    """Advice per advised run; None: the preset's (100)."""
-    strategy: str = "early"
-    """Advising strategy of advised runs (the paper's early advising)."""
-    strategy_options: dict[str, Any] = field(default_factory=dict)
-    """The strategy's options (`interval`, `threshold`); unset ones take its defaults."""
-    oracle_error_rate: float = 0.0
-    """Chance that the `oracle` advisor names a wrong action."""
-    advisor_checkpoint: str | None = None
-    """Trained learner checkpoint that advises `agent` runs; None: a batch trains one first
-    (autonomous, same settings, seed `base_seed + ADVISOR_SEED_OFFSET`), as the paper did."""
-    motion: str = "fast"
-    """`fast` (poses set directly) or `physics`; batch runs need no one to watch."""
-    sort_rule: str | dict[str, str] = "color"
-    """The sorting rule (`color`, `shape`, or a map of all six objects to a side)."""
-    scenario: dict[str, Any] = field(default_factory=dict)
-    """Scenario options of every run (`sim.ScenarioOptions`: reward scheme, realism rates)."""
-    reward_schemes: dict[str, str] = field(default_factory=dict)
-    """A reward scheme for some methods only, over `scenario`'s: how the authors compared
-    their methods (`autonomous` under `authors-autonomous`, `agent` under
-    `authors-interactive`). The report flags such a comparison. The advisor trained for
-    `agent` runs is an autonomous run and takes the autonomous scheme."""
+    per_method: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    """Fields of the template changed for one method, by leaf name: how the authors compared
+    (`{"autonomous": {"reward_scheme": "authors-autonomous"}, "agent": {"reward_scheme":
+    "authors-interactive"}}`). The report flags such a comparison. The advisor trained for
+    `agent` runs is an autonomous run and takes the autonomous changes."""
 
     def __post_init__(self) -> None:
         unknown = [m for m in self.methods if m not in BATCH_METHODS]
@@ -100,52 +75,52 @@ class BatchSpec:
             raise BatchError(f"methods repeat: {', '.join(self.methods)}; name each once")
         if not 1 <= self.agents <= MAX_AGENTS:
             raise BatchError(f"agents must be between 1 and {MAX_AGENTS}, got {self.agents}")
-        top = self.base_seed + ADVISOR_SEED_OFFSET
-        if self.base_seed < 0 or top > MAX_SEED:
+        top = self.base_seed + ADVISOR_SEED_OFFSET + self.agents
+        if top > MAX_SEED:
             raise BatchError(
-                f"base seed must be between 0 and {MAX_SEED - ADVISOR_SEED_OFFSET}, "
-                f"got {self.base_seed}"
+                f"the base seed must be at most {MAX_SEED - ADVISOR_SEED_OFFSET - self.agents}"
             )
-        for name, value, valid in (
-            ("strategy", self.strategy, STRATEGY_NAMES),
-            ("motion", self.motion, MOTIONS),
-        ):
-            if value not in valid:
-                raise BatchError(f"unknown {name} {value!r}; choose from {', '.join(valid)}")
-        if not 0.0 <= self.oracle_error_rate <= 1.0:
-            raise BatchError(
-                f"oracle error rate must be between 0 and 1, got {self.oracle_error_rate}"
-            )
-        strays = sorted(set(self.reward_schemes) - set(self.methods))
+        strays = sorted(set(self.per_method) - set(self.methods))
         if strays:
             raise BatchError(
-                f"a reward scheme is given for {', '.join(strays)}, which the batch does not run"
+                f"settings are given for {', '.join(strays)}, which the batch does not run"
             )
         for method in self.methods:
-            try:
-                ScenarioOptions.from_dict(self.scenario_of(method))
-            except ValueError as error:
-                raise BatchError(str(error)) from None
-        if self.advisor_checkpoint is not None:
+            self.spec_of(method, self.base_seed)  # every method's run checked before any runs
+        checkpoint = self.template.advisor_checkpoint
+        if checkpoint is not None:
             if "agent" not in self.methods:
                 raise BatchError("an advisor checkpoint is only used by the 'agent' method")
-            if not Path(self.advisor_checkpoint).is_file():
+            if not Path(checkpoint).is_file():
                 raise BatchError(
-                    f"no advisor checkpoint at {self.advisor_checkpoint}; give the path of a "
-                    "trained learner's checkpoint (e.g. a session's final.pt), or leave it out "
-                    "to train the advisor first"
+                    "no advisor checkpoint at the path given; give the path of a trained "
+                    "learner's checkpoint (e.g. a session's final.pt), or leave it out to "
+                    "train the advisor first"
                 )
 
-    def scenario_of(self, method: str) -> dict[str, Any]:
-        """The scenario options of a method's runs."""
-        scenario = dict(self.scenario)
-        if method in self.reward_schemes:
-            scenario["reward_scheme"] = self.reward_schemes[method]
-        return scenario
+    @property
+    def base_seed(self) -> int:
+        return self.template.seed
+
+    def spec_of(self, method: str, seed: int) -> RunSpec:
+        """The run of one of `method`'s agents (or of the advisor) on `seed`, checked."""
+        changes = dict(self.per_method.get(method, {}))
+        try:
+            spec = self.template.with_values(changes) if changes else self.template
+            spec = spec.replace(
+                method=method,
+                seed=seed,
+                advisor_checkpoint=spec.advisor_checkpoint if method == "agent" else None,
+            )
+            if method == "agent" and spec.advisor_checkpoint is None:
+                spec = spec.replace(advisor_checkpoint="-")  # filled in once the advisor trained
+            return spec.validate()
+        except FieldError as error:
+            raise BatchError(f"{method}: {error}") from None
 
     @property
     def trains_advisor(self) -> bool:
-        return "agent" in self.methods and self.advisor_checkpoint is None
+        return "agent" in self.methods and self.template.advisor_checkpoint is None
 
     def seed(self, index: int) -> int:
         """The seed of agent `index` (from 0) of every method."""
@@ -185,23 +160,9 @@ def plan_runs(spec: BatchSpec) -> list[Run]:
     return runs
 
 
-def session_body(spec: BatchSpec, run: Run, advisor_checkpoint: str | None) -> SessionCreate:
-    """The session a run becomes; `advisor_checkpoint` for `agent` runs (an absolute path)."""
-    advised = run.method not in UNADVISED
-    return SessionCreate(
-        method=run.method,  # type: ignore[arg-type]
-        seed=run.seed,
-        label=f"{spec.label} advisor" if run.is_advisor else spec.label,
-        preset=spec.preset,
-        config=dict(spec.config),
-        episodes=spec.episodes,
-        max_episode_steps=spec.max_episode_steps,
-        sort_rule=spec.sort_rule,
-        strategy=spec.strategy if advised else "early",  # type: ignore[arg-type]
-        strategy_options=StrategyOptions(**(spec.strategy_options if advised else {})),
-        advice_budget=spec.advice_budget if advised else None,
-        advisor_checkpoint=advisor_checkpoint if run.method == "agent" else None,
-        oracle_error_rate=spec.oracle_error_rate if run.method == "oracle" else 0.0,
-        motion=spec.motion,  # type: ignore[arg-type]
-        scenario=Scenario(**spec.scenario_of(run.method)),
-    )
+def run_spec(spec: BatchSpec, run: Run, advisor_checkpoint: str | None) -> RunSpec:
+    """The run a batch run is; `advisor_checkpoint` for `agent` runs (an absolute path)."""
+    described = spec.spec_of(run.method, run.seed)
+    if run.method == "agent":
+        described = described.replace(advisor_checkpoint=advisor_checkpoint or "-")
+    return described

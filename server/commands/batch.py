@@ -10,6 +10,10 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from learner.cli import add_deprecated, given_values
+from learner.fields import FieldError, leaves, nest, parse_text
+from learner.fields import add_arguments as add_spec_arguments
+from learner.run import RunSpec
 from server.commands.common import service_exit_code, show_progress
 
 if TYPE_CHECKING:  # the command line starts without the batch's imports
@@ -39,14 +43,12 @@ def _methods(values: list[str]) -> tuple[str, ...]:
     return tuple(m for value in values for m in value.split(",") if m)
 
 
-def _override(text: str) -> tuple[str, Any]:
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"expected FIELD=VALUE, got {text!r}")
-    name, value = text.split("=", 1)
-    try:
-        return name.strip(), json.loads(value)
-    except json.JSONDecodeError:
-        return name.strip(), value
+def _per_method(text: str) -> tuple[str, str, str]:
+    method, sep, rest = text.partition(":")
+    name, eq, value = rest.partition("=")
+    if not sep or not eq or not method.strip() or not name.strip():
+        raise argparse.ArgumentTypeError("--per-method takes METHOD:FIELD=VALUE")
+    return method.strip(), name.strip(), value
 
 
 def add_database_options(parser: argparse.ArgumentParser) -> None:
@@ -65,7 +67,7 @@ def settings_from(args: argparse.Namespace) -> Settings:
     return Settings(**{k: v for k, v in overrides.items() if v is not None})
 
 
-def register(subparsers: Any) -> None:
+def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     parser = subparsers.add_parser(
         "batch",
         help="run baseline agents (autonomous, agent, oracle, random, sb3-dqn) as a study's "
@@ -88,153 +90,121 @@ def register(subparsers: Any) -> None:
         "default autonomous agent)",
     )
     what.add_argument("--agents", type=int, default=10, help="agents per method (default 10)")
-    what.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     what.add_argument(
         "--label", default="baselines", help="the batch's name, every run's session label"
     )
-    what.add_argument("--preset", default="paper", help="learner preset: paper, modern or authors")
-    what.add_argument("--episodes", type=int, help="training episodes per run (default 300)")
-    what.add_argument("--pretraining-steps", type=int, help="pretraining actions (default 1000)")
-    what.add_argument("--advice-budget", type=int, help="advice per advised run (default 100)")
-    what.add_argument("--max-episode-steps", type=int, help="truncation (default 250)")
+    run = parser.add_argument_group(
+        "the runs",
+        "every field of learner.run.RunSpec, one flag each (or --set FIELD=VALUE), shared "
+        "by every method's runs; --seed is the base seed (agent i gets seed + i)",
+    )
+    add_spec_arguments(
+        run, spec_class, skip=("method",), defaults={"torch_threads": "1 (half the cores, 1-4)"}
+    )
+    add_deprecated(parser, skip=("method",))
     what.add_argument(
         "--set",
-        dest="overrides",
+        dest="assignments",
         action="append",
-        type=_override,
+        type=_assignment,
         default=[],
         metavar="FIELD=VALUE",
-        help="learner config field (VALUE as JSON), repeatable",
-    )
-    what.add_argument("--strategy", default="early", help="advising strategy (default early)")
-    what.add_argument("--interval", type=int, help="alternating: advise every Nth step (2)")
-    what.add_argument(
-        "--threshold", type=float, help="importance, mistake_correcting: Q-value spread (0.1)"
+        help="set any field of the runs by its name (VALUE as JSON, else a string); repeatable",
     )
     what.add_argument(
-        "--oracle-error-rate", type=float, default=0.0, help="oracle's wrong-advice rate"
-    )
-    what.add_argument("--advisor-checkpoint", help="trained checkpoint advising 'agent' runs")
-    what.add_argument("--motion", default="fast", help="fast (default) or physics")
-    what.add_argument(
-        "--sort-rule", default="color", help='color, shape, or a JSON map {"cube/red": "left"}'
-    )
-    what.add_argument(
-        "--reward-scheme",
-        nargs="+",
-        default=["paper"],
-        metavar="[METHOD=]SCHEME",
-        help="paper (default), authors-autonomous or authors-interactive, for every method, "
-        "or METHOD=SCHEME for one (how the authors compared: autonomous=authors-autonomous "
-        "agent=authors-interactive; the report flags it)",
-    )
-    what.add_argument(
-        "--grasp-failure-rate", type=float, default=0.0, help="chance a grab comes back empty"
-    )
-    what.add_argument(
-        "--knock-off-rate", type=float, default=0.0, help="chance a grab knocks another off"
+        "--per-method",
+        action="append",
+        type=_per_method,
+        default=[],
+        metavar="METHOD:FIELD=VALUE",
+        help="set a field for one method's runs only, repeatable: how the authors compared "
+        "(autonomous:reward_scheme=authors-autonomous agent:reward_scheme=authors-interactive; "
+        "the report flags such a comparison)",
     )
     how = parser.add_argument_group("how to run it")
     how.add_argument("--backend", choices=("local", "ray"), default="local")
     how.add_argument("--address", help="Ray cluster address (default: start a local Ray)")
     how.add_argument(
-        "--workers", type=int, help="runs at once (default: cores / threads; Ray: its CPUs)"
+        "--workers", type=int, help="runs at once (default: cores / torch threads; Ray: its CPUs)"
     )
-    how.add_argument("--threads", type=int, default=1, help="torch threads per run (default 1)")
     how.add_argument(
         "--checkpoint-every", type=int, default=10, help="episodes between checkpoints"
     )
     how.add_argument("--nice", type=int, default=0, help="workers' added niceness (0-19)")
-    how.add_argument("--report", type=Path, metavar="DIR", help="write the report here at the end")
-    how.add_argument("--dry-run", action="store_true", help="show the runs and their state only")
+    how.add_argument(
+        "--override-numerics",
+        action="store_true",
+        help="resume runs pinned to numerics this machine cannot honour (recorded per run)",
+    )
+    how.add_argument("--report", type=Path, metavar="DIR", help="write the report at the end")
+    how.add_argument(
+        "--dry-run", action="store_true", help="show the runs and their state; write nothing"
+    )
+    how.add_argument(
+        "--json", action="store_true", help="with --dry-run: the runs as JSON on stdout"
+    )
     how.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_database_options(how)
-    parser.set_defaults(func=batch)
+    parser.set_defaults(func=batch, spec_class=spec_class)
+
+
+def _assignment(text: str) -> tuple[str, str]:
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError("--set takes FIELD=VALUE")
+    return name.strip(), value
 
 
 def spec_from(args: argparse.Namespace) -> BatchSpec:
-    from server.batch import BatchSpec
+    """The batch the arguments describe, every run checked (`BatchError` otherwise)."""
+    from server.batch import BatchError, BatchSpec
 
-    config = dict(args.overrides)
-    if args.pretraining_steps is not None:
-        config["pretraining_steps"] = args.pretraining_steps
-    sort_rule: Any = args.sort_rule
-    if sort_rule.strip().startswith("{"):
-        sort_rule = json.loads(sort_rule)
-    scenario: dict[str, Any] = {
-        "grasp_failure_rate": args.grasp_failure_rate,
-        "knock_off_rate": args.knock_off_rate,
-    }
-    per_method: dict[str, str] = {}
-    for item in args.reward_scheme:
-        method, sep, scheme = item.rpartition("=")
-        if sep:
-            per_method[method] = scheme
-        else:
-            scenario["reward_scheme"] = scheme
+    spec_class: type[RunSpec] = getattr(args, "spec_class", RunSpec)
+    by_name = {leaf.name: leaf for leaf in leaves(spec_class)}
+    try:
+        values = given_values(args, spec_class)
+        values.setdefault("torch_threads", 1)  # a batch fills the cores with 1-thread runs
+        template = spec_class.from_json(nest(values, spec_class))
+        per_method: dict[str, dict[str, Any]] = {}
+        for method, name, text in args.per_method:
+            if name not in by_name or name == "method":
+                raise FieldError(name, f"--per-method: unknown field {name[:64]}")
+            per_method.setdefault(method, {})[name] = parse_text(by_name[name], text)
+    except FieldError as error:
+        raise BatchError(str(error)) from None
     return BatchSpec(
+        template=template,
         methods=_methods(args.methods),
         agents=args.agents,
-        base_seed=args.seed,
         label=args.label,
-        preset=args.preset,
-        config=config,
-        episodes=args.episodes,
-        max_episode_steps=args.max_episode_steps,
-        advice_budget=args.advice_budget,
-        strategy=args.strategy,
-        strategy_options={
-            name: value
-            for name, value in (("interval", args.interval), ("threshold", args.threshold))
-            if value is not None
-        },
-        oracle_error_rate=args.oracle_error_rate,
-        advisor_checkpoint=args.advisor_checkpoint,
-        motion=args.motion,
-        sort_rule=sort_rule,
-        scenario=scenario,
-        reward_schemes=per_method,
+        per_method=per_method,
     )
 
 
 def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     """The command that reruns (or resumes) exactly this batch, every choice spelled out."""
     parts = ["ideeprl", "batch", "--study", str(args.study), "--methods", *spec.methods]
-    parts += ["--agents", str(spec.agents), "--seed", str(spec.base_seed), "--label", spec.label]
-    parts += ["--preset", spec.preset]
-    for flag, value in (
-        ("--episodes", spec.episodes),
-        ("--pretraining-steps", args.pretraining_steps),
-        ("--advice-budget", spec.advice_budget),
-        ("--max-episode-steps", spec.max_episode_steps),
-        ("--advisor-checkpoint", spec.advisor_checkpoint),
-    ):
-        if value is not None:
-            parts += [flag, str(value)]
-    for name, value in args.overrides:
-        parts += ["--set", f"{name}={json.dumps(value)}"]
-    if "oracle" in spec.methods:
-        parts += ["--oracle-error-rate", str(spec.oracle_error_rate)]
-    parts += ["--strategy", spec.strategy]
-    for name, value in spec.strategy_options.items():
-        parts += [f"--{name}", str(value)]
-    parts += ["--motion", spec.motion]
-    if spec.sort_rule != "color":
-        parts += ["--sort-rule", json.dumps(spec.sort_rule)]
-    schemes = [spec.scenario.get("reward_scheme", "paper")]
-    schemes += [f"{method}={scheme}" for method, scheme in spec.reward_schemes.items()]
-    parts += ["--reward-scheme", *schemes]
-    for name in ("grasp_failure_rate", "knock_off_rate"):
-        if spec.scenario.get(name):
-            parts += ["--" + name.replace("_", "-"), str(spec.scenario[name])]
+    parts += ["--agents", str(spec.agents), "--label", spec.label]
+    template = spec.template
+    base = type(template).from_json({"preset": template.preset}).values()
+    for leaf in leaves(type(template)):
+        value = template.values()[leaf.name]
+        if leaf.name != "method" and (value != base[leaf.name] or leaf.name == "seed"):
+            parts += [leaf.flag, value if isinstance(value, str) else json.dumps(value)]
+    for method, changes in spec.per_method.items():
+        for name, value in changes.items():
+            text = value if isinstance(value, str) else json.dumps(value)
+            parts += ["--per-method", f"{method}:{name}={text}"]
     parts += ["--backend", args.backend]
     if args.address:
         parts += ["--address", args.address]
     if args.workers:
         parts += ["--workers", str(args.workers)]
-    parts += ["--threads", str(args.threads), "--checkpoint-every", str(args.checkpoint_every)]
+    parts += ["--checkpoint-every", str(args.checkpoint_every)]
     if args.nice:
         parts += ["--nice", str(args.nice)]
+    if args.override_numerics:
+        parts += ["--override-numerics"]
     if args.data_dir:
         parts += ["--data-dir", str(args.data_dir)]
     if args.database_url:
@@ -246,8 +216,9 @@ def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     return shlex.join(parts)
 
 
-def resolve_study(db: Session, study: str) -> tuple[int, str]:
-    """The study named by id or name; a new name creates the study. Returns (id, what)."""
+def resolve_study(db: Session, study: str, create: bool = True) -> tuple[int | None, str]:
+    """The study named by id or name; a new name creates the study (unless not `create`:
+    then its id is None). Returns (id, what)."""
     from sqlalchemy import select
 
     from server.db.models import Study
@@ -266,6 +237,8 @@ def resolve_study(db: Session, study: str) -> tuple[int, str]:
     found = db.scalar(select(Study).where(Study.name == study))
     if found is not None:
         return found.id, f"study {found.id} ({found.name})"
+    if not create:
+        return None, f"new study {study!r} (not created: dry run)"
     created = create_study(db, StudyCreate(name=study, description="Baselines run in batch."))
     return created.id, f"new study {created.id} ({created.name})"
 
@@ -277,38 +250,79 @@ def _fail(message: str, code: int = 2) -> int:
 
 
 def batch(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError
-
     from server.batch import BatchError
     from server.db.engine import make_engine, make_session_factory
     from server.db.migrate import upgrade
     from server.services.errors import ServiceError
 
     try:
-        spec = spec_from(args)
         _check_counts(args)
-    except (BatchError, json.JSONDecodeError) as error:
+        spec = spec_from(args)
+    except BatchError as error:
         return _fail(str(error))
     settings = settings_from(args)
+    if args.dry_run:
+        return _dry_run(args, spec, settings)
     engine = make_engine(settings.db_url)
     upgrade(engine)
     try:
         with make_session_factory(engine)() as db:
             study_id, what = resolve_study(db, args.study)
+        assert study_id is not None
         print(f"{what}, database {settings.db_url}")
-        if args.dry_run:
-            from server.batch.runner import BatchRunner
-
-            runner = BatchRunner(spec, study_id, settings.db_url, _options(args, settings))
-            print("\n".join(runner.preview()))
-            return 0
         return _run(args, spec, study_id, settings)
     except LookupError as error:
         return _fail(str(error), 1)
     except ServiceError as error:
         return _fail(error.message, service_exit_code(error))
-    except (BatchError, ValidationError) as error:
+    except BatchError as error:
         return _fail(str(error))
+
+
+def _dry_run(args: argparse.Namespace, spec: BatchSpec, settings: Settings) -> int:
+    """Each run and the session it has, writing nothing: no database, study or session is
+    created, no migration is run."""
+    from sqlalchemy import inspect
+
+    from server.batch.runner import BatchRunner
+    from server.batch.spec import plan_runs
+    from server.db.engine import make_engine, make_session_factory
+
+    url = settings.db_url
+    engine = None if _missing_sqlite(url) else make_engine(url)
+    study_id, what = None, f"new study {args.study!r} (not created: dry run)"
+    try:
+        if engine is not None and inspect(engine).has_table("sessions"):
+            with make_session_factory(engine)() as db:
+                study_id, what = resolve_study(db, args.study, create=False)
+    except LookupError as error:
+        return _fail(str(error), 1)
+    if study_id is None:
+        rows = [
+            {"run": run.name, "method": run.method, "seed": run.seed, "session": None,
+             "status": "new"}
+            for run in plan_runs(spec)
+        ]  # fmt: skip
+    else:
+        options = _options(args, settings)
+        runner = BatchRunner(spec, study_id, url, options, args.spec_class, migrate=False)
+        rows = runner.preview_rows()
+    if args.json:
+        print(json.dumps({"study": study_id, "database": url, "runs": rows}, indent=2))
+        return 0
+    print(f"{what}, database {url}")
+    for row in rows:
+        head = f"  {row['run']:<18} seed {row['seed']:<8}"
+        state = f"session {row['session']}: {row['status']}" if row["session"] else row["status"]
+        print(f"{head} {state}")
+    return 0
+
+
+def _missing_sqlite(url: str) -> bool:
+    from sqlalchemy.engine import make_url
+
+    parsed = make_url(url)
+    return parsed.get_backend_name() == "sqlite" and not Path(parsed.database or "").is_file()
 
 
 def _check_counts(args: argparse.Namespace) -> None:
@@ -316,19 +330,16 @@ def _check_counts(args: argparse.Namespace) -> None:
 
     for flag, value, low in (
         ("--workers", args.workers, 1),
-        ("--threads", args.threads, 1),
         ("--checkpoint-every", args.checkpoint_every, 1),
-        ("--episodes", args.episodes, 1),
-        ("--pretraining-steps", args.pretraining_steps, 0),
-        ("--advice-budget", args.advice_budget, 0),
-        ("--max-episode-steps", args.max_episode_steps, 1),
     ):
         if value is not None and value < low:
-            raise BatchError(f"{flag} must be at least {low}, got {value}")
+            raise BatchError(f"{flag} must be at least {low}")
     if not 0 <= args.nice <= 19:
-        raise BatchError(f"--nice must be between 0 and 19, got {args.nice}")
+        raise BatchError("--nice must be between 0 and 19")
     if args.address and args.backend != "ray":
         raise BatchError("--address is for the Ray backend: add --backend ray")
+    if args.json and not args.dry_run:
+        raise BatchError("--json goes with --dry-run")
 
 
 def _options(args: argparse.Namespace, settings: Settings) -> RunnerOptions:
@@ -338,13 +349,13 @@ def _options(args: argparse.Namespace, settings: Settings) -> RunnerOptions:
         data_dir=settings.data_dir,
         backend=args.backend,
         workers=args.workers,
-        threads=args.threads,
         address=args.address,
         checkpoint_every_episodes=args.checkpoint_every,
         heartbeat_s=settings.heartbeat_s,
         stale_after_s=settings.stale_after_s,
         nice=args.nice,
         progress=show_progress(args.no_progress),
+        override_numerics=args.override_numerics,
     )
 
 
@@ -352,7 +363,10 @@ def _run(args: argparse.Namespace, spec: BatchSpec, study_id: int, settings: Set
     from server.batch import describe
     from server.batch.runner import BatchRunner
 
-    result = BatchRunner(spec, study_id, settings.db_url, _options(args, settings)).run()
+    runner = BatchRunner(
+        spec, study_id, settings.db_url, _options(args, settings), args.spec_class
+    )
+    result = runner.run()
     print("\n".join(describe(result)))
     if result.interrupted or not result.complete:
         print(f"to finish the batch, run the same command again:\n  {command_line(args, spec)}")

@@ -26,6 +26,8 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
+from learner.run import METHODS, UNADVISED, RunSpec
+
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
@@ -47,19 +49,12 @@ class Base(DeclarativeBase):
     type_annotation_map: ClassVar[dict[Any, Any]] = {dict[str, Any]: JSON, list[Any]: JSON}
 
 
-class Method(enum.StrEnum):
-    """Who advises the learner (the paper's DeepRL, agent-IDeepRL, human-IDeepRL, and more)."""
+Method = enum.StrEnum(  # type: ignore[misc]
+    "Method", {name.replace("-", "_"): name for name in METHODS}
+)
+"""A run's method (`learner.run.METHODS`: who advises the learner), as an enum."""
 
-    autonomous = "autonomous"
-    agent = "agent"
-    human = "human"
-    oracle = "oracle"
-    random = "random"
-    sb3_dqn = "sb3-dqn"
-    """Stable-Baselines3's DQN unadvised: an independent baseline learner (`learner.sb3_dqn`)."""
-
-
-UNADVISED_METHODS = (Method.autonomous, Method.sb3_dqn)
+UNADVISED_METHODS = tuple(Method(name) for name in UNADVISED)
 """Methods without an advisor: no strategy, no advice budget."""
 
 
@@ -149,22 +144,12 @@ class StudySession(Base):
         ForeignKey("participants.id", ondelete="SET NULL")
     )
     label: Mapped[str] = mapped_column(String(200), default="")
-    method: Mapped[str] = mapped_column(String(20))
-    seed: Mapped[int] = mapped_column(Integer)
-    config: Mapped[dict[str, Any]] = mapped_column()
-    sort_rule: Mapped[str | dict[str, str]] = mapped_column(JSON)
-    strategy: Mapped[str | None] = mapped_column(String(40))
-    strategy_options: Mapped[dict[str, Any] | None] = mapped_column(JSON)
-    """The strategy's options besides its budget (`learner.run.STRATEGY_OPTIONS`), spelled
-    out; None (stored before 0006) reads as the strategy's defaults."""
-    advice_budget: Mapped[int] = mapped_column(Integer, default=0)
-    advisor_checkpoint: Mapped[str | None] = mapped_column(Text)
-    oracle_error_rate: Mapped[float | None] = mapped_column(Float)
-    motion: Mapped[str] = mapped_column(String(20))
-    scenario: Mapped[dict[str, Any]] = mapped_column(default=dict)
-    """`sim.ScenarioOptions` as JSON: reward scheme and realism rates ({} before 0004)."""
-    episodes: Mapped[int] = mapped_column(Integer)
-    max_episode_steps: Mapped[int] = mapped_column(Integer, default=250)
+    run: Mapped[dict[str, Any]] = mapped_column()
+    """The run, described once: `learner.run.RunSpec.to_json()` (versioned, every field
+    spelled out, numerics pinned when the session was created); `spec` reads it back."""
+    numerics_overrides: Mapped[list[Any]] = mapped_column(default=list)
+    """Resumes that overrode the pinned numerics (each: when, at which step, from what to
+    what, and why); empty for a run computed as it was pinned throughout."""
     idle_limit_s: Mapped[float | None] = mapped_column(Float)
     keep_replay_memory: Mapped[bool | None] = mapped_column()
     """Keep the replay memory in the final checkpoint; None: the server's setting."""
@@ -197,6 +182,21 @@ class StudySession(Base):
     study: Mapped[Study] = relationship(back_populates="sessions")
     participant: Mapped[Participant | None] = relationship()
     texts_version: Mapped[StudyTexts | None] = relationship()
+
+    @property
+    def spec(self) -> RunSpec:
+        """The run this session describes (`run` read back, every value checked)."""
+        return RunSpec.from_json(self.run)
+
+    @property
+    def method(self) -> str:
+        """The run's method (who advises), read from `run`."""
+        return str(self.run.get("method", ""))
+
+    @property
+    def seed(self) -> int:
+        """The run's seed, read from `run`."""
+        return int(self.run.get("seed", 0))
 
     @property
     def ready_for_advice(self) -> bool:

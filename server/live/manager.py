@@ -34,6 +34,7 @@ from starlette.concurrency import run_in_threadpool
 from learner.strategies import make_strategy
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
 from server.live.hub import Hub
+from server.services import numerics
 from server.services.errors import Conflict
 from server.services.sessions import (
     claim,
@@ -213,20 +214,22 @@ class SessionManager:
                 log.exception("checking for dead workers failed")
 
     # --- researcher commands -----------------------------------------------------------
-    async def start(self, session_id: int, resume: bool = False) -> None:
-        token = await run_in_threadpool(self._claim, session_id, resume)
+    async def start(
+        self, session_id: int, resume: bool = False, override_numerics: bool = False
+    ) -> None:
+        token = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
         parent, child = self._context.Pipe(duplex=True)
         with self.factory() as db:
             session = get_session(db, session_id)
             advice = db.scalars(
                 select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
             ).all()
-            budget = session.advice_budget
+            spec = session.spec
+            budget = spec.advice_budget
             human = session.method == Method.human
             ready = human and session.ready_for_advice
-            pretraining = int(session.config.get("pretraining_steps", 0))
-            strategy = make_strategy(session.strategy or "early", budget)
-            first_turn = strategy.first_advice_step(pretraining) - 1
+            strategy = spec.make_strategy() or make_strategy("early", 0)
+            first_turn = strategy.first_advice_step(spec.config.pretraining_steps) - 1
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
@@ -281,8 +284,10 @@ class SessionManager:
             handle.send(Command("train"))
             self.notify(handle.session_id)
 
-    def _claim(self, session_id: int, resume: bool) -> str:
+    def _claim(self, session_id: int, resume: bool, override_numerics: bool = False) -> str:
         with self.factory() as db:
+            session = get_session(db, session_id)
+            numerics.settle(db, session, override_numerics, self.options.spec_class)
             return claim(db, session_id, resume)
 
     def _set_status(self, session_id: int, status: Status, detail: str, token: str) -> None:
@@ -314,7 +319,7 @@ class SessionManager:
             handle.send(Command("pause"))
             await self._until(session_id, lambda h: h.status != Status.running)
 
-    async def resume(self, session_id: int) -> None:
+    async def resume(self, session_id: int, override_numerics: bool = False) -> None:
         handle = self.handles.get(session_id)
         if handle is not None and handle.status in LIVE_STATUSES:
             if handle.status == Status.paused:
@@ -325,7 +330,7 @@ class SessionManager:
             status = get_session(db, session_id).status
         if status == Status.created:
             raise Conflict(f"session {session_id} has not started; start it instead")
-        await self.start(session_id, resume=True)
+        await self.start(session_id, resume=True, override_numerics=override_numerics)
 
     async def stop(self, session_id: int) -> None:
         handle = self.handles.get(session_id)

@@ -14,9 +14,11 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Depends, Form, HTTPException, Request
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import BaseModel, Field
 from sqlalchemy import select
 
+from learner.fields import FieldError
+from learner.run import RunSpec
 from server.db.models import Episode, Method, StudySession
 from server.deps import DbDep, ManagerDep, SettingsDep
 from server.logins import Logins
@@ -26,7 +28,7 @@ from server.routes import sessions as session_routes
 from server.routes.pages import templates
 from server.routes.params import SessionId, StudyId
 from server.routes.reports import FileName, ReportPublic
-from server.schemas.sessions import SessionCreate
+from server.schemas.sessions import SessionOptions
 from server.schemas.studies import StudyCreate
 from server.services import reports, sessions, studies
 
@@ -112,7 +114,6 @@ class SessionRow(BaseModel):
     label: str
     method: str
     seed: int
-    motion: str
     participant: str | None
     participant_url: str | None
     status: str
@@ -206,10 +207,12 @@ def new_participant(
 ) -> dict[str, Any]:
     """A human session with the paper's settings, and its link to hand out."""
     try:
-        body_ = SessionCreate(method="human", participant=body.participant or None)
-    except ValidationError as error:
-        raise HTTPException(422, f"pseudonym: {error.errors()[0]['msg']}") from None
-    created = sessions.create_session(db, study_id, body_)
+        options = SessionOptions(participant=body.participant or None)
+    except FieldError as error:
+        raise HTTPException(422, f"pseudonym: {error}") from None
+    created = sessions.create_session(
+        db, study_id, RunSpec(method="human"), options, settings.data_dir, settings.worker_threads
+    )
     public = sessions.session_public(created, settings.base_url)
     return {"id": created.id, "participant_url": public.participant_url}
 

@@ -102,10 +102,10 @@ def _visit(request: Request, token: str) -> Visit | None:
             session_id=session.id,
             study_id=session.study_id,
             status=request.app.state.manager.status(session.id),
-            advice_budget=session.advice_budget,
+            advice_budget=session.spec.advice_budget,
             advice_given=int(given),
             texts={k: str(v) for k, v in (session.study.texts or {}).items()},
-            sort_rule=session.sort_rule,
+            sort_rule=session.spec.sort_rule,
             consented=session.consented_at is not None,
             ready=session.induction_done_at is not None,
             shown_texts=(

@@ -6,32 +6,57 @@ from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 from sqlalchemy import select
 
+from learner.run import RunSpec
 from server.db.models import LIVE_STATUSES, Advice
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
+from server.schemas.runs import given
 from server.schemas.sessions import (
     AdvicePublic,
     EpisodePublic,
     Progress,
-    SessionCreate,
     SessionCreated,
+    SessionOptions,
     SessionPublic,
+    session_create_model,
 )
-from server.services import sessions, storage
+from server.services import learning, sessions, storage
 from server.services.errors import NotFound
 
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
 
 
-@router.post("/studies/{study_id}/sessions", status_code=201)
-def create_session(
-    db: DbDep, settings: SettingsDep, study_id: StudyId, body: SessionCreate
-) -> SessionCreated:
-    session = sessions.create_session(db, study_id, body, data_dir=settings.data_dir)
-    storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
-    public = sessions.session_public(session, settings.base_url)
-    return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
+def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
+    """The route that creates a session, its body made from `spec_class` (the run's
+    declaration: `create_app` is given it, so a field added there is in the body and its
+    OpenAPI schema)."""
+    creating = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
+    body_model = session_create_model(spec_class)
+
+    @creating.post("/studies/{study_id}/sessions", status_code=201)
+    def create_session(
+        db: DbDep,
+        settings: SettingsDep,
+        study_id: StudyId,
+        body: body_model,  # type: ignore[valid-type]
+    ) -> SessionCreated:
+        """A session: `run` (the run, learner.run.RunSpec, every field optional: unset ones
+        take their defaults, the config's its preset's) and the session's own options.
+        Every value is checked before anything is stored: a bad one is a 422 naming the
+        field and what it allows. The run is stored validated and with its numerics pinned
+        on this machine (device, precision, threads)."""
+        values = given(body)
+        spec = learning.parse(values.pop("run"), spec_class)
+        options = SessionOptions(**values)
+        session = sessions.create_session(
+            db, study_id, spec, options, settings.data_dir, settings.worker_threads
+        )
+        storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
+        public = sessions.session_public(session, settings.base_url)
+        return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
+
+    return creating
 
 
 @router.get("/studies/{study_id}/sessions")
@@ -83,9 +108,18 @@ async def pause_session(
 
 @router.post("/sessions/{session_id}/resume")
 async def resume_session(
-    db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
+    db: DbDep,
+    settings: SettingsDep,
+    manager: ManagerDep,
+    session_id: SessionId,
+    override_numerics: bool = Query(
+        default=False,
+        description="Resume on this machine's numerics although the run was pinned to others "
+        "it cannot honour (recorded in numerics_overrides); without it such a resume is a 409 "
+        "saying why.",
+    ),
 ) -> SessionPublic:
-    await manager.resume(session_id)
+    await manager.resume(session_id, override_numerics)
     return _fresh(db, settings, session_id)
 
 
@@ -104,20 +138,21 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
     live = handle.progress if handle is not None and handle.progress is not None else None
     data = vars(live) if live is not None else dict(session.progress)
     status = handle.status if handle is not None else session.status
-    given = int(data.get("advice_given", 0))
+    advice_given = int(data.get("advice_given", 0))
+    spec = session.spec
     return Progress(
         session_id=session_id,
         status=status,
         phase=data.get("phase"),
         global_step=int(data.get("global_step", 0)),
         episode=int(data.get("episode", 0)),
-        episodes=session.episodes,
+        episodes=spec.config.episodes,
         epsilon=data.get("epsilon"),
         collected_reward=float(data.get("collected_reward", 0.0)),
         last_episode_reward=data.get("last_episode_reward"),
-        advice_given=given,
-        advice_budget=session.advice_budget,
-        advice_left=max(0, session.advice_budget - given),
+        advice_given=advice_given,
+        advice_budget=spec.advice_budget,
+        advice_left=max(0, spec.advice_budget - advice_given),
         advice_wanted=handle is not None and handle.request is not None,
         queued=handle.queued if handle is not None else False,
         consented=session.consented_at is not None,

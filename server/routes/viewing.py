@@ -55,6 +55,6 @@ def learning_curve(session: ParticipantDep, db: DbDep, manager: ManagerDep) -> L
     return LearningCurve(
         status=manager.status(session.id),
         queued=handle is not None and handle.queued,
-        episodes=row.episodes,
+        episodes=row.spec.config.episodes,
         curve=[CurvePoint(episode=e, collected_reward=r) for e, r in episodes],
     )

@@ -2,137 +2,79 @@
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from functools import cache
+from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 
-from learner.config import PRESETS
-from learner.docstrings import field_docstrings
-from learner.run import MOTIONS
-from learner.strategies import STRATEGY_NAMES
-from server.db.models import Method
-from server.schemas.types import Int, Key, Number
-from sim.rewards import REWARD_SCHEMES
-from sim.scenario import ScenarioOptions
+from learner.fields import bounded, check_object
+from learner.run import RunSpec
+from server.schemas.runs import body_model
 
-SCENARIO_DOCS = field_docstrings(ScenarioOptions)
-
-# The names are the learner's and the scenario's, never restated here.
-Strategy = Literal[STRATEGY_NAMES]  # type: ignore[valid-type]
-Motion = Literal[MOTIONS]  # type: ignore[valid-type]
-RewardSchemeName = Literal[REWARD_SCHEMES]  # type: ignore[valid-type]
+API_VERSION_NOTE = (
+    "Since API version 2.0 a session's run is one object, `run` (every field of "
+    "learner.run.RunSpec), beside the session's own fields: "
+    '{"run": {"method": "human", "seed": 3, "preset": "paper", "config": {"episodes": 300}, '
+    '"strategy": "early", "scenario": {"reward_scheme": "paper"}}, "label": "pilot", '
+    '"participant": "P01"}. See docs/api.md.'
+)
 
 
-class Scenario(BaseModel):
-    """The scenario's options (`sim.ScenarioOptions`; a test keeps the two the same)."""
+@dataclass(frozen=True)
+class SessionOptions:
+    """What describes a session but not its run: its name, its participant, how its worker
+    treats it. Declared like the run (`learner.fields`), beside it in the REST body."""
 
-    model_config = ConfigDict(extra="forbid")
+    label: str = bounded("", max_length=200)
+    """Free text, e.g. a batch name."""
+    participant: str | None = bounded(None, max_length=64, pattern=r"[A-Za-z0-9_-]+")
+    """Pseudonym of the participant (human sessions); generated when omitted."""
+    keep_replay_memory: bool | None = bounded(None)
+    """Keep the replay memory in the final checkpoint (default: the server's
+    keep_replay_memory setting). Without it the final checkpoint holds the network and what
+    an advisor needs, a few MB instead of about 250 MB at paper scale."""
+    idle_limit_s: float | None = bounded(None, 0.0, 86_400.0, exclusive_minimum=True)
+    """Seconds without advice before a human session is abandoned (default: the server's)."""
 
-    reward_scheme: RewardSchemeName = Field(
-        default="paper", description=SCENARIO_DOCS["reward_scheme"]
-    )
-    grasp_failure_rate: Number = Field(
-        default=0.0, ge=0.0, le=1.0, description=SCENARIO_DOCS["grasp_failure_rate"]
-    )
-    knock_off_rate: Number = Field(
-        default=0.0, ge=0.0, le=1.0, description=SCENARIO_DOCS["knock_off_rate"]
-    )
-
-
-class StrategyOptions(BaseModel):
-    """The advising strategy's options besides its budget (`learner.run.STRATEGY_OPTIONS`;
-    a test keeps the two the same). Unset ones take the strategy's defaults; one the
-    chosen strategy does not take is a 422."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    interval: Int | None = Field(
-        default=None, ge=1, le=100_000, description="alternating: advise every Nth step (2)."
-    )
-    threshold: Number | None = Field(
-        default=None,
-        ge=0.0,
-        description="importance, mistake_correcting: the advisor's Q-value spread (max - min) "
-        "from which a state is important (0.1).",
-    )
-
-    def given(self) -> dict[str, Any]:
-        """The options set, by name."""
-        return self.model_dump(exclude_none=True)
+    def __post_init__(self) -> None:
+        check_object(self)
 
 
-class SessionCreate(BaseModel):
-    """One learner's run. Unset fields take the paper's defaults."""
+NOT_THE_RUN = tuple(f.name for f in dataclasses.fields(SessionOptions))
 
-    model_config = ConfigDict(extra="forbid")
 
-    method: Method = Field(
-        description="Who advises: autonomous, agent, human, oracle, random; or sb3-dqn, "
-        "Stable-Baselines3's DQN unadvised (an independent baseline; needs the sb3 extra)."
+def _flat_body(data: Any) -> Any:
+    """The body of API 1.x (the run's fields loose at the top) gets a 422 showing the new
+    shape, rather than a list of unknown fields."""
+    if isinstance(data, dict) and "run" not in data and set(data) - set(NOT_THE_RUN):
+        raise ValueError(API_VERSION_NOTE)
+    return data
+
+
+@cache
+def session_create_model(spec_class: type = RunSpec) -> type[BaseModel]:
+    """The REST body that creates a session: `run` (the run, `spec_class`'s tree) beside the
+    session's own options (`SessionOptions`)."""
+    options = body_model(SessionOptions, "SessionOptions")
+    model = create_model(  # type: ignore[call-overload]
+        "SessionCreate",
+        __base__=options,
+        __validators__={"flat": model_validator(mode="before")(_flat_body)},
+        __doc__="A session: its run, described once, and the session's own options. Unset "
+        "fields take their defaults (the learner config's: its preset's).",
+        run=(
+            body_model(spec_class, "Run"),
+            Field(description="The run (learner.run.RunSpec): method, seed, preset, config, "
+            "strategy and its options, advisor, motion, sort rule, scenario."),
+        ),
     )
-    seed: Int = Field(default=0, ge=0, le=2**31 - 1, description="Fixes scene, network, sampling.")
-    label: str = Field(default="", max_length=200, description="Free text, e.g. a batch name.")
-    preset: str = Field(
-        default="paper",
-        max_length=40,
-        description=f"Learner config preset ({', '.join(PRESETS)}).",
-    )
-    config: dict[Key, Any] = Field(
-        default_factory=dict,
-        max_length=100,
-        description="Learner config fields overriding the preset.",
-    )
-    episodes: Int | None = Field(
-        default=None, ge=1, le=100_000, description="Training episodes (default: the preset's)."
-    )
-    max_episode_steps: Int | None = Field(
-        default=None, ge=1, le=10_000, description="Truncation (default: the preset's)."
-    )
-    sort_rule: (
-        Annotated[str, Field(max_length=40)]
-        | Annotated[dict[Key, Annotated[str, Field(max_length=10)]], Field(max_length=12)]
-    ) = Field(default="color", description='"color", "shape", or a map {"cube/red": "left", ...}.')
-    strategy: Strategy = Field(default="early", description="Advising strategy (advised methods).")
-    strategy_options: StrategyOptions = Field(
-        default_factory=StrategyOptions,
-        description="The strategy's options (interval, threshold); unset: its defaults.",
-    )
-    advice_budget: Int | None = Field(
-        default=None, ge=0, le=100_000, description="Advice in all (default: the preset's)."
-    )
-    advisor_checkpoint: str | None = Field(
-        default=None,
-        max_length=1000,
-        description="The advisor (method agent): `session:ID`, a session of this installation "
-        "whose final checkpoint advises, or the path of a checkpoint file under the data folder.",
-    )
-    oracle_error_rate: Number = Field(
-        default=0.0, ge=0.0, le=1.0, description="Chance that the oracle advises wrongly."
-    )
-    motion: Motion | None = Field(
-        default=None, description="physics (default for human) or fast (default otherwise)."
-    )
-    scenario: Scenario = Field(
-        default_factory=Scenario, description="Reward scheme and realism rates."
-    )
-    participant: str | None = Field(
-        default=None,
-        min_length=1,
-        max_length=64,
-        pattern=r"^[A-Za-z0-9_-]+$",
-        description="Pseudonym of the participant (human); generated when omitted.",
-    )
-    keep_replay_memory: bool | None = Field(
-        default=None,
-        strict=True,
-        description="Keep the replay memory in the final checkpoint (default: the server's "
-        "keep_replay_memory setting). Without it the final checkpoint holds the network and "
-        "what an advisor needs, a few MB instead of about 250 MB at paper scale.",
-    )
-    idle_limit_s: Number | None = Field(
-        default=None, gt=0, description="Seconds without advice before abandoning (human)."
-    )
+    return model  # type: ignore[no-any-return]
+
+
+SessionCreate = session_create_model(RunSpec)
 
 
 class SessionPublic(BaseModel):
@@ -141,21 +83,16 @@ class SessionPublic(BaseModel):
     id: int
     study_id: int
     label: str
-    method: str
-    seed: int
-    config: dict[str, Any]
-    sort_rule: str | dict[str, str]
-    strategy: str | None
-    strategy_options: dict[str, Any] | None = Field(
-        default=None, description="The strategy's options, defaults spelled out."
+    method: str = Field(description="The run's method (run.method), for lists.")
+    seed: int = Field(description="The run's seed (run.seed), for lists.")
+    run: dict[str, Any] = Field(
+        description="The run as stored: learner.run.RunSpec's document (every field spelled "
+        "out, numerics pinned), accepted back unchanged as a new session's `run`."
     )
-    advice_budget: int
-    advisor_checkpoint: str | None
-    oracle_error_rate: float | None
-    motion: str
-    scenario: dict[str, Any]
-    episodes: int
-    max_episode_steps: int
+    numerics_overrides: list[Any] = Field(
+        default_factory=list,
+        description="Resumes that overrode the run's pinned numerics, each recorded.",
+    )
     idle_limit_s: float | None
     keep_replay_memory: bool | None = None
     participant: str | None = None

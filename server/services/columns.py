@@ -2,64 +2,25 @@
 
 Step and episode columns are documented where they are made, in the docstrings under the
 learner's `StepRecord` and `EpisodeRecord` fields (their types come from the database
-model); the learner config's columns from `DQNConfig`; the rest are documented here."""
+model); the run's columns (method, seed, config_*, strategy_*, scenario options, ...) from
+the run's declaration (`learner.run.RunSpec`, its docstrings and ranges); the rest are
+documented here."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from learner.config import DQNConfig
-from learner.config import field_docs as config_docs
 from learner.docstrings import field_docstrings
+from learner.fields import leaves
 from learner.records import EpisodeRecord, StepRecord
-from learner.sb3_dqn import FIELDS as SB3_FIELDS
-from learner.strategies import STRATEGY_NAMES
+from learner.run import RunSpec
 from server.services.tables import Column, column
-from sim.scenario import ScenarioOptions
-
-SCENARIO_DOCS = field_docstrings(ScenarioOptions)
-"""The scenario options' meanings, written once under `sim.ScenarioOptions`'s fields."""
 
 SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session id (unique in the database)."),
     "study_id": ("integer", "Study the session belongs to."),
     "label": ("string", "Free text set by the researcher (e.g. a batch name)."),
-    "method": (
-        "string",
-        "Who advised: autonomous, agent, human, oracle or random; sb3-dqn for "
-        "Stable-Baselines3's DQN (unadvised).",
-    ),
     "participant": ("string", "Pseudonym of the human advisor (human sessions)."),
-    "seed": ("integer", "Seed of the scene, network init, memory sampling and exploration."),
-    "strategy": ("string", f"Advising strategy ({', '.join(STRATEGY_NAMES)})."),
-    "advice_budget": ("integer", "Advice the strategy may ask for in all [count]."),
-    "strategy_interval": ("integer", "alternating: advice on every Nth training step [steps]."),
-    "strategy_threshold": (
-        "number",
-        "importance, mistake_correcting: the advisor's Q-value spread (max - min) from "
-        "which a state is important.",
-    ),
-    "advisor_checkpoint": ("string", "Trained learner that advised (agent sessions)."),
-    "oracle_error_rate": (
-        "number",
-        "Chance the oracle advised a wrong action (oracle sessions) [probability].",
-    ),
-    "motion": ("string", "physics (simulated motion) or fast (poses set directly)."),
-    "sort_rule": (
-        "string",
-        "Sorting rule: color (blue right, red left), shape (cubes left, the rest right), "
-        "or a map written shape/color=side;... for all six objects.",
-    ),
-    **{
-        name: (kind, SCENARIO_DOCS[name] + unit)
-        for name, kind, unit in (
-            ("reward_scheme", "string", ""),
-            ("grasp_failure_rate", "number", " [probability]"),
-            ("knock_off_rate", "number", " [probability]"),
-        )
-    },
-    "episodes": ("integer", "Training episodes the session was set to run [count]."),
-    "max_episode_steps": ("integer", "Steps after which an episode is truncated [count]."),
     "status": ("string", "Final or current status (finished, running, stopped, ...)."),
     "created_at": ("datetime", "When the session was created (UTC)."),
     "started_at": ("datetime", "When it first started (UTC)."),
@@ -80,7 +41,19 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
         "When the participant finished the three-step induction (pressed Start); advice "
         "is asked only after it (UTC).",
     ),
+    "numerics_overrides": (
+        "string",
+        "Resumes that overrode the run's pinned numerics (JSON list: when, at which step, "
+        "from what, to what, why); empty when the run was computed as pinned throughout.",
+    ),
+    "run_spec": (
+        "string",
+        "The whole run as stored (learner.run.RunSpec's JSON document, with its version): "
+        "what the API's `run` and `ideeprl batch` accept back, and what a replay reads.",
+    ),
 }
+"""The session's own columns; the run's come from its declaration (`run_columns`)."""
+KINDS = {bool: "boolean", int: "integer", float: "number", str: "string", dict: "string"}
 TEXT_KEYS = ("title", "consent", "induction_1", "induction_2", "induction_3", "thanks")
 TEXTS_COLUMNS: dict[str, tuple[str, str]] = {
     "study_id": ("integer", "Study the texts belong to."),
@@ -181,44 +154,22 @@ def _record_columns(table: str) -> list[Column]:
     return columns + [column(name, *spec) for name, spec in RECORD_EXTRA.items()]
 
 
-def _config_columns(configs: list[dict[str, Any]]) -> list[Column]:
-    """One column per learner config field (`config_lr`, ...), typed by the config's own
-    dataclass, in its field order; fields only some sessions have (old ones, or the `sb3_*`
-    hyperparameters of sb3-dqn sessions) come after."""
-    import dataclasses
-    import typing
-
-    hints = typing.get_type_hints(DQNConfig)
-    docs = {**config_docs(), **SB3_FIELDS}
-    names = [f.name for f in dataclasses.fields(DQNConfig)]
-    names += sorted({k for c in configs for k in c} - set(names))
-    columns = []
-    for name in names:
-        kind = _python_type(hints.get(name), [c.get(name) for c in configs])
-        text = docs.get(name, "Learner configuration field.")
-        columns.append(column(f"config_{name}", kind, f"Learner config: {text}"))
-    return columns
+def run_columns(spec_class: type[RunSpec] = RunSpec) -> list[Column]:
+    """One column per field of the run (`learner.run.RunSpec`'s leaves: `method`, `seed`,
+    `config_batch_size`, `strategy_interval`, `reward_scheme`, ...), typed and documented
+    by the declaration itself."""
+    return [
+        column(leaf.column, KINDS[leaf.kind], f"{leaf.doc} [{leaf.allowed()}]".replace("]]", "]"))
+        for leaf in leaves(spec_class)
+    ]
 
 
-def _python_type(hint: Any, values: list[Any]) -> str:
-    import typing
-
-    options = [a for a in typing.get_args(hint) if a is not type(None)] or [hint]
-    kinds = {bool: "boolean", int: "integer", float: "number", str: "string"}
-    if len(options) == 1 and options[0] in kinds:
-        return kinds[options[0]]
-    present = {type(v) for v in values if v is not None}
-    if present and present <= {int, float} and present != {bool}:
-        return "integer" if present == {int} else "number"
-    return "boolean" if present == {bool} else "string"
-
-
-def table_columns(configs: list[dict[str, Any]]) -> dict[str, list[Column]]:
-    """Every exported table's typed, documented columns; `configs`: the sessions' learner
-    configs (they decide the `config_*` columns)."""
-    sessions = [column(name, *spec) for name, spec in SESSION_COLUMNS.items()]
+def table_columns(spec_class: type[RunSpec] = RunSpec) -> dict[str, list[Column]]:
+    """Every exported table's typed, documented columns."""
+    own = [column(name, *spec) for name, spec in SESSION_COLUMNS.items()]
+    sessions = own[:3] + run_columns(spec_class) + own[3:]
     return {
-        "sessions": sessions + _config_columns(configs),
+        "sessions": sessions,
         "episodes": _record_columns("episodes"),
         "steps": _record_columns("steps"),
         "advice": [column(name, *spec) for name, spec in ADVICE_COLUMNS.items()],

@@ -16,10 +16,12 @@ from sqlalchemy.orm import Session
 
 from learner import sb3_dqn
 from learner.config import PRESETS, DQNConfig
-from server.analysis.audit import describe_learner, describe_scenario
+from learner.fields import leaves
+from learner.run import RunSpec
+from server.analysis.audit import describe_learner
 from server.analysis.rescoring import STEP_COLUMNS
 from server.db.models import Episode, Step, StudySession
-from server.services.learning import parse_scenario
+from server.services import learning
 from server.worker.recorder import TRAINING
 
 EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
@@ -40,11 +42,14 @@ method and seed, so agents on the same seed share a number across methods)."""
 
 def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
     """The training episodes of these sessions, ordered by session and episode."""
+    ids = list(session_ids)
+    runs = {
+        s.id: (s.method, s.seed)
+        for s in db.scalars(select(StudySession).where(StudySession.id.in_(ids)))
+    }
     query = (
         select(
             Episode.session_id,
-            StudySession.method,
-            StudySession.seed,
             Episode.episode,
             Episode.collected_reward,
             Episode.steps,
@@ -53,11 +58,10 @@ def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
             Episode.lost,
             Episode.epsilon,
         )
-        .join(StudySession, StudySession.id == Episode.session_id)
-        .where(Episode.session_id.in_(list(session_ids)), Episode.phase == TRAINING)
+        .where(Episode.session_id.in_(ids), Episode.phase == TRAINING)
         .order_by(Episode.session_id, Episode.episode)
     )
-    rows = [tuple(row) for row in db.execute(query)]
+    rows = [(r[0], *runs[r[0]], *r[1:]) for r in db.execute(query)]
     return pd.DataFrame(rows, columns=list(EPISODE_TABLE_COLUMNS))
 
 
@@ -71,36 +75,47 @@ def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame
     return pd.DataFrame([tuple(row) for row in db.execute(query)], columns=list(STEP_COLUMNS))
 
 
-def session_settings(sessions: Sequence[StudySession]) -> pd.DataFrame:
-    """What each session ran under, for the report's comparability audit
-    (`server.analysis.audit.SETTINGS_COLUMNS`)."""
+def session_settings(
+    sessions: Sequence[StudySession], spec_class: type[RunSpec] = RunSpec
+) -> pd.DataFrame:
+    """What each session ran under, for the report's comparability audit: the learner (its
+    preset and config, described), the treatment, and one column per other setting of the
+    run's declaration (`spec_class`'s leaves of role `setting`), so a field added to the
+    run is audited by itself (`server.analysis.audit`)."""
     presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
+    settings = [
+        leaf
+        for leaf in leaves(spec_class)
+        if leaf.role == "setting" and leaf.path[0] != "config" and leaf.name != "preset"
+    ]
     rows = []
     for s in sessions:
-        scenario = parse_scenario(s.scenario).to_dict()
-        config, sb3 = sb3_dqn.split_config(s.config)
+        spec = learning.spec_of(s, spec_class).normalized()
+        config = spec.config.to_dict()
         learner = (
-            sb3_dqn.describe(sb3, config)  # another learner altogether: the audit flags it
-            if sb3
-            else describe_learner(DQNConfig.from_dict(config).to_dict(), presets)
+            sb3_dqn.describe(spec.sb3, config)  # another learner altogether: the audit flags it
+            if spec.learner == "sb3-dqn"
+            else describe_learner(config, presets)
         )
+        values = spec.values()
         rows.append(
             {
                 "session_id": s.id,
                 "method": s.method,
-                "reward_scheme": scenario["reward_scheme"],
                 "learner": learner,
-                "scenario": describe_scenario(scenario),
-                "motion": s.motion,
-                "sort_rule": json.dumps(s.sort_rule, sort_keys=True)
-                if not isinstance(s.sort_rule, str)
-                else s.sort_rule,
+                **{leaf.name: _text(values[leaf.name]) for leaf in settings},
                 "advice": "none"
-                if s.strategy is None
-                else f"{s.strategy}{_options(s.strategy_options)}, budget {s.advice_budget}",
+                if not spec.advised
+                else f"{spec.strategy}{_options(spec.strategy_options.given())}, "
+                f"budget {spec.advice_budget}",
             }
         )
     return pd.DataFrame(rows)
+
+
+def _text(value: Any) -> Any:
+    """A setting as the audit compares it (a map as sorted JSON)."""
+    return json.dumps(value, sort_keys=True) if isinstance(value, dict | list) else value
 
 
 def _options(options: dict[str, Any] | None) -> str:

@@ -6,8 +6,10 @@ a folder or packed as one zip.
 Analysis-ready means: ISO 8601 UTC timestamps (`logged_at`, with `elapsed_s` since the
 session started beside it), lowercase booleans, the sort rule as plain text, the learner
 config as one column per field, each episode's reset seed (replay it with the episode's
-actions), and one phase vocabulary in steps and episodes (`pretrain`, `train`; a
-pretraining step taken on advice has `advised = true`).
+actions), one phase vocabulary in steps and episodes (`pretrain`, `train`; a
+pretraining step taken on advice has `advised = true`), and each session's run both as
+columns (one per field of `learner.run.RunSpec`) and whole (`run_spec`, JSON: what the API
+and `ideeprl batch` accept back).
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from learner.run import STRATEGY_OPTIONS
+from learner.fields import leaves
+from learner.run import RunSpec
 from server.db.models import Advice, Episode, Step, StudySession, StudyTexts
 from server.services import learning
 from server.services.columns import TEXT_KEYS, table_columns
@@ -59,32 +62,19 @@ def plain_sort_rule(spec: str | dict[str, str]) -> str:
     return ";".join(f"{shape}/{color}={side}" for shape, color, side in rule.sides)
 
 
-STRATEGY_OPTION_NAMES = sorted({name for options in STRATEGY_OPTIONS.values() for name in options})
-"""Every strategy option, one `strategy_<name>` column each (declared in `columns`)."""
-
-
-def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
+def _session_rows(
+    sessions: list[StudySession], spec_class: type[RunSpec]
+) -> Iterator[dict[str, Any]]:
+    run_leaves = leaves(spec_class)
     for s in sessions:
+        values = learning.spec_of(s, spec_class).values()
+        values["sort_rule"] = plain_sort_rule(values["sort_rule"])
         yield {
             "session_id": s.id,
             "study_id": s.study_id,
             "label": s.label,
-            "method": s.method,
+            **{leaf.column: values[leaf.name] for leaf in run_leaves},
             "participant": s.participant.pseudonym if s.participant else None,
-            "seed": s.seed,
-            "strategy": s.strategy,
-            "advice_budget": s.advice_budget,
-            **{
-                f"strategy_{name}": (s.strategy_options or {}).get(name)
-                for name in STRATEGY_OPTION_NAMES
-            },
-            "advisor_checkpoint": s.advisor_checkpoint,
-            "oracle_error_rate": s.oracle_error_rate,
-            "motion": s.motion,
-            "sort_rule": plain_sort_rule(s.sort_rule),
-            **learning.parse_scenario(s.scenario).to_dict(),
-            "episodes": s.episodes,
-            "max_episode_steps": s.max_episode_steps,
             "status": s.status,
             "created_at": s.created_at,
             "started_at": s.started_at,
@@ -93,7 +83,10 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "consented_at": s.consented_at,
             "declined_at": s.declined_at,
             "induction_done_at": s.induction_done_at,
-            **{f"config_{k}": v for k, v in (s.config or {}).items()},
+            "numerics_overrides": json.dumps(s.numerics_overrides)
+            if s.numerics_overrides
+            else None,
+            "run_spec": json.dumps(s.run, sort_keys=True),
         }
 
 
@@ -160,18 +153,21 @@ def _texts_rows(db: Session, study_id: int) -> Iterator[dict[str, Any]]:
         }
 
 
-def export_study(db: Session, study_id: int, out: Path, fmt: str = "csv") -> dict[str, int]:
+def export_study(
+    db: Session, study_id: int, out: Path, fmt: str = "csv", spec_class: type[RunSpec] = RunSpec
+) -> dict[str, int]:
     """Write the study's tables (`fmt`: csv or parquet), `datapackage.json`, `columns.csv`
-    and `study.json` into `out`; returns the row count of each table file."""
+    and `study.json` into `out`; returns the row count of each table file. The sessions'
+    run columns are `spec_class`'s fields (the run's declaration)."""
     if fmt not in FORMATS:
         raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     study = get_study(db, study_id)
     out.mkdir(parents=True, exist_ok=True)
     query = select(StudySession).where(StudySession.study_id == study.id)
     sessions = list(db.scalars(query.order_by(StudySession.id)))
-    columns = table_columns([s.config or {} for s in sessions])
+    columns = table_columns(spec_class)
     rows = {
-        "sessions": _session_rows(sessions),
+        "sessions": _session_rows(sessions, spec_class),
         "texts_versions": _texts_rows(db, study.id),
         "episodes": _records(db, Episode, sessions, Episode.first_global_step),
         "steps": _records(db, Step, sessions, Step.global_step),

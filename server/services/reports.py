@@ -63,7 +63,7 @@ class ReportRequest:
 
 def advisor_sessions(sessions: list[StudySession]) -> set[int]:
     """Sessions whose checkpoint advises another of these sessions (method `agent`)."""
-    advising = {str(Path(s.advisor_checkpoint).resolve()) for s in sessions if s.advisor_checkpoint}
+    advising = {str(Path(c).resolve()) for s in sessions if (c := s.spec.advisor_checkpoint)}
     return {
         s.id
         for s in sessions

@@ -1,4 +1,4 @@
-"""Sessions: create (the run checked once, `learning.spec_from_body`) and read. Who owns a
+"""Sessions: create (the run checked and pinned once, `learning.checked`) and read. Who owns a
 running one is `server.services.ownership`'s (its names are re-exported here)."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from server.db.models import (
     Participant,
     StudySession,
 )
-from server.schemas.sessions import SessionCreate, SessionPublic
+from server.schemas.sessions import SessionOptions, SessionPublic
 from server.services import learning
 from server.services.errors import Invalid, NotFound
 from server.services.ownership import claim as claim
@@ -39,15 +39,15 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
         found = db.get(StudySession, int(number)) if number.isdigit() and len(number) < 10 else None
         if found is None or not found.checkpoint_path or not Path(found.checkpoint_path).is_file():
             raise Invalid(
-                "advisor_checkpoint",
-                f"{spec!r} is not a session of this installation with a "
+                "run.advisor_checkpoint",
+                "run.advisor_checkpoint names no session of this installation with a "
                 "checkpoint; name a finished session, e.g. session:12",
             )
         if found.method == Method.sb3_dqn:
             raise Invalid(
-                "advisor_checkpoint",
-                f"{spec!r} is an sb3-dqn session: its checkpoint is Stable-Baselines3's, "
-                "which cannot advise; name a session of the paper's learner",
+                "run.advisor_checkpoint",
+                "run.advisor_checkpoint names an sb3-dqn session: its checkpoint is "
+                "Stable-Baselines3's, which cannot advise; name a session of the paper's learner",
             )
         return str(Path(found.checkpoint_path).resolve())
     try:
@@ -58,54 +58,44 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
         inside = present = False
     if not inside:
         raise Invalid(
-            "advisor_checkpoint",
-            "advisor_checkpoint must be session:ID (a session of this installation) or a "
+            "run.advisor_checkpoint",
+            "run.advisor_checkpoint must be session:ID (a session of this installation) or a "
             "checkpoint file under the server's data folder",
         )
     if not present:
-        raise Invalid("advisor_checkpoint", f"no file at {spec!r}")
+        raise Invalid("run.advisor_checkpoint", "run.advisor_checkpoint: no such file")
     return str(path)
 
 
 def create_session(
     db: Session,
     study_id: int,
-    body: SessionCreate,
+    spec: RunSpec,
+    options: SessionOptions | None = None,
     data_dir: Path | None = None,
-    spec: RunSpec | None = None,
+    threads: int | None = None,
 ) -> StudySession:
-    """A new session in `created` state; a human one gets its participant and token.
-    `data_dir`: where an advisor's checkpoint file must lie (see `advisor_path`). `spec`:
-    the run `body` describes when the caller has it already (`learning.spec_from_body`)."""
+    """A new session in `created` state, its run validated and pinned on this machine and
+    stored whole; a human one gets its participant and token. `data_dir`: where an advisor's
+    checkpoint file must lie (see `advisor_path`; None: anywhere, for the researcher's own
+    command line); `threads`: torch threads of a run that leaves them open."""
+    options = options or SessionOptions()
     get_study(db, study_id)
-    method = Method(body.method)
-    if method == Method.agent:
-        if not body.advisor_checkpoint:
-            raise Invalid(
-                "advisor_checkpoint",
-                "method 'agent' needs advisor_checkpoint: the path of a trained learner checkpoint",
-            )
-        advisor = advisor_path(db, body.advisor_checkpoint, data_dir)
-    elif body.advisor_checkpoint:
-        raise Invalid("advisor_checkpoint", "only method 'agent' takes an advisor_checkpoint")
-    else:
-        advisor = None
-    if body.participant and method != Method.human:
-        raise Invalid("participant", "only method 'human' has a participant")
-    if spec is None:
-        spec = learning.spec_from_body(body, advisor)
-    else:
-        spec = learning.validated(spec.replace(advisor_checkpoint=advisor))
+    if spec.advisor_checkpoint and spec.method == "agent":
+        spec = spec.replace(advisor_checkpoint=advisor_path(db, spec.advisor_checkpoint, data_dir))
+    spec = learning.checked(spec, threads)
+    if options.participant and spec.method != Method.human:
+        raise Invalid("participant", "only method human has a participant")
     session = StudySession(
         study_id=study_id,
-        label=body.label,
-        method=method.value,
-        keep_replay_memory=body.keep_replay_memory,
-        idle_limit_s=body.idle_limit_s,
-        **learning.stored(spec),
+        label=options.label,
+        run=spec.to_json(),
+        numerics_overrides=[],
+        keep_replay_memory=options.keep_replay_memory,
+        idle_limit_s=options.idle_limit_s,
     )
-    if method == Method.human:
-        pseudonym = body.participant or f"p-{secrets.token_hex(4)}"
+    if spec.method == Method.human:
+        pseudonym = options.participant or f"p-{secrets.token_hex(4)}"
         participant = db.scalar(
             select(Participant).where(
                 Participant.study_id == study_id, Participant.pseudonym == pseudonym
@@ -138,6 +128,7 @@ def session_public(session: StudySession, base_url: str) -> SessionPublic:
         name: getattr(session, name)
         for name in SessionPublic.model_fields
         if name not in ("participant", "participant_url", "texts_version")
+        and hasattr(session, name)
     }
     if session.texts_version is not None:
         data["texts_version"] = session.texts_version.version

@@ -21,9 +21,10 @@ from typing import Any
 
 from sqlalchemy import select, update
 
+from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
 from server.db.models import Advice, Method, Status, StudySession, utcnow
-from server.services import learning
+from server.services import learning, numerics
 from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, set_status
 from server.worker.advisors import HumanAdvisor, RecordingAdvisor
@@ -50,8 +51,13 @@ class WorkerOptions:
     """Longest time between two writes that mark the worker alive."""
     idle_limit_s: float = 1800.0
     """Default idle limit of human sessions (a session's own limit wins)."""
-    torch_threads: int | None = None
-    """torch threads for this process; None leaves torch's default."""
+    spec_class: type[RunSpec] = RunSpec
+    """The run's declaration the session's `run` is read with (`learner.run.RunSpec`, or a
+    class that extends it; it must be importable in the worker's process)."""
+    override_numerics: bool = False
+    """Resume a run whose pinned numerics this machine cannot honour, on what it can, and
+    record the override in the session (`numerics_overrides`); without it such a resume is
+    refused (`numerics.refusal`)."""
     progress_bar: bool = False
     """Show a tqdm bar of training episodes (command line runs)."""
     nice: int = 0
@@ -138,7 +144,8 @@ class _Run:
         self.waiting_for_participant = False
         if s.method == Method.human and self.link is None:
             raise Conflict("a human session needs the server: start it through the API")
-        self.trainer, self.env = learning.spec_of(s, options.torch_threads).build(
+        self.spec = learning.spec_of(s, options.spec_class)
+        self.trainer, self.env = self.spec.build(
             [self.recorder, self.reporter],
             record_motion=conn is not None,
             wrap_env=self._broadcast,
@@ -169,7 +176,7 @@ class _Run:
                 self.link,
                 self.given,
                 self.start_advice,
-                s.advice_budget,
+                self.spec.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
                 lambda: self.recorder.steps + 1,
                 self._before_waiting,
@@ -195,12 +202,12 @@ class _Run:
             phase=self.reporter.phase,
             global_step=self.recorder.steps,
             episode=self.recorder.episodes,
-            episodes=self.session.episodes,
+            episodes=self.spec.config.episodes,
             epsilon=self.reporter.epsilon,
             collected_reward=self.env.collected_reward,
             last_episode_reward=self.reporter.last_episode_reward,
             advice_given=self.advice_given,
-            advice_budget=self.session.advice_budget,
+            advice_budget=self.spec.advice_budget,
             queued=self.queued,
             waiting_for_participant=self.waiting_for_participant,
         )
@@ -260,7 +267,7 @@ class _Run:
             self.link is not None
             and self.session.method == Method.human
             and not self.link.may_train
-            and self.advice_given >= self.session.advice_budget
+            and self.advice_given >= self.spec.advice_budget
         )
 
     def _wait_for_training_slot(self) -> None:
@@ -281,7 +288,7 @@ class _Run:
             from tqdm import tqdm
 
             self.bar = tqdm(
-                total=self.session.episodes,
+                total=self.spec.config.episodes,
                 initial=self.recorder.episodes,
                 desc=f"session {self.session_id}",
                 unit="episode",
@@ -341,10 +348,6 @@ def run_session(
     options = options or WorkerOptions()
     if options.nice:
         os.nice(options.nice)
-    if options.torch_threads:
-        import torch
-
-        torch.set_num_threads(options.torch_threads)
     factory = make_session_factory(make_engine(database_url))
     if worker_token is None:
         with factory() as db:
@@ -353,6 +356,7 @@ def run_session(
                 raise Conflict(
                     f"session {session_id} is a human session: start it through the server"
                 )
+            numerics.settle(db, session, options.override_numerics, options.spec_class)
             worker_token = claim(db, session_id, resume=session.status != Status.created)
     try:
         run = _Run(session_id, database_url, options, worker_token, conn)

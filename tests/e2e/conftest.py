@@ -22,6 +22,7 @@ from server.main import UVICORN_OPTIONS, create_app
 from server.settings import Settings
 from tests.e2e.proxy import config, nginx, nginx_available
 from tests.server.live import API_KEY, free_port
+from tests.server.scale import rest_body
 
 ROOT = Path(__file__).absolute().parents[2]
 CHROMIUM = Path("/usr/bin/chromium")
@@ -57,16 +58,18 @@ class Live:
 
     def human_session(self, study: str, **fields: Any) -> dict[str, Any]:
         """A human session at reduced scale in study `study` (made if new)."""
-        body: dict[str, Any] = {
-            "method": "human",
-            "seed": 3,
-            "config": {"pretraining_steps": 12, "batch_size": 8, "memory_size": 500},
-            "episodes": 2,
-            "max_episode_steps": 25,
-            "advice_budget": 6,
-            "motion": "physics",
-            **fields,
-        }
+        body = rest_body(
+            **{
+                "method": "human",
+                "seed": 3,
+                "config": {"pretraining_steps": 12, "batch_size": 8, "memory_size": 500},
+                "episodes": 2,
+                "max_episode_steps": 25,
+                "advice_budget": 6,
+                "motion": "physics",
+                **fields,
+            }
+        )
         with self.api() as api:
             studies = {s["name"]: s["id"] for s in api.get("/api/studies").json()}
             study_id = studies.get(study)

@@ -13,6 +13,7 @@ from playwright.sync_api import expect
 
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
 from tests.server.live import API_KEY
+from tests.server.scale import rest_body
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -37,21 +38,23 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
         ).json()
         oracle = []
         for seed, error in ((1, 0.0), (2, 0.3)):
-            body = {
+            fields = {
                 "method": "oracle",
                 "seed": seed,
-                "oracle_error_rate": error,
+                "error_rate": error,
                 "config": {"pretraining_steps": 40, "batch_size": 16, "memory_size": 2000},
                 "episodes": 10,
                 "max_episode_steps": 30,
                 "advice_budget": 20,
                 "label": f"oracle, {int(error * 100)} % wrong",
             }
+            body = rest_body(**fields)
             oracle.append(api.post(f"/api/studies/{study['id']}/sessions", json=body).json())
-        advice_only = ("oracle_error_rate", "advice_budget")
-        baseline = {k: v for k, v in body.items() if k not in advice_only}
+        advice_only = ("error_rate", "advice_budget")
+        baseline = {k: v for k, v in fields.items() if k not in advice_only}
         baseline.update(method="autonomous", seed=1, label="autonomous")
-        oracle.append(api.post(f"/api/studies/{study['id']}/sessions", json=baseline).json())
+        made = api.post(f"/api/studies/{study['id']}/sessions", json=rest_body(**baseline))
+        oracle.append(made.json())
 
     context = browser.new_context(viewport=VIEWPORT, accept_downloads=True)
     page = context.new_page()

@@ -29,7 +29,7 @@ def rows(path: Path) -> list[dict[str, str]]:
 @pytest.mark.slow
 def test_train_writes_records_plot_and_checkpoint_and_resumes(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    done = train("--out", str(out), "--episodes", "2", "--advisor", "oracle", *SMALL)
+    done = train("--out", str(out), "--episodes", "2", "--method", "oracle", *SMALL)
     assert done.returncode == 0, done.stderr
     assert "R_T" in done.stdout
     steps, episodes = rows(out / "steps.csv"), rows(out / "episodes.csv")
@@ -38,7 +38,7 @@ def test_train_writes_records_plot_and_checkpoint_and_resumes(tmp_path: Path) ->
     assert sum(r["action_source"] == "advisor" for r in steps) == 20
     assert (out / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
     state = read_checkpoint(out / "checkpoint.pt")
-    assert state["global_step"] == len(steps) and state["metadata"]["advisor"] == "oracle"
+    assert state["global_step"] == len(steps) and state["metadata"]["method"] == "oracle"
 
     more = train("--resume", str(out / "checkpoint.pt"), "--episodes", "3", "--no-progress")
     assert more.returncode == 0, more.stderr
@@ -73,9 +73,9 @@ def test_train_runs_the_scenario_options_it_is_given(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--set", "gamma=2"], "gamma must be in [0, 1]"),
-        (["--set", "epsilon=0.1"], "unknown config field(s) epsilon"),
-        (["--advisor", "agent"], "--advisor-checkpoint"),
+        (["--set", "gamma=2"], "gamma must be a number from 0 to 1"),
+        (["--set", "epsilon=0.1"], "unknown field epsilon"),
+        (["--method", "agent"], "advisor_checkpoint"),
         (["--resume", "no-such-file.pt"], "no checkpoint at no-such-file.pt"),
     ],
 )
@@ -90,5 +90,6 @@ def test_train_explains_bad_arguments(
 def test_ideeprl_lists_the_train_command() -> None:
     from server.cli import build_parser
 
-    args = build_parser().parse_args(["train", "--episodes", "5", "--advisor", "random"])
-    assert args.command == "train" and args.episodes == 5 and args.func.__module__ == "learner.cli"
+    args = build_parser().parse_args(["train", "--episodes", "5", "--method", "random"])
+    assert args.command == "train" and args.func.__module__ == "learner.cli"
+    assert args.spec__episodes == 5 and args.spec__method == "random"

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from learner import machine
 from learner.config import DQNConfig
-from learner.run import STRATEGY_OPTIONS, RunSpec, RunSpecError
+from learner.fields import FieldError
+from learner.run import STRATEGY_OPTIONS, RunSpec, RunSpecError, StrategyOptions, from_old_settings
 
 SMALL = DQNConfig.preset("paper", pretraining_steps=30, advice_budget=10, batch_size=8)
 
@@ -22,31 +24,51 @@ def test_strategy_options_come_from_the_strategies_constructors() -> None:
 @pytest.mark.parametrize(
     ("changes", "field", "message"),
     [
-        ({"budget": 31}, "advice_budget", "early advising gives its 31 advice"),
-        ({"strategy": "importance"}, "strategy", "only an 'agent' advisor has"),
-        ({"strategy_options": {"interval": 3}}, "strategy_options", "takes no option interval"),
+        ({"config": SMALL.replace(advice_budget=31)}, "config.advice_budget", "its 31 advice"),
+        ({"strategy": "importance"}, "strategy", "only an agent advisor has"),
         (
-            {"strategy": "alternating", "strategy_options": {"interval": 0}},
-            "strategy_options",
-            ">= 1",
+            {"strategy_options": StrategyOptions(interval=3)},
+            "strategy_options.interval",
+            "takes no option interval",
         ),
-        ({"advisor": "agent"}, "advisor_checkpoint", "needs a checkpoint"),
-        ({"motion": "slow"}, "motion", "unknown motion"),
-        ({"sort_rule": "size"}, "sort_rule", "size"),
+        ({"method": "agent"}, "advisor_checkpoint", "needs advisor_checkpoint"),
+        ({"sort_rule": "size"}, "sort_rule", "color, shape, or a map"),
     ],
 )
 def test_validate_names_the_field_to_change(
     changes: dict[str, object], field: str, message: str
 ) -> None:
-    spec = RunSpec(config=SMALL, **{"advisor": "oracle", **changes})  # type: ignore[arg-type]
+    spec = RunSpec(**{"config": SMALL, "method": "oracle", **changes})  # type: ignore[arg-type]
     with pytest.raises(RunSpecError, match=message) as raised:
         spec.validate()
     assert raised.value.field == field
 
 
+@pytest.mark.parametrize(
+    ("data", "field"),
+    [
+        ({"motion": "slow"}, "motion"),
+        ({"strategy_options": {"interval": 0}}, "strategy_options.interval"),
+        ({"config": {"batch_size": 10**400}}, "config.batch_size"),
+        ({"scenario": {"knock_off_rate": float("nan")}}, "scenario.knock_off_rate"),
+        ({"nosuch": 1}, "nosuch"),
+    ],
+)
+def test_from_json_names_the_field_and_its_range_never_the_value(
+    data: dict[str, object], field: str
+) -> None:
+    with pytest.raises(FieldError) as raised:
+        RunSpec.from_json(data)
+    assert raised.value.field == field
+    assert "10000000000" not in str(raised.value) and "nan" not in str(raised.value).lower()
+
+
 def test_build_gives_the_trainer_the_strategys_options() -> None:
     spec = RunSpec(
-        config=SMALL, advisor="oracle", strategy="alternating", strategy_options={"interval": 3}
+        config=SMALL,
+        method="oracle",
+        strategy="alternating",
+        strategy_options=StrategyOptions(interval=3),
     )
     trainer, env = spec.build()
     try:
@@ -56,13 +78,42 @@ def test_build_gives_the_trainer_the_strategys_options() -> None:
         env.close()
 
 
-def test_settings_read_back_and_old_checkpoint_metadata_still_reads() -> None:
-    spec = RunSpec(config=SMALL, advisor="random", strategy="alternating").validate()
-    assert RunSpec.from_settings(spec.settings(), SMALL).validate() == spec.replace(budget=10)
+def test_the_stored_document_reads_back_and_old_checkpoint_metadata_still_reads() -> None:
+    spec = RunSpec(config=SMALL, method="random", strategy="alternating").validate().pinned()
+    assert RunSpec.from_json(spec.to_json()) == spec
     old = {  # what ideeprl train stored before RunSpec
         "advisor": "random", "advisor_checkpoint": None, "error_rate": 0.0,
         "strategy": "alternating", "budget": 10, "interval": 4, "threshold": 0.1,
         "motion": "fast", "sort_rule": "color", "seed": 0, "preset": "paper",
     }  # fmt: skip
-    back = RunSpec.from_settings(old, SMALL).validate()
-    assert back.strategy_options == {"interval": 4} and back.scenario.reward_scheme == "paper"
+    back = from_old_settings(old, SMALL).validate()
+    assert back.method == "random" and back.advice_budget == 10
+    assert back.strategy_options.given() == {"interval": 4}
+    assert back.scenario.reward_scheme == "paper"
+
+
+def test_pinning_resolves_the_numerics_on_this_machine() -> None:
+    pinned = RunSpec(config=SMALL).pinned()
+    assert pinned.config.device in ("cpu", "cuda")
+    assert pinned.config.torch_threads >= 1
+    native = machine.bf16_native_cpu() or pinned.config.device == "cuda"
+    assert pinned.config.precision == ("bf16" if native else "fp32")
+    assert pinned.pinned() == pinned and pinned.numerics_problem() is None
+    plain = RunSpec(config=SMALL.replace(update="plain")).pinned()
+    assert plain.config.precision == "fp32"
+
+
+def test_a_replay_memory_larger_than_the_machine_is_refused_before_anything_runs() -> None:
+    spec = RunSpec(config=SMALL.replace(memory_size=10_000_000))
+    with pytest.raises(RunSpecError, match="GiB") as raised:
+        spec.check_memory(total=8 * 2**30)
+    assert raised.value.field == "config.memory_size"
+    spec.replace(config=SMALL).check_memory(total=8 * 2**30)
+
+
+def test_torch_and_the_machine_agree_on_bfloat16() -> None:
+    import torch
+
+    from learner.device import bf16_native
+
+    assert bf16_native(torch.device("cpu")) == machine.bf16_native_cpu()

@@ -11,6 +11,10 @@ import httpx
 import numpy as np
 from PIL import Image
 
+from learner.fields import nest
+from learner.run import RunSpec
+from server.schemas.sessions import NOT_THE_RUN
+
 SMALL_CONFIG: dict[str, Any] = {"pretraining_steps": 60, "batch_size": 16, "memory_size": 2000}
 EPISODES = 3
 MAX_EPISODE_STEPS = 40
@@ -20,16 +24,31 @@ NONDETERMINISTIC = {
 }
 
 
+GROUPS = ("config", "strategy_options", "scenario")
+
+
+def rest_body(**fields: Any) -> dict[str, Any]:
+    """A session's REST body from the run's fields by their names (a group's as a dict, e.g.
+    `scenario={...}`, `config={...}`) and the session's own options (`label`, `participant`,
+    `idle_limit_s`, `keep_replay_memory`), which go beside `run`."""
+    own = {name: fields.pop(name) for name in list(fields) if name in NOT_THE_RUN}
+    groups = {name: fields.pop(name) for name in GROUPS if isinstance(fields.get(name), dict)}
+    run = nest(fields, RunSpec)
+    for name, given in groups.items():
+        run[name] = {**run.get(name, {}), **given}
+    return {"run": run, **own}
+
+
 def session_body(method: str, **extra: Any) -> dict[str, Any]:
-    return {
-        "method": method,
+    """A session's REST body at the tests' scale (`rest_body`'s names)."""
+    scale = {
         "seed": 11,
-        "config": dict(SMALL_CONFIG),
         "episodes": EPISODES,
         "max_episode_steps": MAX_EPISODE_STEPS,
         "motion": "fast",
-        **extra,
+        **SMALL_CONFIG,
     }
+    return rest_body(method=method, **{**scale, **extra})
 
 
 def wait_for_status(

@@ -58,7 +58,9 @@ def _flood(port: int, path: str, total: int, chunked: bool, headers: str = "") -
 def participant_token(server: LiveServer) -> tuple[int, str]:
     with server.client() as api:
         study = api.post("/api/studies", json={"name": f"nan-{uuid.uuid4().hex}"}).json()["id"]
-        created = api.post(f"/api/studies/{study}/sessions", json={"method": "human"}).json()
+        created = api.post(
+            f"/api/studies/{study}/sessions", json={"run": {"method": "human"}}
+        ).json()
         return study, created["participant_token"]
 
 
@@ -149,10 +151,10 @@ def test_nan_infinity_and_surrogates_are_422_for_researchers(
             f'{{"name": "n", "texts": {{"consent": {value}}}}}',
         ],
         f"/api/studies/{study}/sessions": [
-            f'{{"method": "oracle", "config": {{"lr": {value}}}}}',
-            f'{{"method": "oracle", "config": {{{value if value.startswith(chr(34)) else 1}: 1}}}}',
-            f'{{"method": "human", "idle_limit_s": {value}}}',
-            f'{{"method": "oracle", "label": {value}}}',
+            f'{{"run": {{"method": "oracle", "config": {{"learning_rate": {value}}}}}}}',
+            f'{{"run": {{"config": {{{value if value.startswith(chr(34)) else 1}: 1}}}}}}',
+            f'{{"run": {{"method": "human"}}, "idle_limit_s": {value}}}',
+            f'{{"run": {{"method": "oracle"}}, "label": {value}}}',
         ],
         f"/api/studies/{study}/report": [f'{{"label": {value}}}', f'{{"title": {value}}}'],
     }
@@ -189,17 +191,17 @@ def test_numbers_are_strict(server: LiveServer, participant_token: tuple[int, st
     study, token = participant_token
     with server.client() as api:
         for body in [
-            {"method": "human", "idle_limit_s": True},
-            {"method": "oracle", "seed": True},
-            {"method": "oracle", "seed": 1.5},
-            {"method": "oracle", "episodes": "5"},
-            {"method": "oracle", "oracle_error_rate": False},
-            {"method": "oracle", "config": {"learning_rate": True}},
+            {"run": {"method": "human"}, "idle_limit_s": True},
+            {"run": {"method": "oracle", "seed": True}},
+            {"run": {"method": "oracle", "seed": 1.5}},
+            {"run": {"method": "oracle", "config": {"episodes": "5"}}},
+            {"run": {"method": "oracle", "error_rate": False}},
+            {"run": {"method": "oracle", "config": {"learning_rate": True}}},
         ]:
             response = api.post(f"/api/studies/{study}/sessions", json=body)
             assert response.status_code == 422, (body, response.text)
         fine = api.post(
-            f"/api/studies/{study}/sessions", json={"method": "human", "idle_limit_s": 5}
+            f"/api/studies/{study}/sessions", json={"run": {"method": "human"}, "idle_limit_s": 5}
         )
         assert fine.status_code == 201, fine.text
     with server.client(key=None, token=token) as participant:
@@ -226,9 +228,13 @@ def test_a_422_names_the_field_without_echoing_what_was_sent(
     sent = "echo-me-" + "x" * 40
     with server.client() as api:
         for body in [
+            {"run": {"method": sent}},
+            {"run": {"method": "oracle", "seed": sent}},
+            {"run": {"method": "oracle", "scenario": {"reward_scheme": sent}}},
+            {"run": {"method": "oracle", "sort_rule": sent}},
+            {"run": {"method": "oracle", "config": {sent: 1}}},
+            {"run": {"method": "agent", "advisor_checkpoint": sent}},
             {"method": sent},
-            {"method": "oracle", "seed": sent},
-            {"method": "oracle", "scenario": {"reward_scheme": sent}},
         ]:
             response = api.post(f"/api/studies/{study}/sessions", json=body)
             assert response.status_code == 422, response.text
@@ -252,10 +258,11 @@ def test_every_text_field_is_bounded(
         response = api.patch(f"/api/studies/{study}", json={"texts": {"consent": "y" * 60_000}})
         assert response.status_code == 422
         for body in [
-            {"method": "oracle", "preset": "p" * 100},
-            {"method": "oracle", "sort_rule": "c" * 100},
-            {"method": "oracle", "config": {f"f{i}": 1 for i in range(200)}},
-            {"method": "agent", "advisor_checkpoint": "/" + "a" * 5000},
+            {"run": {"method": "oracle", "preset": "p" * 100}},
+            {"run": {"method": "oracle", "sort_rule": "c" * 500}},
+            {"run": {"method": "oracle", "config": {f"f{i}": 1 for i in range(200)}}},
+            {"run": {"method": "agent", "advisor_checkpoint": "/" + "a" * 5000}},
+            {"run": {}, "label": "l" * 300},
         ]:
             response = api.post(f"/api/studies/{study}/sessions", json=body)
             assert response.status_code == 422, response.text[:300]
@@ -288,7 +295,7 @@ def test_spreadsheet_formulas_are_neutralised_in_every_export_cell(
     with server.client() as api:
         study = api.post("/api/studies", json={"name": f"=csv-{uuid.uuid4().hex}"}).json()["id"]
         for label in FORMULAS:
-            body = {"method": "human", "label": label, "participant": "P1"}
+            body = {"run": {"method": "human"}, "label": label, "participant": "P1"}
             assert api.post(f"/api/studies/{study}/sessions", json=body).status_code == 201
         files = export(api, study)
     rows = list(csv.DictReader(io.StringIO(files["sessions.csv"].decode())))

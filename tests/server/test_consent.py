@@ -63,7 +63,7 @@ def test_a_session_started_by_the_researcher_asks_no_advice_before_consent_and_i
     assert started.status_code == 200 and started.json()["status"] == "running"
 
     # The random pretraining runs to the first advice, then waits for the participant.
-    first_turn = body["config"]["pretraining_steps"] - 3
+    first_turn = body["run"]["config"]["pretraining_steps"] - 3
     deadline = time.monotonic() + 120
     while not (ready := participant.client.get("/api/participant/readiness").json())["ready"]:
         assert time.monotonic() < deadline, ready

@@ -20,9 +20,9 @@ def test_a_participant_gives_100_advice_each_stored_once_and_the_101st_is_refuse
 ) -> None:
     study = api.post("/api/studies", json={"name": "human advice"}).json()
     body = session_body("human", advice_budget=BUDGET, participant="P01")
-    body["config"]["pretraining_steps"] = BUDGET + 20
+    body["run"]["config"]["pretraining_steps"] = BUDGET + 20
     created = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
-    assert created["motion"] == "fast" and created["participant"] == "P01"
+    assert created["run"]["motion"] == "fast" and created["participant"] == "P01"
     assert created["participant_url"].endswith("/p/" + created["participant_token"])
     participant = SimulatedParticipant(server.url, created["participant_token"])
 

@@ -11,7 +11,7 @@ from tests.server.live import LiveServer
 from tests.server.test_access import researcher_routes
 
 BAD_BODIES: list[object] = [
-    {"method": "human", "strategy": "importance"},
+    {"run": {"method": "human", "strategy": "importance"}},
     None,
     [],
     "text",
@@ -19,19 +19,21 @@ BAD_BODIES: list[object] = [
     {"name": None},
     {"name": ""},
     {"name": "x" * 5000},
-    {"method": "telepathy"},
-    {"method": "oracle", "seed": -1},
-    {"method": "oracle", "seed": 2**70},
-    {"method": "oracle", "config": {"no_such_field": 1}},
-    {"method": "oracle", "config": "lr"},
-    {"method": "oracle", "episodes": 0},
-    {"method": "oracle", "sort_rule": {"cube/red": "up"}},
-    {"method": "oracle", "sort_rule": 7},
-    {"method": "agent"},
-    {"method": "agent", "advisor_checkpoint": "/no/such/file.pt"},
-    {"method": "human", "participant": "../../etc/passwd"},
-    {"method": "oracle", "oracle_error_rate": 2},
-    {"method": "oracle", "preset": "nope"},
+    {"method": "oracle"},  # the body of API 1.x
+    {"run": None},
+    {"run": {"method": "telepathy"}},
+    {"run": {"method": "oracle", "seed": -1}},
+    {"run": {"method": "oracle", "seed": 2**70}},
+    {"run": {"method": "oracle", "config": {"no_such_field": 1}}},
+    {"run": {"method": "oracle", "config": "lr"}},
+    {"run": {"method": "oracle", "config": {"episodes": 0}}},
+    {"run": {"method": "oracle", "sort_rule": {"cube/red": "up"}}},
+    {"run": {"method": "oracle", "sort_rule": 7}},
+    {"run": {"method": "agent"}},
+    {"run": {"method": "agent", "advisor_checkpoint": "/no/such/file.pt"}},
+    {"run": {"method": "human"}, "participant": "../../etc/passwd"},
+    {"run": {"method": "oracle", "error_rate": 2}},
+    {"run": {"method": "oracle", "preset": "nope"}},
     {"advice_index": -1, "action": 9},
     {"advice_index": 2**80, "action": 0},
     {"unknown": 1},
@@ -67,29 +69,37 @@ def test_bad_bodies_and_ids_never_give_a_server_error(
 
 
 def test_invalid_session_bodies_say_which_field_and_why(server: LiveServer, study: int) -> None:
+    def post(run: dict[str, object]) -> dict[str, object]:
+        response = api.post(f"/api/studies/{study}/sessions", json={"run": run})
+        assert response.status_code == 422, response.text
+        [error] = response.json()["detail"]
+        return error  # type: ignore[no-any-return]
+
     with server.client() as api:
-        response = api.post(f"/api/studies/{study}/sessions", json={"method": "telepathy"})
+        error = post({"method": "telepathy"})
+        assert error["loc"] == ["body", "run", "method"] and "autonomous" in str(error["msg"])
+        error = post({"method": "agent", "advisor_checkpoint": "/x"})
+        assert error["loc"] == ["body", "run", "advisor_checkpoint"]
+        error = post(
+            {"method": "oracle", "config": {"advice_budget": 500, "pretraining_steps": 100}}
+        )
+        # refused by the run's rule or the config's own (100 < batch_size), naming the field
+        assert error["loc"][:3] == ["body", "run", "config"]
+        assert error["loc"][3] in ("advice_budget", "pretraining_steps")
+        assert "pretraining" in str(error["msg"])
+        error = post({"method": "human", "strategy": "importance"})
+        assert error["loc"] == ["body", "run", "strategy"]
+
+
+def test_the_flat_body_of_api_1_gets_a_422_showing_the_new_shape(
+    server: LiveServer, study: int
+) -> None:
+    with server.client() as api:
+        response = api.post(f"/api/studies/{study}/sessions", json={"method": "oracle", "seed": 3})
         assert response.status_code == 422
         [error] = response.json()["detail"]
-        assert error["loc"][-1] == "method" and "autonomous" in error["msg"]
-        response = api.post(
-            f"/api/studies/{study}/sessions", json={"method": "agent", "advisor_checkpoint": "/x"}
-        )
-        assert response.status_code == 422
-        assert response.json()["detail"][0]["loc"] == ["body", "advisor_checkpoint"]
-        response = api.post(
-            f"/api/studies/{study}/sessions",
-            json={"method": "oracle", "advice_budget": 500, "config": {"pretraining_steps": 100}},
-        )
-        assert response.status_code == 422
-        [error] = response.json()["detail"]
-        # refused by the server's check or by the learner's config, naming the field either way
-        assert error["loc"][-1] in ("advice_budget", "config") and "pretraining" in error["msg"]
-        response = api.post(
-            f"/api/studies/{study}/sessions", json={"method": "human", "strategy": "importance"}
-        )
-        assert response.status_code == 422
-        assert response.json()["detail"][0]["loc"] == ["body", "strategy"]
+        assert '{"run": {"method": "human"' in error["msg"] and "2.0" in error["msg"]
+        assert api.get("/openapi.json").json()["info"]["version"].startswith("2.")
 
 
 def test_participant_endpoints_reject_bad_queries(server: LiveServer) -> None:

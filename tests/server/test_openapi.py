@@ -183,7 +183,7 @@ def test_a_generated_client_creates_a_study_and_a_session_and_gets_typed_errors(
     assert f"no study with id {PROBE_ID}" in missing.parsed.detail
 
     create_session = importlib.import_module(f"{package}.api.sessions.create_session")
-    body = models.SessionCreate.from_dict({"method": "autonomous", "seed": 3})
+    body = models.SessionCreate.from_dict({"run": {"method": "autonomous", "seed": 3}})
     session = create_session.sync_detailed(client=client, study_id=study.id, body=body)
     assert session.status_code == 201, session.content
     assert session.parsed.study_id == study.id and session.parsed.seed == 3

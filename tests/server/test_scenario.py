@@ -1,26 +1,14 @@
-"""Scenario options (reward scheme, realism) from the REST body to the environment, and the
-REST schema kept equal to the scenario's own description."""
+"""Scenario options (reward scheme, realism) from the REST body to the environment."""
 
 from __future__ import annotations
 
-import dataclasses
 import io
 
 import httpx
 import pandas as pd
 
-import sim
-from server.schemas.sessions import Scenario
-from server.services.learning import spec_of
+from learner.run import RunSpec
 from tests.server.scale import export, session_body, wait_for_status
-
-
-def test_rest_schema_and_scenario_options_cannot_drift() -> None:
-    ours = {f.name: f.default for f in dataclasses.fields(sim.ScenarioOptions)}
-    rest = {name: field.default for name, field in Scenario.model_fields.items()}
-    assert rest == ours
-    schemes = Scenario.model_json_schema()["properties"]["reward_scheme"]["enum"]
-    assert tuple(schemes) == sim.REWARD_SCHEMES
 
 
 def test_a_session_runs_under_its_scenario_options(api: httpx.Client) -> None:
@@ -32,8 +20,8 @@ def test_a_session_runs_under_its_scenario_options(api: httpx.Client) -> None:
     )
     assert created.status_code == 201, created.text
     session = created.json()
-    assert session["scenario"] == {**scenario, "grasp_failure_rate": 0.0}
-    env = spec_of(type("Row", (), session)()).make_env()
+    assert session["run"]["scenario"] == {**scenario, "grasp_failure_rate": 0.0}
+    env = RunSpec.from_json(session["run"]).make_env()
     assert (env.reward_scheme, env.knock_off_rate) == ("authors-interactive", 0.25)
     env.close()
     assert api.post(f"/api/sessions/{session['id']}/start").status_code == 200

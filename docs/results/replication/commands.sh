@@ -17,7 +17,7 @@ advisor() {  # name, then ideeprl train options
   local name=$1; shift
   if [ ! -f "$DATA/advisor-$name.pt" ]; then
     [ -f "$DATA/advisor-$name/checkpoint.pt" ] && resume=(--resume "$DATA/advisor-$name/checkpoint.pt") || resume=()
-    nice -n 10 $BIN/ideeprl train --seed 100000 --threads 1 --checkpoint-every 50 \
+    nice -n 10 $BIN/ideeprl train --seed 100000 --torch-threads 1 --checkpoint-every 50 \
       --no-progress --out "$DATA/advisor-$name" "$@" "${resume[@]}"
     # Keep what an agent advisor reads (config and network, about 1 MB), not the memory.
     $BIN/python -c "
@@ -37,10 +37,11 @@ authors() {
     --grasp-failure-rate 0.05 --knock-off-rate 0.05
   $BIN/ideeprl batch --study replication-authors --label authors \
     --methods autonomous agent --agents "${AGENTS:-10}" --seed 0 --preset authors \
-    --reward-scheme autonomous=authors-autonomous agent=authors-interactive \
+    --per-method autonomous:reward_scheme=authors-autonomous \
+    --per-method agent:reward_scheme=authors-interactive \
     --grasp-failure-rate 0.05 --knock-off-rate 0.05 \
     --advisor-checkpoint "$DATA/advisor-authors.pt" \
-    --workers "${WORKERS:-1}" --threads 1 --checkpoint-every 25 --nice 10 --no-progress \
+    --workers "${WORKERS:-1}" --torch-threads 1 --checkpoint-every 25 --nice 10 --no-progress \
     --data-dir "$DATA"
 }
 
@@ -51,7 +52,7 @@ authors_one_rule() {
   $BIN/ideeprl batch --study replication-authors --label authors-one-rule \
     --methods autonomous --agents "${AGENTS_ONE_RULE:-4}" --seed 0 --preset authors \
     --reward-scheme authors-interactive --grasp-failure-rate 0.05 --knock-off-rate 0.05 \
-    --workers "${WORKERS:-1}" --threads 1 --checkpoint-every 25 --nice 10 --no-progress \
+    --workers "${WORKERS:-1}" --torch-threads 1 --checkpoint-every 25 --nice 10 --no-progress \
     --data-dir "$DATA"
 }
 
@@ -61,7 +62,7 @@ paper() {
   $BIN/ideeprl batch --study replication-paper --label paper \
     --methods autonomous agent --agents "${AGENTS:-10}" --seed 0 --preset paper \
     --reward-scheme paper --advisor-checkpoint "$DATA/advisor-paper.pt" \
-    --workers "${WORKERS:-1}" --threads 1 --checkpoint-every 25 --nice 10 --no-progress \
+    --workers "${WORKERS:-1}" --torch-threads 1 --checkpoint-every 25 --nice 10 --no-progress \
     --data-dir "$DATA"
 }
 
@@ -73,9 +74,10 @@ import sqlite3, sys
 db = sqlite3.connect(sys.argv[1])
 def finished(label, method):
     return dict(db.execute(
-        "select s.seed, s.id from sessions s join studies t on t.id = s.study_id where "
-        "t.name = 'replication-authors' and s.label = ? and s.method = ? and "
-        "s.status = 'finished'", (label, method)).fetchall())
+        "select json_extract(s.run, '$.seed'), s.id from sessions s join studies t on "
+        "t.id = s.study_id where t.name = 'replication-authors' and s.label = ? and "
+        "json_extract(s.run, '$.method') = ? and s.status = 'finished'", (label, method)
+    ).fetchall())
 autonomous, agent = finished("authors-one-rule", "autonomous"), finished("authors", "agent")
 seeds = sorted(set(autonomous) & set(agent))
 print(" ".join(str(ids[seed]) for seed in seeds for ids in (autonomous, agent)))

@@ -22,7 +22,7 @@ def settings_for(episodes: pd.DataFrame, **by_method: dict[str, str]) -> pd.Data
     for session_id, method in episodes.groupby("session_id")["method"].first().items():
         row = {
             "session_id": session_id, "method": method, "reward_scheme": "paper",
-            "learner": "paper", "scenario": "no realism", "motion": "fast", "sort_rule": "color",
+            "learner": "paper", "knock_off_rate": 0.0, "motion": "fast", "sort_rule": "color",
             "advice": "none" if method == "autonomous" else "early, budget 100",
         }  # fmt: skip
         row.update(by_method.get(method, {}))
@@ -75,17 +75,17 @@ def test_different_schemes_are_flagged_and_their_t_tests_withheld(tmp_path: Path
 
 def test_other_settings_and_mixed_methods_are_flagged() -> None:
     episodes = study_episodes()
-    settings = settings_for(episodes, agent={"learner": "authors", "scenario": "knock-offs 0.05"})
+    settings = settings_for(episodes, agent={"learner": "authors", "knock_off_rate": 0.05})
     settings.loc[settings.index[0], "motion"] = "physics"  # one autonomous session differs
     checked = audit(settings, "autonomous")
     assert checked.differ("autonomous", "agent") == [
-        "learner preset and options", "scenario options", "motion mode",
+        "learner preset and options", "knock off rate", "motion mode",
     ]  # fmt: skip
     assert checked.mixed == {"autonomous": ["motion mode"]}
     assert "differ among themselves" in " ".join(checked.warnings())
     assert checked.differ("agent", "human")[:2] == [
         "learner preset and options",
-        "scenario options",
+        "knock off rate",
     ]
 
 

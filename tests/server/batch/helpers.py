@@ -59,7 +59,10 @@ def in_process(place: Place, capsys: Any, *args: str) -> tuple[int, str]:
     exit code, and output and errors together."""
     from server.cli import main
 
-    code = main([*args, *place.flags])
+    try:
+        code = main([*args, *place.flags])
+    except SystemExit as error:  # argparse refused an option
+        code = int(error.code or 0)
     captured = capsys.readouterr()
     return code, captured.out + captured.err
 

@@ -15,8 +15,9 @@ pytestmark = pytest.mark.slow
 
 AUTHORS = [
     "batch", "--study", "authors", "--methods", "autonomous", "agent", "--agents", "2",
-    "--preset", "authors", "--reward-scheme", "autonomous=authors-autonomous",
-    "agent=authors-interactive", "--knock-off-rate", "0.1", "--workers", "2",
+    "--preset", "authors", "--per-method", "autonomous:reward_scheme=authors-autonomous",
+    "--per-method", "agent:reward_scheme=authors-interactive", "--knock-off-rate", "0.1",
+    "--workers", "2",
 ]  # fmt: skip
 
 
@@ -30,10 +31,10 @@ def test_schemes_per_method_and_the_report_flags_them(
     assert [s.status for s in rows] == ["finished"] * 5, [s.status_detail for s in rows]
     for s in rows:
         expected = "authors-interactive" if s.method == "agent" else "authors-autonomous"
-        assert s.scenario == {
+        assert s.spec.scenario.to_dict() == {
             "reward_scheme": expected, "grasp_failure_rate": 0.0, "knock_off_rate": 0.1,
         }  # fmt: skip
-        assert s.config["fit"] == "keras" and s.config["head"] == "softmax"
+        assert s.spec.config.fit == "keras" and s.spec.config.head == "softmax"
     # the same command again finds every run: nothing new is created
     code, output = in_process(place, capsys, *AUTHORS, *SCALE)
     assert code == 0 and len(sessions(engine, study_id(engine, "authors"))) == 5, output

@@ -131,7 +131,7 @@ def test_an_episode_replays_from_its_exported_seed_and_actions(csv_export: Path)
         env = sim.SortingEnv(
             motion=session["motion"],
             sort_rule=session["sort_rule"],
-            max_episode_steps=int(session["max_episode_steps"]),
+            max_episode_steps=int(session["config_max_episode_steps"]),
         )
         try:
             env.reset(seed=int(episode["reset_seed"]))

@@ -27,7 +27,7 @@ from tests.server.batch.helpers import (
 pytestmark = pytest.mark.slow
 EPISODES = 10
 ADVISED = ["batch", "--study", "advised only", "--methods", "oracle,random", "--agents", "1"]
-ADVISED += ["--workers", "1", "--oracle-error-rate", "0.2", "--episodes", str(EPISODES)]
+ADVISED += ["--workers", "1", "--error-rate", "0.2", "--episodes", str(EPISODES)]
 ADVISED += SCALE[2:]  # the reduced scale, with more episodes: time to interrupt the second run
 assert SCALE[0] == "--episodes"
 

@@ -37,13 +37,14 @@ def test_the_advisor_trains_first_and_runs_pair_up_by_seed(place: Place, baselin
     final = Path(advisor.checkpoint_path or "")
     assert final.name == "final.pt" and final.is_file()
     agents = [s for s in runs if s.method == "agent"]
-    assert all(Path(s.advisor_checkpoint or "") == final.resolve() for s in agents)
+    assert all(Path(s.spec.advisor_checkpoint or "") == final.resolve() for s in agents)
     assert advisor.finished_at is not None
     assert all(s.started_at and s.started_at >= advisor.finished_at for s in agents)
 
     for s in rows:
-        assert (s.config["pretraining_steps"], s.config["batch_size"], s.motion) == (20, 8, "fast")
-        assert s.advice_budget == (ADVICE if s.method == "agent" else 0)
+        config = s.spec.config
+        assert (config.pretraining_steps, config.batch_size, s.spec.motion) == (20, 8, "fast")
+        assert s.spec.advice_budget == (ADVICE if s.method == "agent" else 0)
     totals = training_totals(engine, [s.id for s in rows])
     assert {n for n, _ in totals.values()} == {EPISODES} and len(totals) == 5
 

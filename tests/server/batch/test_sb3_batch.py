@@ -55,8 +55,9 @@ def test_sb3_runs_are_finished_sessions_with_their_steps_and_episodes(
     sb3 = [s for s in rows if s.method == "sb3-dqn"]
     assert sorted(s.seed for s in sb3) == [0, 1]
     for s in sb3:
-        assert (s.strategy, s.advice_budget, s.advisor_checkpoint) == (None, 0, None)
-        config = s.config
+        spec = s.spec
+        assert (spec.advised, spec.advice_budget, spec.advisor_checkpoint) == (False, 0, None)
+        config = {**spec.config.to_dict(), **spec.sb3}
         # The batch's scale options reach SB3's own hyperparameters.
         assert (config["sb3_batch_size"], config["sb3_buffer_size"]) == (8, 200)
         assert config["sb3_learning_starts"] == config["pretraining_steps"] == 20

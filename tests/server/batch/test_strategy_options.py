@@ -26,7 +26,7 @@ def test_the_interval_reaches_the_trainer_and_names_the_run(
     engine = place.engine()
     study = study_id(engine, "options")
     (session,) = sessions(engine, study)
-    assert session.status == "finished" and session.strategy_options == {"interval": 3}
+    assert session.status == "finished" and session.spec.strategy_options.given() == {"interval": 3}
     with Session(engine) as db:
         steps = list(db.scalars(select(Advice.global_step).where(Advice.session_id == session.id)))
     training = [step - PRETRAINING for step in steps]

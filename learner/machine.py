@@ -1,0 +1,90 @@
+"""What this machine can compute, read without torch (the web process pins a run's numerics
+when it creates the session, and loads no torch): the CPU's kind and bfloat16 support, a
+CUDA device, the cores and the memory. `learner.device` asks torch the same questions
+where torch is loaded; a test checks the two agree here."""
+
+from __future__ import annotations
+
+import os
+import platform
+from functools import cache
+from pathlib import Path
+
+BF16_FLAGS = ("avx512_bf16", "amx_bf16")
+"""CPU flags with which bfloat16 convolutions run natively (oneDNN's AVX-512 BF16 or AMX)."""
+
+
+@cache
+def cpu_flags() -> frozenset[str]:
+    """The CPU's feature flags (/proc/cpuinfo; empty where there is none)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return frozenset()
+    for line in text.splitlines():
+        if line.startswith("flags"):
+            return frozenset(line.partition(":")[2].split())
+    return frozenset()
+
+
+@cache
+def cpu_model() -> str:
+    """The CPU's model name ('AMD EPYC', 'Intel(R) Xeon(R) ...')."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return " ".join(line.partition(":")[2].split())
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def cpu_kind() -> str:
+    """The CPU kind as this project names it: model, and which of AVX-512, AVX-512 BF16 and
+    AMX it has (the kinds change between machines and decide the numerics)."""
+    flags = cpu_flags()
+    has = [
+        name
+        for name, flag in (
+            ("AVX-512", "avx512f"),
+            ("AVX-512 BF16", "avx512_bf16"),
+            ("AMX", "amx_bf16"),
+        )
+        if flag in flags
+    ]
+    return f"{cpu_model()} ({', '.join(has) if has else 'no AVX-512'})"
+
+
+def bf16_native_cpu() -> bool:
+    """bfloat16 convolutions run natively on this CPU."""
+    return any(flag in cpu_flags() for flag in BF16_FLAGS)
+
+
+def cuda_present() -> bool:
+    """An NVIDIA GPU with its driver loaded (what torch would use); CUDA_VISIBLE_DEVICES=""
+    hides it, as it hides it from torch."""
+    if os.environ.get("CUDA_VISIBLE_DEVICES", None) == "":
+        return False
+    gpus = Path("/proc/driver/nvidia/gpus")
+    return gpus.is_dir() and any(gpus.iterdir())
+
+
+def usable_cores() -> int:
+    """The cores this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def total_memory() -> int:
+    """This machine's memory in bytes."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 0
+
+
+def default_threads() -> int:
+    """Torch threads when a run leaves them open: half the cores, 1 to 4 (the simulator, the
+    server and other workers need the rest; `learner.device.configure_threads`)."""
+    return max(1, min(4, usable_cores() // 2))

@@ -1,0 +1,93 @@
+"""Request bodies generated from declared dataclasses (`learner.fields`): the REST body of a
+run is `RunSpec`'s tree as pydantic models, so the OpenAPI schema shows every field with its
+docstring, type and range, and a bad value is a 422 naming the field and what it allows.
+
+The checks are the declaration's own (`learner.fields.check`), never restated here; the
+body's values then go through `RunSpec.from_json` like every other entry point's."""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from functools import cache
+from typing import Annotated, Any
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, create_model
+
+from learner.fields import FieldError, Leaf, check, leaves
+
+
+def leaf_schema(leaf: Leaf) -> dict[str, Any]:
+    """The JSON schema of one declared value."""
+    schema: dict[str, Any]
+    if leaf.choices is not None:
+        schema = {"type": "string", "enum": list(leaf.choices)}
+    elif leaf.kind is bool:
+        schema = {"type": "boolean"}
+    elif leaf.kind in (int, float):
+        schema = {"type": "integer" if leaf.kind is int else "number"}
+        number = int if leaf.kind is int else float
+        if leaf.minimum is not None:
+            key = "exclusiveMinimum" if leaf.exclusive_minimum else "minimum"
+            schema[key] = number(leaf.minimum)
+        if leaf.maximum is not None:
+            schema["maximum"] = number(leaf.maximum)
+    elif leaf.kind is dict:
+        mapping = {
+            "type": "object",
+            "additionalProperties": {"type": "string", "maxLength": 10},
+            "maxProperties": 12,
+        }
+        schema = (
+            {"anyOf": [{"type": "string", "maxLength": leaf.max_length or 400}, mapping]}
+            if leaf.also_text
+            else mapping
+        )
+    else:
+        schema = {"type": "string"}
+        if leaf.max_length:
+            schema["maxLength"] = leaf.max_length
+    if leaf.optional:
+        schema = {"anyOf": [schema, {"type": "null"}]}
+    return {**schema, "description": f"{leaf.doc} [{leaf.allowed()}]"}
+
+
+def _validator(leaf: Leaf) -> Any:
+    def validate(value: Any) -> Any:
+        try:
+            return check(leaf, value)
+        except FieldError as error:
+            raise ValueError(str(error)) from None
+
+    return validate
+
+
+@cache
+def body_model(cls: type, name: str | None = None) -> type[BaseModel]:
+    """A pydantic model of the dataclass tree under `cls`: every field optional (unset ones
+    take their defaults where the body is read), unknown fields refused."""
+    hints = typing.get_type_hints(cls)
+    by_name = {leaf.path[0]: leaf for leaf in leaves(cls) if len(leaf.path) == 1}
+    fields: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if dataclasses.is_dataclass(hints[f.name]):
+            inner = body_model(hints[f.name])  # type: ignore[arg-type]
+            fields[f.name] = (inner | None, Field(default=None))
+            continue
+        leaf = by_name[f.name]
+        kind = Annotated[
+            Any, BeforeValidator(_validator(leaf)), WithJsonSchema(leaf_schema(leaf))
+        ]
+        fields[f.name] = (kind, Field(default=None))
+    model = create_model(  # type: ignore[call-overload]
+        name or cls.__name__,
+        __config__=ConfigDict(extra="forbid"),
+        __doc__=(cls.__doc__ or "").strip(),
+        **fields,
+    )
+    return model  # type: ignore[no-any-return]
+
+
+def given(body: BaseModel) -> dict[str, Any]:
+    """The values a body set (its nested models too), as JSON for `from_json`."""
+    return body.model_dump(exclude_unset=True)
