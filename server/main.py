@@ -17,7 +17,7 @@ from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
 from server.guard import LOGIN, RequestGuard
-from server.headers import SecurityHeaders, validation_error
+from server.headers import SecurityHeaders, validation_error, without_input
 from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.logins import Logins
@@ -133,9 +133,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     add_docs(app)
 
     @app.exception_handler(ServiceError)
-    async def service_error(_: Request, error: ServiceError) -> JSONResponse:
+    async def service_error(request: Request, error: ServiceError) -> JSONResponse:
         if isinstance(error, Invalid):
-            detail = [{"loc": ["body", error.field], "msg": error.message, "type": "value_error"}]
+            message = await without_input(request, error.message)
+            detail = [{"loc": ["body", error.field], "msg": message, "type": "value_error"}]
             return JSONResponse({"detail": detail}, status_code=422)
         return JSONResponse({"detail": error.message}, status_code=error.status_code)
 
