@@ -5,8 +5,10 @@ generated from that raises on every other status as if it were unexpected. Here 
 status a route can return is declared, all errors with one model (`ErrorBody`, FastAPI's
 own `{"detail": ...}` written down), operation ids are the route functions' names
 (`create_study`, not `create_study_api_studies_post`), and zip, PNG, CSV and Markdown
-downloads are binary strings. Done once, over the finished app, so a new route gets the
-same treatment as long as its errors follow the rules below (a test checks them).
+downloads are binary strings, listed first as `application/octet-stream` so that a client
+generated with default settings reads their bytes. Done once, over the finished app, so a
+new route gets the same treatment as long as its errors follow the rules below (a test
+checks them).
 
 Which errors a route can return:
 - 401 and 403: the researcher key or the participant token is missing or wrong
@@ -83,6 +85,7 @@ EXTRA_ERRORS: dict[str, tuple[int, ...]] = {
 """Statuses a route returns beyond what its dependencies and path ids imply (by name)."""
 
 BINARY_TYPES = ("application/zip", "image/png", "text/csv", "text/markdown")
+BYTES = "application/octet-stream"
 
 _REF = "#/components/schemas/"
 PARTICIPANT_SCHEME = "HTTPBearer"
@@ -153,9 +156,22 @@ def _declare(schema: dict[str, Any]) -> dict[str, Any]:
                     "content": error_content,
                 }
             for response in responses.values():
-                for media_type, content in response.get("content", {}).items():
-                    if media_type in BINARY_TYPES:
-                        content["schema"] = {"type": "string", "format": "binary"}
+                _declare_binary(response)
     for unused in ("HTTPValidationError", "ValidationError"):
         components.pop(unused, None)
     return schema
+
+
+def _declare_binary(response: dict[str, Any]) -> None:
+    """A download's bytes: `application/octet-stream` first, then what the server names it
+    (zip, PNG, CSV, Markdown), all binary strings. Generators read a response by the first
+    media type they know: openapi-python-client knows JSON, octet-stream and `text/*`, and
+    would decode a PNG listed as `text/*` first as text, or skip the 200 of a zip."""
+    content = response.get("content", {})
+    if not any(media in BINARY_TYPES for media in content):
+        return
+    binary = {"type": "string", "format": "binary"}
+    response["content"] = {
+        BYTES: {"schema": dict(binary)},
+        **{media: {**found, "schema": dict(binary)} for media, found in content.items()},
+    }
