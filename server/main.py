@@ -8,10 +8,12 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials
 from fastapi.security.utils import get_authorization_scheme_param
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
@@ -22,7 +24,7 @@ from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.logins import Logins
 from server.openapi import install as install_openapi
-from server.openapi import operation_id
+from server.openapi import operation_id, path_methods
 from server.routes import ROUTERS, dashboard, pages, reports, viewing
 from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
@@ -131,6 +133,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
     install_openapi(app)
     add_docs(app)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, error: StarletteHTTPException) -> Response:
+        if error.status_code == 405:  # Starlette names the first route's methods only
+            methods = path_methods(request.app.openapi(), request.url.path)
+            if methods:
+                headers = {**(error.headers or {}), "Allow": ", ".join(methods)}
+                error = StarletteHTTPException(405, error.detail, headers)
+        return await http_exception_handler(request, error)
 
     @app.exception_handler(ServiceError)
     async def service_error(request: Request, error: ServiceError) -> JSONResponse:

@@ -26,6 +26,7 @@ Which errors a route can return:
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from fastapi import FastAPI
@@ -118,6 +119,20 @@ def route_errors(operation: dict[str, Any], method: str = "") -> list[int]:
     if places or "requestBody" in operation or method.upper() in BODY_METHODS:
         codes.add(422)
     return sorted(codes)
+
+
+def path_methods(schema: dict[str, Any], path: str) -> list[str]:
+    """Every method the document declares at `path` (HEAD with GET), for a 405's `Allow`:
+    Starlette names the first matching route's only, and this app has a route per method."""
+    methods: set[str] = set()
+    for template, operations in schema.get("paths", {}).items():
+        parts = re.split(r"(\{[^}]+\})", template)
+        pattern = "".join("[^/]+" if p.startswith("{") else re.escape(p) for p in parts)
+        if re.fullmatch(pattern, path):
+            methods |= {method.upper() for method in operations}
+    if "GET" in methods:
+        methods.add("HEAD")
+    return sorted(methods)
 
 
 def install(app: FastAPI) -> None:

@@ -274,3 +274,19 @@ def _zip_entries(data: bytes) -> dict[str, bytes]:
 
     with zipfile.ZipFile(io.BytesIO(data)) as archive:
         return {name: archive.read(name) for name in archive.namelist()}
+
+
+def test_a_405_names_every_method_of_its_path(server: LiveServer, spec: dict[str, Any]) -> None:
+    """`Allow` lists what the path takes, not only the first route's method."""
+    several = 0
+    with server.client() as client:
+        for path, methods in spec["paths"].items():
+            declared = {m.upper() for m in methods}
+            url = re.sub(r"\{[^}]+\}", str(PROBE_ID), path)
+            wrong = next(m for m in ("PUT", "PATCH", "DELETE", "POST", "GET") if m not in declared)
+            response = client.request(wrong, url)
+            assert response.status_code == 405, f"{wrong} {path}: {response.status_code}"
+            allowed = {m.strip() for m in response.headers["allow"].split(",")}
+            assert declared <= allowed, f"{path}: Allow {allowed}, has {declared}"
+            several += len(declared) > 1
+    assert several >= 6
