@@ -16,7 +16,7 @@ from fastapi.security.utils import get_authorization_scheme_param
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
+from server.db.migrate import BACKUPS, upgrade
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
 from server.guard import LOGIN, RequestGuard
 from server.headers import SecurityHeaders, validation_error, without_input
@@ -90,7 +90,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        upgrade(engine)
+        upgrade(engine, settings.data_dir / BACKUPS)
         await manager.open()
         viewer.start()
         yield
