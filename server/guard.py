@@ -1,6 +1,7 @@
 """The door every request passes before the app: a bounded body, credentials checked
 before the body is read, and JSON that Python can parse but JSON does not allow (NaN,
-Infinity, numbers too large for a float, lone surrogates) refused with a 422.
+Infinity, numbers too large for a float or with more digits than Python converts, lone
+surrogates) refused with a 422 that names the field and never repeats the value.
 
 One pure ASGI middleware, so nothing is buffered before its checks: a body larger than
 `max_body_bytes` is refused from its Content-Length at once, or as soon as the bytes read
@@ -20,6 +21,8 @@ from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from server.schemas.types import SURROGATE_MESSAGE
+
 BODY_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
 DASHBOARD_API = "/dashboard/api/"
 LOGIN = "dashboard-login"
@@ -37,80 +40,81 @@ class BodyTooLarge(HTTPException):
 
 
 class UnacceptableJson(ValueError):
-    """JSON the standard does not allow; `loc` is where (a path in the body), when known."""
-
-    def __init__(self, message: str, loc: list[str] | None = None) -> None:
+    def __init__(self, message: str, loc: tuple[str | int, ...] = ()) -> None:
         super().__init__(message)
-        self.loc = loc or []
+        self.loc = loc
 
 
-class _NonFinite:
-    """Where the JSON held NaN, Infinity or a number too large for a float."""
+class _NotFinite:
+    """Where the parser met a number JSON cannot mean (NaN, Infinity, too large for a
+    float); found again by `_check` to name its field without repeating it."""
 
     def __init__(self, what: str) -> None:
         self.what = what
 
 
-def _finite(text: str) -> float | _NonFinite:
+def _finite(text: str) -> float | _NotFinite:
     value = float(text)
-    return value if math.isfinite(value) else _NonFinite("a number too large for a float")
+    return value if math.isfinite(value) else _NotFinite("is too large for a float")
 
 
-def _constant(name: str) -> _NonFinite:
-    return _NonFinite(f"{name}, which is not a JSON number")
+def _integer(text: str) -> int | _NotFinite:
+    try:
+        return int(text)
+    except ValueError:  # more digits than Python converts (sys.get_int_max_str_digits)
+        return _NotFinite("has more digits than any field here accepts")
 
 
-Describe = Callable[[list[str]], str | None]
-"""What a body's field allows, by its path (e.g. ['run', 'config', 'batch_size']), or None."""
+def _constant(name: str) -> _NotFinite:
+    return _NotFinite(f"is {name}, which is not a JSON number; numbers must be finite")
 
 
-def _check_text(value: Any, where: str = "body", describe: Describe | None = None) -> None:
-    """Refuse strings that cannot be encoded as UTF-8 (lone surrogates), keys included, and
-    numbers that are not finite (naming the field, and what it allows where `describe`
-    knows it)."""
-    stack: list[tuple[Any, str, list[str]]] = [(value, where, [])]
+def _printable(key: str) -> str:
+    return key.encode("utf-8", "backslashreplace").decode()
+
+
+Describe = Callable[[tuple[str | int, ...]], str | None]
+"""What a body's field allows, by its path (e.g. ('run', 'config', 'batch_size')), or None."""
+
+
+def _check(value: Any, describe: Describe | None = None) -> None:
+    """Refuse numbers JSON has not and strings UTF-8 cannot encode (lone surrogates), keys
+    included, naming where they are (and what the field allows, where `describe` knows it)
+    and never what they are."""
+    stack: list[tuple[Any, tuple[str | int, ...]]] = [(value, ())]
     while stack:
-        item, at, path = stack.pop()
-        if isinstance(item, _NonFinite):
-            allowed = describe(path) if describe is not None else None
-            field = ".".join(path) or "the body"
-            message = (
-                f"{field} must be {allowed}"
-                if allowed
-                else f"{field} holds {item.what}; numbers must be finite"
-            )
-            raise UnacceptableJson(message, path)
+        item, at = stack.pop()
+        if isinstance(item, _NotFinite):
+            allowed = describe(at) if describe is not None else None
+            if allowed:
+                field = ".".join(map(str, at))
+                raise UnacceptableJson(f"{field} must be {allowed}: the number {item.what}", at)
+            raise UnacceptableJson(f"the number {item.what}", at)
         if isinstance(item, str):
             try:
                 item.encode("utf-8")
             except UnicodeEncodeError:
-                raise UnacceptableJson(
-                    f"text at {at} is not valid Unicode (it holds a lone surrogate such as "
-                    "\\ud800); send UTF-8 text"
-                ) from None
+                raise UnacceptableJson(f"Text {SURROGATE_MESSAGE}", at) from None
         elif isinstance(item, dict):
             for key, child in item.items():
-                name = key.encode("utf-8", "backslashreplace").decode()
-                stack.append((key, f"{at} (a key)", path))
-                stack.append((child, f"{at}.{name}", [*path, name[:64]]))
+                stack.append((key, at))
+                stack.append((child, (*at, _printable(key))))
         elif isinstance(item, list):
-            stack.extend((child, f"{at}[{i}]", [*path, str(i)]) for i, child in enumerate(item))
+            stack.extend((child, (*at, i)) for i, child in enumerate(item))
 
 
 def check_json(body: bytes, describe: Describe | None = None) -> None:
     """Raise `UnacceptableJson` for JSON Python would accept but the standard does not;
     leave malformed JSON to FastAPI, which explains it."""
     try:
-        parsed = json.loads(body, parse_constant=_constant, parse_float=_finite)
-    except UnacceptableJson:
-        raise
+        parsed = json.loads(body, parse_constant=_constant, parse_float=_finite, parse_int=_integer)
     except RecursionError:
         raise UnacceptableJson("the JSON is nested too deeply") from None
     except UnicodeDecodeError:
         raise UnacceptableJson("the body is not text in UTF-8 (nor UTF-16 or UTF-32)") from None
     except ValueError:
         return
-    _check_text(parsed, describe=describe)
+    _check(parsed, describe)
 
 
 def _json_error(status: int, detail: Any, headers: dict[str, str] | None = None) -> Any:
@@ -133,9 +137,9 @@ class RequestGuard:
         describe: Describe | None = None,
     ) -> None:
         self.app = app
+        self.describe = describe
         self.max_body_bytes = max_body_bytes
         self.guards = guards
-        self.describe = describe
         self._table: list[tuple[re.Pattern[str], dict[str, list[str]]]] | None = None
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:

@@ -11,6 +11,7 @@ inline script, so it gets a policy that allows that.
 
 from __future__ import annotations
 
+import json
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -125,19 +126,58 @@ def _own_origin(scope: Scope) -> str:
     return f"{request.url.scheme}://{request.url.netloc}"
 
 
+QUOTABLE = 12
+"""Characters from which a value sent is long enough to be unmistakable in a message."""
+SENT = "(the value sent)"
+
+
+def _leaves(body: bytes) -> set[str]:
+    """Every value (string or number) of a JSON body that a message could quote, as it
+    would be printed (`str` and `repr`); not the keys, which name fields."""
+    try:
+        stack = [json.loads(body)]
+    except ValueError:
+        return set()
+    found: set[str] = set()
+    while stack:
+        item = stack.pop()
+        if isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+        elif isinstance(item, str | int | float) and not isinstance(item, bool):
+            found.update(p for p in (str(item), repr(item)) if len(p) >= QUOTABLE)
+    return found
+
+
+async def without_input(request: Request, message: str) -> str:
+    """`message` with every long value of the request's body taken out: a 422 says what is
+    wrong with a field, never what was sent (a message built by a service or the learner's
+    config may quote it)."""
+    try:
+        body = await request.body()
+    except RuntimeError:  # the body was streamed, not kept: nothing to compare with
+        return message
+    if len(message) < QUOTABLE or not body:
+        return message
+    for value in sorted(_leaves(body), key=len, reverse=True):
+        message = message.replace(value, SENT)
+    return message
+
+
 def _printable(value: Any) -> Any:
     if isinstance(value, int | float) and not isinstance(value, bool):
         return value
     return str(value).encode("utf-8", "backslashreplace").decode("utf-8")
 
 
-async def validation_error(_: Request, error: RequestValidationError) -> JSONResponse:
+async def validation_error(request: Request, error: RequestValidationError) -> JSONResponse:
     """FastAPI's 422, without echoing the input: input it cannot encode (NaN, a lone
     surrogate) would turn the 422 into a 500, and a message need not repeat the input."""
     detail = []
     for e in error.errors():
         loc = [_printable(part) for part in e.get("loc", ())]
-        msg = _printable(e.get("msg", ""))
+        msg = await without_input(request, _printable(e.get("msg", "")))
         if e.get("type") == "extra_forbidden" and loc:
             # the field's name is the sender's text: say where, not what
             loc[-1] = "(unknown field)"

@@ -3,29 +3,31 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Callable
-from dataclasses import replace
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from dataclasses import replace
 from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials
 from fastapi.security.utils import get_authorization_scheme_param
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from learner.fields import leaves
 from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
+from server.db.migrate import BACKUPS, upgrade
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
-from server.guard import LOGIN, RequestGuard
-from server.headers import SecurityHeaders, validation_error
+from server.guard import LOGIN, Describe, RequestGuard
+from server.headers import SecurityHeaders, validation_error, without_input
 from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.logins import Logins
 from server.openapi import install as install_openapi
-from server.openapi import operation_id
+from server.openapi import operation_id, path_methods
 from server.routes import ROUTERS, dashboard, pages, reports, sessions, viewing
 from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
@@ -55,13 +57,13 @@ def worker_options(settings: Settings) -> WorkerOptions:
     )
 
 
-def describe_run_field(spec_class: type[RunSpec]) -> Callable[[list[str]], str | None]:
+def describe_run_field(spec_class: type[RunSpec]) -> Describe:
     """What a field of a session body's `run` allows, by its path (for the guard's 422 on
     NaN and infinities, which it refuses before the body is validated)."""
     by_path = {leaf.path: leaf for leaf in leaves(spec_class)}
 
-    def describe(path: list[str]) -> str | None:
-        leaf = by_path.get(tuple(path[1:])) if path[:1] == ["run"] else None
+    def describe(path: tuple[str | int, ...]) -> str | None:
+        leaf = by_path.get(tuple(map(str, path[1:]))) if path[:1] == ("run",) else None
         return leaf.allowed() if leaf is not None else None
 
     return describe
@@ -107,7 +109,7 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        upgrade(engine)
+        upgrade(engine, settings.data_dir / BACKUPS)
         await manager.open()
         viewer.start()
         yield
@@ -155,11 +157,21 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
     install_openapi(app)
     add_docs(app)
 
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, error: StarletteHTTPException) -> Response:
+        if error.status_code == 405:  # Starlette names the first route's methods only
+            methods = path_methods(request.app.openapi(), request.url.path)
+            if methods:
+                headers = {**(error.headers or {}), "Allow": ", ".join(methods)}
+                error = StarletteHTTPException(405, error.detail, headers)
+        return await http_exception_handler(request, error)
+
     @app.exception_handler(ServiceError)
-    async def service_error(_: Request, error: ServiceError) -> JSONResponse:
+    async def service_error(request: Request, error: ServiceError) -> JSONResponse:
         if isinstance(error, Invalid):
             loc = ["body", *error.field.split(".")]
-            detail = [{"loc": loc, "msg": error.message, "type": "value_error"}]
+            message = await without_input(request, error.message)
+            detail = [{"loc": loc, "msg": message, "type": "value_error"}]
             return JSONResponse({"detail": detail}, status_code=422)
         return JSONResponse({"detail": error.message}, status_code=error.status_code)
 

@@ -5,8 +5,10 @@ generated from that raises on every other status as if it were unexpected. Here 
 status a route can return is declared, all errors with one model (`ErrorBody`, FastAPI's
 own `{"detail": ...}` written down), operation ids are the route functions' names
 (`create_study`, not `create_study_api_studies_post`), and zip, PNG, CSV and Markdown
-downloads are binary strings. Done once, over the finished app, so a new route gets the
-same treatment as long as its errors follow the rules below (a test checks them).
+downloads are binary strings, listed first as `application/octet-stream` so that a client
+generated with default settings reads their bytes. Done once, over the finished app, so a
+new route gets the same treatment as long as its errors follow the rules below (a test
+checks them).
 
 Which errors a route can return:
 - 401 and 403: the researcher key or the participant token is missing or wrong
@@ -24,6 +26,7 @@ Which errors a route can return:
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from fastapi import FastAPI
@@ -83,6 +86,7 @@ EXTRA_ERRORS: dict[str, tuple[int, ...]] = {
 """Statuses a route returns beyond what its dependencies and path ids imply (by name)."""
 
 BINARY_TYPES = ("application/zip", "image/png", "text/csv", "text/markdown")
+BYTES = "application/octet-stream"
 
 _REF = "#/components/schemas/"
 PARTICIPANT_SCHEME = "HTTPBearer"
@@ -115,6 +119,20 @@ def route_errors(operation: dict[str, Any], method: str = "") -> list[int]:
     if places or "requestBody" in operation or method.upper() in BODY_METHODS:
         codes.add(422)
     return sorted(codes)
+
+
+def path_methods(schema: dict[str, Any], path: str) -> list[str]:
+    """Every method the document declares at `path` (HEAD with GET), for a 405's `Allow`:
+    Starlette names the first matching route's only, and this app has a route per method."""
+    methods: set[str] = set()
+    for template, operations in schema.get("paths", {}).items():
+        parts = re.split(r"(\{[^}]+\})", template)
+        pattern = "".join("[^/]+" if p.startswith("{") else re.escape(p) for p in parts)
+        if re.fullmatch(pattern, path):
+            methods |= {method.upper() for method in operations}
+    if "GET" in methods:
+        methods.add("HEAD")
+    return sorted(methods)
 
 
 def install(app: FastAPI) -> None:
@@ -153,9 +171,22 @@ def _declare(schema: dict[str, Any]) -> dict[str, Any]:
                     "content": error_content,
                 }
             for response in responses.values():
-                for media_type, content in response.get("content", {}).items():
-                    if media_type in BINARY_TYPES:
-                        content["schema"] = {"type": "string", "format": "binary"}
+                _declare_binary(response)
     for unused in ("HTTPValidationError", "ValidationError"):
         components.pop(unused, None)
     return schema
+
+
+def _declare_binary(response: dict[str, Any]) -> None:
+    """A download's bytes: `application/octet-stream` first, then what the server names it
+    (zip, PNG, CSV, Markdown), all binary strings. Generators read a response by the first
+    media type they know: openapi-python-client knows JSON, octet-stream and `text/*`, and
+    would decode a PNG listed as `text/*` first as text, or skip the 200 of a zip."""
+    content = response.get("content", {})
+    if not any(media in BINARY_TYPES for media in content):
+        return
+    binary = {"type": "string", "format": "binary"}
+    response["content"] = {
+        BYTES: {"schema": dict(binary)},
+        **{media: {**found, "schema": dict(binary)} for media, found in content.items()},
+    }

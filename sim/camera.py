@@ -6,8 +6,8 @@ agent needs neither.
 """
 
 import numpy as np
-import pybullet
 
+from sim.bullet import pybullet
 from sim.layout import CameraPose
 from sim.world import World
 

@@ -13,10 +13,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import pybullet
 
 from sim import meshes
 from sim.bodies import Color, Cylinder, Mesh, Pose
+from sim.bullet import pybullet
 from sim.layout import Layout
 from sim.world import TIME_STEP, Part, World
 

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pybullet
 
 from sim.bodies import BodySpec, Box, Color, Cylinder, Mesh, MotionFrame, Pose
+from sim.bullet import pybullet
 
 TIME_STEP = 1.0 / 120.0
 """Seconds of simulated time per physics step: half PyBullet's default step, twice as fast,

@@ -26,7 +26,7 @@ from server.batch.progress import BatchProgress
 from server.batch.sessions import ensure_session, find_session
 from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, run_spec
 from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
+from server.db.migrate import BACKUPS, upgrade
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
 from server.services import numerics
 from server.services.errors import Invalid
@@ -147,7 +147,7 @@ class BatchRunner:
         self.database_url = absolute_database_url(database_url)
         engine = make_engine(self.database_url)
         if migrate:
-            upgrade(engine)
+            upgrade(engine, options.data_dir / BACKUPS)
         self.factory: sessionmaker[Session] = make_session_factory(engine)
         self.states = [RunState(run) for run in plan_runs(spec)]
         given = spec.template.advisor_checkpoint

@@ -252,7 +252,7 @@ def _fail(message: str, code: int = 2) -> int:
 def batch(args: argparse.Namespace) -> int:
     from server.batch import BatchError
     from server.db.engine import make_engine, make_session_factory
-    from server.db.migrate import upgrade
+    from server.db.migrate import BACKUPS, upgrade
     from server.services.errors import ServiceError
 
     try:
@@ -264,7 +264,7 @@ def batch(args: argparse.Namespace) -> int:
     if args.dry_run:
         return _dry_run(args, spec, settings)
     engine = make_engine(settings.db_url)
-    upgrade(engine)
+    upgrade(engine, settings.data_dir / BACKUPS)
     try:
         with make_session_factory(engine)() as db:
             study_id, what = resolve_study(db, args.study)
@@ -363,9 +363,7 @@ def _run(args: argparse.Namespace, spec: BatchSpec, study_id: int, settings: Set
     from server.batch import describe
     from server.batch.runner import BatchRunner
 
-    runner = BatchRunner(
-        spec, study_id, settings.db_url, _options(args, settings), args.spec_class
-    )
+    runner = BatchRunner(spec, study_id, settings.db_url, _options(args, settings), args.spec_class)
     result = runner.run()
     print("\n".join(describe(result)))
     if result.interrupted or not result.complete:

@@ -59,7 +59,7 @@ def existing_database(settings: Settings) -> Engine:
     that only reads: a SQLite file that does not exist is an error that says where we
     looked, never a new empty database."""
     from server.db.engine import make_engine
-    from server.db.migrate import upgrade
+    from server.db.migrate import BACKUPS, upgrade
 
     url = make_url(settings.db_url)
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
@@ -73,7 +73,7 @@ def existing_database(settings: Settings) -> Engine:
                 "ideeprl.sqlite3, or --database-url"
             )
     engine = make_engine(settings.db_url)
-    upgrade(engine)
+    upgrade(engine, settings.data_dir / BACKUPS)
     return engine
 
 

@@ -107,6 +107,8 @@ class WorkerHandle:
     started: float = field(default_factory=time.monotonic)
     reported: bool = False
     """The worker has said something: it is past its start (imports, resuming)."""
+    stopping: bool = False
+    """The researcher asked it to stop: if it hangs, it ends `stopped`, not `interrupted`."""
     advice_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     send_lock: threading.Lock = field(default_factory=threading.Lock)
 
@@ -184,11 +186,14 @@ class SessionManager:
             handle = owned[session_id]
             if handle.token != token:
                 continue
-            detail = (
-                f"its worker stopped marking itself alive for {self.stale_after_s:.0f} s "
-                "and was killed; resume it"
-            )
-            self._kill(handle, Status.interrupted, detail)
+            silence = f"its worker stopped marking itself alive for {self.stale_after_s:.0f} s"
+            if handle.stopping:  # `stop` waits for it: what the researcher asked for
+                detail = f"stopped by the researcher; {silence} and was killed (it resumes "
+                detail += "from its last checkpoint)"
+                self._kill(handle, Status.stopped, detail)
+                self.hub.publish(session_id, "status", StatusChanged(Status.stopped.value))
+                continue
+            self._kill(handle, Status.interrupted, f"{silence} and was killed; resume it")
             marked.append(session_id)
         for session_id in marked:
             self.hub.publish(session_id, "status", StatusChanged(Status.interrupted.value))
@@ -342,6 +347,7 @@ class SessionManager:
                     self.notify(session_id)
                     return
             raise Conflict(f"session {session_id} is {session.status}; there is nothing to stop")
+        handle.stopping = True
         handle.send(Command("stop"))
         await run_in_threadpool(handle.process.join, self.command_timeout_s)
         if handle.process.is_alive():

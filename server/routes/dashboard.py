@@ -30,6 +30,7 @@ from server.routes.params import SessionId, StudyId
 from server.routes.reports import FileName, ReportPublic
 from server.schemas.sessions import SessionOptions
 from server.schemas.studies import StudyCreate
+from server.schemas.types import Text
 from server.services import reports, sessions, studies
 
 COOKIE = "ideeprl_dashboard"
@@ -130,11 +131,11 @@ class StudyRow(BaseModel):
 
 
 class NewStudy(BaseModel):
-    name: str = Field(min_length=1, max_length=200)
+    name: Text = Field(min_length=1, max_length=200)
 
 
 class NewParticipant(BaseModel):
-    participant: str | None = Field(default=None, max_length=64)
+    participant: Text | None = Field(default=None, max_length=64)
     """Pseudonym; generated when empty."""
 
 

@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from server.analysis.report import REPORT_FILE
 from server.deps import DbDep, ResearcherDep, SettingsDep
 from server.routes.params import MAX_ID, StudyId
+from server.schemas.types import Text
 from server.services import reports
 from server.services.studies import get_study
 
@@ -37,11 +38,11 @@ class ReportCreate(BaseModel):
         max_length=10_000,
         description="These sessions only (any status).",
     )
-    methods: list[Annotated[str, Field(max_length=40)]] | None = Field(
+    methods: list[Annotated[Text, Field(max_length=40)]] | None = Field(
         default=None, min_length=1, max_length=20, description="These methods."
     )
-    label: str | None = Field(default=None, max_length=200, description="This label only.")
-    baseline: str = Field(
+    label: Text | None = Field(default=None, max_length=200, description="This label only.")
+    baseline: Text = Field(
         default=reports.AUTO,
         max_length=40,
         description="auto (autonomous when present), none, or a method.",
@@ -49,7 +50,7 @@ class ReportCreate(BaseModel):
     n_episodes: Annotated[int, Field(strict=True)] | None = Field(
         default=None, ge=1, le=100_000, description="First N episodes of every agent."
     )
-    title: str | None = Field(default=None, max_length=200, description="Report title.")
+    title: Text | None = Field(default=None, max_length=200, description="Report title.")
     allow_mismatch: bool = Field(
         default=False,
         description="Also give the t-tests of methods that ran under different settings "

@@ -75,9 +75,7 @@ def body_model(cls: type, name: str | None = None) -> type[BaseModel]:
             fields[f.name] = (inner | None, Field(default=None))
             continue
         leaf = by_name[f.name]
-        kind = Annotated[
-            Any, BeforeValidator(_validator(leaf)), WithJsonSchema(leaf_schema(leaf))
-        ]
+        kind = Annotated[Any, BeforeValidator(_validator(leaf)), WithJsonSchema(leaf_schema(leaf))]
         fields[f.name] = (kind, Field(default=None))
     model = create_model(  # type: ignore[call-overload]
         name or cls.__name__,

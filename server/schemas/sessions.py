@@ -67,8 +67,10 @@ def session_create_model(spec_class: type = RunSpec) -> type[BaseModel]:
         "fields take their defaults (the learner config's: its preset's).",
         run=(
             body_model(spec_class, "Run"),
-            Field(description="The run (learner.run.RunSpec): method, seed, preset, config, "
-            "strategy and its options, advisor, motion, sort rule, scenario."),
+            Field(
+                description="The run (learner.run.RunSpec): method, seed, preset, config, "
+                "strategy and its options, advisor, motion, sort rule, scenario."
+            ),
         ),
     )
     return model  # type: ignore[no-any-return]

@@ -7,17 +7,17 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.schemas.types import Key
+from server.schemas.types import Key, Text
 
 MAX_TEXT = 50_000
 """Characters of one page text (the consent form is the longest, about 3,000)."""
-Texts = dict[Key, Annotated[str, Field(max_length=MAX_TEXT)]]
+Texts = dict[Key, Annotated[Text, Field(max_length=MAX_TEXT)]]
 
 
 class StudyBase(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    description: str = Field(default="", max_length=10_000)
+    description: Text = Field(default="", max_length=10_000)
     texts: Texts = Field(
         default_factory=dict,
         max_length=32,
@@ -26,14 +26,14 @@ class StudyBase(BaseModel):
 
 
 class StudyCreate(StudyBase):
-    name: str = Field(min_length=1, max_length=200, description="Unique name of the study.")
+    name: Text = Field(min_length=1, max_length=200, description="Unique name of the study.")
 
 
 class StudyUpdate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    name: str | None = Field(default=None, min_length=1, max_length=200)
-    description: str | None = Field(default=None, max_length=10_000)
+    name: Text | None = Field(default=None, min_length=1, max_length=200)
+    description: Text | None = Field(default=None, max_length=10_000)
     texts: Texts | None = Field(default=None, max_length=32)
 
 
@@ -42,5 +42,7 @@ class StudyPublic(StudyBase):
 
     id: int
     name: str
+    description: str = ""
+    texts: dict[str, str] = Field(default_factory=dict)
     created_at: datetime
     session_count: int = 0

@@ -1,11 +1,32 @@
 """Strict scalar types for request bodies: JSON `true` is not the number 1, `1.5` is not an
-integer, and a number is finite (JSON has no NaN or Infinity; Python's parser accepts them)."""
+integer, a number is finite (JSON has no NaN or Infinity; Python's parser accepts them), and
+text is text every database stores (PostgreSQL refuses the NUL character, SQLite keeps it)."""
 
 from typing import Annotated
 
-from pydantic import Field, StringConstraints
+from pydantic import AfterValidator, Field, StringConstraints
+from pydantic_core import PydanticCustomError
+
+NUL_MESSAGE = "holds the NUL character (\\u0000), which text cannot hold; remove it"
+SURROGATE_MESSAGE = (
+    "is not valid Unicode (it holds a lone surrogate such as \\ud800); send UTF-8 text"
+)
+
+
+def plain_text(value: str) -> str:
+    """Refuse what a database cannot store as text, saying so without repeating the value."""
+    if "\x00" in value:
+        raise PydanticCustomError("string_nul", "Text " + NUL_MESSAGE)
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        raise PydanticCustomError("string_unicode", "Text " + SURROGATE_MESSAGE) from None
+    return value
+
 
 Int = Annotated[int, Field(strict=True)]
 Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
-Key = Annotated[str, StringConstraints(min_length=1, max_length=64)]
+Text = Annotated[str, AfterValidator(plain_text)]
+"""A text field of a body (a name, a description, a page text): same 422 on every database."""
+Key = Annotated[Text, StringConstraints(min_length=1, max_length=64)]
 """A key of a body's map (a config field, a text's name)."""

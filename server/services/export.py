@@ -209,5 +209,9 @@ def export_zip(db: Session, study_id: int, work_dir: Path, fmt: str = "csv") -> 
     work_dir.mkdir(parents=True, exist_ok=True)
     temp = Path(tempfile.mkdtemp(prefix=f"study-{study_id}-", dir=work_dir))
     folder = temp / f"study-{study_id}"
-    export_study(db, study_id, folder, fmt)
-    return Path(shutil.make_archive(str(folder), "zip", root_dir=folder))
+    try:
+        export_study(db, study_id, folder, fmt)
+        return Path(shutil.make_archive(str(folder), "zip", root_dir=folder))
+    except BaseException:  # an unknown study, a full disk: no scratch folder left behind
+        shutil.rmtree(temp, ignore_errors=True)
+        raise

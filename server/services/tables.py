@@ -3,12 +3,16 @@ schema and the Frictionless `datapackage.json`, so the three never disagree.
 
 Cell conventions (what R's `read.csv`, readr, pandas and pyarrow all read without
 options): booleans `true`/`false`; missing values empty; timestamps ISO 8601 in UTC
-with a `Z` (`2026-12-01T20:35:41.668Z`, milliseconds); numbers as Python prints them.
+with a `Z` (`2026-12-01T20:35:41.668Z`, milliseconds); numbers as Python prints them,
+integers without a decimal point. A missing value is missing in both formats (empty in the
+CSV, null in Parquet; an integer column stays int64 with nulls): never a sentinel, never
+NaN.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -67,6 +71,25 @@ def iso_z(value: datetime | None) -> str:
     return value.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
 
 
+def typed(column: Column, value: Any) -> Any:
+    """A value as its column's declared type, None when missing: an integer stays an
+    integer (a float such as 8.0, from JSON, becomes 8) and a number's NaN is missing, so
+    the CSV and the Parquet file hold the same cells and a reader needs no sentinel."""
+    if value is None or (isinstance(value, str) and value == ""):  # "" is missing (CSV)
+        return None
+    if column.type == "integer":
+        if isinstance(value, float):
+            if math.isnan(value):
+                return None
+            assert value.is_integer(), f"{column.name}: {value} is not an integer"
+        assert not isinstance(value, bool), f"{column.name}: a boolean is not an integer"
+        return int(value)
+    if column.type == "number":
+        value = float(value)
+        return None if math.isnan(value) else value
+    return value
+
+
 def cell(value: Any) -> Any:
     """A value as the CSV cell the module docstring promises."""
     if value is None:
@@ -90,9 +113,9 @@ def write_csv(path: Path, columns: list[Column], rows: Iterable[dict[str, Any]])
         for row in rows:
             writer.writerow(
                 [
-                    safe_cell(cell(row.get(c.name)))
+                    safe_cell(cell(typed(c, row.get(c.name))))
                     if c.type == "string"
-                    else cell(row.get(c.name))
+                    else cell(typed(c, row.get(c.name)))
                     for c in columns
                 ]
             )
@@ -133,10 +156,7 @@ def write_parquet(path: Path, columns: list[Column], rows: Iterable[dict[str, An
     count = 0
     with pq.ParquetWriter(path, schema) as writer:
         for batch in _batches(rows):
-            data = {
-                c.name: [None if r.get(c.name) == "" else r.get(c.name) for r in batch]
-                for c in columns
-            }
+            data = {c.name: [typed(c, r.get(c.name)) for r in batch] for c in columns}
             writer.write_table(pa.Table.from_pydict(data, schema=schema))
             count += len(batch)
         if count == 0:

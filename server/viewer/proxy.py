@@ -67,6 +67,7 @@ def _upstream(listen_host: str) -> str:
 
 
 @router.websocket("/p/{token}")
+@router.websocket("/p/{token}/")  # as viser takes it (`TOKEN_PATH`); no redirects for sockets
 async def relay(websocket: WebSocket, token: str) -> None:
     """The participant's websocket, relayed to viser's (which admits or closes it)."""
     viewer = websocket.app.state.viewer

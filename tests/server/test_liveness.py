@@ -103,7 +103,7 @@ def test_stop_answers_within_the_limit_with_the_real_status(stale_server: LiveSe
         assert response.status_code == 200
         body = response.json()
         assert took < STALE_S + 5
-        assert body["status"] in ("stopped", "interrupted"), body
+        assert body["status"] == "stopped", body  # what was asked, even if it hung
         assert body["status"] == api.get(f"/api/sessions/{session['id']}").json()["status"]
 
 

@@ -192,3 +192,101 @@ def test_a_generated_client_creates_a_study_and_a_session_and_gets_typed_errors(
     pause = importlib.import_module(f"{package}.api.sessions.pause_session")
     not_running = pause.sync_detailed(client=client, session_id=session.parsed.id)
     assert not_running.status_code == 409 and isinstance(not_running.parsed, models.ErrorBody)
+
+
+def _finished_oracle_session(api: httpx.Client) -> tuple[int, int]:
+    """(study id, session id) of a small oracle-advised session, run to its end."""
+    from tests.server.scale import session_body, wait_for_status
+
+    study = api.post("/api/studies", json={"name": "generated downloads"}).json()["id"]
+    body = session_body("oracle", advice_budget=3)
+    session = api.post(f"/api/studies/{study}/sessions", json=body).json()["id"]
+    assert api.post(f"/api/sessions/{session}/start").status_code == 200
+    wait_for_status(api, session, {"finished"})
+    return study, session
+
+
+def test_a_generated_client_downloads_every_file_byte_for_byte(
+    server: LiveServer, api: httpx.Client, generated_client: Any
+) -> None:
+    """Exports (CSV, Parquet), the report's zip and each of its files (Markdown, PNG,
+    CSV) and an advice PNG, through a client generated with default settings, equal the
+    bytes a plain GET receives."""
+    package = generated_client.__name__
+    client = generated_client.AuthenticatedClient(
+        base_url=server.url,
+        token=API_KEY,
+        prefix="",
+        auth_header_name="X-API-Key",
+        raise_on_unexpected_status=True,
+    )
+    study, session = _finished_oracle_session(api)
+    report = api.post(f"/api/studies/{study}/report", json={})
+    assert report.status_code == 201, report.text
+    files = report.json()["files"]
+    assert {f["kind"] for f in files} >= {"figure", "table", "report"}
+
+    def module(name: str) -> Any:
+        return importlib.import_module(f"{package}.api.{name}")
+
+    export = module("exports.export_study")
+    formats = importlib.import_module(f"{package}.models.export_study_format")
+    report_file = module("reports.get_report_file")
+    downloads = [
+        (export.sync_detailed(client=client, study_id=study), f"/api/studies/{study}/export"),
+        (
+            export.sync_detailed(
+                client=client, study_id=study, format_=formats.ExportStudyFormat.PARQUET
+            ),
+            f"/api/studies/{study}/export?format=parquet",
+        ),
+        (
+            module("reports.get_report_zip").sync_detailed(client=client, study_id=study),
+            f"/api/studies/{study}/report.zip",
+        ),
+        (
+            module("sessions.advice_observation").sync_detailed(
+                client=client, session_id=session, advice_index=0
+            ),
+            f"/api/sessions/{session}/advice/0.png",
+        ),
+        *[
+            (report_file.sync_detailed(client=client, study_id=study, name=f["name"]), f["url"])
+            for f in files
+        ],
+    ]
+    for response, url in downloads:
+        assert response.status_code == 200, url
+        assert response.parsed is not None, f"{url}: the client has no 200 response for it"
+        received = response.parsed.payload.read()
+        direct = api.get(url)
+        assert direct.status_code == 200, url
+        if url.endswith((".zip", "export", "parquet")):  # zips carry their time of packing
+            assert _zip_entries(received) == _zip_entries(direct.content), url
+        else:
+            assert received == direct.content, url
+    assert {url.rsplit(".", 1)[-1] for _, url in downloads} >= {"png", "md", "csv", "zip"}
+
+
+def _zip_entries(data: bytes) -> dict[str, bytes]:
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        return {name: archive.read(name) for name in archive.namelist()}
+
+
+def test_a_405_names_every_method_of_its_path(server: LiveServer, spec: dict[str, Any]) -> None:
+    """`Allow` lists what the path takes, not only the first route's method."""
+    several = 0
+    with server.client() as client:
+        for path, methods in spec["paths"].items():
+            declared = {m.upper() for m in methods}
+            url = re.sub(r"\{[^}]+\}", str(PROBE_ID), path)
+            wrong = next(m for m in ("PUT", "PATCH", "DELETE", "POST", "GET") if m not in declared)
+            response = client.request(wrong, url)
+            assert response.status_code == 405, f"{wrong} {path}: {response.status_code}"
+            allowed = {m.strip() for m in response.headers["allow"].split(",")}
+            assert declared <= allowed, f"{path}: Allow {allowed}, has {declared}"
+            several += len(declared) > 1
+    assert several >= 6

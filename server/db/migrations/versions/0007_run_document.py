@@ -124,9 +124,7 @@ def upgrade() -> None:
             row[name] = None if row[name] is None else int(row[name])
         if row["oracle_error_rate"] is not None:
             row["oracle_error_rate"] = float(row["oracle_error_rate"])
-        bind.execute(
-            sa.update(new).where(new.c.id == row["id"]).values(run=run_document(row))
-        )
+        bind.execute(sa.update(new).where(new.c.id == row["id"]).values(run=run_document(row)))
     bind.execute(sa.text("UPDATE sessions SET numerics_overrides = '[]'"))
     with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
         batch.alter_column("run", existing_type=sa.JSON(), nullable=False)

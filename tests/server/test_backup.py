@@ -1,0 +1,208 @@
+"""`ideeprl backup` and `ideeprl restore`: a copy taken while a writer commits holds every
+row committed before it began and no half of anything after; it restores into a fresh data
+folder with the checkpoints its sessions refer to, moved there. A database at an older
+revision is backed up before it is migrated. Runs on PostgreSQL too (DATABASE_URL)."""
+
+from __future__ import annotations
+
+import sqlite3
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from alembic import command
+from sqlalchemy import Engine, select, text
+from sqlalchemy.engine import make_url
+
+from learner.run import RunSpec
+from server.cli import main
+from server.db.backup import RESTORED, BackupError, backup, restore
+from server.db.engine import make_engine, make_session_factory
+from server.db.migrate import alembic_config, upgrade
+from server.db.models import Status, Study, StudySession
+from server.schemas.studies import StudyCreate
+from server.services.sessions import create_session
+from server.services.studies import create_study
+from tests.server.live import fresh_database
+
+
+@pytest.fixture
+def installation(tmp_path: Path) -> Iterator[tuple[Engine, Path]]:
+    """A migrated database and its data folder."""
+    data_dir = tmp_path / "data"
+    with fresh_database(data_dir.parent) as url:
+        engine = make_engine(url)
+        upgrade(engine)
+        try:
+            yield engine, data_dir
+        finally:
+            engine.dispose()
+
+
+def _sessions_with_checkpoints(engine: Engine, data_dir: Path) -> dict[int, bytes]:
+    """Two sessions, one running with a step checkpoint, one finished with final.pt."""
+    factory = make_session_factory(engine)
+    contents = {}
+    with factory() as db:
+        study = create_study(db, StudyCreate(name="backed up"))
+        for status, name in ((Status.running, "step-000000120.pt"), (Status.finished, "final.pt")):
+            session = create_session(db, study.id, RunSpec(method="oracle"), data_dir=data_dir)
+            path = data_dir / "checkpoints" / f"session-{session.id}" / name
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(f"checkpoint of {session.id}".encode())
+            session.checkpoint_path, session.status = str(path), status.value
+            contents[session.id] = path.read_bytes()
+        db.commit()
+    return contents
+
+
+class Writer(threading.Thread):
+    """Commits one study at a time until told to stop; remembers what was committed."""
+
+    def __init__(self, engine: Engine) -> None:
+        super().__init__(daemon=True)
+        self.factory = make_session_factory(engine)
+        self.committed: list[int] = []
+        self.done = threading.Event()
+
+    def run(self) -> None:
+        index = 0
+        while not self.done.is_set():
+            with self.factory() as db:
+                study = create_study(db, StudyCreate(name=f"row {index}", description="x" * 500))
+                self.committed.append(study.id)
+            index += 1
+
+
+def test_a_backup_taken_while_a_writer_commits_restores_every_committed_row(
+    installation: tuple[Engine, Path], tmp_path: Path
+) -> None:
+    engine, data_dir = installation
+    checkpoints = _sessions_with_checkpoints(engine, data_dir)
+    (data_dir / "api_key").write_text("the key\n")
+    writer = Writer(engine)
+    writer.start()
+    try:
+        while len(writer.committed) < 20:
+            time.sleep(0.01)
+        before = list(writer.committed)
+        args = ["backup", "--out", str(tmp_path / "backup"), "--data-dir", str(data_dir)]
+        assert main([*args, "--database-url", engine.url.render_as_string(False)]) == 0
+        time.sleep(0.1)
+    finally:
+        writer.done.set()
+        writer.join(30)
+    assert len(writer.committed) > len(before)  # the writer ran on through the backup
+
+    fresh = tmp_path / "restored"
+    with fresh_database(fresh) as url:
+        args = ["restore", str(tmp_path / "backup"), "--data-dir", str(fresh)]
+        assert main([*args, "--database-url", url]) == 0
+        restored = make_engine(url)
+        try:
+            if make_url(url).get_backend_name() == "sqlite":
+                with sqlite3.connect(make_url(url).database) as raw:
+                    assert raw.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+            with make_session_factory(restored)() as db:
+                ids = set(db.scalars(select(Study.id)))
+                sessions = list(db.scalars(select(StudySession).order_by(StudySession.id)))
+        finally:
+            restored.dispose()
+    assert set(before) <= ids, "a row committed before the backup began is missing"
+    rows = sorted(i for i in ids if i in set(writer.committed))
+    assert rows == writer.committed[: len(rows)], "the copy is not one instant's"
+    assert len(sessions) == 2
+    for session in sessions:
+        path = Path(session.checkpoint_path or "")
+        assert path.is_relative_to(fresh) and path.read_bytes() == checkpoints[session.id]
+    running, finished = sessions
+    assert running.status == "interrupted" and running.status_detail == RESTORED
+    assert finished.status == "finished"
+    assert (fresh / "api_key").read_text() == "the key\n"
+
+
+def test_a_backup_follows_a_checkpoint_replaced_meanwhile(
+    installation: tuple[Engine, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A worker that records a newer checkpoint and deletes the old one between the
+    snapshot and the copy: the backup snapshots again and holds the newer one."""
+    import server.db.backup as backups
+
+    engine, data_dir = installation
+    _sessions_with_checkpoints(engine, data_dir)
+    real_copy = backups.shutil.copyfile
+    replaced: list[Path] = []
+
+    def worker_moves_on(source: Path, target: Path) -> object:
+        if source.name.startswith("step-") and not replaced:
+            newer = source.with_name("step-000000240.pt")
+            newer.write_bytes(b"newer")
+            with engine.begin() as connection:
+                connection.execute(
+                    text("UPDATE sessions SET checkpoint_path = :new WHERE checkpoint_path = :old"),
+                    {"new": str(newer), "old": str(source)},
+                )
+            source.unlink()
+            replaced.append(newer)
+        return real_copy(source, target)
+
+    monkeypatch.setattr(backups.shutil, "copyfile", worker_moves_on)
+    done = backup(engine.url.render_as_string(False), data_dir, tmp_path / "backup")
+    assert replaced and not done.missing
+    relative = str(replaced[0].relative_to(data_dir))
+    assert relative in done.files
+    assert (tmp_path / "backup" / "files" / relative).read_bytes() == b"newer"
+
+
+def test_restore_refuses_a_database_that_has_tables(
+    installation: tuple[Engine, Path], tmp_path: Path
+) -> None:
+    engine, data_dir = installation
+    url = engine.url.render_as_string(False)
+    backup(url, data_dir, tmp_path / "backup")
+    with pytest.raises(BackupError, match="has tables already"):
+        restore(tmp_path / "backup", url, data_dir)
+    with pytest.raises(BackupError, match="exists already"):
+        backup(url, data_dir, tmp_path / "backup")
+
+
+def test_a_database_at_an_older_revision_is_backed_up_before_it_is_migrated(
+    tmp_path: Path,
+) -> None:
+    with fresh_database(tmp_path) as url:
+        engine = make_engine(url)
+        try:
+            command.upgrade(alembic_config(engine), "0005")
+            with engine.begin() as connection:
+                connection.execute(
+                    text("INSERT INTO studies (name, description, texts, created_at) "
+                         "VALUES ('before the migration', '', '{}', CURRENT_TIMESTAMP)")
+                )  # fmt: skip
+            saved = upgrade(engine, tmp_path / "backups")
+            assert saved is not None and saved.parent == tmp_path / "backups"
+            assert "pre-migration-0005" in saved.name
+            assert upgrade(engine, tmp_path / "backups") is None  # at head: nothing to save
+        finally:
+            engine.dispose()
+        with fresh_database(tmp_path / "copy") as copy:
+            restore(saved, copy, tmp_path / "copy")
+            old = make_engine(copy)
+            try:
+                with old.connect() as connection:
+                    revision = connection.execute(text("SELECT version_num FROM alembic_version"))
+                    assert revision.scalar_one() == "0005"
+                    names = connection.execute(text("SELECT name FROM studies")).scalars().all()
+            finally:
+                old.dispose()
+    assert names == ["before the migration"]
+
+
+def test_a_fresh_database_is_not_backed_up(tmp_path: Path) -> None:
+    engine = make_engine(f"sqlite:///{tmp_path / 'ideeprl.sqlite3'}")
+    try:
+        assert upgrade(engine) is None
+    finally:
+        engine.dispose()
+    assert not (tmp_path / "backups").exists()

@@ -1,0 +1,31 @@
+"""The 3-D view's websocket relay (`/viewer/p/TOKEN`) takes the path with or without a
+trailing slash, as viser itself does: both reach viser, which judges the token."""
+
+from __future__ import annotations
+
+import pytest
+import viser
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.sync.client import connect
+
+from tests.server.live import LiveServer
+
+FORGED = "x" * 43
+
+
+@pytest.mark.parametrize("slash", ["", "/"], ids=["bare", "trailing-slash"])
+def test_the_relay_reaches_viser_with_or_without_a_trailing_slash(
+    server: LiveServer, slash: str
+) -> None:
+    url = server.url.replace("http://", "ws://") + f"/viewer/p/{FORGED}{slash}"
+    try:
+        with (
+            connect(
+                url, subprotocols=[f"viser-v{viser.__version__}"], open_timeout=30, close_timeout=5
+            ) as socket,
+            pytest.raises(ConnectionClosed) as closed,
+        ):
+            socket.recv(timeout=30)
+    except InvalidStatus as refused:  # the relay itself refused the upgrade
+        pytest.fail(f"{url}: HTTP {refused.response.status_code} instead of a relayed socket")
+    assert closed.value.rcvd is not None and closed.value.rcvd.code == 4003  # viser's "forbidden"
