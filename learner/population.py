@@ -1,0 +1,205 @@
+"""A population: agents of one learner configuration trained together in one process.
+
+Why: every question the platform answers is paid for in agent runs, and one run per
+process repeats torch (about 590 MB resident) and leaves the vector units idle on one
+agent's small convolutions. Here N agents step side by side: each agent's environment
+steps in turn, their actions are chosen on one batched forward pass over their stacked
+weights, and their updates are computed together (`learner.stacked`).
+
+Each agent is a `Trainer` of its own (seed, environment, advisor, strategy, callbacks,
+replay memory, exploration, optimizer state), driven through the same code as alone:
+`Trainer._act` chooses, asks for advice, steps and remembers; `Trainer._end_step` records
+and tells the callbacks. So an agent's records are the same StepRecords and
+EpisodeRecords, its checkpoints are `Trainer`'s files (a population agent's checkpoint
+resumes in a plain `Trainer` and a plain `Trainer`'s in a population), and for the same
+seed its course through pretraining and advice is the same as alone, bit for bit: the
+actions there are random or advised, and advisors are asked one agent at a time, as
+alone (an agent advisor's greedy action is its own batch-of-one forward pass, which
+batching cannot flip). Q-values are the same function computed in another order (within
+about 1e-2 relative in bfloat16, 1e-5 in float32; tests/learner/test_population.py).
+Learning may differ from alone only by floating-point order.
+
+An agent that finishes (its episodes run, or a callback stopped it) leaves the
+population; the others go on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from learner.advisors import Advisor
+from learner.config import DQNConfig
+from learner.records import EpisodeRecord, StepRecord
+from learner.stacked import ConvMode, StackedAgents
+from learner.strategies import AdvisingStrategy
+from learner.trainer import Trainer
+
+Layout = Literal["auto", "stacked", "loop"]
+LAYOUTS = ("auto", "stacked", "loop")
+
+
+@dataclass
+class Member:
+    """One agent of a population: what a `Trainer` takes besides the shared config.
+    Environments may differ (reward scheme, realism, sort rule); the image and action
+    spaces may not."""
+
+    env: gym.Env
+    seed: int = 0
+    advisor: Advisor | None = None
+    strategy: AdvisingStrategy | str | None = None
+    callbacks: Iterable[Any] = field(default_factory=tuple)
+
+
+class Population:
+    """Trains `members` under one `config` together; see the module docstring.
+
+    `layout`: `stacked` computes the agents' action values and updates together over
+    their stacked weights (the fast update, `config.update="fast"`); `loop` runs each
+    agent's own `DQNAgent` one after the other, exactly as alone (the fallback, and the
+    only way for the plain float32 update); `auto` is `stacked` where it applies.
+    `conv` is how the convolutions run in the stacked layout (`learner.stacked`):
+    `loop` (one call per agent: each agent's values and gradients are its own alone, to
+    the bit) or `grouped` (one grouped convolution: the same function, another order).
+
+    Drive it with `step()` (one step of every agent still training) or `run()`; each
+    agent's records go to its own callbacks. `trainers[i]` is agent i's `Trainer`: its
+    `save_checkpoint`/`load_checkpoint` are the per-agent checkpoints (or use
+    `save_checkpoint(i, path)`, which records the population's numerics with it).
+    """
+
+    def __init__(
+        self,
+        config: DQNConfig,
+        members: Sequence[Member],
+        layout: Layout = "auto",
+        conv: ConvMode = "loop",
+    ) -> None:
+        if not members:
+            raise ValueError("a population needs at least one member")
+        if layout not in LAYOUTS:
+            raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+        if layout == "stacked" and config.update != "fast":
+            raise ValueError(
+                "the stacked layout computes the fast update; config update='plain' runs "
+                "with layout='loop' (or 'auto')"
+            )
+        if conv not in ("loop", "grouped"):
+            raise ValueError(f"conv must be 'loop' or 'grouped', got {conv!r}")
+        self.config = config
+        self.layout: Layout = (
+            ("stacked" if config.update == "fast" else "loop") if layout == "auto" else layout
+        )
+        self.conv: ConvMode = conv
+        self.trainers = [
+            Trainer(m.env, config, m.advisor, m.strategy, m.seed, m.callbacks) for m in members
+        ]
+        shapes = {t.env.observation_space.shape for t in self.trainers}
+        if len(shapes) > 1:
+            raise ValueError(f"the members' environments differ in image shape: {shapes}")
+
+    @property
+    def size(self) -> int:
+        return len(self.trainers)
+
+    @property
+    def active(self) -> list[int]:
+        """Indices of the agents still training."""
+        return [i for i, trainer in enumerate(self.trainers) if not trainer.done]
+
+    @property
+    def done(self) -> bool:
+        return not self.active
+
+    def numerics(self, index: int | None = None) -> dict[str, Any]:
+        """How this population computes (plain JSON, recorded with each agent's checkpoint):
+        its size and layout, the convolutions' dtype, device and threads; with `index`,
+        also which agent."""
+        agent = self.trainers[0].agent
+        numerics: dict[str, Any] = {
+            "population_size": self.size,
+            "layout": self.layout,
+            "conv": self.conv if self.layout == "stacked" else "per-agent",
+            "conv_dtype": str(agent.dtype).replace("torch.", ""),
+            "device": str(agent.device),
+            "torch_threads": self.trainers[0].threads,
+            "torch": str(torch.__version__),
+        }
+        if index is not None:
+            numerics["population_index"] = index
+            numerics["seed"] = self.trainers[index].seed
+        return numerics
+
+    def step(self) -> dict[int, StepRecord]:
+        """One environment step of every agent still training; their records by index."""
+        active = self.active
+        if not active:
+            raise RuntimeError("the population is done (every agent finished or stopped)")
+        trainers = [self.trainers[i] for i in active]
+        images = [trainer._begin_step() for trainer in trainers]
+        q_values = self._q_values(trainers, images)
+        steps = [trainer._act(q) for trainer, q in zip(trainers, q_values, strict=True)]
+        updating = [k for k, step in enumerate(steps) if step.updates]
+        losses = dict(zip(updating, self._update([trainers[k] for k in updating]), strict=True))
+        return {
+            i: trainer._end_step(step, losses.get(k))
+            for k, (i, trainer, step) in enumerate(zip(active, trainers, steps, strict=True))
+        }
+
+    def run(self) -> dict[int, list[EpisodeRecord]]:
+        """Step until every agent is done; each agent's training episodes finished here."""
+        finished: dict[int, list[EpisodeRecord]] = {i: [] for i in self.active}
+        while not self.done:
+            for i in self.step():
+                record = self.trainers[i].episode_record
+                if record is not None and record.phase == "train":
+                    finished[i].append(record)
+        return finished
+
+    def stop(self) -> None:
+        """Stop every agent; `run` returns after the current step."""
+        for trainer in self.trainers:
+            trainer.stop()
+
+    def _q_values(self, trainers: list[Trainer], images: list[np.ndarray]) -> Sequence[Any]:
+        if self.layout == "loop":
+            return [t.agent.q_values(image) for t, image in zip(trainers, images, strict=True)]
+        return StackedAgents([t.agent for t in trainers], self.conv).q_values(images)
+
+    def _update(self, trainers: list[Trainer]) -> list[float]:
+        """Each trainer's update on a batch from its own memory, as `Trainer.step` does."""
+        if not trainers:
+            return []
+        size = self.config.batch_size
+        batches = [t.memory.sample(size, t._memory_rng) for t in trainers]
+        rngs = [t._memory_rng for t in trainers]
+        if self.layout == "loop":
+            return [
+                t.agent.update(batch, rng)
+                for t, batch, rng in zip(trainers, batches, rngs, strict=True)
+            ]
+        return StackedAgents([t.agent for t in trainers], self.conv).update(batches, rngs)
+
+    def save_checkpoint(
+        self,
+        index: int,
+        path: str | Path,
+        metadata: dict[str, Any] | None = None,
+        memory: bool = True,
+    ) -> None:
+        """Agent `index`'s checkpoint, in `Trainer`'s format (a plain `Trainer` resumes
+        it), with the population's numerics under `metadata["population"]`."""
+        metadata = {**(metadata or {}), "population": self.numerics(index)}
+        self.trainers[index].save_checkpoint(path, metadata, memory)
+
+    def load_checkpoint(self, index: int, path: str | Path) -> None:
+        """Continue agent `index` from a checkpoint of a `Trainer` or a population's agent
+        (same config except its runtime fields, strategy and advisor kind)."""
+        self.trainers[index].load_checkpoint(path)
