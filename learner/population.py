@@ -41,8 +41,8 @@ from learner.stacked import ConvMode, StackedAgents
 from learner.strategies import AdvisingStrategy
 from learner.trainer import Trainer
 
-Layout = Literal["auto", "stacked", "loop"]
-LAYOUTS = ("auto", "stacked", "loop")
+Layout = Literal["auto", "stacked", "stacked-actions", "loop"]
+LAYOUTS = ("auto", "stacked", "stacked-actions", "loop")
 
 
 @dataclass
@@ -61,10 +61,14 @@ class Member:
 class Population:
     """Trains `members` under one `config` together; see the module docstring.
 
-    `layout`: `stacked` computes the agents' action values and updates together over
-    their stacked weights (the fast update, `config.update="fast"`); `loop` runs each
-    agent's own `DQNAgent` one after the other, exactly as alone (the fallback, and the
-    only way for the plain float32 update); `auto` is `stacked` where it applies.
+    `layout` says what is computed together (`resolve_layout`): `stacked`, the agents'
+    action values (one forward pass) and their updates, over their stacked weights;
+    `stacked-actions`, the action values, while each agent's update is its own
+    `DQNAgent.update` in turn (on a CPU the faster: one agent's working set stays in the
+    caches, and the stacked update has nothing else to gain there, see
+    benchmarks/bench_population.py); `loop`, nothing: each agent's own `DQNAgent` one
+    after the other, as alone (the fallback, and the only way for `update="plain"`).
+    `auto`: `stacked` on CUDA, `stacked-actions` on a CPU, `loop` for the plain update.
     `conv` is how the convolutions run in the stacked layout (`learner.stacked`):
     `loop` (one call per agent: each agent's values and gradients are its own alone, to
     the bit) or `grouped` (one grouped convolution: the same function, another order).
@@ -84,23 +88,14 @@ class Population:
     ) -> None:
         if not members:
             raise ValueError("a population needs at least one member")
-        if layout not in LAYOUTS:
-            raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
-        if layout == "stacked" and config.update != "fast":
-            raise ValueError(
-                "the stacked layout computes the fast update; config update='plain' runs "
-                "with layout='loop' (or 'auto')"
-            )
         if conv not in ("loop", "grouped"):
             raise ValueError(f"conv must be 'loop' or 'grouped', got {conv!r}")
-        self.config = config
-        self.layout: Layout = (
-            ("stacked" if config.update == "fast" else "loop") if layout == "auto" else layout
-        )
-        self.conv: ConvMode = conv
         self.trainers = [
             Trainer(m.env, config, m.advisor, m.strategy, m.seed, m.callbacks) for m in members
         ]
+        self.config = config
+        self.layout = resolve_layout(layout, config, self.trainers[0].device)
+        self.conv: ConvMode = conv
         shapes = {t.env.observation_space.shape for t in self.trainers}
         if len(shapes) > 1:
             raise ValueError(f"the members' environments differ in image shape: {shapes}")
@@ -126,7 +121,7 @@ class Population:
         numerics: dict[str, Any] = {
             "population_size": self.size,
             "layout": self.layout,
-            "conv": self.conv if self.layout == "stacked" else "per-agent",
+            "conv": "per-agent" if self.layout == "loop" else self.conv,
             "conv_dtype": str(agent.dtype).replace("torch.", ""),
             "device": str(agent.device),
             "torch_threads": self.trainers[0].threads,
@@ -180,7 +175,7 @@ class Population:
         size = self.config.batch_size
         batches = [t.memory.sample(size, t._memory_rng) for t in trainers]
         rngs = [t._memory_rng for t in trainers]
-        if self.layout == "loop":
+        if self.layout != "stacked":
             return [
                 t.agent.update(batch, rng)
                 for t, batch, rng in zip(trainers, batches, rngs, strict=True)
@@ -203,3 +198,19 @@ class Population:
         """Continue agent `index` from a checkpoint of a `Trainer` or a population's agent
         (same config except its runtime fields, strategy and advisor kind)."""
         self.trainers[index].load_checkpoint(path)
+
+
+def resolve_layout(layout: str, config: DQNConfig, device: torch.device) -> Layout:
+    """The layout `auto` stands for on `device` (see `Population`); checks the others."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+    if config.update != "fast":
+        if layout not in ("auto", "loop"):
+            raise ValueError(
+                f"the {layout} layout computes the fast update; config update='plain' runs "
+                "with layout='loop' (or 'auto')"
+            )
+        return "loop"
+    if layout == "auto":
+        return "stacked" if device.type == "cuda" else "stacked-actions"
+    return layout  # type: ignore[return-value]

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from learner import Trainer, make_advisor, make_strategy
-from learner.population import Member, Population
+from learner.population import Member, Population, resolve_layout
 from learner.stacked import StackedAgents
 from tests.learner.conftest import Recorder, small_config
 
@@ -102,8 +102,7 @@ def test_an_agent_in_a_mixed_population_takes_the_course_it_takes_alone(
         alone.append((recorder, member.env.hashes))
     recorders = [Recorder() for _ in specs]
     members = [build(make_env, s, r) for s, r in zip(specs, recorders, strict=True)]
-    population = Population(config, members)
-    assert population.layout == "stacked"
+    population = Population(config, members, layout="stacked")
     for _ in range(steps):
         assert sorted(population.step()) == [0, 1, 2, 3]
     for (expected, hashes), recorder, member in zip(alone, recorders, members, strict=True):
@@ -140,9 +139,14 @@ def test_the_loop_fallback_is_each_trainer_alone_bit_for_bit(make_env) -> None:
     population = Population(config, members, layout="loop")
     population.run()
     assert [[s.to_dict() for s in r.steps] for r in recorders] == alone
-    assert Population(small_config(update="plain"), members[:1]).layout == "loop"
+    cpu, cuda = torch.device("cpu"), torch.device("cuda")
+    assert resolve_layout("auto", config, cpu) == "stacked-actions"
+    assert resolve_layout("auto", config, cuda) == "stacked"
+    assert resolve_layout("auto", small_config(update="plain"), cuda) == "loop"
     with pytest.raises(ValueError, match="layout='loop'"):
-        Population(small_config(update="plain"), members[:1], layout="stacked")
+        resolve_layout("stacked", small_config(update="plain"), cpu)
+    with pytest.raises(ValueError, match="layout must be one of"):
+        resolve_layout("vectorised", config, cpu)
 
 
 def test_grouped_convolutions_compute_the_same_values_and_update() -> None:
@@ -197,7 +201,8 @@ def test_float32_parameters_after_50_updates_agree_alone_and_in_a_population(mak
         while trainer.agent.updates < 50:
             trainer.step()
         alone.append([p.detach().clone() for p in trainer.agent.network.parameters()])
-    population = Population(config, [Member(make_env(max_episode_steps=30), s) for s in seeds])
+    members = [Member(make_env(max_episode_steps=30), s) for s in seeds]
+    population = Population(config, members, layout="stacked")
     snapshots = [Snapshot(t) for t in population.trainers]
     for trainer, snapshot in zip(population.trainers, snapshots, strict=True):
         trainer.callbacks.append(snapshot)
@@ -217,7 +222,7 @@ def test_a_resumed_population_matches_an_uninterrupted_one(make_env, tmp_path) -
             Member(make_env(max_episode_steps=30), s, make_advisor("oracle", seed=s), callbacks=[r])
             for s, r in zip(seeds, recorders, strict=True)
         ]
-        return Population(config, members)
+        return Population(config, members, layout="stacked")
 
     uninterrupted = [Recorder() for _ in seeds]
     population(uninterrupted).run()
