@@ -12,6 +12,9 @@
    median reported. Agent-updates per second, and the achieved rate in GFLOPS of the
    network's own FLOPs (torch's FLOP counter on the plain float32 update: the function,
    not the zeros the space-to-depth kernels add) as a fraction of the matmul rates.
+   Where the CPU has two cores per torch thread, also: 2 workers (each agent's update
+   on one of two threads, `Population(workers=2)`) against N single updates with twice
+   the torch threads: whole updates in parallel against each operation in parallel.
 3. A population step split into its parts: the update, action selection (one batched
    forward pass), simulation (the environments' steps less their rendering), rendering
    (the 64x64 camera image), and the rest (replay memory, records, bookkeeping).
@@ -28,6 +31,7 @@ import platform
 import statistics
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -106,37 +110,69 @@ def _time_block(work: Callable[[], Any], block: int) -> float:
 
 
 def bench_update(size: int, repeats: int, block: int, frames: list[np.ndarray]) -> dict:
-    """Seconds per population update (N agent-updates), stacked vs N single updates."""
-    from learner.agent import DQNAgent
+    """Seconds per population update (N agent-updates) in each layout, against N single
+    updates (`DQNAgent.update` one after the other), through `Population._update`."""
+    import sim
     from learner.config import DQNConfig
-    from learner.stacked import StackedAgents
+    from learner.population import Member, Population
 
-    config = DQNConfig(torch_threads=torch.get_num_threads())
-    agents = [DQNAgent(config, torch.device("cpu"), init_seed=i) for i in range(size)]
-    memories = [_memory(agents[0], frames) for _ in range(size)]
-    rngs = [np.random.default_rng(i) for i in range(size)]
+    threads = torch.get_num_threads()
+    config = DQNConfig(torch_threads=threads, memory_size=len(frames))
+    members = [Member(sim.SortingEnv(motion="fast"), seed) for seed in range(size)]
+    population = Population(config, members, layout="stacked-actions")
+    rng = np.random.default_rng(0)
+    for trainer in population.trainers:
+        packed = [trainer.agent.encode(frame) for frame in frames]
+        for t in range(len(frames) - 1):
+            reward = float(rng.choice([0.0, 0.4, -0.01, -1.0]))
+            trainer.memory.add(packed[t], t % 4, reward, packed[t + 1], t % 40 == 39, False)
+    trainers = population.trainers
+    agents = [t.agent for t in trainers]
 
-    def batches() -> list:
-        return [m.sample(BATCH, rng) for m, rng in zip(memories, rngs, strict=True)]
+    def single() -> list[float]:
+        batches = [t.memory.sample(BATCH, t._memory_rng) for t in trainers]
+        return [a.update(b) for a, b in zip(agents, batches, strict=True)]
 
-    works: dict[str, Callable[[], Any]] = {
-        "single": lambda: [a.update(b) for a, b in zip(agents, batches(), strict=True)],
-        "stacked": lambda: StackedAgents(agents, "loop").update(batches(), rngs),
-    }
+    def variant(layout: str, conv: str = "loop", workers: int = 1) -> Callable[[], Any]:
+        def work() -> list[float]:
+            population.layout, population.conv = layout, conv  # type: ignore[assignment]
+            population.workers, population._pool = workers, pools.get(workers)
+            return population._update(trainers)
+
+        return work
+
+    pools = {w: ThreadPoolExecutor(w) for w in (2,) if (os.cpu_count() or 1) >= 2 * threads}
+    works: dict[str, Callable[[], Any]] = {"single": single, "stacked": variant("stacked")}
     if size > 1:
-        works["grouped"] = lambda: StackedAgents(agents, "grouped").update(batches(), rngs)
+        works["stacked grouped"] = variant("stacked", "grouped")
+    if pools:
+        works["2 workers"] = variant("stacked-actions", workers=2)
+        works["single, 2x threads"] = lambda: _with_threads(2 * threads, single)
     for work in works.values():
         work()  # warm-up: allocator, oneDNN kernels
     times: dict[str, list[float]] = {name: [] for name in works}
     for _ in range(repeats):
         for name, work in works.items():
             times[name].append(_time_block(work, block))
+    for pool in pools.values():
+        pool.shutdown()
+    for member in members:
+        member.env.close()
     ratios = {
         name: statistics.median(s / t for s, t in zip(times["single"], times[name], strict=True))
         for name in works
         if name != "single"
     }
     return {"seconds": {k: statistics.median(v) for k, v in times.items()}, "ratios": ratios}
+
+
+def _with_threads(threads: int, work: Callable[[], Any]) -> Any:
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        return work()
+    finally:
+        torch.set_num_threads(before)
 
 
 class _Timed:
@@ -153,8 +189,9 @@ class _Timed:
             self.totals[self.name] += time.perf_counter() - start
 
 
-def profile_step(size: int, steps: int) -> dict[str, float]:
-    """Milliseconds per population step (of `size` agents in training) by part."""
+def profile_step(size: int, steps: int, workers: int = 1) -> dict[str, float]:
+    """Milliseconds per population step (of `size` agents in training) by part, in the
+    layout `auto` picks here."""
     import sim
     from learner.config import DQNConfig
     from learner.population import Member, Population
@@ -163,7 +200,7 @@ def profile_step(size: int, steps: int) -> dict[str, float]:
         torch_threads=torch.get_num_threads(), memory_size=2000, pretraining_steps=BATCH
     )
     members = [Member(sim.SortingEnv(motion="fast"), seed) for seed in range(size)]
-    population = Population(config, members)
+    population = Population(config, members, workers=workers)
     while any(t.stage == "pretraining" for t in population.trainers):
         population.step()
     population.step()  # warm-up
@@ -182,6 +219,7 @@ def profile_step(size: int, steps: int) -> dict[str, float]:
     totals["rest"] = total - (
         totals["update"] + totals["action selection"] + totals["simulation"] + totals["rendering"]
     )
+    population.close()
     for member in members:
         member.env.close()
     return {name: 1000 * seconds / steps for name, seconds in totals.items()} | {
@@ -201,37 +239,52 @@ def main(argv: Sequence[str] | None = None) -> None:
     torch.set_num_threads(args.threads)
     print(f"{cpu_kind()}; torch {torch.__version__}, {args.threads} thread(s); {load()}")
 
-    bf16 = matmul_gflops(torch.bfloat16, 7)
-    fp32 = matmul_gflops(torch.float32, 7)
-    print(f"\n2048x2048 matmul: bfloat16 {bf16:.0f} GFLOPS, float32 {fp32:.0f} GFLOPS")
+    cores = [args.threads] + (
+        [2 * args.threads] if (os.cpu_count() or 1) >= 2 * args.threads else []
+    )
+    peaks: dict[int, tuple[float, float]] = {}
+    for n in cores:
+        peaks[n] = _with_threads(
+            n, lambda: (matmul_gflops(torch.bfloat16, 7), matmul_gflops(torch.float32, 7))
+        )
+        print(
+            f"\n2048x2048 matmul on {n} thread(s): bfloat16 {peaks[n][0]:.0f} GFLOPS, "
+            f"float32 {peaks[n][1]:.0f} GFLOPS; {load()}"
+        )
     flops = update_flops()
     print(f"one update of batch {BATCH}: {flops / 1e9:.2f} GFLOP (torch's FLOP counter)")
 
     frames = real_frames(600)
     print(
         f"\nthe update alone, batch {BATCH} (median of {args.repeats} rounds of "
-        f"{args.block}-update blocks; ratio: N single updates' time / the population's)"
+        f"{args.block}-update blocks; x: N single updates' time / the variant's, per round)"
     )
     for size in args.sizes:
         r = bench_update(size, args.repeats, args.block, frames)
-        seconds = r["seconds"]
-        best = min(seconds, key=seconds.get)  # type: ignore[arg-type]
-        rate = size * flops / seconds[best] / 1e9
-        ratios = ", ".join(f"{k} {v:.2f}x" for k, v in r["ratios"].items())
-        times = ", ".join(f"{k} {1000 * v:.0f} ms" for k, v in seconds.items())
-        print(
-            f"  N={size:2}: {times}; vs single: {ratios or '-'}; best ({best}) "
-            f"{size / seconds[best]:.1f} agent-updates/s, {rate:.0f} GFLOPS = "
-            f"{100 * rate / bf16:.1f} % of bf16 matmul, {100 * rate / fp32:.0f} % of fp32; "
-            f"{load()}",
-            flush=True,
-        )
+        print(f"  N={size}: {load()}")
+        for name, seconds in r["seconds"].items():
+            n = 2 * args.threads if name in ("2 workers", "single, 2x threads") else args.threads
+            bf16, fp32 = peaks[n]
+            rate = size * flops / seconds / 1e9
+            ratio = f"{r['ratios'][name]:.2f}x" if name in r["ratios"] else "1 (reference)"
+            print(
+                f"    {name:19} {1000 * seconds:6.0f} ms  {ratio:>13}  "
+                f"{size / seconds:5.1f} agent-updates/s  {rate:4.0f} GFLOPS = "
+                f"{100 * rate / bf16:4.1f} % of bf16 matmul, {100 * rate / fp32:3.0f} % of fp32 "
+                f"({n} core(s))",
+                flush=True,
+            )
 
     print(f"\na population step in training, by part (ms per step, {args.profile_steps} steps)")
     for size in args.profile_sizes:
-        parts = profile_step(size, args.profile_steps)
-        line = ", ".join(f"{k} {v:.1f}" for k, v in parts.items())
-        print(f"  N={size:2}: {line}; {parts['total'] / size:.1f} ms per agent-step; {load()}")
+        for workers in (1, 2) if size > 1 else (1,):
+            parts = profile_step(size, args.profile_steps, workers)
+            line = ", ".join(f"{k} {v:.1f}" for k, v in parts.items())
+            print(
+                f"  N={size:2}, {workers} worker(s): {line}; {parts['total'] / size:.1f} ms per "
+                f"agent-step; {load()}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

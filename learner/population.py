@@ -1,23 +1,28 @@
 """A population: agents of one learner configuration trained together in one process.
 
 Why: every question the platform answers is paid for in agent runs, and one run per
-process repeats torch (about 590 MB resident) and leaves the vector units idle on one
-agent's small convolutions. Here N agents step side by side: each agent's environment
-steps in turn, their actions are chosen on one batched forward pass over their stacked
-weights, and their updates are computed together (`learner.stacked`).
+process repeats torch (about 590 MB resident) and the work of choosing each agent's
+action alone. Here N agents step side by side: each agent's environment steps in turn,
+their actions are chosen on one batched forward pass over their stacked weights, and
+their updates are computed together (`learner.stacked`), or one agent at a time where
+that is faster (a CPU's caches), or on several threads (`workers`).
 
 Each agent is a `Trainer` of its own (seed, environment, advisor, strategy, callbacks,
 replay memory, exploration, optimizer state), driven through the same code as alone:
 `Trainer._act` chooses, asks for advice, steps and remembers; `Trainer._end_step` records
 and tells the callbacks. So an agent's records are the same StepRecords and
-EpisodeRecords, its checkpoints are `Trainer`'s files (a population agent's checkpoint
-resumes in a plain `Trainer` and a plain `Trainer`'s in a population), and for the same
-seed its course through pretraining and advice is the same as alone, bit for bit: the
-actions there are random or advised, and advisors are asked one agent at a time, as
-alone (an agent advisor's greedy action is its own batch-of-one forward pass, which
-batching cannot flip). Q-values are the same function computed in another order (within
-about 1e-2 relative in bfloat16, 1e-5 in float32; tests/learner/test_population.py).
-Learning may differ from alone only by floating-point order.
+EpisodeRecords, and its checkpoints are `Trainer`'s files (a population agent's
+checkpoint resumes in a plain `Trainer`, a plain `Trainer`'s in a population).
+
+The same science: advisors are asked one agent at a time, as alone (an agent advisor's
+greedy action is its own batch-of-one forward pass, which batching cannot flip), and the
+stacked computation uses each agent's own convolution and dense kernels on the same
+shapes as alone, so for the same seed, device and torch threads an agent's records in a
+population equal its records alone in every column, Q-values and losses included
+(tests/learner/test_population.py, bfloat16 and float32). With `conv="grouped"` the
+values are the same function in another float order (Q-values within 1e-2 relative in
+bfloat16); actions through pretraining and advice, which do not depend on them, stay
+the same, and learning differs only by floating-point order.
 
 An agent that finishes (its episodes run, or a callback stopped it) leaves the
 population; the others go on.
@@ -26,6 +31,7 @@ population; the others go on.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -69,6 +75,14 @@ class Population:
     benchmarks/bench_population.py); `loop`, nothing: each agent's own `DQNAgent` one
     after the other, as alone (the fallback, and the only way for `update="plain"`).
     `auto`: `stacked` on CUDA, `stacked-actions` on a CPU, `loop` for the plain update.
+
+    `workers` > 1 computes the updates on that many threads, each taking every
+    `workers`-th agent (stacked together in the `stacked` layout): agents are independent,
+    so on a multi-core CPU this parallelises whole updates rather than each small operation
+    (`config.torch_threads`); measured on 2 cores, 2 workers of 1 torch thread each beat 1
+    worker of 2 threads. Each agent's ops run with the process's torch threads, so with
+    `torch_threads=1` every agent computes what it computes alone, to the bit. Keep
+    workers x torch threads within the free cores.
     `conv` is how the convolutions run in the stacked layout (`learner.stacked`):
     `loop` (one call per agent: each agent's values and gradients are its own alone, to
     the bit) or `grouped` (one grouped convolution: the same function, another order).
@@ -85,6 +99,7 @@ class Population:
         members: Sequence[Member],
         layout: Layout = "auto",
         conv: ConvMode = "loop",
+        workers: int = 1,
     ) -> None:
         if not members:
             raise ValueError("a population needs at least one member")
@@ -96,6 +111,10 @@ class Population:
         self.config = config
         self.layout = resolve_layout(layout, config, self.trainers[0].device)
         self.conv: ConvMode = conv
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
+        self.workers = workers
+        self._pool = ThreadPoolExecutor(workers, "population") if workers > 1 else None
         shapes = {t.env.observation_space.shape for t in self.trainers}
         if len(shapes) > 1:
             raise ValueError(f"the members' environments differ in image shape: {shapes}")
@@ -125,6 +144,7 @@ class Population:
             "conv_dtype": str(agent.dtype).replace("torch.", ""),
             "device": str(agent.device),
             "torch_threads": self.trainers[0].threads,
+            "workers": self.workers,
             "torch": str(torch.__version__),
         }
         if index is not None:
@@ -175,12 +195,32 @@ class Population:
         size = self.config.batch_size
         batches = [t.memory.sample(size, t._memory_rng) for t in trainers]
         rngs = [t._memory_rng for t in trainers]
-        if self.layout != "stacked":
-            return [
-                t.agent.update(batch, rng)
-                for t, batch, rng in zip(trainers, batches, rngs, strict=True)
-            ]
-        return StackedAgents([t.agent for t in trainers], self.conv).update(batches, rngs)
+        agents = [t.agent for t in trainers]
+        groups = [list(range(w, len(agents), self.workers)) for w in range(self.workers)]
+        groups = [group for group in groups if group]
+
+        def update(group: list[int]) -> list[float]:
+            mine = [agents[k] for k in group]
+            if self.layout == "stacked":
+                stacked = StackedAgents(mine, self.conv)
+                return stacked.update([batches[k] for k in group], [rngs[k] for k in group])
+            return [agents[k].update(batches[k], rngs[k]) for k in group]
+
+        if self._pool is None or len(groups) == 1:
+            results = [update(group) for group in groups]
+        else:
+            results = list(self._pool.map(update, groups))
+        losses = [0.0] * len(agents)
+        for group, result in zip(groups, results, strict=True):
+            for k, loss in zip(group, result, strict=True):
+                losses[k] = loss
+        return losses
+
+    def close(self) -> None:
+        """End the worker threads (a population with `workers` > 1); idempotent."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
 
     def save_checkpoint(
         self,

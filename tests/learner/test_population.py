@@ -102,9 +102,12 @@ def test_an_agent_in_a_mixed_population_takes_the_course_it_takes_alone(
         alone.append((recorder, member.env.hashes))
     recorders = [Recorder() for _ in specs]
     members = [build(make_env, s, r) for s, r in zip(specs, recorders, strict=True)]
-    population = Population(config, members, layout="stacked")
+    # two workers, each updating two agents stacked together
+    population = Population(config, members, layout="stacked", workers=2)
     for _ in range(steps):
         assert sorted(population.step()) == [0, 1, 2, 3]
+    population.close()
+    assert population.numerics()["workers"] == 2
     for (expected, hashes), recorder, member in zip(alone, recorders, members, strict=True):
         # every column, Q-values and losses included: the stacked layout computes each
         # agent's values with the agent's own kernels, in its own float order
