@@ -306,3 +306,31 @@ def test_an_agent_that_finishes_leaves_and_the_others_go_on(make_env) -> None:
     with pytest.raises(RuntimeError, match="done"):
         population.step()
     assert population.numerics()["population_size"] == 2
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_a_population_computes_on_cuda_when_present(make_env) -> None:
+    config = small_config(device="cuda")
+    alone = Recorder()
+    trainer = Trainer(
+        make_env(max_episode_steps=30),
+        config,
+        make_advisor("oracle", seed=1),
+        seed=1,
+        callbacks=[alone],
+    )
+    recorder = Recorder()
+    member = Member(
+        make_env(max_episode_steps=30), 1, make_advisor("oracle", seed=1), callbacks=[recorder]
+    )
+    population = Population(config, [member, Member(make_env(max_episode_steps=30), 2)])
+    assert population.layout == "stacked" and population.numerics()["device"].startswith("cuda")
+    for _ in range(70):
+        trainer.step()
+        population.step()
+    pretraining = slice(0, config.pretraining_steps)
+    columns = ("action", "action_source", "advised_action", "reward", "terminated", "truncated")
+    for mine, theirs in zip(recorder.steps[pretraining], alone.steps[pretraining], strict=True):
+        assert [getattr(mine, c) for c in columns] == [getattr(theirs, c) for c in columns]
+        assert mine.q_grab == pytest.approx(theirs.q_grab, rel=Q_TOLERANCE, abs=1e-4)
+    assert all(s.loss is not None for s in recorder.steps[60:])
