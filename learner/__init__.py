@@ -25,6 +25,7 @@ from learner.records import EpisodeRecord, StepRecord
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
 
 if TYPE_CHECKING:
+    from learner.population import Member, Population
     from learner.trainer import Trainer
 
 
@@ -33,6 +34,10 @@ def __getattr__(name: str) -> Any:
         from learner.trainer import Trainer
 
         return Trainer
+    if name in ("Population", "Member"):
+        from learner import population
+
+        return getattr(population, name)
     raise AttributeError(f"module 'learner' has no attribute {name!r}")
 
 
@@ -43,7 +48,9 @@ __all__ = [
     "AgentAdvisor",
     "DQNConfig",
     "EpisodeRecord",
+    "Member",
     "OracleAdvisor",
+    "Population",
     "RandomAdvisor",
     "StepRecord",
     "Trainer",

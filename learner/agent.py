@@ -147,9 +147,15 @@ class DQNAgent:
 
     def _step(self, loss: torch.Tensor) -> None:
         """One optimizer step on `loss` (one of `updates`)."""
-        config = self.config
         self.optimizer.zero_grad()
         loss.backward()
+        self.apply_gradients()
+
+    def apply_gradients(self) -> None:
+        """Clip the gradients in the parameters' `.grad` (per config) and take the optimizer
+        step: one of `updates`. Apart from `_step` so that a population, which computes its
+        agents' gradients together, steps each agent on its own."""
+        config = self.config
         if config.grad_clip_norm is not None:
             torch.nn.utils.clip_grad_norm_(self.network.parameters(), config.grad_clip_norm)
         self.optimizer.step()

@@ -98,23 +98,29 @@ def space_to_depth(
 
 
 class _PhaseMaxBiasRelu(torch.autograd.Function):
-    """relu(max over the 4 phases + bias) on (B, 4*o, h, w) NCHW. The gradient goes to the
-    first maximal phase in row-major window order, as `max_pool2d`'s does; masks are built
-    from signs of differences, which are exact and much faster on the CPU than `where`."""
+    """relu(max over the 4 phases + bias) on (B, 4*o, h, w) NCHW (bias: see `_add_bias`).
+    The gradient goes to the first maximal phase in row-major window order, as
+    `max_pool2d`'s does; masks are built from signs of differences, which are exact and much
+    faster on the CPU than `where`."""
 
     @staticmethod
     def forward(ctx, y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
         y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
         m01, m23 = torch.maximum(y0, y1), torch.maximum(y2, y3)
-        out = torch.maximum(m01, m23).add_(bias.to(y.dtype).view(1, -1, 1, 1)).relu_()
+        out = _add_bias(torch.maximum(m01, m23), bias).relu_()
         ctx.save_for_backward(y, m01, m23, out)
+        ctx.bias_groups = bias.shape[0] if bias.dim() == 2 else 0
         return out
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:  # type: ignore[override]
         y, m01, m23, out = ctx.saved_tensors
         grad = torch.ops.aten.threshold_backward(grad, out, 0)
-        grad_bias = grad.sum((0, 2, 3), dtype=torch.float32)
+        if ctx.bias_groups:  # each group's sum as if alone: the same float order
+            sums = [g.sum((0, 2, 3), dtype=torch.float32) for g in grad.chunk(ctx.bias_groups)]
+            grad_bias = torch.stack(sums)
+        else:
+            grad_bias = grad.sum((0, 2, 3), dtype=torch.float32)
         y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
         grad_hi = grad * _greater(m23, m01)
         grad_lo = grad - grad_hi
@@ -136,7 +142,17 @@ def phase_max_bias_relu(y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
         return _PhaseMaxBiasRelu.apply(y, bias)  # type: ignore[no-any-return]
     y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
     m = torch.maximum(torch.maximum(y0, y1), torch.maximum(y2, y3))
-    return m.add_(bias.to(m.dtype).view(1, -1, 1, 1)).relu_()
+    return _add_bias(m, bias).relu_()
+
+
+def _add_bias(m: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+    """m += bias in place: a bias (o,) for every image, or (G, o), one per group of
+    consecutive images (the agents of a population, `learner.stacked`)."""
+    if bias.dim() == 1:
+        return m.add_(bias.to(m.dtype).view(1, -1, 1, 1))
+    groups = bias.shape[0]
+    m.unflatten(0, (groups, -1)).add_(bias.to(m.dtype).view(groups, 1, -1, 1, 1))
+    return m
 
 
 class PhaseConvForward:

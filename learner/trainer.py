@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -52,6 +52,26 @@ class _Episode:
     advised_steps: int = 0
     loss_sum: float = 0.0
     loss_count: int = 0
+
+
+class _Step(NamedTuple):
+    """A step taken, before its update: what `Trainer._end_step` records."""
+
+    phase: str
+    source: str
+    action: int
+    greedy: int
+    q_values: np.ndarray
+    advised: int | None
+    obs: np.ndarray
+    reward: float
+    terminated: bool
+    truncated: bool
+    info: dict[str, Any]
+    epsilon: float
+    """Epsilon as the action was chosen (before this step's update decays it)."""
+    updates: bool
+    """Whether an update follows this step."""
 
 
 class Trainer(StagedRun):
@@ -109,16 +129,31 @@ class Trainer(StagedRun):
 
     def step(self) -> StepRecord:
         """Take one environment step (resetting first if no episode is in progress)."""
+        step = self._act(self.agent.q_values(self._begin_step()))
+        loss = None
+        if step.updates:
+            batch = self.memory.sample(self.config.batch_size, self._memory_rng)
+            loss = self.agent.update(batch, self._memory_rng)
+        return self._end_step(step, loss)
+
+    def _begin_step(self) -> np.ndarray:
+        """The image the next action is chosen on (resetting first if needed)."""
         if self.done:
             raise RuntimeError("the trainer is done (all episodes run, or stopped)")
         if self._episode is None:
             self._begin_episode()
+        assert self._episode is not None
+        return self._episode.obs  # type: ignore[no-any-return]
+
+    def _act(self, q_values: np.ndarray) -> _Step:
+        """Choose (and maybe get advised) an action on the learner's `q_values` of the
+        current image, take it and remember the transition; the update, if `updates`, is
+        the caller's (`step`, or a population updating its agents together)."""
         episode = self._episode
         assert episode is not None
         config = self.config
         global_step = self.global_step + 1
         pretraining = episode.stage == "pretraining"
-        q_values = self.agent.q_values(episode.obs)
         greedy = int(np.argmax(q_values))
         rng_state = self._action_rng.bit_generator.state
         if pretraining:
@@ -156,41 +191,49 @@ class Trainer(StagedRun):
             self.agent.encode(episode.obs), action, reward,
             self.agent.encode(obs), terminated, truncated,
         )  # fmt: skip
-        epsilon = self.epsilon.value
-        loss = None
-        if self._updates_now(pretraining, advised is not None, terminated or truncated):
-            batch = self.memory.sample(config.batch_size, self._memory_rng)
-            loss = self.agent.update(batch, self._memory_rng)
+        updates = self._updates_now(pretraining, advised is not None, terminated or truncated)
+        return _Step(
+            phase, source, action, greedy, q_values, advised, obs, reward, terminated,
+            truncated, info, self.epsilon.value, updates,
+        )  # fmt: skip
+
+    def _end_step(self, step: _Step, loss: float | None) -> StepRecord:
+        """Account for the update's `loss` (None: no update), record the step, end the
+        episode if it ended, and tell the callbacks."""
+        episode = self._episode
+        assert episode is not None
+        if loss is not None:
             self.epsilon.step()
             episode.loss_sum += loss
             episode.loss_count += 1
-        episode.collected_reward += reward
-        episode.advised_steps += advised is not None
+        episode.collected_reward += step.reward
+        episode.advised_steps += step.advised is not None
+        q_values = step.q_values
         record = StepRecord(
-            global_step=global_step,
-            phase=phase,  # type: ignore[arg-type]
+            global_step=self.global_step,
+            phase=step.phase,  # type: ignore[arg-type]
             episode=episode.number,
             episode_step=len(episode.actions),
-            action=action,
-            action_source=source,  # type: ignore[arg-type]
-            greedy_action=greedy,
+            action=step.action,
+            action_source=step.source,  # type: ignore[arg-type]
+            greedy_action=step.greedy,
             q_grab=float(q_values[0]),
             q_move_right=float(q_values[1]),
             q_move_left=float(q_values[2]),
             q_drop=float(q_values[3]),
-            advised_action=advised,
+            advised_action=step.advised,
             advice_remaining=self.strategy.remaining if self.strategy else 0,
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            epsilon=epsilon,
+            reward=step.reward,
+            terminated=step.terminated,
+            truncated=step.truncated,
+            epsilon=step.epsilon,
             loss=loss,
         )
         self.episode_record = None
-        if terminated or truncated:
-            self.episode_record = self._finish_episode(info, terminated, truncated)
+        if step.terminated or step.truncated:
+            self.episode_record = self._finish_episode(step.info, step.terminated, step.truncated)
         else:
-            episode.obs, episode.info = obs, info
+            episode.obs, episode.info = step.obs, step.info
         self._notify("on_step", record)
         if self.episode_record is not None:
             self._notify("on_episode", self.episode_record)

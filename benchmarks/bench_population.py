@@ -1,0 +1,291 @@
+"""How fast a population of agents learns: the update alone, and a whole step in parts.
+
+    python -m benchmarks.bench_population                      # sizes 1 2 4 8 16, 1 thread
+    python -m benchmarks.bench_population --sizes 1 4 --threads 2 --repeats 3
+
+1. The matrix-multiply rate of this machine: 2048x2048 `torch.matmul` in bfloat16 and
+   float32 (GFLOPS, median of several): what the vector units can do.
+2. The update alone, batch 128, for populations of N agents: the stacked update of N
+   agents (`learner.stacked`, with per-agent and grouped convolutions) against N
+   single-agent updates (`DQNAgent.update` one after the other), in alternating blocks
+   so that both see the same machine load; the ratio is taken per block pair and its
+   median reported. Agent-updates per second, and the achieved rate in GFLOPS of the
+   network's own FLOPs (torch's FLOP counter on the plain float32 update: the function,
+   not the zeros the space-to-depth kernels add) as a fraction of the matmul rates.
+   Where the CPU has two cores per torch thread, also: 2 workers (each agent's update
+   on one of two threads, `Population(workers=2)`) against N single updates with twice
+   the torch threads: whole updates in parallel against each operation in parallel.
+3. A population step split into its parts: the update, action selection (one batched
+   forward pass), simulation (the environments' steps less their rendering), rendering
+   (the 64x64 camera image), and the rest (replay memory, records, bookkeeping).
+
+Other processes share the CPUs: compare ratios, not times. The CPU kind and the load
+average are printed with the numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+import torch
+
+from benchmarks.bench_learner import BATCH, real_frames
+
+
+def cpu_kind() -> str:
+    """The CPU's model name and whether it multiplies bfloat16 natively."""
+    name = platform.processor() or "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith("model name"):
+                    name = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    bf16 = getattr(torch.cpu, "_is_avx512_bf16_supported", lambda: False)()
+    return f"{name}, {os.cpu_count()} CPUs" + (", AVX-512 BF16" if bf16 else "")
+
+
+def load() -> str:
+    return "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def matmul_gflops(dtype: torch.dtype, repeats: int, size: int = 2048) -> float:
+    a = torch.randn(size, size, dtype=dtype)
+    b = torch.randn(size, size, dtype=dtype)
+    for _ in range(2):
+        torch.matmul(a, b)
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        torch.matmul(a, b)
+        times.append(time.perf_counter() - start)
+    return 2 * size**3 / statistics.median(times) / 1e9
+
+
+def update_flops() -> float:
+    """FLOPs of one plain float32 update of batch 128 (torch's FLOP counter)."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    from learner.agent import DQNAgent
+    from learner.config import DQNConfig
+    from learner.replay import ReplayMemory
+
+    agent = DQNAgent(DQNConfig(update="plain"), torch.device("cpu"))
+    memory = _memory(agent, real_frames(BATCH + 2))
+    batch = memory.sample(BATCH, np.random.default_rng(0))
+    counter = FlopCounterMode(display=False)
+    with counter:
+        agent.update(batch)
+    assert isinstance(memory, ReplayMemory)
+    return float(counter.get_total_flops())
+
+
+def _memory(agent: Any, frames: list[np.ndarray]) -> Any:
+    from learner.replay import ReplayMemory
+
+    rng = np.random.default_rng(0)
+    memory = ReplayMemory(len(frames), agent.frame_shape)
+    packed = [agent.encode(frame) for frame in frames]
+    for t in range(len(frames) - 1):
+        reward = float(rng.choice([0.0, 0.4, -0.01, -1.0]))
+        memory.add(packed[t], t % 4, reward, packed[t + 1], t % 40 == 39, False)
+    return memory
+
+
+def _time_block(work: Callable[[], Any], block: int) -> float:
+    start = time.perf_counter()
+    for _ in range(block):
+        work()
+    return (time.perf_counter() - start) / block
+
+
+def bench_update(size: int, repeats: int, block: int, frames: list[np.ndarray]) -> dict:
+    """Seconds per population update (N agent-updates) in each layout, against N single
+    updates (`DQNAgent.update` one after the other), through `Population._update`."""
+    import sim
+    from learner.config import DQNConfig
+    from learner.population import Member, Population
+
+    threads = torch.get_num_threads()
+    config = DQNConfig(torch_threads=threads, memory_size=len(frames))
+    members = [Member(sim.SortingEnv(motion="fast"), seed) for seed in range(size)]
+    population = Population(config, members, layout="stacked-actions")
+    rng = np.random.default_rng(0)
+    for trainer in population.trainers:
+        packed = [trainer.agent.encode(frame) for frame in frames]
+        for t in range(len(frames) - 1):
+            reward = float(rng.choice([0.0, 0.4, -0.01, -1.0]))
+            trainer.memory.add(packed[t], t % 4, reward, packed[t + 1], t % 40 == 39, False)
+    trainers = population.trainers
+    agents = [t.agent for t in trainers]
+
+    def single() -> list[float]:
+        batches = [t.memory.sample(BATCH, t._memory_rng) for t in trainers]
+        return [a.update(b) for a, b in zip(agents, batches, strict=True)]
+
+    def variant(layout: str, conv: str = "loop", workers: int = 1) -> Callable[[], Any]:
+        def work() -> list[float]:
+            population.layout, population.conv = layout, conv  # type: ignore[assignment]
+            population.workers, population._pool = workers, pools.get(workers)
+            return population._update(trainers)
+
+        return work
+
+    pools = {w: ThreadPoolExecutor(w) for w in (2,) if (os.cpu_count() or 1) >= 2 * threads}
+    works: dict[str, Callable[[], Any]] = {"single": single, "stacked": variant("stacked")}
+    if size > 1:
+        works["stacked grouped"] = variant("stacked", "grouped")
+    if pools:
+        works["2 workers"] = variant("stacked-actions", workers=2)
+        works["single, 2x threads"] = lambda: _with_threads(2 * threads, single)
+    for work in works.values():
+        work()  # warm-up: allocator, oneDNN kernels
+    times: dict[str, list[float]] = {name: [] for name in works}
+    for _ in range(repeats):
+        for name, work in works.items():
+            times[name].append(_time_block(work, block))
+    for pool in pools.values():
+        pool.shutdown()
+    for member in members:
+        member.env.close()
+    ratios = {
+        name: statistics.median(s / t for s, t in zip(times["single"], times[name], strict=True))
+        for name in works
+        if name != "single"
+    }
+    return {"seconds": {k: statistics.median(v) for k, v in times.items()}, "ratios": ratios}
+
+
+def _with_threads(threads: int, work: Callable[[], Any]) -> Any:
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        return work()
+    finally:
+        torch.set_num_threads(before)
+
+
+class _Timed:
+    """Accumulates the wall time of calls to a wrapped function under a name."""
+
+    def __init__(self, totals: dict[str, float], name: str, function: Callable) -> None:
+        self.totals, self.name, self.function = totals, name, function
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        start = time.perf_counter()
+        try:
+            return self.function(*args, **kwargs)
+        finally:
+            self.totals[self.name] += time.perf_counter() - start
+
+
+def profile_step(size: int, steps: int, workers: int = 1) -> dict[str, float]:
+    """Milliseconds per population step (of `size` agents in training) by part, in the
+    layout `auto` picks here."""
+    import sim
+    from learner.config import DQNConfig
+    from learner.population import Member, Population
+
+    config = DQNConfig(
+        torch_threads=torch.get_num_threads(), memory_size=2000, pretraining_steps=BATCH
+    )
+    members = [Member(sim.SortingEnv(motion="fast"), seed) for seed in range(size)]
+    population = Population(config, members, workers=workers)
+    while any(t.stage == "pretraining" for t in population.trainers):
+        population.step()
+    population.step()  # warm-up
+    totals = dict.fromkeys(("update", "action selection", "simulation", "rendering"), 0.0)
+    population._update = _Timed(totals, "update", population._update)  # type: ignore[method-assign]
+    population._q_values = _Timed(totals, "action selection", population._q_values)  # type: ignore[method-assign]
+    for trainer in population.trainers:
+        env = trainer.env.unwrapped
+        env.step = _Timed(totals, "simulation", env.step)  # type: ignore[method-assign]
+        env._camera.image = _Timed(totals, "rendering", env._camera.image)  # type: ignore[attr-defined]
+    start = time.perf_counter()
+    for _ in range(steps):
+        population.step()
+    total = time.perf_counter() - start
+    totals["simulation"] -= totals["rendering"]  # env.step renders; resets render too
+    totals["rest"] = total - (
+        totals["update"] + totals["action selection"] + totals["simulation"] + totals["rendering"]
+    )
+    population.close()
+    for member in members:
+        member.env.close()
+    return {name: 1000 * seconds / steps for name, seconds in totals.items()} | {
+        "total": 1000 * total / steps
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_population")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1, 2, 4, 8, 16])
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--repeats", type=int, default=5, help="block rounds for the update")
+    parser.add_argument("--block", type=int, default=2, help="updates per timed block")
+    parser.add_argument("--profile-sizes", type=int, nargs="+", default=[1, 8])
+    parser.add_argument("--profile-steps", type=int, default=20)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    print(f"{cpu_kind()}; torch {torch.__version__}, {args.threads} thread(s); {load()}")
+
+    cores = [args.threads] + (
+        [2 * args.threads] if (os.cpu_count() or 1) >= 2 * args.threads else []
+    )
+    peaks: dict[int, tuple[float, float]] = {}
+    for n in cores:
+        peaks[n] = _with_threads(
+            n, lambda: (matmul_gflops(torch.bfloat16, 7), matmul_gflops(torch.float32, 7))
+        )
+        print(
+            f"\n2048x2048 matmul on {n} thread(s): bfloat16 {peaks[n][0]:.0f} GFLOPS, "
+            f"float32 {peaks[n][1]:.0f} GFLOPS; {load()}"
+        )
+    flops = update_flops()
+    print(f"one update of batch {BATCH}: {flops / 1e9:.2f} GFLOP (torch's FLOP counter)")
+
+    frames = real_frames(600)
+    print(
+        f"\nthe update alone, batch {BATCH} (median of {args.repeats} rounds of "
+        f"{args.block}-update blocks; x: N single updates' time / the variant's, per round)"
+    )
+    for size in args.sizes:
+        r = bench_update(size, args.repeats, args.block, frames)
+        print(f"  N={size}: {load()}")
+        for name, seconds in r["seconds"].items():
+            n = 2 * args.threads if name in ("2 workers", "single, 2x threads") else args.threads
+            bf16, fp32 = peaks[n]
+            rate = size * flops / seconds / 1e9
+            ratio = f"{r['ratios'][name]:.2f}x" if name in r["ratios"] else "1 (reference)"
+            print(
+                f"    {name:19} {1000 * seconds:6.0f} ms  {ratio:>13}  "
+                f"{size / seconds:5.1f} agent-updates/s  {rate:4.0f} GFLOPS = "
+                f"{100 * rate / bf16:4.1f} % of bf16 matmul, {100 * rate / fp32:3.0f} % of fp32 "
+                f"({n} core(s))",
+                flush=True,
+            )
+
+    print(f"\na population step in training, by part (ms per step, {args.profile_steps} steps)")
+    for size in args.profile_sizes:
+        for workers in (1, 2) if size > 1 else (1,):
+            parts = profile_step(size, args.profile_steps, workers)
+            line = ", ".join(f"{k} {v:.1f}" for k, v in parts.items())
+            print(
+                f"  N={size:2}, {workers} worker(s): {line}; {parts['total'] / size:.1f} ms per "
+                f"agent-step; {load()}",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()
