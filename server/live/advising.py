@@ -76,7 +76,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
     """The page's state; showing a pending request starts its response-time clock."""
     version = manager.version(session.id)
     handle = manager.handles.get(session.id)
-    budget = session.spec.advice_budget
+    budget = session.advice_budget
     if handle is None:
         with manager.factory() as db:
             given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
@@ -187,7 +187,7 @@ async def submit_advice(
     manager: SessionManager, session: ParticipantSession, body: AdviceCreate
 ) -> AdviceReceipt:
     handle = manager.handles.get(session.id)
-    budget = session.spec.advice_budget
+    budget = session.advice_budget
     if handle is None:
         stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
         if stored is not None:
