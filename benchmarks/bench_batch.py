@@ -44,15 +44,15 @@ def per_step_seconds(db_url: str, session_ids: list[int]) -> dict[str, float]:
     with factory() as db:
         for session_id in session_ids:
             rows = db.execute(
-                select(Step.phase, Step.wall_time)
+                select(Step.stage, Step.wall_time)
                 .where(Step.session_id == session_id)
                 .order_by(Step.global_step)
             ).all()
             stamps = np.array([w for _, w in rows])
             gaps = np.diff(stamps)
-            phase = np.array([p for p, _ in rows[1:]])
-            for name, members in (("pretrain", ["pretrain", "advice"]), ("train", ["train"])):
-                chosen = gaps[np.isin(phase, members)]
+            stage = np.array([p for p, _ in rows[1:]])
+            for name in ("pretrain", "train"):
+                chosen = gaps[stage == name]
                 if len(chosen):
                     phases[name].append(float(chosen.mean()))
             session = db.get(StudySession, session_id)

@@ -214,7 +214,7 @@ def bench_run(threads: int, training_steps: int) -> dict:
     env = sim.SortingEnv(motion="fast")
     trainer = Trainer(env, DQNConfig(torch_threads=threads), seed=0)
     start = time.perf_counter()
-    while trainer.stage == "pretraining":
+    while trainer.stage == "pretrain":
         trainer.step()
     pretraining = time.perf_counter() - start
     start = time.perf_counter()
@@ -226,7 +226,7 @@ def bench_run(threads: int, training_steps: int) -> dict:
         "threads": threads,
         "pretraining_s": pretraining,
         "training_step_ms": 1000 * per_step,
-        "episodes_seen": trainer.episodes_done["training"],
+        "episodes_seen": trainer.episodes_done["train"],
         "paper_run_min": (pretraining + per_step * PAPER_TRAINING_STEPS) / 60,
     }
 

@@ -64,7 +64,7 @@ def advise_loop(
 def wait_training(api: httpx.Client, ids: list[int]) -> None:
     """Measure only once the machine sessions are past pretraining, training for real."""
     deadline = time.monotonic() + 300
-    while any(api.get(f"/api/sessions/{i}/progress").json()["phase"] != "training" for i in ids):
+    while any(api.get(f"/api/sessions/{i}/progress").json()["stage"] != "train" for i in ids):
         assert time.monotonic() < deadline, "the training sessions did not reach training"
         time.sleep(0.5)
 
@@ -145,7 +145,7 @@ def run(participants: int, trainers: int, advice: int, motion: str) -> None:
     print(f"round trip p50 / bare p50: {percentile(round_trips, 50) / percentile(bare, 50):.1f}x")
     print(
         "trainers meanwhile reached: "
-        + ", ".join(f"{p['phase']} step {p['global_step']}" for p in progress)
+        + ", ".join(f"{p['stage']} step {p['global_step']}" for p in progress)
     )
 
 
@@ -284,7 +284,7 @@ def _one_study(
                 while any(t.is_alive() for t in threads):
                     rows = [api.get(f"/api/sessions/{m['id']}/progress").json() for m in made]
                     now = (
-                        sum(r["phase"] == "training" and not r["queued"] for r in rows),
+                        sum(r["stage"] == "train" and not r["queued"] for r in rows),
                         sum(r["queued"] for r in rows),
                         sum(r["advice_left"] > 0 for r in rows),
                     )

@@ -162,7 +162,7 @@ def train(args: argparse.Namespace) -> int:
         progress.close()
         recorder.close()
     trainer.save_checkpoint(checkpoint, settings)
-    rows = [row for row in read_episodes(recorder.episodes_path) if row["phase"] == "train"]
+    rows = [row for row in read_episodes(recorder.episodes_path) if row["stage"] == "train"]
     rewards = [row["collected_reward"] for row in rows]
     label = "DeepRL" if not spec.advised else f"{spec.method}-IDeepRL"
     plot = plot_learning_curve(
@@ -215,7 +215,7 @@ def run_spec(args: argparse.Namespace) -> tuple[RunSpec, dict[str, Any] | None]:
 
 def _checkpoint_due(finished: EpisodeRecord | None, every: int) -> bool:
     """After every `every`-th training episode (never with 0)."""
-    if finished is None or finished.phase != "train" or every <= 0:
+    if finished is None or finished.stage != "train" or every <= 0:
         return False
     return finished.episode % every == 0
 
@@ -251,7 +251,7 @@ class Progress:
         self.rewards: list[float] = []
 
     def on_step(self, record: StepRecord) -> None:
-        if record.phase != "train":
+        if record.stage != "train":
             self.pretraining.update(1)
         elif self.training is None:
             self.pretraining.close()
@@ -264,7 +264,7 @@ class Progress:
             )
 
     def on_episode(self, record: EpisodeRecord) -> None:
-        if record.phase != "train" or self.training is None:
+        if record.stage != "train" or self.training is None:
             return
         self.rewards.append(record.collected_reward)
         recent = self.rewards[-10:]

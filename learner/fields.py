@@ -403,9 +403,7 @@ def add_arguments(
             metavar=_metavar(leaf),
             type=_argument_type(leaf),
             default=argparse.SUPPRESS,
-            help=f"{leaf.doc} [{leaf.allowed()}; default {default}]".replace(
-                "%", "%%"
-            ),
+            help=f"{leaf.doc} [{leaf.allowed()}; default {default}]".replace("%", "%%"),
         )
 
 

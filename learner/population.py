@@ -174,7 +174,7 @@ class Population:
         while not self.done:
             for i in self.step():
                 record = self.trainers[i].episode_record
-                if record is not None and record.phase == "train":
+                if record is not None and record.stage == "train":
                     finished[i].append(record)
         return finished
 

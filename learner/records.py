@@ -4,12 +4,13 @@ The field docstrings are the column dictionary of the exports (`column_docs`).
 
 Numbering. Global steps count every environment step of a run from 1: pretraining is
 steps 1..pretraining_steps, training follows. Episodes are numbered from 1 within their
-stage: pretraining episodes (`phase` "pretrain" in `EpisodeRecord`) and training episodes
-(`phase` "train", 1..`episodes`) each start at 1, so a step's `episode` refers to the
-pretraining episode of that number when its phase is "pretrain" or "advice", and to the
-training episode when it is "train". Pretraining episodes are recorded for completeness
-(they show the advisor's effect on the memory) but are not among the training episodes
-whose collected reward the paper reports; the last one is cut when pretraining ends.
+stage: pretraining episodes (`stage` "pretrain") and training episodes (`stage` "train",
+1..`episodes`) each start at 1, so a step's `episode` refers to the pretraining episode of
+that number when its stage is "pretrain", and to the training episode when it is "train".
+Advice is an action source (`action_source` "advisor"), never a stage. Pretraining
+episodes are recorded for completeness (they show the advisor's effect on the memory) but
+are not among the training episodes whose collected reward the paper reports; the last
+one is cut when pretraining ends.
 """
 
 from __future__ import annotations
@@ -20,8 +21,20 @@ from typing import Any, Literal
 
 from learner.docstrings import field_docstrings
 
-StepPhase = Literal["pretrain", "advice", "train"]
-EpisodePhase = Literal["pretrain", "train"]
+Stage = Literal["pretrain", "train"]
+"""The part of a run: `pretrain` (Algorithm 1: the memory is filled, random or advised
+actions) or `train` (Algorithm 2)."""
+STAGES: tuple[Stage, ...] = ("pretrain", "train")
+OLD_STAGES = {"pretraining": "pretrain", "training": "train", "advice": "pretrain"}
+"""Older spellings of a stage (checkpoints, step rows and exports written before one word
+was kept): `advice` was an advised pretraining step."""
+
+
+def stage_of(text: str) -> Stage:
+    """A stage from its spelling, old spellings included."""
+    return OLD_STAGES.get(text, text)  # type: ignore[return-value]
+
+
 ActionSource = Literal["random", "advisor", "greedy", "exploration"]
 
 
@@ -31,12 +44,12 @@ class StepRecord:
 
     global_step: int
     """Step number in the whole run, from 1 (pretraining, then training)."""
-    phase: StepPhase
-    """`pretrain` (random pretraining step), `advice` (pretraining step taken on advice:
-    early advising), `train` (training stage, including advice given during training)."""
+    stage: Stage
+    """`pretrain` (pretraining stage: random actions, or advised ones under early advising:
+    see `action_source`) or `train` (training stage, advice given during it included)."""
     episode: int
-    """Episode number within the stage, from 1: a pretraining episode for phases
-    `pretrain` and `advice`, a training episode for `train`."""
+    """Episode number within the stage, from 1: a pretraining episode for stage `pretrain`,
+    a training episode for `train`."""
     episode_step: int
     """Step number within the episode, from 1."""
     action: int
@@ -79,7 +92,7 @@ class StepRecord:
 class EpisodeRecord:
     """One episode, pretraining or training."""
 
-    phase: EpisodePhase
+    stage: Stage
     """`pretrain` or `train`; the paper's curves and R_T use the `train` episodes only."""
     episode: int
     """Episode number within its stage, from 1."""
@@ -139,13 +152,13 @@ class StagedRun:
         raise NotImplementedError
 
     @property
-    def stage(self) -> str:
-        """`pretraining` or `training`: the stage of the next step."""
-        return "pretraining" if self.global_step < self.config.pretraining_steps else "training"
+    def stage(self) -> Stage:
+        """`pretrain` or `train`: the stage of the next step."""
+        return "pretrain" if self.global_step < self.config.pretraining_steps else "train"
 
     @property
     def done(self) -> bool:
-        return self._stopped or self.episodes_done["training"] >= self.config.episodes
+        return self._stopped or self.episodes_done["train"] >= self.config.episodes
 
     @property
     def observation(self) -> Any:
@@ -161,6 +174,6 @@ class StagedRun:
         finished = []
         while not self.done:
             self.step()
-            if self.episode_record is not None and self.episode_record.phase == "train":
+            if self.episode_record is not None and self.episode_record.stage == "train":
                 finished.append(self.episode_record)
         return finished

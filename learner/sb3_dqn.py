@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from learner.config import DQNConfig
-from learner.records import EpisodeRecord, StagedRun, StepRecord
+from learner.records import EpisodeRecord, StagedRun, StepRecord, stage_of
 
 METHOD = "sb3-dqn"
 PREFIX = "sb3_"
@@ -193,7 +193,7 @@ class SB3DQNTrainer(StagedRun):
         model.exploration_rate = h["sb3_exploration_initial_eps"]
         self.model = model
         self.global_step = 0
-        self.episodes_done = {"pretraining": 0, "training": 0}
+        self.episodes_done = {"pretrain": 0, "train": 0}
         self.episode_record: EpisodeRecord | None = None
         self._episode: Any = None
         self._stopped = False
@@ -216,7 +216,7 @@ class SB3DQNTrainer(StagedRun):
             self._begin_episode()
         episode = self._episode
         model = self.model
-        pretraining = episode.stage == "pretraining"
+        pretraining = episode.stage == "pretrain"
         model.policy.set_training_mode(False)
         obs = _channels_first(episode.obs)
         with torch.no_grad():
@@ -225,13 +225,13 @@ class SB3DQNTrainer(StagedRun):
         greedy = int(np.argmax(q_values))
         epsilon = float(model.exploration_rate)
         if model.num_timesteps < model.learning_starts:  # SB3's `_sample_action`
-            phase, source = "pretrain", "random"
+            stage, source = "pretrain", "random"
             action = int(model.action_space.sample())
         elif np.random.rand() < model.exploration_rate:  # `DQN.predict`, spelled out
-            phase, source = "train", "exploration"
+            stage, source = "train", "exploration"
             action = int(model.action_space.sample())
         else:
-            phase, source = "train", "greedy"
+            stage, source = "train", "greedy"
             action = greedy
 
         next_obs, reward, terminated, truncated, info = self.env.step(action)
@@ -261,7 +261,7 @@ class SB3DQNTrainer(StagedRun):
         episode.collected_reward += reward
         record = StepRecord(
             global_step=self.global_step,
-            phase=phase,  # type: ignore[arg-type]
+            stage=stage,  # type: ignore[arg-type]
             episode=episode.number,
             episode_step=len(episode.actions),
             action=action,
@@ -306,7 +306,7 @@ class SB3DQNTrainer(StagedRun):
         self.episodes_done[episode.stage] += 1
         misplaced = int(info.get("misplaced", 0))
         return EpisodeRecord(
-            phase="pretrain" if episode.stage == "pretraining" else "train",
+            stage=episode.stage,
             episode=episode.number,
             collected_reward=episode.collected_reward,
             steps=len(episode.actions),
@@ -411,7 +411,7 @@ class SB3DQNTrainer(StagedRun):
         model._current_progress_remaining = self._progress_remaining()
         self.seed = int(state["seed"])
         self.global_step = int(state["global_step"])
-        self.episodes_done = dict(state["episodes_done"])
+        self.episodes_done = {stage_of(k): int(v) for k, v in state["episodes_done"].items()}
         rngs = state["rngs"]
         self._env_rng.bit_generator.state = rngs["env"]
         numpy_state = dict(rngs["numpy"])

@@ -137,7 +137,7 @@ class EarlyAdvising(AdvisingStrategy):
     name = "early"
 
     def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
-        if moment.stage != "pretraining":
+        if moment.stage != "pretrain":
             return None
         if moment.global_step < self.first_advice_step(moment.pretraining_steps):
             return None
@@ -166,7 +166,7 @@ class AlternatingAdvising(AdvisingStrategy):
         self.interval = interval
 
     def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
-        if moment.stage != "training" or (moment.training_step - 1) % self.interval:
+        if moment.stage != "train" or (moment.training_step - 1) % self.interval:
             return None
         return advisor.advise(moment.obs, moment.info)
 
@@ -188,7 +188,7 @@ class ImportanceAdvising(AdvisingStrategy):
         self.threshold = float(threshold)
 
     def _important(self, moment: AdviceMoment, advisor: Advisor) -> bool:
-        if moment.stage != "training":
+        if moment.stage != "train":
             return False
         values = np.asarray(advisor.q_values(moment.obs))  # type: ignore[attr-defined]
         return float(values.max() - values.min()) >= self.threshold

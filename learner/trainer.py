@@ -27,7 +27,7 @@ from learner.checkpoint import read_checkpoint, write_checkpoint
 from learner.config import DQNConfig
 from learner.device import configure_threads, resolve_device
 from learner.exploration import EpsilonSchedule
-from learner.records import EpisodeRecord, StagedRun, StepRecord
+from learner.records import EpisodeRecord, StagedRun, StepRecord, stage_of
 from learner.replay import ReplayMemory
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
 
@@ -57,7 +57,7 @@ class _Episode:
 class _Step(NamedTuple):
     """A step taken, before its update: what `Trainer._end_step` records."""
 
-    phase: str
+    stage: str
     source: str
     action: int
     greedy: int
@@ -121,7 +121,7 @@ class Trainer(StagedRun):
         self._memory_rng = np.random.default_rng(memory)
         self.global_step = 0
         """Environment steps taken so far."""
-        self.episodes_done = {"pretraining": 0, "training": 0}
+        self.episodes_done = {"pretrain": 0, "train": 0}
         self.episode_record: EpisodeRecord | None = None
         """The record of the episode the last step ended, else None."""
         self._episode: _Episode | None = None
@@ -153,16 +153,16 @@ class Trainer(StagedRun):
         assert episode is not None
         config = self.config
         global_step = self.global_step + 1
-        pretraining = episode.stage == "pretraining"
+        pretraining = episode.stage == "pretrain"
         greedy = int(np.argmax(q_values))
         rng_state = self._action_rng.bit_generator.state
         if pretraining:
-            phase, source = "pretrain", "random"
+            source = "random"
             intended = int(self._action_rng.integers(N_ACTIONS))
         else:
             explore = bool(self._action_rng.random() < self.epsilon.value)
             random_action = int(self._action_rng.integers(N_ACTIONS))
-            phase, source = "train", ("exploration" if explore else "greedy")
+            source = "exploration" if explore else "greedy"
             intended = random_action if explore else greedy
         advised = None
         if self.strategy is not None and self.advisor is not None:
@@ -177,8 +177,7 @@ class Trainer(StagedRun):
                 raise
         action = intended if advised is None else advised
         if advised is not None:
-            source = "advisor"
-            phase = "advice" if pretraining else phase
+            source = "advisor"  # advice is a source, not a stage
 
         obs, reward, terminated, truncated, info = self.env.step(action)
         reward, terminated = float(reward), bool(terminated)
@@ -193,7 +192,7 @@ class Trainer(StagedRun):
         )  # fmt: skip
         updates = self._updates_now(pretraining, advised is not None, terminated or truncated)
         return _Step(
-            phase, source, action, greedy, q_values, advised, obs, reward, terminated,
+            episode.stage, source, action, greedy, q_values, advised, obs, reward, terminated,
             truncated, info, self.epsilon.value, updates,
         )  # fmt: skip
 
@@ -211,7 +210,7 @@ class Trainer(StagedRun):
         q_values = step.q_values
         record = StepRecord(
             global_step=self.global_step,
-            phase=step.phase,  # type: ignore[arg-type]
+            stage=step.stage,  # type: ignore[arg-type]
             episode=episode.number,
             episode_step=len(episode.actions),
             action=step.action,
@@ -264,7 +263,7 @@ class Trainer(StagedRun):
         self.episodes_done[episode.stage] += 1
         misplaced = int(info.get("misplaced", 0))
         return EpisodeRecord(
-            phase="pretrain" if episode.stage == "pretraining" else "train",
+            stage=episode.stage,  # type: ignore[arg-type]
             episode=episode.number,
             collected_reward=episode.collected_reward,
             steps=len(episode.actions),
@@ -349,7 +348,7 @@ class Trainer(StagedRun):
         self.memory.load_state_dict(state["memory"])
         self.epsilon.value = float(state["epsilon"])
         self.global_step = int(state["global_step"])
-        self.episodes_done = dict(state["episodes_done"])
+        self.episodes_done = {stage_of(k): int(v) for k, v in state["episodes_done"].items()}
         self._env_rng.bit_generator.state = state["rngs"]["env"]
         self._action_rng.bit_generator.state = state["rngs"]["action"]
         self._memory_rng.bit_generator.state = state["rngs"]["memory"]
@@ -377,7 +376,7 @@ def replay_episode(env: gym.Env, saved: dict[str, Any]) -> _Episode:
             "(or not configured as the one) the checkpoint was made with"
         )
     return _Episode(
-        stage=saved["stage"],
+        stage=stage_of(saved["stage"]),
         number=int(saved["number"]),
         reset_seed=int(saved["reset_seed"]),
         obs=obs,

@@ -1,18 +1,24 @@
-"""`python -m server.analysis EPISODES.csv OUT`: the report from an exported episode CSV.
+"""`python -m server.analysis EXPORT OUT`: the report from a study's export (the folder or
+zip `ideeprl export` writes, this version's or an older one's), with the comparability
+audit and the rescoring; or from a CSV that follows the episode contract; or `--demo` for
+made-up curves.
 
-The `ideeprl report --study ID` command reads the database; this one needs only a CSV
-that follows the episode contract, or `--demo` for made-up curves.
+The `ideeprl report --study ID` command reads the database; this one needs only the files.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import zipfile
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 from server.analysis.episodes import CONTRACT, EpisodeTableError
+from server.analysis.exported import ExportError, read_export
 from server.analysis.report import write_report
 from server.analysis.synthetic import synthetic_episodes
 
@@ -23,7 +29,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="Write the paper's analysis (figures, CSV tables, report.md) for episodes.",
         epilog=f"The CSV has {CONTRACT}.",
     )
-    parser.add_argument("episodes", nargs="?", help="episode CSV (omit with --demo)")
+    parser.add_argument(
+        "episodes", nargs="?", help="a study's export (folder or zip), or an episode CSV"
+    )
     parser.add_argument("out_dir", help="folder for the report")
     parser.add_argument("--demo", action="store_true", help="use made-up curves, not a CSV")
     parser.add_argument("--baseline", default="autonomous", help="method to improve on")
@@ -33,9 +41,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.demo == (args.episodes is not None):
         parser.error("give an episode CSV, or --demo without one")
+    extra: dict[str, Any] = {}
     if args.demo:
         episodes = synthetic_episodes()
         notes = ["Made-up curves (server.analysis.synthetic): a demonstration, not a result."]
+    elif Path(args.episodes).is_dir() or zipfile.is_zipfile(args.episodes):
+        try:
+            export = read_export(Path(args.episodes))
+        except ExportError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        episodes = export.episodes
+        extra = {"settings": export.settings, "steps": export.steps}
+        notes = [f"Sessions from the export `{args.episodes}`."]
     else:
         episodes = pd.read_csv(args.episodes)
         notes = [f"Episodes from `{args.episodes}`."]
@@ -48,6 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             notes=notes,
             n_episodes=args.n_episodes,
             smoothing=args.smoothing,
+            **extra,
         )
     except EpisodeTableError as error:
         print(f"error: {error}", file=sys.stderr)

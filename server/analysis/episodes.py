@@ -30,6 +30,19 @@ OPTIONAL_COLUMNS: tuple[str, ...] = (
 `epsilon` draws the exploration schedule, the counts are summarised per method."""
 
 OUTCOME_COLUMNS: tuple[str, ...] = ("steps", "placed_correct", "misplaced", "lost")
+
+EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
+    "session_id",
+    "method",
+    "seed",
+    "episode",
+    "collected_reward",
+    *OUTCOME_COLUMNS,
+    "epsilon",
+)
+"""The table the platform gives the analysis (from its database, or from an export);
+`label` is left to the analysis (DeepRL1, agent-IDeepRL1, ... by method and seed, so
+agents on the same seed share a number across methods)."""
 """Per-episode counts that the per-method table averages when present."""
 
 METHOD_ORDER: tuple[str, ...] = ("autonomous", "agent", "human", "oracle", "random", "sb3-dqn")

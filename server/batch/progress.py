@@ -53,7 +53,7 @@ class BatchProgress:
                 done += run_fraction(progress)
                 where = (
                     f"{progress.get('episode', 0)}/{progress.get('episodes', '?')}"
-                    if progress.get("phase") == "training"
+                    if progress.get("stage") == "train"
                     else "pretraining"
                 )
                 running.append(f"{state.run.name} {where}")

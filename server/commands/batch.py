@@ -112,6 +112,14 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         help="set any field of the runs by its name (VALUE as JSON, else a string); repeatable",
     )
     what.add_argument(
+        "--run",
+        dest="run_file",
+        type=Path,
+        metavar="FILE",
+        help="a run's JSON document (an exported session's run_spec, a session's `run` from "
+        "the API) as the template; flags given beside it change its fields",
+    )
+    what.add_argument(
         "--per-method",
         action="append",
         type=_per_method,
@@ -163,8 +171,11 @@ def spec_from(args: argparse.Namespace) -> BatchSpec:
     by_name = {leaf.name: leaf for leaf in leaves(spec_class)}
     try:
         values = given_values(args, spec_class)
-        values.setdefault("torch_threads", 1)  # a batch fills the cores with 1-thread runs
-        template = spec_class.from_json(nest(values, spec_class))
+        if args.run_file is not None:
+            template = spec_class.from_json(_document(args.run_file)).with_values(values)
+        else:
+            values.setdefault("torch_threads", 1)  # a batch fills the cores with 1-thread runs
+            template = spec_class.from_json(nest(values, spec_class))
         per_method: dict[str, dict[str, Any]] = {}
         for method, name, text in args.per_method:
             if name not in by_name or name == "method":
@@ -179,6 +190,17 @@ def spec_from(args: argparse.Namespace) -> BatchSpec:
         label=args.label,
         per_method=per_method,
     )
+
+
+def _document(path: Path) -> Any:
+    """A run's JSON document from a file ('-': standard input)."""
+    from server.batch import BatchError
+
+    try:
+        text = sys.stdin.read() if str(path) == "-" else path.read_text()
+        return json.loads(text)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise BatchError(f"--run {path}: not a readable JSON document ({error})") from None
 
 
 def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:

@@ -213,7 +213,7 @@ class Step(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
     global_step: Mapped[int] = mapped_column(Integer)
-    phase: Mapped[str] = mapped_column(String(20))
+    stage: Mapped[str] = mapped_column(String(20))
     episode: Mapped[int] = mapped_column(Integer)
     episode_step: Mapped[int] = mapped_column(Integer)
     action: Mapped[int] = mapped_column(Integer)
@@ -237,11 +237,11 @@ class Episode(Base):
     """One episode, pretraining or training: the learner's `EpisodeRecord`."""
 
     __tablename__ = "episodes"
-    __table_args__ = (UniqueConstraint("session_id", "phase", "episode"),)
+    __table_args__ = (UniqueConstraint("session_id", "stage", "episode"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
-    phase: Mapped[str] = mapped_column(String(20))
+    stage: Mapped[str] = mapped_column(String(20))
     episode: Mapped[int] = mapped_column(Integer)
     collected_reward: Mapped[float] = mapped_column(Float)
     steps: Mapped[int] = mapped_column(Integer)

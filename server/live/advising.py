@@ -96,7 +96,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             advice_given=given,
             advice_left=max(0, budget - given),
             episode=int(progress.get("episode", 0)),
-            phase=progress.get("phase"),
+            stage=progress.get("stage"),
             ready=ready,
             queued=bool(progress.get("queued", False)) and status == Status.running,
         )
@@ -123,7 +123,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
         advice_left=max(0, budget - given),
         last_reward=handle.last_reward,
         episode=progress.episode if progress else 0,
-        phase=progress.phase if progress else None,
+        stage=progress.stage if progress else None,
         ready=handle.ready,
         queued=handle.queued,
         history=_history(list(handle.history)),

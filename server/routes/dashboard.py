@@ -167,7 +167,7 @@ def curves(db: DbDep, study_id: StudyId) -> dict[int, list[tuple[int, float]]]:
     query = (
         select(Episode.session_id, Episode.episode, Episode.collected_reward)
         .join(StudySession, StudySession.id == Episode.session_id)
-        .where(StudySession.study_id == study_id, Episode.phase == "train")
+        .where(StudySession.study_id == study_id, Episode.stage == "train")
         .order_by(Episode.session_id, Episode.episode)
     )
     found: dict[int, list[tuple[int, float]]] = {}

@@ -143,7 +143,7 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
     return Progress(
         session_id=session_id,
         status=status,
-        phase=data.get("phase"),
+        stage=data.get("stage"),
         global_step=int(data.get("global_step", 0)),
         episode=int(data.get("episode", 0)),
         episodes=spec.config.episodes,
@@ -164,13 +164,13 @@ def list_episodes(
     db: DbDep,
     session_id: SessionId,
     page: PageDep,
-    phase: Literal["train", "pretrain", "all"] = Query(
+    stage: Literal["train", "pretrain", "all"] = Query(
         default="train", description="train: the learning curve; pretrain; or all."
     ),
 ) -> list[EpisodePublic]:
     """The learning curve: collected reward (and more) per episode, in order."""
     found = sessions.list_episodes(db, session_id)
-    chosen = [e for e in found if phase in ("all", e.phase)]
+    chosen = [e for e in found if stage in ("all", e.stage)]
     return [EpisodePublic.model_validate(e) for e in page.of(chosen)]
 
 

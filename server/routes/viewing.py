@@ -48,7 +48,7 @@ def learning_curve(session: ParticipantDep, db: DbDep, manager: ManagerDep) -> L
     assert row is not None, "a participant token reaches an existing session"
     episodes = db.execute(
         select(Episode.episode, Episode.collected_reward)
-        .where(Episode.session_id == session.id, Episode.phase == "train")
+        .where(Episode.session_id == session.id, Episode.stage == "train")
         .order_by(Episode.episode)
     ).all()
     handle = manager.handles.get(session.id)

@@ -65,7 +65,7 @@ class ParticipantState(BaseModel):
     advice_left: int
     last_reward: float | None = None
     episode: int = 0
-    phase: str | None = None
+    stage: str | None = None
     ready: bool = Field(
         default=False, description="Consent and induction done: advice may be asked."
     )

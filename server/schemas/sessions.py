@@ -132,7 +132,9 @@ class Progress(BaseModel):
 
     session_id: int
     status: str
-    phase: str | None = None
+    stage: str | None = Field(
+        default=None, description="pretrain or train: the stage of the run's next step."
+    )
     global_step: int = 0
     episode: int = 0
     episodes: int = 0
@@ -155,7 +157,7 @@ class EpisodePublic(BaseModel):
 
     model_config = ConfigDict(from_attributes=True)
 
-    phase: str
+    stage: str
     episode: int
     collected_reward: float
     steps: int

@@ -107,9 +107,10 @@ RECORD_EXTRA: dict[str, tuple[str, str]] = {
     "elapsed_s": ("number", "Seconds from the session's first start to the record [s]."),
 }
 STEP_ADVISED = ("boolean", "The step's action came from the advisor (advised_action is set).")
-PHASES = {
-    "steps": "`pretrain` (pretraining stage, random or advised: see `advised`) or `train` "
-    "(training stage); the same vocabulary as episodes.csv.",
+STAGE_DOCS = {
+    "steps": "`pretrain` (pretraining stage: random actions, or advised ones: see "
+    "`action_source` and `advised`) or `train` (training stage); the same vocabulary as "
+    "episodes.csv. Advice is an action source, never a stage.",
     "episodes": "`pretrain` or `train`; the paper's curves and R_T use the `train` episodes.",
 }
 UNITS = {
@@ -142,7 +143,7 @@ def _record_columns(table: str) -> list[Column]:
 
     model, record = (Step, StepRecord) if table == "steps" else (Episode, EpisodeRecord)
     docs = field_docstrings(record)
-    docs["phase"] = PHASES[table]
+    docs["stage"] = STAGE_DOCS[table]
     columns = [column("session_id", "integer", "Session the record belongs to.")]
     for c in model.__table__.columns:
         if c.name in ("id", "session_id", "wall_time"):

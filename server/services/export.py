@@ -6,8 +6,9 @@ a folder or packed as one zip.
 Analysis-ready means: ISO 8601 UTC timestamps (`logged_at`, with `elapsed_s` since the
 session started beside it), lowercase booleans, the sort rule as plain text, the learner
 config as one column per field, each episode's reset seed (replay it with the episode's
-actions), one phase vocabulary in steps and episodes (`pretrain`, `train`; a
-pretraining step taken on advice has `advised = true`), and each session's run both as
+actions), one stage vocabulary in steps and episodes (`stage`: `pretrain`, `train`; a
+pretraining step taken on advice has `action_source` advisor and `advised = true`), and
+each session's run both as
 columns (one per field of `learner.run.RunSpec`) and whole (`run_spec`, JSON: what the API
 and `ideeprl batch` accept back).
 """
@@ -38,7 +39,7 @@ FORMATS = ("csv", "parquet")
 TABLES = ("sessions", "episodes", "steps", "advice", "texts_versions")
 KEYS: dict[str, dict[str, Any]] = {
     "sessions": {"primaryKey": ["session_id"]},
-    "episodes": {"primaryKey": ["session_id", "phase", "episode"]},
+    "episodes": {"primaryKey": ["session_id", "stage", "episode"]},
     "steps": {"primaryKey": ["session_id", "global_step"]},
     "advice": {"primaryKey": ["session_id", "advice_index"]},
     "texts_versions": {"primaryKey": ["study_id", "texts_version"]},
@@ -111,8 +112,6 @@ def _records(
             row["elapsed_s"] = None if started is None else round(wall - started, 3)
             if model is Step:
                 row["advised"] = row["advised_action"] is not None
-                if row["phase"] == "advice":  # a pretraining step taken on advice
-                    row["phase"] = "pretrain"
             yield row
 
 

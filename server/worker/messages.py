@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 @dataclass(frozen=True)
 class Progress:
-    phase: str
+    stage: str
     """`pretraining` or `training`."""
     global_step: int
     """Environment steps taken so far (pretraining included)."""

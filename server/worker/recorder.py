@@ -87,7 +87,7 @@ class Recorder:
 
     def on_episode(self, record: EpisodeRecord) -> None:
         self._episodes.append(_row(record, EPISODE_COLUMNS, self.session_id))
-        if record.phase == TRAINING:
+        if record.stage == TRAINING:
             self.episodes += 1
             self.episodes_since_checkpoint += 1
         self.flush()

@@ -75,12 +75,12 @@ class _Reporter:
     def __init__(self, run: _Run) -> None:
         self._run = run
         self._sent = 0.0
-        self.phase = "pretraining"
+        self.stage = "pretrain"
         self.epsilon = 1.0
         self.last_episode_reward: float | None = None
 
     def on_step(self, record: Any) -> None:
-        self.phase = "training" if record.phase == TRAINING else "pretraining"
+        self.stage = record.stage
         self.epsilon = float(record.epsilon)
         if time.monotonic() - self._sent >= PROGRESS_EVERY_S:
             self._run.send_progress()
@@ -88,7 +88,7 @@ class _Reporter:
 
     def on_episode(self, record: Any) -> None:
         self._run.send(EpisodeDone(record.to_dict()))
-        if record.phase != TRAINING:
+        if record.stage != TRAINING:
             return
         self.last_episode_reward = float(record.collected_reward)
         self._run.env.episode = self._run.recorder.episodes
@@ -158,7 +158,7 @@ class _Run:
         self.recorder.rewind(s)
         self.env.steps = self.recorder.steps
         self.env.episode = self.recorder.episodes
-        self.reporter.phase = str(getattr(self.trainer, "stage", "pretraining"))
+        self.reporter.stage = str(getattr(self.trainer, "stage", "pretrain"))
         self.bar: Any = None
 
     def _broadcast(self, env: Any) -> SceneBroadcast:
@@ -199,7 +199,7 @@ class _Run:
 
     def progress(self) -> Progress:
         return Progress(
-            phase=self.reporter.phase,
+            stage=self.reporter.stage,
             global_step=self.recorder.steps,
             episode=self.recorder.episodes,
             episodes=self.spec.config.episodes,

@@ -119,13 +119,13 @@ def test_updates_during_advice_and_not_on_final_steps(make_env) -> None:
                       callbacks=[recorder])  # fmt: skip
     trainer.run()
     steps = recorder.steps
-    advised = [s for s in steps if s.phase == "advice"]
+    advised = [s for s in steps if s.stage == "pretrain" and s.action_source == "advisor"]
     assert len(advised) == config.advice_budget
     for s in steps:
         final = s.terminated or s.truncated
-        if s.phase == "pretrain" or final:
+        if (s.stage == "pretrain" and s.action_source == "random") or final:
             assert s.loss is None, s
-        elif s.phase == "advice":
+        elif s.stage == "pretrain":
             assert s.loss is not None  # the memory holds a batch long before the advice
         else:
             assert s.loss is not None
@@ -138,4 +138,4 @@ def test_updates_during_advice_and_not_on_final_steps(make_env) -> None:
     Trainer(make_env(), small_config(), advisor=make_advisor("oracle", seed=0), seed=1,
             callbacks=[recorder]).run()  # fmt: skip
     for s in recorder.steps:
-        assert (s.loss is None) == (s.phase != "train")
+        assert (s.loss is None) == (s.stage != "train")

@@ -33,7 +33,7 @@ def test_train_writes_records_plot_and_checkpoint_and_resumes(tmp_path: Path) ->
     assert done.returncode == 0, done.stderr
     assert "R_T" in done.stdout
     steps, episodes = rows(out / "steps.csv"), rows(out / "episodes.csv")
-    assert [r["episode"] for r in episodes if r["phase"] == "train"] == ["1", "2"]
+    assert [r["episode"] for r in episodes if r["stage"] == "train"] == ["1", "2"]
     assert [int(r["global_step"]) for r in steps] == list(range(1, len(steps) + 1))
     assert sum(r["action_source"] == "advisor" for r in steps) == 20
     assert (out / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
@@ -45,7 +45,7 @@ def test_train_writes_records_plot_and_checkpoint_and_resumes(tmp_path: Path) ->
     steps_after = rows(out / "steps.csv")
     assert steps_after[: len(steps)] == steps
     assert [int(r["global_step"]) for r in steps_after] == list(range(1, len(steps_after) + 1))
-    assert [r["episode"] for r in rows(out / "episodes.csv") if r["phase"] == "train"] == [
+    assert [r["episode"] for r in rows(out / "episodes.csv") if r["stage"] == "train"] == [
         "1", "2", "3",
     ]  # fmt: skip
 

@@ -304,7 +304,7 @@ def test_an_agent_that_finishes_leaves_and_the_others_go_on(make_env) -> None:
     assert list(population.step()) == [1]
     population.run()
     assert population.done and population.trainers[0].global_step == 65
-    assert population.trainers[1].episodes_done["training"] == 1
+    assert population.trainers[1].episodes_done["train"] == 1
     with pytest.raises(RuntimeError, match="done"):
         population.step()
     assert population.numerics()["population_size"] == 2

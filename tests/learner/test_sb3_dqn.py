@@ -40,12 +40,12 @@ def test_stages_records_and_an_exact_resume(make_env, tmp_path) -> None:
     whole = Recorder()
     trainer = _trainer(make_env, config, whole)
     trainer.run()
-    pretraining = [s for s in whole.steps if s.phase == "pretrain"]
-    training = [s for s in whole.steps if s.phase == "train"]
+    pretraining = [s for s in whole.steps if s.stage == "pretrain"]
+    training = [s for s in whole.steps if s.stage == "train"]
     assert len(pretraining) == config.pretraining_steps
     assert {s.action_source for s in pretraining} == {"random"}
     assert all(s.loss is not None for s in training) and all(s.loss is None for s in pretraining)
-    assert [e.episode for e in whole.episodes if e.phase == "train"] == [1, 2, 3]
+    assert [e.episode for e in whole.episodes if e.stage == "train"] == [1, 2, 3]
     # SB3's linear schedule, counted in training steps: 1.0 at the first, then down.
     assert training[0].epsilon == 1.0 and training[-1].epsilon < 1.0
     assert trainer.model.num_timesteps == len(whole.steps)

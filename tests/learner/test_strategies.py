@@ -25,7 +25,7 @@ class ScriptedAdvisor:
 
 def moments(pretraining: int = 1000, training: int = 2000, intended: int = 0):
     for step in range(1, pretraining + training + 1):
-        stage = "pretraining" if step <= pretraining else "training"
+        stage = "pretrain" if step <= pretraining else "train"
         yield AdviceMoment(IMAGE, {}, stage, step, pretraining, intended, intended)
 
 

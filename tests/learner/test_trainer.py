@@ -13,14 +13,14 @@ def test_early_advising_takes_exactly_steps_901_to_1000(make_env) -> None:
     trainer = Trainer(
         make_env(), config, advisor=make_advisor("oracle", seed=1), seed=3, callbacks=[recorder]
     )
-    while trainer.stage == "pretraining":
+    while trainer.stage == "pretrain":
         trainer.step()
     steps = recorder.steps
     assert [s.global_step for s in steps] == list(range(1, 1001))
     advised = [s.global_step for s in steps if s.advised_action is not None]
     assert advised == list(range(901, 1001))
     for s in steps:
-        assert s.phase == ("advice" if s.global_step > 900 else "pretrain")
+        assert s.stage == "pretrain"  # advice is a source, not a stage
         assert s.action_source == ("advisor" if s.global_step > 900 else "random")
         assert s.loss is None and s.epsilon == 1.0
         if s.advised_action is not None:
@@ -28,7 +28,7 @@ def test_early_advising_takes_exactly_steps_901_to_1000(make_env) -> None:
     assert [s.advice_remaining for s in steps[899:]] == list(range(100, -1, -1))
     assert steps[-1].terminated or steps[-1].truncated  # pretraining's last episode is cut
     assert trainer.memory.added == 1000
-    assert trainer.step().phase == "train" and trainer.global_step == 1001
+    assert trainer.step().stage == "train" and trainer.global_step == 1001
 
 
 def test_records_number_steps_and_episodes_and_add_up(make_env) -> None:
@@ -38,19 +38,18 @@ def test_records_number_steps_and_episodes_and_add_up(make_env) -> None:
     steps, episodes = recorder.steps, recorder.episodes
     assert trainer.done and [e.episode for e in finished] == [1, 2, 3, 4]
     assert [s.global_step for s in steps] == list(range(1, len(steps) + 1))
-    assert [e.episode for e in episodes if e.phase == "train"] == [1, 2, 3, 4]
-    pretrain = [e for e in episodes if e.phase == "pretrain"]
+    assert [e.episode for e in episodes if e.stage == "train"] == [1, 2, 3, 4]
+    pretrain = [e for e in episodes if e.stage == "pretrain"]
     assert [e.episode for e in pretrain] == list(range(1, len(pretrain) + 1))
     assert pretrain[-1].last_global_step == 60
     for episode in episodes:
         own = steps[episode.first_global_step - 1 : episode.last_global_step]
-        stage = ("pretrain", "advice") if episode.phase == "pretrain" else ("train",)
-        assert all(s.phase in stage and s.episode == episode.episode for s in own)
+        assert all(s.stage == episode.stage and s.episode == episode.episode for s in own)
         assert [s.episode_step for s in own] == list(range(1, episode.steps + 1))
         assert episode.collected_reward == pytest.approx(sum(s.reward for s in own))
         assert own[-1].terminated == episode.terminated and own[-1].truncated == episode.truncated
         assert episode.steps <= 30
-    training = [s for s in steps if s.phase == "train"]
+    training = [s for s in steps if s.stage == "train"]
     assert all(
         s.loss is not None and s.action_source in ("greedy", "exploration") for s in training
     )
@@ -61,7 +60,7 @@ def test_records_number_steps_and_episodes_and_add_up(make_env) -> None:
         assert s.greedy_action == int(np.argmax(q))
         if s.action_source == "greedy":
             assert s.action == s.greedy_action
-    assert set(steps[0].to_dict()) >= {"global_step", "phase", "action_source", "epsilon"}
+    assert set(steps[0].to_dict()) >= {"global_step", "stage", "action_source", "epsilon"}
 
 
 def test_same_seed_same_run_other_seed_other_run(make_env) -> None:
@@ -95,7 +94,7 @@ def test_alternating_advice_during_training_is_executed_within_budget(make_env) 
     Trainer(make_env(), config, advisor, strategy, seed=1, callbacks=[recorder]).run()
     advised = [s for s in recorder.steps if s.advised_action is not None]
     assert [s.global_step - 60 for s in advised] == [1, 3, 5, 7, 9, 11, 13]
-    assert all(s.phase == "train" and s.action == s.advised_action for s in advised)
+    assert all(s.stage == "train" and s.action == s.advised_action for s in advised)
     assert strategy.used == 7 and recorder.steps[-1].advice_remaining == 0
 
 

@@ -72,7 +72,7 @@ def _same(
     files = export(api, study)
     for faulty, twin in pairs:
         got, want = records(files, faulty), records(files, twin)
-        assert len([e for e in got["episodes.csv"] if e["phase"] == "train"]) == episodes
+        assert len([e for e in got["episodes.csv"] if e["stage"] == "train"]) == episodes
         for name in got:
             assert got[name] == want[name], (name, faulty, twin)
 

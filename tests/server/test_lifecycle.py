@@ -55,7 +55,7 @@ def test_pause_resume_stop_and_resume_again(server: LiveServer, api: httpx.Clien
     assert api.post(f"/api/sessions/{sid}/resume").json()["status"] == "running"
     wait_step(api, sid, stopped["checkpoint_step"])
     assert api.post(f"/api/sessions/{sid}/stop").json()["status"] == "stopped"
-    steps = api.get(f"/api/sessions/{sid}/episodes", params={"phase": "all"}).json()
+    steps = api.get(f"/api/sessions/{sid}/episodes", params={"stage": "all"}).json()
     starts = [e["first_global_step"] for e in steps]
     assert starts == sorted(set(starts)), "no episode logged twice across pause and resume"
 

@@ -46,6 +46,14 @@ OLD_SESSION = {  # a session row as revision 0006 stored it
 }  # fmt: skip
 
 
+OLD_STEP = {  # a step row of revision 0006 (its `phase` is 0008's `stage`)
+    "session_id": 2, "episode": 1, "episode_step": 1, "action": 0, "greedy_action": 0,
+    "q_grab": 0.0, "q_move_right": 0.0, "q_move_left": 0.0, "q_drop": 0.0,
+    "advised_action": None, "advice_remaining": 0, "reward": 0.0, "terminated": False,
+    "truncated": False, "epsilon": 1.0, "loss": None, "wall_time": 0.0,
+}  # fmt: skip
+
+
 def _config(**changes: object) -> dict[str, object]:
     return {**DQNConfig.preset("paper", pretraining_steps=60, batch_size=16).to_dict(), **changes}
 
@@ -81,7 +89,20 @@ def test_migration_0007_stores_each_session_as_one_run_document(tmp_path: Path) 
             sessions = Table("sessions", MetaData(), autoload_with=c)
             for row in rows:
                 c.execute(sessions.insert().values(**OLD_SESSION, **row))
+            steps = Table("steps", MetaData(), autoload_with=c)
+            for step, (phase, source) in enumerate(
+                [("pretrain", "random"), ("advice", "advisor"), ("train", "greedy")], 1
+            ):
+                c.execute(steps.insert().values(**OLD_STEP, global_step=step, phase=phase,
+                                                action_source=source))  # fmt: skip
         upgrade(engine)
+        with engine.connect() as c:
+            stages = c.execute(text("SELECT stage, action_source FROM steps ORDER BY global_step"))
+            assert [tuple(r) for r in stages] == [
+                ("pretrain", "random"),
+                ("pretrain", "advisor"),
+                ("train", "greedy"),
+            ]  # fmt: skip  (0008: advice is a source, not a stage)
         with make_session_factory(engine)() as db:
             stored = list(db.scalars(select(StudySession).order_by(StudySession.id)))
             specs = [s.spec for s in stored]

@@ -86,7 +86,7 @@ def test_oracle_session_runs_to_the_end_and_exports_the_learners_records(
     assert seen[-1]["status"] == "finished", api.get(f"/api/sessions/{session['id']}").json()
     assert seen[-1]["episode"] == EPISODES and seen[-1]["advice_given"] == 20
     assert seen[-1]["advice_left"] == 0
-    assert {p["phase"] for p in seen} >= {"training"}
+    assert {p["stage"] for p in seen} >= {"train"}
 
     curve = api.get(f"/api/sessions/{session['id']}/episodes").json()
     files = export(api, study["id"])
@@ -98,10 +98,10 @@ def test_oracle_session_runs_to_the_end_and_exports_the_learners_records(
     assert [int(r["action"]) for r in steps] == [s["action"] for s in reference.steps]
     episodes = rows(files["episodes.csv"])
     assert len(episodes) == len(reference.episodes)
-    assert [(r["phase"], float(r["collected_reward"])) for r in episodes] == [
-        (e["phase"], e["collected_reward"]) for e in reference.episodes
+    assert [(r["stage"], float(r["collected_reward"])) for r in episodes] == [
+        (e["stage"], e["collected_reward"]) for e in reference.episodes
     ]
-    trained = [e for e in reference.episodes if e["phase"] == "train"]
+    trained = [e for e in reference.episodes if e["stage"] == "train"]
     assert len(curve) == len(trained) == EPISODES
     assert [e["collected_reward"] for e in curve] == [e["collected_reward"] for e in trained]
     advice = rows(files["advice.csv"])

@@ -82,7 +82,7 @@ def test_a_session_killed_with_its_server_resumes_to_exactly_the_uninterrupted_r
         wait_for_status(api, reference["id"], {"finished"})
         files = export(api, study["id"])
     resumed, uninterrupted = records(files, crashed["id"]), records(files, reference["id"])
-    assert len([e for e in resumed["episodes.csv"] if e["phase"] == "train"]) == EPISODES
+    assert len([e for e in resumed["episodes.csv"] if e["stage"] == "train"]) == EPISODES
     for name in resumed:
         assert resumed[name] == uninterrupted[name], name
 

@@ -48,7 +48,7 @@ def test_run_session_runs_a_session_to_its_end_in_this_process(tmp_path: Path) -
             )
             trained = db.scalar(
                 select(func.count()).where(
-                    Episode.session_id == session.id, Episode.phase == "train"
+                    Episode.session_id == session.id, Episode.stage == "train"
                 )
             )
         assert steps == last == done.checkpoint_step and trained == EPISODES

@@ -29,7 +29,7 @@ def test_a_session_runs_under_its_scenario_options(api: httpx.Client) -> None:
     episodes = api.get(f"/api/sessions/{session['id']}/episodes").json()
     assert any(e["lost"] > 0 for e in episodes), "knock-offs at 0.25 lose objects"
     steps = pd.read_csv(io.BytesIO(export(api, study["id"])["steps.csv"]))
-    train = steps[steps["phase"] == "train"]
+    train = steps[steps["stage"] == "train"]
     costs = train.loc[(train["reward"] <= 0) & ~train["terminated"].astype(bool), "reward"]
     assert len(costs) and (costs == -0.01).all()  # flat -0.01 from step 1, never 0
     assert (train["episode_step"] <= 18).any()

@@ -54,7 +54,7 @@ def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveSe
         a = SimulatedParticipant(one_trainer.url, first["participant_token"])
         b = SimulatedParticipant(one_trainer.url, second["participant_token"])
         _advise_all(a, 2)
-        _until(lambda: _progress(api, first["id"])["phase"] == "training")
+        _until(lambda: _progress(api, first["id"])["stage"] == "train")
         _advise_all(b, 2)
         _until(lambda: _progress(api, second["id"])["queued"])
         waiting = _progress(api, second["id"])

@@ -46,8 +46,8 @@
     if (s.method === "human" && !p.consented) parts.push(s.declined ? "declined" : "not consented yet");
     if (p.advice_wanted) parts.push("waiting for the participant");
     if (p.queued) parts.push("advice done, queued for a trainer");
-    if (p.phase === "training" || p.episode) parts.push(`episode ${p.episode}/${p.episodes}`);
-    else if (p.phase) parts.push(p.phase);
+    if (p.stage === "train" || p.episode) parts.push(`episode ${p.episode}/${p.episodes}`);
+    else if (p.stage) parts.push(p.stage === "pretrain" ? "pretraining" : p.stage);
     if (p.last_episode_reward !== null && p.last_episode_reward !== undefined) {
       parts.push(`last ${p.last_episode_reward.toFixed(2)}`);
     }

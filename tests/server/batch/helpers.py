@@ -108,7 +108,7 @@ def training_totals(engine: Engine, session_ids: list[int]) -> dict[int, tuple[i
     with engine.connect() as c:
         rows = c.execute(
             select(Episode.session_id, func.count(), func.sum(Episode.collected_reward))
-            .where(Episode.session_id.in_(session_ids), Episode.phase == "train")
+            .where(Episode.session_id.in_(session_ids), Episode.stage == "train")
             .group_by(Episode.session_id)
         )
         return {int(s): (int(n), float(total)) for s, n, total in rows}

@@ -88,10 +88,10 @@ def test_pandas_reads_the_declared_types_and_plain_cells(csv_export: Path) -> No
     assert plain["reset_seed"].dtype == np.int64
     raw = (csv_export / "steps.csv").read_text()
     assert "True" not in raw and "False" not in raw and "+00:00" not in raw
-    assert set(steps["phase"]) == set(episodes["phase"]) == {"pretrain", "train"}
+    assert set(steps["stage"]) == set(episodes["stage"]) == {"pretrain", "train"}
     agent = sessions.loc[sessions["method"] == "agent", "session_id"]
     advised = steps[steps["session_id"].isin(agent) & steps["advised"]]
-    assert len(advised) > 0 and set(advised["phase"]) == {"pretrain"}
+    assert len(advised) > 0 and set(advised["stage"]) == {"pretrain"}
     assert set(sessions["sort_rule"]) == {"color"}
     assert "config" not in sessions and sessions["config_batch_size"].dtype == "Int64"
     assert (sessions["config_batch_size"] == 8).all()
@@ -121,11 +121,11 @@ def test_an_episode_replays_from_its_exported_seed_and_actions(csv_export: Path)
     sessions = typed["sessions"].set_index("session_id")
     steps, episodes = typed["steps"], typed["episodes"]
     replayed = 0
-    for _, episode in episodes[episodes["phase"] == "train"].iterrows():
+    for _, episode in episodes[episodes["stage"] == "train"].iterrows():
         session = sessions.loc[episode["session_id"]]
         mine = steps[
             (steps["session_id"] == episode["session_id"])
-            & (steps["phase"] == "train")
+            & (steps["stage"] == "train")
             & (steps["episode"] == episode["episode"])
         ].sort_values("episode_step")
         env = sim.SortingEnv(
@@ -151,3 +151,69 @@ def test_a_map_sort_rule_is_plain_text_that_parses_back() -> None:
     text = plain_sort_rule(rule)
     assert text.startswith("cube/red=right;") and "{" not in text
     assert sim.SortRule.parse(text) == sim.SortRule.parse(rule)
+
+
+def test_an_export_reads_back_as_the_database_holds_it(
+    place: Place, csv_export: Path, tmp_path: Path
+) -> None:
+    """Each session's run comes back whole from `run_spec` (CSV and Parquet alike), and the
+    analysis' tables from the export equal the database's."""
+    from sqlalchemy.orm import Session
+
+    from server.analysis.exported import read_export
+    from server.services.episodes import load_episodes, load_training_steps, session_settings
+    from tests.server.batch.helpers import sessions, study_id
+
+    export(place, tmp_path / "parquet", "--format", "parquet")
+    engine = place.engine()
+    rows = sessions(engine, study_id(engine, "baselines"))
+    ids = [s.id for s in rows]
+    for folder in (csv_export, tmp_path / "parquet"):
+        exported = read_export(folder)
+        assert exported.runs == {s.id: s.spec for s in rows}
+        with Session(engine) as db:
+            episodes = load_episodes(db, ids)
+            steps = load_training_steps(db, ids)
+            settings = session_settings(rows)
+        pd.testing.assert_frame_equal(exported.episodes, episodes, check_dtype=False)
+        pd.testing.assert_frame_equal(exported.steps, steps, check_dtype=False)
+        pd.testing.assert_frame_equal(exported.settings, settings)
+
+
+def test_every_exported_run_is_accepted_back_unchanged(
+    place: Place, csv_export: Path, tmp_path: Path
+) -> None:
+    """The API takes each exported `run_spec` as a new session's `run` and stores it as it
+    was; `ideeprl batch --run FILE` makes it the batch's template, unchanged."""
+    import csv
+
+    from fastapi.testclient import TestClient
+
+    from learner.run import RunSpec
+    from server.cli import build_parser
+    from server.commands.batch import spec_from
+    from server.main import create_app
+    from server.settings import Settings
+    from tests.server.live import API_KEY
+
+    with (csv_export / "sessions.csv").open() as f:
+        documents = [json.loads(row["run_spec"]) for row in csv.DictReader(f)]
+    assert {d["method"] for d in documents} == {"autonomous", "agent"}
+    settings = Settings(data_dir=place.data_dir, database_url=place.url, api_key=API_KEY)
+    headers = {"X-API-Key": API_KEY}
+    with TestClient(create_app(settings)) as client:
+        study = client.post("/api/studies", json={"name": "round trip"}, headers=headers)
+        for document in documents:
+            made = client.post(
+                f"/api/studies/{study.json()['id']}/sessions",
+                json={"run": document},
+                headers=headers,
+            )
+            assert made.status_code == 201, made.text
+            assert made.json()["run"] == document
+            path = tmp_path / "run.json"
+            path.write_text(json.dumps(document))
+            argv = ["batch", "--study", "x", "--methods", document["method"], "--run", str(path)]
+            spec = spec_from(build_parser().parse_args([*argv, *place.flags]))
+            back = spec.spec_of(document["method"], document["seed"])
+            assert back == RunSpec.from_json(document)

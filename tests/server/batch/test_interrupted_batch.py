@@ -35,7 +35,7 @@ assert SCALE[0] == "--episodes"
 def episode_ids(place: Place, session_id: int) -> list[tuple[int, int]]:
     with Session(place.engine()) as db:
         query = select(Episode.id, Episode.episode).where(
-            Episode.session_id == session_id, Episode.phase == "train"
+            Episode.session_id == session_id, Episode.stage == "train"
         )
         return [(int(i), int(e)) for i, e in db.execute(query.order_by(Episode.episode))]
 

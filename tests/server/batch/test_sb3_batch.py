@@ -73,8 +73,8 @@ def test_sb3_runs_are_finished_sessions_with_their_steps_and_episodes(
             steps = list(db.scalars(select(Step).where(Step.session_id == s.id)))
             episodes = list(db.scalars(select(Episode).where(Episode.session_id == s.id)))
             assert [t.global_step for t in steps] == list(range(1, len(steps) + 1))
-            pretraining = [t for t in steps if t.phase == "pretrain"]
-            training = [t for t in steps if t.phase == "train"]
+            pretraining = [t for t in steps if t.stage == "pretrain"]
+            training = [t for t in steps if t.stage == "train"]
             assert len(pretraining) == 20 and len(pretraining) + len(training) == len(steps)
             assert {t.action_source for t in pretraining} == {"random"}
             assert {t.action_source for t in training} <= {"exploration", "greedy"}
@@ -91,7 +91,7 @@ def test_sb3_runs_are_finished_sessions_with_their_steps_and_episodes(
         first = {
             (s.method, s.seed): db.scalar(
                 select(Episode.reset_seed).where(
-                    Episode.session_id == s.id, Episode.phase == "pretrain", Episode.episode == 1
+                    Episode.session_id == s.id, Episode.stage == "pretrain", Episode.episode == 1
                 )
             )
             for s in rows
@@ -158,7 +158,7 @@ def test_without_stable_baselines3_the_batch_says_how_to_install_it(
 
 def _steps(place: Place, session_id: int) -> list[tuple[object, ...]]:
     """A session's steps as the learner made them (no times, no ids)."""
-    columns = (Step.global_step, Step.phase, Step.action, Step.action_source, Step.reward)
+    columns = (Step.global_step, Step.stage, Step.action, Step.action_source, Step.reward)
     columns += (Step.truncated, Step.epsilon, Step.loss, Step.q_grab)
     with Session(place.engine()) as db:
         query = select(*columns).where(Step.session_id == session_id)

@@ -1,0 +1,114 @@
+"""A run's numerics are pinned when its session is created, and a resume on a machine that
+cannot honour them is refused with the reason, or overridden and recorded."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from sqlalchemy.orm import Session
+
+from learner import machine
+from learner.run import RunSpec
+from server.db.engine import make_engine, make_session_factory
+from server.db.migrate import upgrade
+from server.db.models import Status, StudySession
+from server.schemas.studies import StudyCreate
+from server.services.export import export_study
+from server.services.numerics import NumericsRefused
+from server.services.sessions import create_session, set_status
+from server.services.studies import create_study
+from server.worker.worker import WorkerOptions, run_session
+from tests.server.live import fresh_database
+
+TINY = {"pretraining_steps": 30, "batch_size": 8, "memory_size": 300, "episodes": 1,
+        "max_episode_steps": 15, "advice_budget": 5}  # fmt: skip
+
+
+@pytest.fixture
+def database(tmp_path: Path) -> Iterator[str]:
+    with fresh_database(tmp_path) as url:
+        upgrade(make_engine(url))
+        yield url
+
+
+def _stopped_bf16_session(url: str) -> int:
+    """A session pinned to bfloat16 convolutions that stopped before its end."""
+    with make_session_factory(make_engine(url))() as db:
+        study = create_study(db, StudyCreate(name="numerics"))
+        spec = RunSpec.from_json({"method": "oracle", "config": TINY})
+        session = create_session(db, study.id, spec)
+        assert session.run["config"]["device"] in ("cpu", "cuda")  # pinned when created
+        assert session.run["config"]["torch_threads"] >= 1
+        session.run = {**session.run, "config": {**session.run["config"], "precision": "bf16",
+                                                 "device": "cpu"}}  # fmt: skip
+        db.commit()
+        set_status(db, session.id, Status.stopped, "stopped for the test")
+        return session.id
+
+
+def test_a_resume_the_machine_cannot_honour_is_refused_or_overridden_and_recorded(
+    database: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    session_id = _stopped_bf16_session(database)
+    monkeypatch.setattr(machine, "bf16_native_cpu", lambda: False)  # a CPU without BF16
+    options = WorkerOptions(data_dir=tmp_path / "data")
+    with pytest.raises(NumericsRefused, match="bfloat16") as refused:
+        run_session(session_id, database, options)
+    assert "override_numerics" in str(refused.value)
+    factory = make_session_factory(make_engine(database))
+    with factory() as db:
+        session = db.get(StudySession, session_id)
+        assert session is not None and session.status == Status.stopped  # untouched
+        assert session.numerics_overrides == []
+
+    status = run_session(session_id, database, WorkerOptions(
+        data_dir=tmp_path / "data", override_numerics=True))  # fmt: skip
+    assert status == "finished"
+    with factory() as db:
+        session = db.get(StudySession, session_id)
+        assert session is not None
+        [override] = session.numerics_overrides
+        assert override["from"]["precision"] == "bf16" and override["to"]["precision"] == "fp32"
+        assert "bfloat16" in override["why"] and override["machine"]
+        assert session.spec.config.precision == "fp32"
+        study = session.study_id
+        export_study(db, study, tmp_path / "export")
+    with (tmp_path / "export" / "sessions.csv").open() as f:
+        import csv
+
+        (row,) = list(csv.DictReader(f))
+    assert json.loads(row["numerics_overrides"])[0]["to"]["precision"] == "fp32"
+
+
+def test_ideeprl_train_refuses_to_resume_on_other_numerics(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from learner.checkpoint import read_checkpoint, write_checkpoint
+    from server.cli import main
+
+    small = [f"--{k.replace('_', '-')}={v}" for k, v in TINY.items()]
+    out = tmp_path / "run"
+    assert main(["train", "--out", str(out), "--no-progress", "--precision", "bf16", *small]) == 0
+    checkpoint = out / "checkpoint.pt"
+    monkeypatch.setattr(machine, "bf16_native_cpu", lambda: False)
+    state = read_checkpoint(checkpoint)
+    assert state["metadata"]["config"]["precision"] == "bf16"
+    write_checkpoint(checkpoint, state)
+    assert main(["train", "--resume", str(checkpoint), "--episodes", "2", "--no-progress"]) == 2
+    assert "bfloat16" in capsys.readouterr().err
+    code = main(["train", "--resume", str(checkpoint), "--episodes", "2", "--no-progress",
+                 "--override-numerics"])  # fmt: skip
+    assert code == 0 and "numerics overridden" in capsys.readouterr().err
+
+
+def test_sessions_are_pinned_where_they_are_created(database: str) -> None:
+    with Session(make_engine(database)) as db:
+        study = create_study(db, StudyCreate(name="pinned"))
+        made = create_session(db, study.id, RunSpec.from_json({"config": TINY}), threads=1)
+        config = made.spec.config
+    native = machine.bf16_native_cpu() or config.device == "cuda"
+    assert config.precision == ("bf16" if native else "fp32")
+    assert config.torch_threads == 1 and config.device in ("cpu", "cuda")
