@@ -6,12 +6,12 @@ import dataclasses
 from dataclasses import dataclass
 from datetime import datetime
 from functools import cache
-from typing import Any
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 
 from learner.fields import bounded, check_object
-from learner.run import RunSpec
+from learner.run import SPEC_VERSION, RunSpec
 from server.schemas.runs import body_model
 
 API_VERSION_NOTE = (
@@ -66,7 +66,7 @@ def session_create_model(spec_class: type = RunSpec) -> type[BaseModel]:
         __doc__="A session: its run, described once, and the session's own options. Unset "
         "fields take their defaults (the learner config's: its preset's).",
         run=(
-            body_model(spec_class, "Run"),
+            _run_model(spec_class),
             Field(
                 description="The run (learner.run.RunSpec): method, seed, preset, config, "
                 "strategy and its options, advisor, motion, sort rule, scenario."
@@ -74,6 +74,20 @@ def session_create_model(spec_class: type = RunSpec) -> type[BaseModel]:
         ),
     )
     return model  # type: ignore[no-any-return]
+
+
+def _run_model(spec_class: type) -> type[BaseModel]:
+    """The run's body: every field of `spec_class`, and the stored document's `version`
+    (so a session's `run`, or an export's `run_spec`, is accepted back as it is)."""
+    return create_model(  # type: ignore[call-overload, no-any-return]
+        "Run",
+        __base__=body_model(spec_class, "RunFields"),
+        __doc__=(spec_class.__doc__ or "").strip(),
+        version=(
+            Annotated[int | None, Field(strict=True, ge=1, le=SPEC_VERSION)],
+            Field(default=None, description=f"The document's version (1 to {SPEC_VERSION})."),
+        ),
+    )
 
 
 SessionCreate = session_create_model(RunSpec)
