@@ -1,6 +1,9 @@
 """What every `ideeprl` command shares: exit codes, finding the data folder and a study,
 and whether to draw progress bars.
 
+Commands whose result a script reads take `--json`: one JSON object on stdout and nothing
+else there (messages and warnings go to stderr), with the same exit codes.
+
 Exit codes follow the usual convention: 0 done, 1 a runtime error (no such study, nothing
 to analyse, a database that is not there), 2 a usage error (an option that makes no
 sense, or a value the database refuses as invalid; argparse's own errors are 2 too),
@@ -9,12 +12,15 @@ sense, or a value the database refuses as invalid; argparse's own errors are 2 t
 
 from __future__ import annotations
 
+import json
 import sys
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from sqlalchemy.engine import make_url
 
 if TYPE_CHECKING:
+    import argparse
+
     from sqlalchemy.engine import Engine
     from sqlalchemy.orm import Session
 
@@ -45,6 +51,20 @@ def fail(message: str, code: int = EXIT_RUNTIME) -> int:
     """Print `error: message` on stderr; returns the exit code."""
     print(f"error: {message}", file=sys.stderr)
     return code
+
+
+def add_json_option(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help=f"print {what} as one JSON object on stdout, and nothing else there "
+        "(messages go to stderr); the exit codes stay the same",
+    )
+
+
+def print_json(value: Any) -> None:
+    """The result of a command run with `--json`: its only output on stdout."""
+    print(json.dumps(value, indent=2))
 
 
 def show_progress(disabled: bool, stream: TextIO | None = None) -> bool:

@@ -9,8 +9,10 @@ from typing import Any
 from server.commands.batch import add_database_options, settings_from
 from server.commands.common import (
     CommandError,
+    add_json_option,
     existing_database,
     find_study,
+    print_json,
     service_exit_code,
 )
 
@@ -29,6 +31,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--format", choices=("csv", "parquet"), default="csv", help="table format (default csv)"
     )
+    add_json_option(parser, "the folder, the format and each table file's row count")
     add_database_options(parser)
     parser.set_defaults(func=export)
 
@@ -47,6 +50,10 @@ def export(args: argparse.Namespace) -> int:
             counts = export_study(db, study_id, args.out, args.format)
         except ServiceError as error:
             raise CommandError(error.message, service_exit_code(error)) from None
+    if args.json:
+        folder = str(args.out.resolve())
+        print_json({"study_id": study_id, "folder": folder, "format": args.format, "rows": counts})
+        return 0
     for name, rows in counts.items():
         print(f"{args.out / name}: {rows} rows")
     print(f"{args.out / 'datapackage.json'}: the data package (types, units, descriptions)")

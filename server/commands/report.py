@@ -8,7 +8,14 @@ from pathlib import Path
 from typing import Any
 
 from server.commands.batch import add_database_options, settings_from
-from server.commands.common import EXIT_USAGE, existing_database, find_study, service_exit_code
+from server.commands.common import (
+    EXIT_USAGE,
+    add_json_option,
+    existing_database,
+    find_study,
+    print_json,
+    service_exit_code,
+)
 
 DESCRIPTION = """\
 Write the paper's analysis of a study's sessions into a folder: report.md with Figures 5-7
@@ -69,6 +76,7 @@ def register(subparsers: Any) -> None:
         metavar="TEXT",
         help="a line under the title (how the sessions were run, ...), repeatable",
     )
+    add_json_option(parser, "the report as the API describes it (files, R_T per method, notes)")
     add_database_options(parser)
     parser.set_defaults(func=report)
 
@@ -81,7 +89,7 @@ def _fail(message: str, code: int = EXIT_USAGE) -> int:
 def report(args: argparse.Namespace) -> int:
     from server.db.engine import make_session_factory
     from server.services.errors import ServiceError
-    from server.services.reports import ReportRequest, build_report
+    from server.services.reports import ReportRequest, build_report, describe_report
 
     try:
         sessions = _ints(args.sessions) if args.sessions else None
@@ -114,6 +122,10 @@ def report(args: argparse.Namespace) -> int:
     warnings = result.audit.warnings() if result.audit is not None else []
     for warning in warnings:
         print(f"warning: {warning}", file=sys.stderr)
+    if args.json:
+        folder = str(args.out.resolve())
+        print_json({**describe_report(study_id, built), "folder": folder, "warnings": warnings})
+        return 0
     for note in built.notes:
         if note not in warnings:
             print(f"note: {note}")

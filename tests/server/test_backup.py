@@ -1,31 +1,43 @@
 """`ideeprl backup` and `ideeprl restore`: a copy taken while a writer commits holds every
 row committed before it began and no half of anything after; it restores into a fresh data
-folder with the checkpoints its sessions refer to, moved there. A database at an older
+folder with the checkpoints its sessions refer to, moved there, and sessions backed up while
+they ran resume there to exactly the records of uninterrupted twins. A database at an older
 revision is backed up before it is migrated. Runs on PostgreSQL too (DATABASE_URL)."""
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+import shutil
+import signal
 import sqlite3
 import threading
 import time
 from collections.abc import Iterator
+from multiprocessing.process import BaseProcess
 from pathlib import Path
 
 import pytest
 from alembic import command
 from sqlalchemy import Engine, select, text
 from sqlalchemy.engine import make_url
+from sqlalchemy.orm import Session
 
 from learner.run import RunSpec
-from server.cli import main
+from server.cli import build_parser, main
 from server.db.backup import RESTORED, BackupError, backup, restore
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import alembic_config, upgrade
-from server.db.models import Status, Study, StudySession
+from server.db.models import Episode, Status, Study, StudySession
 from server.schemas.studies import StudyCreate
+from server.services import learning
+from server.services.export import export_study
 from server.services.sessions import create_session
 from server.services.studies import create_study
+from server.worker.worker import WorkerOptions, run_session
 from tests.server.live import fresh_database
+from tests.server.scale import session_body
+from tests.server.test_resume import records
 
 
 @pytest.fixture
@@ -206,3 +218,111 @@ def test_a_fresh_database_is_not_backed_up(tmp_path: Path) -> None:
     finally:
         engine.dispose()
     assert not (tmp_path / "backups").exists()
+
+
+WRITERS = {
+    "oracle": session_body("oracle", strategy="alternating", advice_budget=60, episodes=4),
+    "autonomous": session_body("autonomous", episodes=4),
+}
+"""Two machine sessions; the oracle advises all through training, so advice is rewound too."""
+
+
+def _past_checkpoint(db: Session, session_id: int) -> bool:
+    """The session has logged a training episode after its last checkpoint (not its first:
+    a resume must rewind rows, not start over)."""
+    session = db.get(StudySession, session_id)
+    assert session is not None
+    query = select(Episode.id).where(
+        Episode.session_id == session_id, Episode.last_global_step > session.checkpoint_step
+    )
+    return session.checkpoint_step > 0 and db.scalar(query.limit(1)) is not None
+
+
+def _signal(worker: BaseProcess, signum: signal.Signals) -> None:
+    assert worker.pid is not None, "started"
+    os.kill(worker.pid, signum)
+
+
+def _hold_past_checkpoints(engine: Engine, workers: dict[int, BaseProcess]) -> None:
+    """Stops (SIGSTOP) each worker once it is past a checkpoint, until all are."""
+    factory, held = make_session_factory(engine), set()
+    deadline = time.monotonic() + 120
+    while len(held) < len(workers):
+        assert time.monotonic() < deadline, "the sessions never got past a checkpoint"
+        for session_id, worker in workers.items():
+            with factory() as db:
+                status = db.scalar(select(StudySession.status).filter_by(id=session_id))
+                assert status in {"created", "running"}, f"session {session_id} ended first"
+                if session_id in held or not _past_checkpoint(db, session_id):
+                    continue
+                _signal(worker, signal.SIGSTOP)
+                if _past_checkpoint(db, session_id):  # not checkpointed again meanwhile
+                    held.add(session_id)
+                else:
+                    _signal(worker, signal.SIGCONT)
+        time.sleep(0.02)
+
+
+@pytest.mark.slow
+def test_sessions_backed_up_while_they_write_resume_to_the_records_of_uninterrupted_twins(
+    tmp_path: Path,
+) -> None:
+    """Two sessions run in worker processes, each held as soon as it has logged an episode
+    after a checkpoint; both go on and `ideeprl backup` runs at once; the workers are then
+    killed and the old installation deleted. `ideeprl restore` into a fresh folder and
+    database; both resume there (rewinding what they logged after the checkpoint) and hold
+    row for row the episodes, steps and advice of twins (the same runs, new sessions)."""
+    original, restored, saved = tmp_path / "original", tmp_path / "restored", tmp_path / "b"
+    options = WorkerOptions(data_dir=original, checkpoint_every_episodes=2, heartbeat_s=0.2)
+    spawn = multiprocessing.get_context("spawn")
+    build_parser()  # its imports (torch, seconds) now, not while the sessions run out
+    with fresh_database(original) as url:
+        engine = make_engine(url)
+        upgrade(engine)
+        with make_session_factory(engine)() as db:
+            study = create_study(db, StudyCreate(name="backed up while running")).id
+            runs = [learning.parse(body["run"]) for body in WRITERS.values()]
+            ids = [create_session(db, study, run).id for run in runs]
+        workers = {i: spawn.Process(target=run_session, args=(i, url, options)) for i in ids}
+        for worker in workers.values():
+            worker.start()
+        try:
+            _hold_past_checkpoints(engine, workers)
+            for worker in workers.values():
+                _signal(worker, signal.SIGCONT)
+            args = ["backup", "--out", str(saved), "--data-dir", str(original)]
+            assert main([*args, "--database-url", url]) == 0
+        finally:
+            for worker in workers.values():
+                worker.kill()
+                worker.join(30)
+            engine.dispose()
+    shutil.rmtree(original)  # the restored installation needs nothing of the old one
+
+    with fresh_database(restored) as url:
+        args = ["restore", str(saved), "--data-dir", str(restored)]
+        assert main([*args, "--database-url", url]) == 0
+        engine = make_engine(url)
+        factory = make_session_factory(engine)
+        try:
+            with factory() as db:
+                for session_id in ids:  # the copy is of sessions running, past a checkpoint
+                    assert _past_checkpoint(db, session_id)
+                    status = db.scalar(select(StudySession.status).filter_by(id=session_id))
+                    assert status == "interrupted"
+                twins = [create_session(db, study, run).id for run in runs]
+            options = WorkerOptions(data_dir=restored, checkpoint_every_episodes=2)
+            for session_id in [*ids, *twins]:
+                assert run_session(session_id, url, options) == "finished", session_id
+            with factory() as db:
+                counts = export_study(db, study, tmp_path / "export")
+            files = {name: (tmp_path / "export" / name).read_bytes() for name in counts}
+        finally:
+            engine.dispose()
+    for method, run, resumed, twin in zip(WRITERS, runs, ids, twins, strict=True):
+        got, want = records(files, resumed), records(files, twin)
+        trained = [e for e in got["episodes.csv"] if e["phase"] == "train"]
+        assert len(trained) == run.config.episodes, method
+        assert len(got["advice.csv"]) == (60 if method == "oracle" else 0), method
+        for name in got:
+            assert got[name] == want[name], (method, name)

@@ -5,6 +5,7 @@ find the data folder as `serve` does and never create an empty database."""
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import struct
 import subprocess
@@ -21,6 +22,7 @@ from server.commands.common import show_progress
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.schemas.studies import StudyCreate
+from server.services.export import TABLES
 from server.services.studies import create_study
 
 ROOT = Path(__file__).absolute().parents[2]
@@ -120,6 +122,32 @@ def test_unknown_studies_are_runtime_errors_and_bad_options_usage_errors(
         main(["export", "--no-such-option"])
     assert stopped.value.code == 2
     assert not Path(out).exists()
+
+
+def test_json_output_is_all_of_stdout_and_keeps_the_exit_codes(
+    data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Scripts parse stdout: with --json it is one JSON object (nothing else writes there,
+    not even a library in the process), or nothing on an error."""
+    flags = ["--data-dir", str(data_dir), "--json"]
+    out = tmp_path / "out"
+    done = ideeprl("export", "--study", "pilot study", "--out", str(out), *flags, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    printed = json.loads(done.stdout)
+    assert printed == {
+        "study_id": 1,
+        "folder": str(out.resolve()),
+        "format": "csv",
+        "rows": {f"{table}.csv": 0 for table in TABLES},
+    }
+    assert main(["export", "--study", "no such study", "--out", str(out), *flags]) == 1
+    captured = capsys.readouterr()
+    assert captured.out == "" and "error: no study with name no such study" in captured.err
+    assert main(["report", "--study", "pilot study", "--out", str(out), *flags]) == 1
+    captured = capsys.readouterr()
+    assert captured.out == "" and "no finished sessions" in captured.err
+    assert main(["report", "--study", "1", "--n-episodes", "0", "--out", str(out), *flags]) == 2
+    assert capsys.readouterr().out == ""
 
 
 class FakeTerminal:

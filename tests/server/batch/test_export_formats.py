@@ -116,6 +116,21 @@ def test_parquet_carries_the_same_rows_with_the_declared_types(
                 assert frame[name].tolist() == expected[name].astype(object).tolist(), name
 
 
+def test_json_names_the_folder_and_each_tables_row_count(
+    place: Place, baselines: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    parquet = pytest.importorskip("pyarrow.parquet")
+    out = tmp_path / "scripted"
+    capsys.readouterr()
+    flags = ["--format", "parquet", "--json", *place.flags]
+    assert main(["export", "--study", "baselines", "--out", str(out), *flags]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert (printed["folder"], printed["format"]) == (str(out.resolve()), "parquet")
+    files = {name: parquet.read_metadata(out / name).num_rows for name in printed["rows"]}
+    assert printed["rows"] == files and files["sessions.parquet"] == 5
+    assert files["steps.parquet"] > files["episodes.parquet"] > 0
+
+
 def test_an_episode_replays_from_its_exported_seed_and_actions(csv_export: Path) -> None:
     typed = tables(csv_export)
     sessions = typed["sessions"].set_index("session_id")

@@ -3,10 +3,12 @@ and the report written from them."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
+from server.cli import main
 from tests.server.batch.conftest import BASELINES
 from tests.server.batch.helpers import (
     ADVICE,
@@ -96,6 +98,26 @@ def test_report_tables_match_the_database(
     report = (out / "report.md").read_text()
     assert f"Left out session(s) {advisor.id}" in report and "- pilot run" in report
     assert "![Figure 5" in report and "figure7_correlation.png" in report
+
+
+def test_report_json_is_the_apis_description_of_it(
+    place: Place, baselines: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`--json`: stdout is the report's description alone (files, R_T per method, notes)."""
+    engine = place.engine()
+    study = study_id(engine, "baselines")
+    out = tmp_path / "scripted"
+    capsys.readouterr()
+    args = ["report", "--study", "baselines", "--out", str(out), "--json"]
+    assert main([*args, *place.flags]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["folder"] == str(out.resolve()) and printed["study_id"] == study
+    assert {f["name"] for f in printed["files"]} == {p.name for p in out.glob("*.*")}
+    methods = {r["method"]: float(r["R_T"]) for r in read_csv(out / "r_t_per_method.csv")}
+    assert {m["method"]: m["R_T"] for m in printed["methods"]} == pytest.approx(methods)
+    assert printed["baseline"] == "autonomous" and printed["warnings"] == []
+    advisor = next(s.id for s in sessions(engine, study) if s.label.endswith("advisor"))
+    assert any(f"Left out session(s) {advisor}" in note for note in printed["notes"])
 
 
 def test_the_same_command_again_runs_nothing(
