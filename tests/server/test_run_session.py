@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 from sqlalchemy import func, select
 
+from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
 from server.db.models import Episode, Step, StudySession
-from server.schemas.sessions import SessionCreate
 from server.schemas.studies import StudyCreate
 from server.services.errors import Conflict
 from server.services.sessions import create_session
@@ -31,10 +31,10 @@ def test_run_session_runs_a_session_to_its_end_in_this_process(tmp_path: Path) -
         with factory() as db:
             study = create_study(db, StudyCreate(name="batch"))
             session = create_session(
-                db, study.id, SessionCreate(**session_body("oracle", advice_budget=10))
+                db, study.id, RunSpec.from_json(session_body("oracle", advice_budget=10)["run"])
             )
             human = create_session(
-                db, study.id, SessionCreate(**session_body("human", advice_budget=5))
+                db, study.id, RunSpec.from_json(session_body("human", advice_budget=5)["run"])
             )
         options = WorkerOptions(data_dir=tmp_path, checkpoint_every_episodes=1)
 
