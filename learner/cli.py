@@ -19,7 +19,6 @@ from typing import Any
 
 from tqdm import tqdm
 
-from learner.checkpoint import read_checkpoint
 from learner.config import DQNConfig
 from learner.fields import FieldError, given_arguments, leaves, nest, parse_text
 from learner.fields import add_arguments as add_spec_arguments
@@ -184,6 +183,8 @@ def run_spec(args: argparse.Namespace) -> tuple[RunSpec, dict[str, Any] | None]:
     spec_class: type[RunSpec] = getattr(args, "spec_class", RunSpec)
     values = given_values(args, spec_class)
     if args.resume:
+        from learner.checkpoint import read_checkpoint  # torch: only when resuming
+
         state = read_checkpoint(args.resume)
         settings = dict(state["metadata"])
         if "advisor" not in settings and "method" not in settings:

@@ -24,3 +24,13 @@ def test_light_names_import_without_torch() -> None:
 
 def test_the_trainer_brings_torch() -> None:
     assert run("import sys; from learner import Trainer; print('torch' in sys.modules)") == "True"
+
+
+def test_the_command_line_parses_without_torch() -> None:
+    """`ideeprl --help`, `backup`, `export` start at once: making the parser (every run field
+    a flag) loads neither torch nor the simulator."""
+    code = (
+        "import sys; from server.cli import build_parser; build_parser(); "
+        "print(any(m in sys.modules for m in ('torch', 'pybullet')))"
+    )
+    assert run(code) == "False"
