@@ -256,15 +256,24 @@ def check(leaf: Leaf, value: Any) -> Any:
                 isinstance(k, str) and isinstance(v, str) for k, v in value.items()
             ):
                 raise problem
+            for text in [value] if isinstance(value, str) else [*value, *value.values()]:
+                _storable(leaf, text)
             return value if isinstance(value, str) else dict(value)
         raise problem
     if not isinstance(value, str) or (leaf.max_length and len(value) > leaf.max_length):
         raise problem
-    if "\x00" in value or any(0xD800 <= ord(c) <= 0xDFFF for c in value):
-        raise FieldError(leaf.dotted, f"{leaf.dotted} must not hold NUL or unpaired surrogates")
+    _storable(leaf, value)
     if leaf.pattern and not re.fullmatch(leaf.pattern, value):
         raise problem
     return value
+
+
+def _storable(leaf: Leaf, text: str) -> None:
+    """Text every database stores: no NUL (PostgreSQL refuses it), no lone surrogate."""
+    if "\x00" in text:
+        raise FieldError(leaf.dotted, f"{leaf.dotted} must not hold a NUL character")
+    if any(0xD800 <= ord(c) <= 0xDFFF for c in text):
+        raise FieldError(leaf.dotted, f"{leaf.dotted} must not hold a lone surrogate")
 
 
 def check_object(obj: Any) -> None:

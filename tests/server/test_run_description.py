@@ -255,3 +255,25 @@ def test_every_numeric_field_refuses_what_it_does_not_allow(server, api) -> None
             assert "9999999999" not in response.text and '"12"' not in response.text, where
     assert tried >= 7 * len(NUMBERS)
     assert api.get(f"/api/studies/{study}/sessions").json() == []  # nothing was stored
+
+
+MAP_RULE = ";".join(
+    f"{shape}/{color}={'left' if color == 'red' else 'right'}"
+    for shape in ("cube", "cylinder", "disk")
+    for color in ("red", "blue")
+)
+"""A map sort rule as the export writes it (98 characters)."""
+
+
+def test_a_map_sort_rule_goes_back_as_the_export_wrote_it(api, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    study = api.post("/api/studies", json={"name": "map rule"}).json()["id"]
+    made = api.post(f"/api/studies/{study}/sessions", json={"run": {"sort_rule": MAP_RULE}})
+    assert made.status_code == 201, made.text
+    assert made.json()["run"]["sort_rule"]["disk/blue"] == "right"
+    args = build_parser().parse_args(
+        ["batch", "--study", "map", "--sort-rule", MAP_RULE, "--methods", "autonomous"]
+    )
+    assert (
+        batch_command.spec_from(args).template.normalized().sort_rule
+        == made.json()["run"]["sort_rule"]
+    )

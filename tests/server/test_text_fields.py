@@ -124,3 +124,20 @@ def test_the_dashboard_refuses_nul_in_a_new_study(server: LiveServer) -> None:
         response = browser.post("/dashboard/api/studies", content=body, headers=headers)
         assert response.status_code == 422, response.text
         assert SECRET not in response.text
+
+
+@pytest.mark.parametrize("value", [NUL, SURROGATE], ids=["nul", "surrogate"])
+def test_a_session_refuses_text_a_database_cannot_store_naming_the_field(
+    api: httpx.Client, study: int, value: str
+) -> None:
+    cases = [
+        (f'{{"run": {{}}, "label": {value}}}', ["body", "label"]),
+        (f'{{"run": {{"method": "human"}}, "participant": {value}}}', ["body", "participant"]),
+        (f'{{"run": {{"sort_rule": {value}}}}}', ["body", "run", "sort_rule"]),
+        (f'{{"run": {{"method": "agent", "advisor_checkpoint": {value}}}}}',
+         ["body", "run", "advisor_checkpoint"]),
+    ]  # fmt: skip
+    for body, loc in cases:
+        message = _refused(_post(api, "POST", f"/api/studies/{study}/sessions", body), loc)
+        assert ("NUL" if value == NUL else "surrogate") in message, message
+    assert api.get(f"/api/studies/{study}/sessions").json() == []

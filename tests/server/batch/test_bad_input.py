@@ -7,9 +7,11 @@ import json
 from pathlib import Path
 
 import pytest
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from server.db.migrate import upgrade
+from server.db.models import Study
 from server.schemas.studies import StudyCreate
 from server.services.studies import create_study
 from tests.server.batch.helpers import SCALE, Place, sessions
@@ -50,6 +52,9 @@ def test_bad_batch_options_are_refused_with_a_reason(
 ) -> None:
     code, out = run(place, capsys, "batch", "--study", "refused", *SCALE, *args)
     assert code == 2 and f"error: {message}" in out.replace("\n", " ")
+    upgrade(place.engine())
+    with Session(place.engine()) as db:  # refused before anything was written
+        assert db.scalar(select(Study).where(Study.name == "refused")) is None
 
 
 def test_an_unknown_study_id_is_named_and_nothing_runs(
