@@ -34,6 +34,7 @@ LABELS: dict[str, str] = {
     "reward_scheme": "reward scheme",
     "motion": "motion mode",
     "sort_rule": "sorting rule",
+    "cpu_kind": "CPU kind",
 }
 """A setting's name in words, where it is not its column's with spaces."""
 

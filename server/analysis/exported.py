@@ -71,7 +71,7 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
         runs=runs,
         episodes=training[list(EPISODE_TABLE_COLUMNS)].reset_index(drop=True),
         steps=steps[list(STEP_COLUMNS)].reset_index(drop=True),
-        settings=settings_table(sorted(runs.items()), spec_class),
+        settings=settings_table(sorted(runs.items()), spec_class, _provenance(sessions)),
     )
 
 
@@ -92,6 +92,16 @@ def run_of(row: Mapping[str, Any], spec_class: type[RunSpec] = RunSpec) -> RunSp
         return spec_class.from_json(nest(values, spec_class))
     except (FieldError, json.JSONDecodeError) as error:
         raise ExportError(f"session {row.get('session_id')}: {error}") from None
+
+
+def _provenance(sessions: pd.DataFrame) -> dict[int, list[Any]] | None:
+    """Each session's provenance records (None for an export written before they were)."""
+    if "provenance" not in sessions:
+        return None
+    return {
+        int(row["session_id"]): [] if _missing(row["provenance"]) else json.loads(row["provenance"])
+        for row in _rows(sessions)
+    }
 
 
 def _table(folder: Path, name: str) -> pd.DataFrame:

@@ -10,7 +10,7 @@ database (`server.services.episodes.session_settings`) and from an export
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import pandas as pd
@@ -21,11 +21,19 @@ from learner.fields import leaves
 from learner.run import RunSpec
 from server.analysis.audit import describe_learner
 
+PROVENANCE = {"code_version": "code", "cpu_kind": "cpu", "torch_version": "torch"}
+"""The provenance the audit compares (`learner.provenance.record`): its column, and the
+record's key. Arms computed by other code, on another CPU kind or torch are flagged."""
+
 
 def settings_table(
-    runs: Sequence[tuple[int, RunSpec]], spec_class: type[RunSpec] = RunSpec
+    runs: Sequence[tuple[int, RunSpec]],
+    spec_class: type[RunSpec] = RunSpec,
+    provenance: Mapping[int, Sequence[Mapping[str, Any]]] | None = None,
 ) -> pd.DataFrame:
-    """The audit's table for `(session_id, run)` pairs."""
+    """The audit's table for `(session_id, run)` pairs; with `provenance` (each session's
+    records of where it was computed) also the code version, CPU kind and torch version
+    (several joined by ' + ' when a run was resumed elsewhere)."""
     presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
     settings = [
         leaf
@@ -48,6 +56,14 @@ def settings_table(
                 "method": spec.method,
                 "learner": learner,
                 **{leaf.name: _text(values[leaf.name]) for leaf in settings},
+                **(
+                    {}
+                    if provenance is None
+                    else {
+                        column: where(provenance.get(session_id, ()), key)
+                        for column, key in PROVENANCE.items()
+                    }
+                ),
                 "advice": "none"
                 if not spec.advised
                 else f"{spec.strategy}{_options(spec.strategy_options.given())}, "
@@ -55,6 +71,13 @@ def settings_table(
             }
         )
     return pd.DataFrame(rows)
+
+
+def where(records: Sequence[Mapping[str, Any]], key: str) -> str:
+    """One provenance value of a run: its records' distinct values, in order, joined by
+    ' + ' ('not recorded' for a run stored before provenance was)."""
+    seen = list(dict.fromkeys(str(r.get(key)) for r in records))
+    return " + ".join(seen) if seen else "not recorded"
 
 
 def _text(value: Any) -> Any:

@@ -147,6 +147,10 @@ class StudySession(Base):
     run: Mapped[dict[str, Any]] = mapped_column()
     """The run, described once: `learner.run.RunSpec.to_json()` (versioned, every field
     spelled out, numerics pinned when the session was created); `spec` reads it back."""
+    provenance: Mapped[list[Any]] = mapped_column(default=list)
+    """Where the run was computed, one entry each time a worker started or resumed it
+    (`learner.provenance.record`: code version, commit, CPU kind, torch, numerics, and the
+    step it started from); empty for a run that never started, or stored before 0009."""
     numerics_overrides: Mapped[list[Any]] = mapped_column(default=list)
     """Resumes that overrode the pinned numerics (each: when, at which step, from what to
     what, and why); empty for a run computed as it was pinned throughout."""

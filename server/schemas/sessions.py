@@ -109,6 +109,11 @@ class SessionPublic(BaseModel):
         default_factory=list,
         description="Resumes that overrode the run's pinned numerics, each recorded.",
     )
+    provenance: list[Any] = Field(
+        default_factory=list,
+        description="Where the run was computed, one entry per start or resume: code version "
+        "(a hash of sim/ and learner/), commit, CPU kind, torch and Python versions, numerics.",
+    )
     idle_limit_s: float | None
     keep_replay_memory: bool | None = None
     participant: str | None = None

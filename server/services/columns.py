@@ -46,6 +46,16 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
         "Resumes that overrode the run's pinned numerics (JSON list: when, at which step, "
         "from what, to what, why); empty when the run was computed as pinned throughout.",
     ),
+    "code_version": (
+        "string",
+        "Version of the code that computed the run (learner.provenance: a hash of sim/ and "
+        "learner/), several joined by ' + ' when it was resumed by other code.",
+    ),
+    "provenance": (
+        "string",
+        "Where the run was computed (JSON list, one entry per start or resume: code version, "
+        "commit, CPU kind, torch and Python versions, numerics, and the step it started from).",
+    ),
     "run_spec": (
         "string",
         "The whole run as stored (learner.run.RunSpec's JSON document, with its version): "

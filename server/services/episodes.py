@@ -61,4 +61,5 @@ def session_settings(
 ) -> pd.DataFrame:
     """What each session ran under, for the report's comparability audit
     (`server.analysis.settings.settings_table` of their runs)."""
-    return settings_table([(s.id, learning.spec_of(s, spec_class)) for s in sessions], spec_class)
+    runs = [(s.id, learning.spec_of(s, spec_class)) for s in sessions]
+    return settings_table(runs, spec_class, {s.id: s.provenance for s in sessions})

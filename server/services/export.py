@@ -27,6 +27,7 @@ from sqlalchemy.orm import Session
 
 from learner.fields import leaves
 from learner.run import RunSpec
+from server.analysis.settings import where
 from server.db.models import Advice, Episode, Step, StudySession, StudyTexts
 from server.services import learning
 from server.services.columns import TEXT_KEYS, table_columns
@@ -87,6 +88,8 @@ def _session_rows(
             "numerics_overrides": json.dumps(s.numerics_overrides)
             if s.numerics_overrides
             else None,
+            "code_version": where(s.provenance, "code") if s.provenance else None,
+            "provenance": json.dumps(s.provenance) if s.provenance else None,
             "run_spec": json.dumps(s.run, sort_keys=True),
         }
 

@@ -91,6 +91,7 @@ def create_session(
         label=options.label,
         run=spec.to_json(),
         numerics_overrides=[],
+        provenance=[],
         keep_replay_memory=options.keep_replay_memory,
         idle_limit_s=options.idle_limit_s,
     )

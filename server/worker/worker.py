@@ -21,6 +21,7 @@ from typing import Any
 
 from sqlalchemy import select, update
 
+from learner import provenance
 from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
 from server.db.models import Advice, Method, Status, StudySession, utcnow
@@ -116,10 +117,20 @@ class _Run:
                 for a in db.scalars(select(Advice).where(Advice.session_id == session_id))
                 if self.session.method == Method.human
             }
+            run = learning.spec_of(self.session, options.spec_class)
+            here = {  # where the run is computed from here on (the report audits it)
+                **provenance.record(run.config),
+                "at": utcnow().isoformat(),
+                "from_step": self.session.checkpoint_step,
+            }
             db.execute(
                 update(StudySession)
                 .where(StudySession.id == session_id, StudySession.worker_token == token)
-                .values(worker_pid=os.getpid(), heartbeat_at=utcnow())
+                .values(
+                    worker_pid=os.getpid(),
+                    heartbeat_at=utcnow(),
+                    provenance=[*self.session.provenance, here],
+                )
             )
             db.commit()
         s = self.session

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from sqlalchemy.orm import Session
 
-from learner import machine
+from learner import machine, provenance
 from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import upgrade
@@ -81,6 +81,10 @@ def test_a_resume_the_machine_cannot_honour_is_refused_or_overridden_and_recorde
 
         (row,) = list(csv.DictReader(f))
     assert json.loads(row["numerics_overrides"])[0]["to"]["precision"] == "fp32"
+    [computed] = json.loads(row["provenance"])  # the refused start computed nothing
+    assert row["code_version"] == computed["code"] == provenance.code_version()
+    assert computed["cpu"] == machine.cpu_kind() and computed["from_step"] == 0
+    assert computed["numerics"]["precision"] == "fp32"
 
 
 def test_ideeprl_train_refuses_to_resume_on_other_numerics(
