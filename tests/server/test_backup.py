@@ -321,7 +321,7 @@ def test_sessions_backed_up_while_they_write_resume_to_the_records_of_uninterrup
             engine.dispose()
     for method, run, resumed, twin in zip(WRITERS, runs, ids, twins, strict=True):
         got, want = records(files, resumed), records(files, twin)
-        trained = [e for e in got["episodes.csv"] if e["phase"] == "train"]
+        trained = [e for e in got["episodes.csv"] if e["stage"] == "train"]
         assert len(trained) == run.config.episodes, method
         assert len(got["advice.csv"]) == (60 if method == "oracle" else 0), method
         for name in got:
