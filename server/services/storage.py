@@ -84,11 +84,12 @@ def _advised_by(db: Session, sessions: list[StudySession]) -> list[int]:
     if not paths:
         return []
     ids = {s.id for s in sessions}
-    query = select(StudySession.id).where(
-        StudySession.advisor_checkpoint.in_(paths),
-        StudySession.status != Status.finished.value,
-    )
-    return [i for i in db.scalars(query) if i not in ids]
+    query = select(StudySession).where(StudySession.status != Status.finished.value)
+    return [
+        s.id
+        for s in db.scalars(query)
+        if s.id not in ids and s.run.get("advisor_checkpoint") in paths
+    ]
 
 
 def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool) -> None:

@@ -165,13 +165,13 @@ def test_advisor_checkpoints_are_sessions_of_this_installation_or_files_under_it
             json=session_body("agent", advisor_checkpoint=spec, advice_budget=10),
         )
         assert response.status_code == 422, (spec, response.text)
-        assert response.json()["detail"][0]["loc"] == ["body", "advisor_checkpoint"]
-    advisor = _finished(api, study, method="autonomous", advice_budget=None)
+        assert response.json()["detail"][0]["loc"] == ["body", "run", "advisor_checkpoint"]
+    advisor = _finished(api, study, method="autonomous")
     by_session = _finished(
         api, study, method="agent", advisor_checkpoint=f"session:{advisor['id']}"
     )
     final = (_checkpoints(server, advisor["id"]) / "final.pt").resolve()
-    assert Path(by_session["advisor_checkpoint"]) == final
+    assert Path(by_session["run"]["advisor_checkpoint"]) == final
     by_path = api.post(
         f"/api/studies/{study}/sessions",
         json=session_body("agent", advisor_checkpoint=str(final), advice_budget=10),
@@ -188,9 +188,9 @@ def test_a_paper_scale_final_checkpoint_is_small_and_still_advises(
     final checkpoint's size does not depend on how long the run was once the memory is
     left out."""
     study = api.post("/api/studies", json={"name": f"paper-{uuid.uuid4().hex}"}).json()["id"]
-    paper = {"config": {"pretraining_steps": 200}, "max_episode_steps": 30, "episodes": 1}
-    body = {"method": "autonomous", "seed": 3, "motion": "fast", **paper}
-    advisor = api.post(f"/api/studies/{study}/sessions", json=body).json()
+    config = {"pretraining_steps": 200, "max_episode_steps": 30, "episodes": 1}
+    run = {"method": "autonomous", "seed": 3, "motion": "fast", "config": config}
+    advisor = api.post(f"/api/studies/{study}/sessions", json={"run": run}).json()
     api.post(f"/api/sessions/{advisor['id']}/start")
     wait_for_status(api, advisor["id"], {"finished"})
     final = _checkpoints(server, advisor["id"]) / "final.pt"
@@ -199,8 +199,9 @@ def test_a_paper_scale_final_checkpoint_is_small_and_still_advises(
     assert state["config"]["memory_size"] == 20_000 and state["memory"] is None
     print(f"\npaper-scale final checkpoint without the replay memory: {size} bytes")
     assert size < 5_000_000, f"{size} bytes"
-    body = {**body, "method": "agent", "advisor_checkpoint": f"session:{advisor['id']}"}
-    agent = api.post(f"/api/studies/{study}/sessions", json=body | {"advice_budget": 100}).json()
+    run = {**run, "method": "agent", "advisor_checkpoint": f"session:{advisor['id']}"}
+    run["config"] = {**config, "advice_budget": 100}
+    agent = api.post(f"/api/studies/{study}/sessions", json={"run": run}).json()
     api.post(f"/api/sessions/{agent['id']}/start")
     trained = wait_for_status(api, agent["id"], {"finished"})
     advice = api.get(f"/api/sessions/{trained['id']}/advice").json()
