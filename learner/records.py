@@ -36,6 +36,7 @@ def stage_of(text: str) -> Stage:
 
 
 ActionSource = Literal["random", "advisor", "greedy", "exploration"]
+Outcome = Literal["placed", "misplaced", "lost", "none"]
 
 
 @dataclass(frozen=True)
@@ -79,6 +80,11 @@ class StepRecord:
     truncated: bool
     """The episode was cut without a terminal state: the step limit, or the end of
     pretraining."""
+    outcome: Outcome
+    """What the step did to the objects: `placed` (one where it belongs), `misplaced` (one
+    on the wrong side), `lost` (one knocked off the center table) or `none`. Rescoring
+    under another reward scheme keeps the rewards of placements only (empty in logs
+    recorded before it was kept, until `ideeprl outcomes` replays them)."""
     epsilon: float
     """Exploration rate used to choose this step's action."""
     loss: float | None

@@ -30,6 +30,7 @@ import numpy as np
 
 from learner.config import DQNConfig
 from learner.records import EpisodeRecord, StagedRun, StepRecord, stage_of
+from sim.rewards import step_outcome
 
 METHOD = "sb3-dqn"
 PREFIX = "sb3_"
@@ -276,6 +277,7 @@ class SB3DQNTrainer(StagedRun):
             reward=reward,
             terminated=terminated,
             truncated=truncated,
+            outcome=step_outcome(episode.info, info),  # type: ignore[arg-type]
             epsilon=epsilon,
             loss=loss,
         )

@@ -30,6 +30,7 @@ from learner.exploration import EpsilonSchedule
 from learner.records import EpisodeRecord, StagedRun, StepRecord, stage_of
 from learner.replay import ReplayMemory
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
+from sim.rewards import step_outcome
 
 N_ACTIONS = 4
 RUNTIME_FIELDS = ("device", "torch_threads", "precision", "episodes")
@@ -225,6 +226,7 @@ class Trainer(StagedRun):
             reward=step.reward,
             terminated=step.terminated,
             truncated=step.truncated,
+            outcome=step_outcome(episode.info, step.info),  # type: ignore[arg-type]
             epsilon=step.epsilon,
             loss=loss,
         )

@@ -7,7 +7,7 @@ the two methods the paper compares differently, and the paper's R_T compares tho
 accountings (shared/reference/README.md); a study that reproduces them names the scheme.
 """
 
-from typing import Literal
+from typing import Any, Literal
 
 RewardScheme = Literal["paper", "authors-autonomous", "authors-interactive"]
 REWARD_SCHEMES: tuple[RewardScheme, ...] = ("paper", "authors-autonomous", "authors-interactive")
@@ -59,6 +59,22 @@ def check_reward_scheme(scheme: object) -> str:
     return scheme  # type: ignore[return-value]
 
 
+OUTCOMES = ("placed", "misplaced", "lost", "none")
+"""What a step did to the objects: placed one where it belongs, placed one on the wrong
+side, lost one (knocked off the center table), or none of these."""
+COUNTS = {"placed": "placed_correct", "misplaced": "misplaced", "lost": "lost"}
+"""Each outcome's counter in the environment's `info`."""
+
+
+def step_outcome(before: dict[str, Any], after: dict[str, Any]) -> str:
+    """The outcome of the step between two `info`s of one episode (`OUTCOMES`). A step does
+    at most one of them: a grab may lose an object, a drop places one."""
+    for outcome, count in COUNTS.items():
+        if int(after.get(count, 0)) > int(before.get(count, 0)):
+            return outcome
+    return "none"
+
+
 def is_placement(reward: float, terminated: bool, scheme: str, episode_step: int) -> bool:
     """Whether a logged step placed an object, from its reward under the scheme it was
     scored with: a placement's reward is never the scheme's step cost, except a wrong
@@ -67,12 +83,28 @@ def is_placement(reward: float, terminated: bool, scheme: str, episode_step: int
 
 
 def rescore(
-    rewards: list[float], terminated: list[bool], scheme: str, to_scheme: str
+    rewards: list[float],
+    terminated: list[bool],
+    scheme: str,
+    to_scheme: str,
+    outcomes: list[str | None] | None = None,
 ) -> list[float]:
     """One episode's logged rewards (scored under `scheme`) as `to_scheme` scores them:
-    the placements keep their reward, every other step costs what `to_scheme` says."""
+    the placements keep their reward, every other step costs what `to_scheme` says.
+
+    With the steps' `outcomes` (what each did: `OUTCOMES`) a placement is
+    a step that placed an object, right or wrong; without them it is read from the reward
+    (`is_placement`), which cannot tell an episode that ended because its last object was
+    lost from one that ended by a placement, nor, under `authors-autonomous`, a 119th step's
+    -1 cost from a wrong placement's -1."""
     check_reward_scheme(to_scheme)
+    steps = enumerate(zip(rewards, terminated, strict=True), start=1)
+    if outcomes is None:
+        return [
+            reward if is_placement(reward, ended, scheme, n) else step_penalty(to_scheme, n)
+            for n, (reward, ended) in steps
+        ]
     return [
-        reward if is_placement(reward, ended, scheme, n) else step_penalty(to_scheme, n)
-        for n, (reward, ended) in enumerate(zip(rewards, terminated, strict=True), start=1)
+        reward if outcome in ("placed", "misplaced") else step_penalty(to_scheme, n)
+        for (n, (reward, _)), outcome in zip(steps, outcomes, strict=True)
     ]

@@ -46,7 +46,8 @@ class Exported:
     episodes: pd.DataFrame
     """Training episodes, `EPISODE_TABLE_COLUMNS`."""
     steps: pd.DataFrame
-    """Training steps, `server.analysis.rescoring.STEP_COLUMNS`."""
+    """Training steps, `server.analysis.rescoring.STEP_COLUMNS` (and `outcome` when the
+    export has it)."""
     settings: pd.DataFrame
     """The audit's settings table (`server.analysis.settings`)."""
 
@@ -70,7 +71,9 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
     return Exported(
         runs=runs,
         episodes=training[list(EPISODE_TABLE_COLUMNS)].reset_index(drop=True),
-        steps=steps[list(STEP_COLUMNS)].reset_index(drop=True),
+        steps=steps[[*STEP_COLUMNS, *(["outcome"] if "outcome" in steps else [])]].reset_index(
+            drop=True
+        ),
         settings=settings_table(sorted(runs.items()), spec_class, _provenance(sessions)),
     )
 

@@ -528,7 +528,12 @@ def write_report(
     }
 
     report = out / REPORT_FILE
-    extra = _Extras(checked, rescored, tables.get("reference"), allow_mismatch)
+    by_outcomes = (
+        None
+        if rescored_agents is None
+        else (int(rescored_agents["by_outcomes"].sum()), len(rescored_agents))
+    )
+    extra = _Extras(checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes)
     report.write_text(
         _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra),
         encoding="utf-8",
@@ -548,6 +553,22 @@ class _Extras:
     rescored: pd.DataFrame | None
     reference: pd.DataFrame | None
     allow_mismatch: bool
+    by_outcomes: tuple[int, int] | None = None
+    """Sessions rescored by their steps' outcomes, of all rescored."""
+
+
+def _outcomes_note(by_outcomes: tuple[int, int] | None) -> str:
+    """Which sessions' placements come from their steps' outcomes, and which from rewards."""
+    if by_outcomes is None:
+        return ""
+    known, total = by_outcomes
+    if known == total:
+        return " A placement is a step that placed an object (the steps' recorded outcomes)."
+    return (
+        f" {known} of {total} sessions are rescored by their steps' recorded outcomes; the "
+        "others (logged before outcomes were kept) by their rewards, which count an episode "
+        "ended by a lost object as a placement (`ideeprl outcomes --study ID` replays them)."
+    )
 
 
 def _withhold_tests(analysis: Analysis, checked: Audit, allow_mismatch: bool) -> Analysis:
@@ -616,7 +637,7 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
             "",
             "The same logged behaviour scored under each accounting: a placement keeps its "
             "reward, every other step costs what the scheme says (`sim.rewards`). Compare "
-            "methods within one column.",
+            "methods within one column." + _outcomes_note(extra.by_outcomes),
             "",
             md.table(extra.rescored, columns, formats),  # type: ignore[arg-type]
             "",

@@ -23,7 +23,9 @@ STEP_COLUMNS: tuple[str, ...] = (
     "terminated",
 )
 """One row per training step (episode 1..N within the session, `episode_step` from 1, every
-step of each episode present: a step's cost depends on its number in the episode)."""
+step of each episode present: a step's cost depends on its number in the episode), and an
+optional `outcome` (`sim.rewards.OUTCOMES`; missing in logs recorded before it was kept):
+an episode whose steps all have one is rescored by them, else by its rewards."""
 
 
 def rescored_totals(
@@ -45,15 +47,27 @@ def rescored_totals(
             "R_T_logged": float(group["reward"].sum()),
         }
         episodes = [
-            ([float(r) for r in e["reward"]], [bool(t) for t in e["terminated"]])
+            ([float(r) for r in e["reward"]], [bool(t) for t in e["terminated"]], _outcomes(e))
             for _, e in group.groupby("episode", sort=True)
         ]
+        row["by_outcomes"] = all(outcomes is not None for _, _, outcomes in episodes)
         for target in REWARD_SCHEMES:
             row[f"R_T_{target}"] = sum(
-                sum(rescore(rewards, ended, scheme, target)) for rewards, ended in episodes
+                sum(rescore(rewards, ended, scheme, target, outcomes))
+                for rewards, ended, outcomes in episodes
             )
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _outcomes(episode: pd.DataFrame) -> list[str | None] | None:
+    """The episode's step outcomes, or None when any is unknown (an older log)."""
+    if "outcome" not in episode:
+        return None
+    values = list(episode["outcome"])
+    if any(v is None or (isinstance(v, float) and v != v) for v in values):
+        return None
+    return [str(v) for v in values]
 
 
 def rescoring_table(

@@ -232,6 +232,9 @@ class Step(Base):
     reward: Mapped[float] = mapped_column(Float)
     terminated: Mapped[bool] = mapped_column()
     truncated: Mapped[bool] = mapped_column()
+    outcome: Mapped[str | None] = mapped_column(String(10))
+    """`placed`, `misplaced`, `lost` or `none`; NULL (unknown) in rows stored before 0010
+    whose episodes were not replayed yet (`server.services.outcomes`)."""
     epsilon: Mapped[float] = mapped_column(Float)
     loss: Mapped[float | None] = mapped_column(Float)
     wall_time: Mapped[float] = mapped_column(Float)

@@ -49,11 +49,19 @@ def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
 def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
     """The training steps of these sessions (`server.analysis.rescoring.STEP_COLUMNS`)."""
     query = (
-        select(Step.session_id, Step.episode, Step.episode_step, Step.reward, Step.terminated)
+        select(
+            Step.session_id,
+            Step.episode,
+            Step.episode_step,
+            Step.reward,
+            Step.terminated,
+            Step.outcome,
+        )
         .where(Step.session_id.in_(list(session_ids)), Step.stage == TRAINING)
         .order_by(Step.session_id, Step.global_step)
     )
-    return pd.DataFrame([tuple(row) for row in db.execute(query)], columns=list(STEP_COLUMNS))
+    rows = [tuple(row) for row in db.execute(query)]
+    return pd.DataFrame(rows, columns=[*STEP_COLUMNS, "outcome"])
 
 
 def session_settings(

@@ -144,3 +144,24 @@ def test_the_environment_must_be_the_papers(make_env) -> None:
     env.action_space = gym.spaces.Discrete(5)
     with pytest.raises(ValueError, match="Discrete"):
         Trainer(env, small_config())
+
+
+def test_every_step_records_what_it_did_to_the_objects(make_env) -> None:
+    """The steps' outcomes add up to their episode's counts, realism on, so all three
+    happen: placements, wrong placements and objects knocked off."""
+    from learner import make_advisor
+
+    recorder = Recorder()
+    env = make_env(knock_off_rate=0.3)
+    trainer = Trainer(env, small_config(episodes=4), make_advisor("oracle", error_rate=0.3, seed=1),
+                      "early", seed=5, callbacks=[recorder])  # fmt: skip
+    trainer.run()
+    seen = set()
+    for episode in recorder.episodes:
+        own = recorder.steps[episode.first_global_step - 1 : episode.last_global_step]
+        outcomes = [s.outcome for s in own]
+        seen |= set(outcomes)
+        assert outcomes.count("placed") == episode.placed_correct
+        assert outcomes.count("misplaced") == episode.misplaced
+        assert outcomes.count("lost") == episode.lost
+    assert {"placed", "none"} <= seen and seen <= {"placed", "misplaced", "lost", "none"}

@@ -3,7 +3,7 @@
 import pytest
 
 import sim
-from sim.rewards import REWARD_SCHEMES, rescore, step_penalty
+from sim.rewards import REWARD_SCHEMES, rescore, step_outcome, step_penalty
 
 RIGHT, LEFT, GRAB, DROP = (
     sim.Action.MOVE_RIGHT,
@@ -85,3 +85,34 @@ def test_rescoring_a_constructed_episode() -> None:
             rescored = rescore(logged(source), ended, source, target)
             assert rescored == pytest.approx(logged(target))
             assert sum(rescored) == pytest.approx(total)
+
+
+def test_rescoring_by_outcomes_tells_what_the_rewards_cannot() -> None:
+    """Three endings the rewards misread: an episode ended because its last object was
+    knocked off (terminated, a step cost: no placement), the 119th step under
+    authors-autonomous (its cost is -1, a wrong placement's reward) and a real wrong
+    placement there."""
+    cost = lambda scheme, n: step_penalty(scheme, n)  # noqa: E731
+    # knocked off at step 5 (the episode ends), logged under authors-interactive
+    rewards = [cost("authors-interactive", n) for n in range(1, 6)]
+    ended = [False] * 4 + [True]
+    by_rewards = rescore(rewards, ended, "authors-interactive", "paper")
+    assert by_rewards[-1] == pytest.approx(-0.01)  # kept as a placement: wrong
+    by_outcomes = rescore(rewards, ended, "authors-interactive", "paper", ["none"] * 4 + ["lost"])
+    assert by_outcomes == [0.0] * 5  # the paper charges nothing up to step 18
+    # step 119 under authors-autonomous: -1.0 either way; only the outcome says which
+    n = 119
+    assert cost("authors-autonomous", n) == pytest.approx(-1.0)
+    rewards = [cost("authors-autonomous", k) for k in range(1, n + 1)]
+    for last, kept in (("misplaced", -1.0), ("none", -0.01)):
+        rescored = rescore(rewards, [False] * n, "authors-autonomous", "paper",
+                           ["none"] * (n - 1) + [last])  # fmt: skip
+        assert rescored[-1] == pytest.approx(kept)
+
+
+def test_a_step_outcome_reads_the_counters_of_two_infos() -> None:
+    before = {"placed_correct": 1, "misplaced": 0, "lost": 0}
+    assert step_outcome(before, {**before, "placed_correct": 2}) == "placed"
+    assert step_outcome(before, {**before, "misplaced": 1}) == "misplaced"
+    assert step_outcome(before, {**before, "lost": 1}) == "lost"
+    assert step_outcome(before, before) == "none"
