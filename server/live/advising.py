@@ -72,6 +72,15 @@ def _arm(info: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+async def current_state(manager: SessionManager, session: ParticipantSession) -> ParticipantState:
+    """`participant_state` from an async route: a session without a live worker is read
+    from the database in a worker thread, so a crowd polling finished or queued sessions
+    never blocks the event loop (a live one is answered from memory, on the loop)."""
+    if manager.handles.get(session.id) is None:
+        return await run_in_threadpool(participant_state, manager, session)
+    return participant_state(manager, session)
+
+
 def participant_state(manager: SessionManager, session: ParticipantSession) -> ParticipantState:
     """The page's state; showing a pending request starts its response-time clock."""
     version = manager.version(session.id)

@@ -34,7 +34,7 @@ async def get_state(
 ) -> ParticipantState:
     if after is not None:
         await manager.wait_change(session.id, after, timeout)
-    return advising.participant_state(manager, session)
+    return await advising.current_state(manager, session)
 
 
 def _consent_state(request: Request, session_id: int, record: ConsentCreate | None) -> ConsentState:
@@ -92,7 +92,7 @@ async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantStat
     await run_in_threadpool(_finish_induction, manager, session.id)
     await manager.welcome(session.id)
     manager.set_ready(session.id)
-    return advising.participant_state(manager, session)
+    return await advising.current_state(manager, session)
 
 
 @router.get("/readiness")
@@ -102,7 +102,7 @@ async def readiness(session: ParticipantDep, manager: ManagerDep) -> Readiness:
     await manager.welcome(session.id)
     handle = manager.handles.get(session.id)
     if handle is None:
-        state = advising.participant_state(manager, session)
+        state = await advising.current_state(manager, session)
         return Readiness(status=state.status, steps_done=0, steps_before_first_turn=0, ready=False)
     progress = handle.progress
     done = progress.global_step if progress is not None else 0
@@ -131,7 +131,7 @@ async def give_advice(
     receipt = await advising.submit_advice(manager, session, body)
     if wait > 0:
         await manager.wait_change(session.id, receipt.version, wait)
-        receipt.state = advising.participant_state(manager, session)
+        receipt.state = await advising.current_state(manager, session)
     return receipt
 
 
