@@ -21,6 +21,8 @@ from typing import Any
 
 import pandas as pd
 
+from learner.config import DQNConfig
+from learner.fields import leaves
 from server.analysis.episodes import method_name, order_methods
 
 FIXED_COLUMNS: tuple[str, ...] = ("session_id", "method", "learner", "advice")
@@ -38,9 +40,10 @@ LABELS: dict[str, str] = {
 }
 """A setting's name in words, where it is not its column's with spaces."""
 
-RUNTIME_FIELDS = ("device", "torch_threads", "update", "precision", "advice_budget", "episodes")
+RUNTIME_FIELDS = tuple(leaf.name for leaf in leaves(DQNConfig) if leaf.role != "setting")
 """Learner config fields that do not change what is learned (where it runs, how fast the
-same function is computed), or are the treatment or the report's own cut."""
+same function is computed), or are the treatment or the report's own cut: their declared
+roles (`learner.fields.ROLES`) are numerics, treatment and scale, not setting."""
 
 
 def label(column: str) -> str:

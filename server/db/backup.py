@@ -202,20 +202,29 @@ def backup(database_url: str, data_dir: Path, out: Path) -> Backup:
     if key.is_file():
         shutil.copyfile(key, work / FILES / API_KEY_FILE)
         files.append(API_KEY_FILE)
-    manifest = {
+    manifest = _manifest(
+        url,
+        database,
+        data_dir=str(data_dir),
+        data_dir_resolved=str(data_dir.resolve()),
+        files=files,
+        missing=missing,
+    )
+    (work / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+    work.rename(out)
+    return Backup(out, url.get_backend_name(), files, missing)
+
+
+def _manifest(url: URL, database: Path, **contents: Any) -> dict[str, Any]:
+    """A backup's manifest: its format, when, the database's kind and file, and `contents`."""
+    return {
         "format": "ideeprl-backup",
         "version": 1,
         "created_at": datetime.now(UTC).isoformat(),
         "database": url.get_backend_name(),
         "database_file": database.name,
-        "data_dir": str(data_dir),
-        "data_dir_resolved": str(data_dir.resolve()),
-        "files": files,
-        "missing": missing,
+        **contents,
     }
-    (work / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
-    work.rename(out)
-    return Backup(out, url.get_backend_name(), files, missing)
 
 
 def backup_database(engine: Engine, out: Path) -> Path:
@@ -225,15 +234,7 @@ def backup_database(engine: Engine, out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=False)
     database = out / (SQLITE_FILE if _is_sqlite(url) else POSTGRES_FILE)
     (_snapshot_sqlite if _is_sqlite(url) else _snapshot_postgres)(url, database)
-    manifest = {
-        "format": "ideeprl-backup",
-        "version": 1,
-        "created_at": datetime.now(UTC).isoformat(),
-        "database": url.get_backend_name(),
-        "database_file": database.name,
-        "files": [],
-        "missing": [],
-    }
+    manifest = _manifest(url, database, files=[], missing=[])
     (out / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
     return database
 
@@ -295,29 +296,13 @@ def _move_paths(url: URL, manifest: dict[str, Any], data_dir: Path) -> int:
     were live are `interrupted` (their workers are not coming back)."""
     old = Path(manifest.get("data_dir") or ".")
     engine = create_engine(url)
-    moved = 0
     try:
         with engine.begin() as connection:
             columns = {c["name"] for c in inspect(connection).get_columns("sessions")}
-            if "run" not in columns:  # a database from before migration 0007
-                return _move_paths_before_0007(connection, old, manifest, data_dir)
-            rows = connection.execute(
-                select(SESSIONS.c.id, SESSIONS.c.checkpoint_path, SESSIONS.c.run)
-            ).all()
-            for session_id, checkpoint, run in rows:
-                values: dict[str, Any] = {}
-                relative = _relative_to_old(checkpoint, old, manifest)
-                if relative is not None:
-                    values["checkpoint_path"] = str(data_dir / relative)
-                relative = _relative_to_old(_advisor(run), old, manifest)
-                if relative is not None:
-                    run = json.loads(run) if isinstance(run, str) else dict(run)
-                    values["run"] = {**run, "advisor_checkpoint": str(data_dir / relative)}
-                if values:
-                    connection.execute(
-                        update(SESSIONS).where(SESSIONS.c.id == session_id).values(**values)
-                    )
-                    moved += 1
+            if "run" in columns:
+                moved = _move_run_paths(connection, old, manifest, data_dir)
+            else:  # a database from before migration 0007
+                moved = _move_paths_before_0007(connection, old, manifest, data_dir)
             live = ", ".join(f"'{s.value}'" for s in LIVE_STATUSES)
             connection.execute(
                 text(
@@ -328,6 +313,27 @@ def _move_paths(url: URL, manifest: dict[str, Any], data_dir: Path) -> int:
             )
     finally:
         engine.dispose()
+    return moved
+
+
+def _move_run_paths(connection: Any, old: Path, manifest: dict[str, Any], data_dir: Path) -> int:
+    """The checkpoint paths and the run documents' advisor checkpoints moved."""
+    moved = 0
+    rows = connection.execute(
+        select(SESSIONS.c.id, SESSIONS.c.checkpoint_path, SESSIONS.c.run)
+    ).all()
+    for session_id, checkpoint, run in rows:
+        values: dict[str, Any] = {}
+        relative = _relative_to_old(checkpoint, old, manifest)
+        if relative is not None:
+            values["checkpoint_path"] = str(data_dir / relative)
+        relative = _relative_to_old(_advisor(run), old, manifest)
+        if relative is not None:
+            run = json.loads(run) if isinstance(run, str) else dict(run)
+            values["run"] = {**run, "advisor_checkpoint": str(data_dir / relative)}
+        if values:
+            connection.execute(update(SESSIONS).where(SESSIONS.c.id == session_id).values(**values))
+            moved += 1
     return moved
 
 

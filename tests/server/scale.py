@@ -11,7 +11,7 @@ import httpx
 import numpy as np
 from PIL import Image
 
-from learner.fields import nest
+from learner.fields import leaves, nest
 from learner.run import RunSpec
 from server.schemas.sessions import NOT_THE_RUN
 
@@ -24,7 +24,8 @@ NONDETERMINISTIC = {
 }
 
 
-GROUPS = ("config", "strategy_options", "scenario")
+GROUPS = tuple({leaf.path[0] for leaf in leaves(RunSpec) if len(leaf.path) > 1})
+"""The run's nested groups (`config`, `strategy_options`, `scenario`)."""
 
 
 def rest_body(**fields: Any) -> dict[str, Any]:
