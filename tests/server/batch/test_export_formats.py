@@ -14,15 +14,9 @@ import pytest
 import sim
 from server.cli import main
 from tests.server.batch.helpers import Place
+from tests.server.test_export_types import ARROW_TYPES
 
 PANDAS_TYPES = {"integer": "Int64", "number": "float64", "boolean": "boolean", "string": "string"}
-ARROW_TYPES = {
-    "integer": "int64",
-    "number": "double",
-    "boolean": "bool",
-    "string": "string",
-    "datetime": "timestamp[ms, tz=UTC]",
-}
 
 
 def export(place: Place, out: Path, *fmt: str) -> dict[str, Any]:
