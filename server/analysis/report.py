@@ -19,6 +19,7 @@ import pandas as pd
 import scipy
 
 from server.analysis import markdown as md
+from server.analysis.advice import advice_quality, quality_correlations
 from server.analysis.audit import Audit, audit, label
 from server.analysis.episodes import EpisodeTableError, agents_of, method_name
 from server.analysis.figures import (
@@ -63,6 +64,8 @@ OPTIONAL_TABLE_FILES: dict[str, str] = {
     "rescored": "r_t_rescored.csv",
     "rescored_agents": "r_t_rescored_per_agent.csv",
     "reference": "authors_reference.csv",
+    "advice_quality": "advice_quality.csv",
+    "advice_correlations": "advice_quality_per_method.csv",
 }
 """Tables written when their input is given: the sessions' settings (the audit), the step
 logs (rescoring), a reference."""
@@ -433,6 +436,7 @@ def write_report(
     steps: pd.DataFrame | None = None,
     allow_mismatch: bool = False,
     reference: str | None = None,
+    advice: pd.DataFrame | None = None,
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -450,7 +454,8 @@ def write_report(
     (the warning stays).
     `steps` (training steps, `server.analysis.rescoring.STEP_COLUMNS`) with `settings` adds
     R_T rescored under each reward scheme. `reference="authors"` draws the authors' mean
-    curves on Figure 5 and lists the paper's R_T beside them.
+    curves on Figure 5 and lists the paper's R_T beside them. `advice` (the advised steps,
+    `server.analysis.advice.ADVICE_COLUMNS`) adds each advised session's advice quality.
     """
     if reference is not None and reference not in REFERENCES:
         raise EpisodeTableError(
@@ -498,6 +503,14 @@ def write_report(
         tables["rescored_agents"] = rescored_agents
     if reference == "authors":
         tables["reference"] = authors_totals(analysis.n_episodes)
+    quality = None
+    if advice is not None:
+        quality = advice_quality(advice, analysis.agents)
+        if len(quality):
+            tables["advice_quality"] = quality
+            tables["advice_correlations"] = quality_correlations(quality)
+        else:
+            quality = None
     table_paths = {}
     for name, frame in tables.items():
         table_paths[name] = out / {**TABLE_FILES, **OPTIONAL_TABLE_FILES}[name]
@@ -533,7 +546,10 @@ def write_report(
         if rescored_agents is None
         else (int(rescored_agents["by_outcomes"].sum()), len(rescored_agents))
     )
-    extra = _Extras(checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes)
+    extra = _Extras(
+        checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes, quality,
+        tables.get("advice_correlations"),
+    )  # fmt: skip
     report.write_text(
         _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra),
         encoding="utf-8",
@@ -555,6 +571,8 @@ class _Extras:
     allow_mismatch: bool
     by_outcomes: tuple[int, int] | None = None
     """Sessions rescored by their steps' outcomes, of all rescored."""
+    advice_quality: pd.DataFrame | None = None
+    advice_correlations: pd.DataFrame | None = None
 
 
 def _outcomes_note(by_outcomes: tuple[int, int] | None) -> str:
@@ -667,6 +685,54 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
     return out
 
 
+def _advice_section(extra: _Extras) -> list[str]:
+    """Each advised session's advice: what it did, and whether better advice went with a
+    better outcome."""
+    quality, per_method = extra.advice_quality, extra.advice_correlations
+    if quality is None or per_method is None:
+        return []
+    rows = [
+        f"| {r.label} | {method_name(r.method)} | {r.advice} | {r.placed} | {r.misplaced} | "
+        f"{r.lost} | {r.longest_repeat} | {r.R_T:.2f} |"
+        for r in quality.itertuples()
+    ]
+    rhos = [
+        f"- {method_name(r.method)}: {r.agents} agents, {r.mean_placed:.1f} correct placements "
+        "on average; Spearman's rho between an agent's correct placements and its R_T "
+        + ("not defined (fewer than 3 agents, or no variation)" if np.isnan(r.spearman_rho)
+           else f"{r.spearman_rho:+.2f} (p {r.spearman_p:.3g})")
+        for r in per_method.itertuples()
+    ]  # fmt: skip
+    unknown = int(quality["unknown_outcome"].sum())
+    return [
+        "## Advice quality",
+        "",
+        "What each advised session's advice did, counted from the steps whose action came "
+        "from the advisor: objects placed where they belong, placed on the wrong side, "
+        "knocked off, and the most advised steps in a row with one action (a working "
+        "policy crossing the scene repeats a move at most twice; an advisor stuck in a "
+        "state repeats one action until its budget ends). An effect of advice is only "
+        "credible where the advice was good.",
+        "",
+        "| agent | method | advice | placed | misplaced | lost | longest repeat | R_T |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+        *rows,
+        "",
+        *rhos,
+        *_unknown_outcomes(unknown),
+        "",
+    ]
+
+
+def _unknown_outcomes(unknown: int) -> list[str]:
+    if not unknown:
+        return []
+    return [
+        f"- {unknown} advised steps have no recorded outcome (logged before outcomes were "
+        "kept): run `ideeprl outcomes --study ID` to replay them."
+    ]
+
+
 def _markdown(
     analysis: Analysis,
     title: str,
@@ -767,6 +833,7 @@ def _markdown(
             f"![Epsilon per episode]({FIGURE_FILES['epsilon']})",
             "",
         ]
+    out += _advice_section(extra)
     out += ["## Compared with the paper", "", _scale_note(analysis), ""]
     if len(analysis.paper):
         out += [_paper_table(analysis), ""]
@@ -785,6 +852,8 @@ def _markdown(
                 ("rescored", extra.rescored),
                 ("rescored_agents", extra.rescored),
                 ("reference", extra.reference),
+                ("advice_quality", extra.advice_quality),
+                ("advice_correlations", extra.advice_quality),
             )
             if part is not None
         ),

@@ -20,6 +20,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
+from learner.advisor_check import AdvisorCheck, checked_advisor
 from learner.run import RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.progress import BatchProgress
@@ -69,6 +70,12 @@ class RunnerOptions:
     override_numerics: bool = False
     """Resume runs whose pinned numerics this machine cannot honour, recording the override;
     without it they are left as they are, with the reason."""
+    advisor_check: str = "require"
+    """`require`: an advisor checkpoint (given or trained) must pass its check
+    (`learner.advisor_check`) before it advises; a trained one that fails is trained again
+    from the next seed. `record`: checked and recorded, never refused. `skip`: not checked."""
+    advisor_attempts: int = 3
+    """Advisors the batch trains at most (seeds advisor_seed, +1, ...) to get one that passes."""
 
 
 @dataclass
@@ -152,6 +159,8 @@ class BatchRunner:
         self.states = [RunState(run) for run in plan_runs(spec)]
         given = spec.template.advisor_checkpoint
         self.advisor_checkpoint: str | None = str(Path(given).resolve()) if given else None
+        self.advisor_checks: list[tuple[str, AdvisorCheck]] = []
+        """Every advisor checkpoint checked by this batch, in order, with its check."""
         self.queue: list[RunState] = []
         self.elsewhere: list[RunState] = []
         self.log: Callable[[str], None] = print
@@ -179,8 +188,10 @@ class BatchRunner:
             if problem and not self.options.override_numerics:
                 state.status, state.detail = REFUSED, problem
 
-    def _advisor_ready(self, db: Session, advisor: RunState) -> None:
-        """The trained advisor's final checkpoint becomes the `agent` runs' advisor."""
+    def _advisor_ready(self, db: Session, advisor: RunState) -> bool:
+        """The trained advisor's final checkpoint becomes the `agent` runs' advisor once it
+        passes its check; when it fails, the next advisor seed is trained (queued here, and
+        False returned) until `advisor_attempts` are spent."""
         session = db.get(StudySession, advisor.session_id)
         assert session is not None and session.status == Status.finished.value
         path = session.checkpoint_path
@@ -190,7 +201,44 @@ class BatchRunner:
                 f"{path or '(none)'} is gone; pass --advisor-checkpoint, or delete session "
                 f"{session.id} to train the advisor again"
             )
-        self.advisor_checkpoint = str(Path(path).resolve())
+        checkpoint = str(Path(path).resolve())
+        check = self._check_advisor(checkpoint)
+        if check is None or check.passed or self.options.advisor_check == "record":
+            self.advisor_checkpoint = checkpoint
+            return True
+        attempt = advisor.run.seed - self.spec.advisor_seed + 1
+        if attempt >= self.options.advisor_attempts:
+            raise BatchError(
+                f"{attempt} trained advisors failed their check (the last: session "
+                f"{session.id}, {'; '.join(check.problems)}); raise --advisor-attempts, give a "
+                "checked --advisor-checkpoint, or --advisor-check record to use it anyway"
+            )
+        self.log(
+            f"the advisor of seed {advisor.run.seed} (session {session.id}) failed its check "
+            f"({'; '.join(check.problems)}): training the advisor of seed {advisor.run.seed + 1}"
+        )
+        retry = RunState(Run("autonomous", -1, advisor.run.seed + 1))
+        self.states.insert(self.states.index(advisor) + 1, retry)
+        self._ensure(db, retry)
+        if retry.status == Status.finished.value:
+            return self._advisor_ready(db, retry)
+        if retry.status in LIVE:
+            self.elsewhere.append(retry)
+        else:
+            self._enqueue([retry])
+        return False
+
+    def _check_advisor(self, checkpoint: str) -> AdvisorCheck | None:
+        """`checkpoint` checked for this batch's agent runs (from their advice-time states),
+        stored beside it and logged; None when checks are skipped or no agent runs."""
+        if self.options.advisor_check == "skip" or "agent" not in self.spec.methods:
+            return None
+        spec = run_spec(self.spec, Run("agent", 0, self.spec.seed(0)), checkpoint)
+        seeds = [self.spec.seed(i) for i in range(self.spec.agents)]
+        check = checked_advisor(checkpoint, spec, seeds, allow_failed=True)
+        self.advisor_checks.append((checkpoint, check))
+        self.log(f"{checkpoint}: {check.summary()}")
+        return check
 
     def _create_agent_runs(self, db: Session) -> list[RunState]:
         waiting = [s for s in self.states if s.status == WAITING]
@@ -229,12 +277,21 @@ class BatchRunner:
     def prepare(self) -> None:
         """Find or create every run's session; take back the ones whose worker died. (Every
         run was checked when the `BatchSpec` was made, before anything is written.)"""
+        given = self.spec.template.advisor_checkpoint
+        if given and self.advisor_checkpoint:
+            check = self._check_advisor(self.advisor_checkpoint)
+            if check is not None and not check.passed and self.options.advisor_check == "require":
+                raise BatchError(
+                    f"the advisor {given} failed its check ({'; '.join(check.problems)}); give "
+                    "another, or --advisor-check record to use it anyway"
+                )
         with self.factory() as db:
             get_study(db, self.study_id)
-            for state in self.states:
+            for state in list(self.states):
                 if state.run.method == "agent" and self.advisor_checkpoint is None:
                     continue  # created once the advisor has finished
-                self._ensure(db, state)
+                if state.session_id is None:
+                    self._ensure(db, state)
                 if state.run.is_advisor and state.status == Status.finished.value:
                     self._advisor_ready(db, state)
             live = [s.session_id for s in self.states if s.status in LIVE and s.session_id]
@@ -305,7 +362,8 @@ class BatchRunner:
 
     def _after_advisor(self, db: Session, advisor: RunState) -> None:
         if advisor.status == Status.finished.value:
-            self._advisor_ready(db, advisor)
+            if not self._advisor_ready(db, advisor):
+                return  # the next advisor seed trains
             created = self._create_agent_runs(db)
             fresh = [s for s in created if s.status in TO_RUN]
             self._enqueue(fresh)

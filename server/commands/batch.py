@@ -144,6 +144,21 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         action="store_true",
         help="resume runs pinned to numerics this machine cannot honour (recorded per run)",
     )
+    how.add_argument(
+        "--advisor-check",
+        choices=("require", "record", "skip"),
+        default="require",
+        help="the agent runs' advisor is checked first (greedy on 10 fresh episodes and from "
+        "the states where it advises: mean reward >= 2.5, no action more than 10 times in a "
+        "row); require (default): a given advisor that fails is refused and a trained one is "
+        "trained again from the next seed; record: checked, used anyway; skip",
+    )
+    how.add_argument(
+        "--advisor-attempts",
+        type=int,
+        default=3,
+        help="advisors the batch trains at most to get one that passes (default 3)",
+    )
     how.add_argument("--report", type=Path, metavar="DIR", help="write the report at the end")
     how.add_argument(
         "--dry-run", action="store_true", help="show the runs and their state; write nothing"
@@ -227,6 +242,10 @@ def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
         parts += ["--nice", str(args.nice)]
     if args.override_numerics:
         parts += ["--override-numerics"]
+    if args.advisor_check != "require":
+        parts += ["--advisor-check", args.advisor_check]
+    if args.advisor_attempts != 3:
+        parts += ["--advisor-attempts", str(args.advisor_attempts)]
     if args.data_dir:
         parts += ["--data-dir", str(args.data_dir)]
     if args.database_url:
@@ -360,6 +379,8 @@ def _check_counts(args: argparse.Namespace) -> None:
         raise BatchError("--nice must be between 0 and 19")
     if args.address and args.backend != "ray":
         raise BatchError("--address is for the Ray backend: add --backend ray")
+    if not 1 <= args.advisor_attempts <= 100:
+        raise BatchError("--advisor-attempts must be between 1 and 100")
     if args.json and not args.dry_run:
         raise BatchError("--json goes with --dry-run")
 
@@ -378,6 +399,8 @@ def _options(args: argparse.Namespace, settings: Settings) -> RunnerOptions:
         nice=args.nice,
         progress=show_progress(args.no_progress),
         override_numerics=args.override_numerics,
+        advisor_check=args.advisor_check,
+        advisor_attempts=args.advisor_attempts,
     )
 
 

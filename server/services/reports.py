@@ -21,7 +21,12 @@ from sqlalchemy.orm import Session
 
 from server.analysis import EpisodeTableError, ReportResult, method_name, write_report
 from server.db.models import Status, StudySession
-from server.services.episodes import load_episodes, load_training_steps, session_settings
+from server.services.episodes import (
+    load_advised_steps,
+    load_episodes,
+    load_training_steps,
+    session_settings,
+)
 from server.services.errors import Conflict, Invalid, NotFound
 from server.services.sessions import list_sessions
 from server.services.studies import get_study
@@ -168,6 +173,7 @@ def build_report(
     episodes = load_episodes(db, [s.id for s in sessions])
     settings = session_settings(sessions)
     steps = load_training_steps(db, [s.id for s in sessions])
+    advice = load_advised_steps(db, [s.id for s in sessions])
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
     if empty:
         raise Conflict(
@@ -206,6 +212,7 @@ def build_report(
             steps=steps,
             allow_mismatch=request.allow_mismatch,
             reference=request.reference,
+            advice=advice,
         )
     except EpisodeTableError as error:
         raise Conflict(f"these sessions cannot be compared as they are: {error}") from None
