@@ -44,18 +44,21 @@ from sim.scenario import ScenarioOptions
 if TYPE_CHECKING:
     import gymnasium as gym
 
+    from learner.procedure import Schedule
     from learner.sb3_dqn import SB3DQNTrainer
     from learner.trainer import Trainer
 
 SPEC_VERSION = 1
 """Version of the stored run document (`RunSpec.to_json`); `from_json` reads this and older."""
-METHODS = ("autonomous", "agent", "human", "oracle", "random", "sb3-dqn")
+METHODS = ("autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn")
 """A run's method: who advises it (nobody, a trained agent, a person, the oracle, a random
-advisor), or `sb3-dqn`, Stable-Baselines3's DQN unadvised (an independent baseline)."""
-Method = Literal["autonomous", "agent", "human", "oracle", "random", "sb3-dqn"]
+advisor), `procedure` (the procedure control: an advised run's advising procedure with
+random actions, `learner.procedure`), or `sb3-dqn`, Stable-Baselines3's DQN unadvised (an
+independent baseline)."""
+Method = Literal["autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn"]
 UNADVISED = ("autonomous", "sb3-dqn")
 """Methods without an advisor: no strategy, no advice budget."""
-ADVISORS = ("none", *ADVISOR_KINDS, "human")
+ADVISORS = ("none", *ADVISOR_KINDS, "human", "procedure")
 """Who advises: nobody, a machine advisor the learner builds, or a person (`human`: the
 caller supplies the advisor to `build`, the server's `HumanAdvisor`)."""
 LEARNERS = ("dqn", "sb3-dqn")
@@ -148,6 +151,9 @@ class RunSpec:
     advisor_checkpoint: str | None = bounded(None, role="treatment", max_length=1000)
     """The trained learner whose checkpoint advises (method agent): `session:ID` through the
     API, or a checkpoint file's path."""
+    schedule: str | None = bounded(None, role="treatment", max_length=1000)
+    """The advised run whose advising procedure this control follows (method procedure): a
+    schedule file (`learner.procedure.Schedule`; the batch writes one per paired run)."""
     error_rate: float = bounded(0.0, 0.0, 1.0, role="treatment", column="oracle_error_rate")
     """Chance that the oracle advises a wrong action (method oracle) [probability]."""
     motion: Motion | None = bounded(None)
@@ -293,6 +299,13 @@ class RunSpec:
             raise RunSpecError(
                 "advisor_checkpoint", "only method agent takes an advisor_checkpoint"
             )
+        if (spec.method == "procedure") != bool(spec.schedule):
+            raise RunSpecError(
+                "schedule",
+                "method procedure needs schedule: the advised run whose procedure it follows"
+                if spec.method == "procedure"
+                else "only method procedure takes a schedule",
+            )
         if not spec.advised:
             return spec
         if spec.method == "agent" and not spec.advisor_checkpoint:
@@ -300,7 +313,7 @@ class RunSpec:
                 "advisor_checkpoint",
                 "method agent needs advisor_checkpoint: the trained learner that advises",
             )
-        if _STRATEGIES[spec.strategy].needs_values and spec.method != "agent":
+        if _STRATEGIES[spec.strategy].needs_values and spec.method not in ("agent", "procedure"):
             raise RunSpecError(
                 "strategy",
                 f"the {spec.strategy} strategy weighs the advisor's Q-values, which only an "
@@ -389,7 +402,7 @@ class RunSpec:
             return make_advisor(
                 "oracle", sort_rule=self.sort_rule, error_rate=self.error_rate, seed=self.seed
             )
-        if self.method == "random":
+        if self.method in ("random", "procedure"):
             return make_advisor("random", seed=self.seed)
         return None
 
@@ -425,9 +438,21 @@ class RunSpec:
         if wrap_advisor is not None:
             advisor = wrap_advisor(advisor)
         trainer = Trainer(
-            env, spec.config, advisor, spec.make_strategy(), spec.seed, list(callbacks)
-        )
+            env, spec.config, advisor, spec.make_strategy(), spec.seed, list(callbacks),
+            schedule=spec.make_schedule(),
+        )  # fmt: skip
         return trainer, env
+
+    def make_schedule(self) -> Schedule | None:
+        """The procedure control's schedule (None for other methods)."""
+        if self.method != "procedure" or not self.schedule:
+            return None
+        from learner.procedure import Schedule
+
+        try:
+            return Schedule.load(self.schedule)
+        except ValueError as error:
+            raise RunSpecError("schedule", str(error)) from None
 
 
 def from_old_settings(settings: Mapping[str, Any], config: DQNConfig) -> RunSpec:

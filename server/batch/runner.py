@@ -32,6 +32,7 @@ from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySes
 from server.services import numerics
 from server.services.errors import Invalid
 from server.services.ownership import set_status, take_back
+from server.services.schedules import write_schedule
 from server.services.studies import get_study
 from server.worker.worker import WorkerOptions
 
@@ -39,6 +40,8 @@ TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
 LIVE = {s.value for s in LIVE_STATUSES}
 WAITING = "waiting for the advisor"
 BLOCKED = "not run: the advisor did not finish"
+WAITING_PAIR = "waiting for its advised run"
+BLOCKED_PAIR = "not run: its advised run did not finish"
 REFUSED = "not resumed: its pinned numerics"
 
 
@@ -156,7 +159,10 @@ class BatchRunner:
         if migrate:
             upgrade(engine, options.data_dir / BACKUPS)
         self.factory: sessionmaker[Session] = make_session_factory(engine)
-        self.states = [RunState(run) for run in plan_runs(spec)]
+        self.states = [
+            RunState(run, status=WAITING_PAIR if run.method == "procedure" else WAITING)
+            for run in plan_runs(spec)
+        ]
         given = spec.template.advisor_checkpoint
         self.advisor_checkpoint: str | None = str(Path(given).resolve()) if given else None
         self.advisor_checks: list[tuple[str, AdvisorCheck]] = []
@@ -240,6 +246,36 @@ class BatchRunner:
         self.log(f"{checkpoint}: {check.summary()}")
         return check
 
+    def _pair_controls(self, db: Session) -> list[RunState]:
+        """Create the procedure controls whose advised run (same agent number, method
+        `control_of`) has finished, each with that run's schedule; returns them."""
+        created = []
+        for state in self.states:
+            if state.run.method != "procedure" or state.session_id is not None:
+                continue
+            pair = next(
+                (
+                    s
+                    for s in self.states
+                    if s.run.method == self.spec.control_of and s.run.index == state.run.index
+                ),
+                None,
+            )
+            if pair is None or pair.session_id is None or pair.status != Status.finished.value:
+                continue
+            row = db.get(StudySession, pair.session_id)
+            assert row is not None
+            path = write_schedule(db, row, self.options.data_dir / "schedules")
+            state.spec = run_spec(self.spec, state.run, None).replace(schedule=str(path))
+            self._ensure(db, state)
+            created.append(state)
+        return created
+
+    def _start_controls(self, db: Session) -> None:
+        created = self._pair_controls(db)
+        self._enqueue([s for s in created if s.status in TO_RUN])
+        self.elsewhere += [s for s in created if s.status in LIVE]
+
     def _create_agent_runs(self, db: Session) -> list[RunState]:
         waiting = [s for s in self.states if s.status == WAITING]
         for state in waiting:
@@ -264,6 +300,9 @@ class BatchRunner:
                 rows.append(row)
                 if run.method == "agent" and checkpoint is None:
                     row["status"] = "waits for the advisor"
+                    continue
+                if run.method == "procedure":
+                    row["status"] = f"follows {self.spec.control_of} #{run.index + 1} once it ran"
                     continue
                 found = find_session(
                     db, self.study_id, self._run_spec(state, checkpoint), self.spec_class
@@ -290,10 +329,13 @@ class BatchRunner:
             for state in list(self.states):
                 if state.run.method == "agent" and self.advisor_checkpoint is None:
                     continue  # created once the advisor has finished
+                if state.run.method == "procedure":
+                    continue  # created once its advised run has finished
                 if state.session_id is None:
                     self._ensure(db, state)
                 if state.run.is_advisor and state.status == Status.finished.value:
                     self._advisor_ready(db, state)
+            self._pair_controls(db)
             live = [s.session_id for s in self.states if s.status in LIVE and s.session_id]
             for session_id in take_back(db, live, self.options.stale_after_s):  # type: ignore[arg-type]
                 self._state(session_id).status = Status.interrupted.value
@@ -359,6 +401,7 @@ class BatchRunner:
                 state.status, state.detail = Status.interrupted.value, problem
             if state.run.is_advisor:
                 self._after_advisor(db, state)
+        self._start_controls(db)
 
     def _after_advisor(self, db: Session, advisor: RunState) -> None:
         if advisor.status == Status.finished.value:
@@ -388,6 +431,7 @@ class BatchRunner:
             self.elsewhere.remove(state)
             if state.run.is_advisor:
                 self._after_advisor(db, state)
+        self._start_controls(db)
 
     def run(self) -> BatchResult:
         started = time.monotonic()
@@ -423,6 +467,9 @@ class BatchRunner:
                 take_back(db, running, 0.0)
                 bar.update(self._refresh(db))
         finally:
+            for state in self.states:
+                if state.status == WAITING_PAIR and not interrupted:
+                    state.status = BLOCKED_PAIR
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
             bar.close()

@@ -15,9 +15,14 @@ from typing import Any
 from learner.fields import FieldError
 from learner.run import RunSpec
 
-BATCH_METHODS: tuple[str, ...] = ("autonomous", "agent", "oracle", "random", "sb3-dqn")
-"""Methods a batch can run: every machine advisor, no advisor at all, and Stable-Baselines3's
-DQN (an independent baseline learner, the optional `sb3` extra)."""
+BATCH_METHODS: tuple[str, ...] = (
+    "autonomous", "agent", "oracle", "random", "procedure", "sb3-dqn",
+)  # fmt: skip
+"""Methods a batch can run: every machine advisor, no advisor at all, the procedure control
+of an advised method (`control_of`), and Stable-Baselines3's DQN (an independent baseline
+learner, the optional `sb3` extra)."""
+CONTROLLED = ("agent", "oracle", "random")
+"""The advised methods a `procedure` control can follow."""
 
 MAX_SEED = 2**31 - 1
 ADVISOR_SEED_OFFSET = 100_000
@@ -51,6 +56,9 @@ class BatchSpec:
     (`{"autonomous": {"reward_scheme": "authors-autonomous"}, "agent": {"reward_scheme":
     "authors-interactive"}}`). The report flags such a comparison. The advisor trained for
     `agent` runs is an autonomous run and takes the autonomous changes."""
+    control_of: str = "agent"
+    """The advised method whose runs the `procedure` runs follow: agent i's control replays
+    the schedule of that method's agent i (same seed), with its settings."""
 
     def __post_init__(self) -> None:
         unknown = [m for m in self.methods if m not in BATCH_METHODS]
@@ -85,6 +93,14 @@ class BatchSpec:
             raise BatchError(
                 f"settings are given for {', '.join(strays)}, which the batch does not run"
             )
+        if "procedure" in self.methods and (
+            self.control_of not in CONTROLLED or self.control_of not in self.methods
+        ):
+            raise BatchError(
+                "the procedure control follows an advised method of the batch "
+                f"({', '.join(CONTROLLED)}); --control-of {self.control_of} is not among "
+                "--methods"
+            )
         for method in self.methods:
             self.spec_of(method, self.base_seed)  # every method's run checked before any runs
         checkpoint = self.template.advisor_checkpoint
@@ -105,12 +121,15 @@ class BatchSpec:
     def spec_of(self, method: str, seed: int) -> RunSpec:
         """The run of one of `method`'s agents (or of the advisor) on `seed`, checked."""
         changes = dict(self.per_method.get(method, {}))
+        if method == "procedure":  # the control runs with its advised method's settings
+            changes = {**self.per_method.get(self.control_of, {}), **changes}
         try:
             spec = self.template.with_values(changes) if changes else self.template
             spec = spec.replace(
                 method=method,
                 seed=seed,
                 advisor_checkpoint=spec.advisor_checkpoint if method == "agent" else None,
+                schedule="-" if method == "procedure" else None,  # written once its pair ran
             )
             if method == "agent" and spec.advisor_checkpoint is None:
                 spec = spec.replace(advisor_checkpoint="-")  # filled in once the advisor trained

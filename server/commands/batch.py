@@ -23,7 +23,7 @@ if TYPE_CHECKING:  # the command line starts without the batch's imports
     from server.settings import Settings
 
 DESCRIPTION = """\
-Run N agents per method (autonomous, agent, oracle, random, sb3-dqn) as sessions of a
+Run N agents per method (autonomous, agent, oracle, random, procedure, sb3-dqn) as sessions of a
 study, in parallel worker processes on this machine or on Ray. Agent i of every method gets
 seed BASE+i, so runs pair up across methods. The 'agent' method needs a trained advisor:
 without --advisor-checkpoint the batch first trains one (autonomous, same settings, seed
@@ -92,6 +92,14 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     what.add_argument("--agents", type=int, default=10, help="agents per method (default 10)")
     what.add_argument(
         "--label", default="baselines", help="the batch's name, every run's session label"
+    )
+    what.add_argument(
+        "--control-of",
+        default="agent",
+        metavar="METHOD",
+        help="the advised method (agent, oracle, random) whose runs the 'procedure' method's "
+        "runs follow: agent i's control asks at the same steps, fits as often and follows "
+        "the same epsilon, with random actions in place of the advice (default agent)",
     )
     run = parser.add_argument_group(
         "the runs",
@@ -204,6 +212,7 @@ def spec_from(args: argparse.Namespace) -> BatchSpec:
         agents=args.agents,
         label=args.label,
         per_method=per_method,
+        control_of=args.control_of,
     )
 
 
@@ -222,6 +231,8 @@ def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     """The command that reruns (or resumes) exactly this batch, every choice spelled out."""
     parts = ["ideeprl", "batch", "--study", str(args.study), "--methods", *spec.methods]
     parts += ["--agents", str(spec.agents), "--label", spec.label]
+    if "procedure" in spec.methods:
+        parts += ["--control-of", spec.control_of]
     template = spec.template
     base = type(template).from_json({"preset": template.preset}).values()
     for leaf in leaves(type(template)):

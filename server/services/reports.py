@@ -64,6 +64,8 @@ class ReportRequest:
     """Give the t-tests of methods whose settings differ too (the warning stays)."""
     reference: str | None = None
     """`authors`: draw the authors' published curves on Figure 5."""
+    primary: str = "welch"
+    """Each comparison's primary test: `welch`, or `paired` over seeds where they pair."""
 
 
 def advisor_sessions(sessions: list[StudySession]) -> set[int]:
@@ -213,6 +215,7 @@ def build_report(
             allow_mismatch=request.allow_mismatch,
             reference=request.reference,
             advice=advice,
+            primary=request.primary,
         )
     except EpisodeTableError as error:
         raise Conflict(f"these sessions cannot be compared as they are: {error}") from None
@@ -234,6 +237,7 @@ def describe_report(study_id: int, built: StudyReport) -> dict[str, Any]:
     result = built.result
     files = [("report", result.report)]
     files += [("figure", p) for p in result.figures.values()]
+    files += [("figure", p) for p in result.vector_figures]
     files += [("table", p) for p in result.tables.values()]
     return {
         "study_id": study_id,

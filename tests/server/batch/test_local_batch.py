@@ -7,7 +7,6 @@ import json
 from pathlib import Path
 
 import pytest
-
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
