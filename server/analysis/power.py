@@ -240,7 +240,7 @@ def _jsonable(comparison: Comparison) -> dict[str, object]:
     from dataclasses import asdict
 
     out = asdict(comparison)
-    out["d"] = None if math.isnan(comparison.d) else comparison.d
+    out["d"] = comparison.d if math.isfinite(comparison.d) else None  # strict JSON
     out["curve"] = {k: list(v) for k, v in out["curve"].items()}
     return out
 

@@ -20,7 +20,12 @@ from server.services.studies import get_study
 
 router = APIRouter(prefix="/api/studies", tags=["reports"], dependencies=[ResearcherDep])
 
-MEDIA_TYPES = {".md": "text/markdown", ".png": "image/png", ".csv": "text/csv"}
+MEDIA_TYPES = {
+    ".md": "text/markdown",
+    ".png": "image/png",
+    ".svg": "image/svg+xml",
+    ".csv": "text/csv",
+}
 FileName = Annotated[
     str, PathParam(pattern=r"^[A-Za-z0-9_.-]+$", max_length=100, description="A report file.")
 ]
@@ -63,7 +68,7 @@ class ReportCreate(BaseModel):
 
 class ReportFile(BaseModel):
     name: str
-    kind: str = Field(description="report (Markdown), figure (PNG) or table (CSV).")
+    kind: str = Field(description="report (Markdown), figure (PNG, or SVG) or table (CSV).")
     url: str
 
 

@@ -233,7 +233,7 @@ def describe_report(study_id: int, built: StudyReport) -> dict[str, Any]:
     """What the API says about a report: its sessions, choices, files and R_T per method."""
     result = built.result
     files = [("report", result.report)]
-    files += [("figure", p) for p in result.figures.values()]
+    files += [("figure", p) for p in [*result.figures.values(), *result.vector_figures.values()]]
     files += [("table", p) for p in result.tables.values()]
     return {
         "study_id": study_id,
