@@ -67,7 +67,9 @@ def welch_rejects(a: np.ndarray, b: np.ndarray, alpha: float) -> np.ndarray:
     return np.where(spread, p < alpha, diff != 0)
 
 
-def _draw(values: np.ndarray, n: int, draws: int, rng: np.random.Generator, model: Model):
+def _draw(
+    values: np.ndarray, n: int, draws: int, rng: np.random.Generator, model: Model
+) -> np.ndarray:
     if model == "bootstrap":
         return rng.choice(values, size=(draws, n), replace=True)
     sd = float(values.std(ddof=1)) if len(values) > 1 else 0.0

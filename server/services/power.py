@@ -14,7 +14,12 @@ from pathlib import Path
 
 from sqlalchemy.orm import Session
 
-from server.analysis.episodes import EpisodeTableError, method_name, validate_episodes
+from server.analysis.episodes import (
+    EpisodeTableError,
+    method_name,
+    order_methods,
+    validate_episodes,
+)
 from server.analysis.figures import plot_power, save_figure
 from server.analysis.power import (
     DEFAULT_DRAWS,
@@ -115,19 +120,28 @@ def study_power(
     `out_dir`, the figure (PNG and SVG) and the table written there."""
     request = request or PowerRequest()
     request.check()
+    if out_dir is not None and out_dir.exists() and not out_dir.is_dir():
+        raise Invalid("out", f"{out_dir} is a file; pass a folder")
     get_study(db, study_id)
     chosen = ReportRequest(sessions=request.sessions, methods=request.methods, label=request.label)
     sessions, notes = select_sessions(db, study_id, chosen)
     baseline = _baseline({s.method for s in sessions}, request.baseline)
     episodes = load_episodes(db, [s.id for s in sessions])
-    if episodes.empty:
-        raise Conflict(f"study {study_id}'s sessions have no training episodes yet")
+    empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
+    if empty:
+        raise Conflict(
+            f"session(s) {', '.join(map(str, empty))} have no training episodes yet; "
+            "leave them out (--sessions, --methods), or wait until they have run"
+        )
     try:
         table = validate_episodes(episodes, n_episodes=request.n_episodes)
     except EpisodeTableError as error:
         raise Conflict(f"these sessions cannot be compared as they are: {error}") from None
     agents = agent_totals(table, baseline=None)
-    r_t = {m: group["R_T"].to_numpy(dtype=float) for m, group in agents.groupby("method")}
+    r_t = {
+        m: agents.loc[agents["method"] == m, "R_T"].to_numpy(dtype=float)
+        for m in order_methods(agents["method"], baseline)
+    }
     analysis = power_analysis(
         r_t, baseline, alpha=request.alpha, draws=request.draws, seed=request.seed,
         max_n=request.max_n, progress=progress,
@@ -140,8 +154,6 @@ def study_power(
         )
     files: tuple[Path, ...] = ()
     if out_dir is not None:
-        if out_dir.exists() and not out_dir.is_dir():
-            raise Invalid("out", f"{out_dir} is a file; pass a folder")
         out_dir.mkdir(parents=True, exist_ok=True)
         figure = plot_power(analysis)
         csv = out_dir / OPTIONAL_TABLE_FILES["power"]

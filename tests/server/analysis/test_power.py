@@ -215,6 +215,12 @@ def test_the_command_refuses_what_it_cannot_do(
     assert main(["power", "--study", "pilot", "--baseline", "human", "--json", *flags]) == 2
     captured = capsys.readouterr()
     assert captured.out == "" and "no 'human' sessions" in captured.err
+    (tmp_path / "file").write_text("")
+    assert main(["power", "--study", "pilot", "--out", str(tmp_path / "file"), *flags]) == 2
+    assert "is a file; pass a folder" in capsys.readouterr().err
+    every = ["--sessions", *map(str, range(1, 8))]  # 7: created, never run
+    assert main(["power", "--study", "pilot", *every, *flags]) == 1
+    assert "session(s) 7 have no training episodes yet" in capsys.readouterr().err
     assert main(["power", "--study", "pilot", "--methods", "oracle", *flags]) == 2
     assert "no autonomous DeepRL sessions" in capsys.readouterr().err
     engine = make_engine(f"sqlite:///{data_dir / 'ideeprl.sqlite3'}")
