@@ -207,6 +207,9 @@ class Comparison:
     """Cohen's d: delta over the pooled sd sqrt((sd^2 + baseline_sd^2) / 2); NaN if 0/0."""
     sample_sizes: tuple[SampleSize, ...]
     curve: PowerCurve
+    """Power on a grid of sizes up to a little beyond the largest n needed (the figure)."""
+    at_sizes: PowerCurve = PowerCurve((), (), (), ())
+    """Power at the sizes asked for (`at_n`): what a study of a given size can expect."""
 
 
 @dataclass(frozen=True)
@@ -243,7 +246,8 @@ def _jsonable(comparison: Comparison) -> dict[str, object]:
 
     out = asdict(comparison)
     out["d"] = comparison.d if math.isfinite(comparison.d) else None  # strict JSON
-    out["curve"] = {k: list(v) for k, v in out["curve"].items()}
+    for name in ("curve", "at_sizes"):
+        out[name] = {k: list(v) for k, v in out[name].items()}
     return out
 
 
@@ -270,6 +274,7 @@ def compare(
     seed: int = 0,
     targets: Sequence[float] = TARGETS,
     max_n: int = DEFAULT_MAX_N,
+    at_n: Sequence[int] = (),
 ) -> Comparison:
     """The effect of arm `a` over baseline `b` and the agents per arm each target needs."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
@@ -311,14 +316,16 @@ def compare(
         )
         for target in targets
     )
+
+    def curve(sizes: Sequence[int]) -> PowerCurve:
+        return PowerCurve(
+            n=tuple(sizes),
+            bootstrap=tuple(power("bootstrap")(n) for n in sizes),
+            fitted=tuple(power("fitted")(n) for n in sizes),
+            closed_form=tuple(closed(n) for n in sizes),
+        )
+
     needed = [n for s in sizes for n in (s.bootstrap, s.fitted, s.closed_form)]
-    grid = _curve_sizes(needed, max_n)
-    curve = PowerCurve(
-        n=tuple(grid),
-        bootstrap=tuple(power("bootstrap")(n) for n in grid),
-        fitted=tuple(power("fitted")(n) for n in grid),
-        closed_form=tuple(closed(n) for n in grid),
-    )
     return Comparison(
         method=method,
         baseline=baseline,
@@ -331,7 +338,8 @@ def compare(
         delta=delta,
         d=d,
         sample_sizes=sizes,
-        curve=curve,
+        curve=curve(_curve_sizes(needed, max_n)),
+        at_sizes=curve(at_n),
     )
 
 
@@ -344,13 +352,15 @@ def power_analysis(
     seed: int = 0,
     targets: Sequence[float] = TARGETS,
     max_n: int = DEFAULT_MAX_N,
+    at_n: Sequence[int] = (),
     progress: Callable[[str], None] | None = None,
 ) -> PowerAnalysis:
     """Every arm of `r_t` (method -> its agents' R_T) against `baseline`.
 
     An arm with fewer than `MIN_AGENTS` agents is left out with a sentence in `skipped`
     (a baseline with too few leaves every arm out), never an error: a pilot may be that
-    small. `progress` hears a line before each comparison (each takes seconds).
+    small. `at_n` adds the power at these agents per arm (`Comparison.at_sizes`);
+    `progress` hears a line before each comparison (each takes seconds).
     """
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be between 0 and 1, got {alpha}")
@@ -358,6 +368,8 @@ def power_analysis(
         raise ValueError(f"draws must be at least 1, got {draws}")
     if any(not 0 < t < 1 for t in targets):
         raise ValueError(f"target powers must be between 0 and 1, got {list(targets)}")
+    if any(n < MIN_N for n in at_n):
+        raise ValueError(f"sizes must be at least {MIN_N} agents per arm, got {list(at_n)}")
     if baseline not in r_t:
         raise ValueError(f"baseline {baseline!r} is not an arm; arms: {', '.join(r_t)}")
     base = np.asarray(r_t[baseline], dtype=float)
@@ -391,6 +403,7 @@ def power_analysis(
                 seed=seed,
                 targets=targets,
                 max_n=max_n,
+                at_n=at_n,
             )
         )
     return PowerAnalysis(baseline, alpha, draws, seed, max_n, tuple(comparisons), tuple(skipped))

@@ -53,6 +53,14 @@ def register(subparsers: Any) -> None:
         "--max-n", type=int, help="largest number of agents per arm searched (default 1000)"
     )
     parser.add_argument(
+        "--n",
+        type=int,
+        nargs="+",
+        default=[],
+        metavar="N",
+        help="also give the power at these numbers of agents per arm",
+    )
+    parser.add_argument(
         "--sessions", nargs="+", metavar="ID", help="these sessions only (any status)"
     )
     parser.add_argument("--methods", nargs="+", metavar="METHOD", help="these methods only")
@@ -93,6 +101,7 @@ def power(args: argparse.Namespace) -> int:
         methods=tuple(m for value in args.methods or [] for m in value.split(",") if m) or None,
         label=args.label,
         n_episodes=args.n_episodes,
+        at_n=tuple(args.n),
         **{k: v for k, v in given.items() if v is not None},
     )
     tell = show_progress(False)
@@ -139,6 +148,12 @@ def power(args: argparse.Namespace) -> int:
         for s in c.sample_sizes:
             sizes = [_needed(n, result.max_n) for n in (s.bootstrap, s.fitted, s.closed_form)]
             print(f"  {f'{s.target:.0%}':<7}{sizes[0]:>11}{sizes[1]:>12}{sizes[2]:>13}")
+        at = c.at_sizes
+        for i, n in enumerate(at.n):
+            print(
+                f"  power with {n} agents per arm: {at.bootstrap[i]:.0%} (bootstrap), "
+                f"{at.fitted[i]:.0%} (normal fit), {at.closed_form[i]:.0%} (closed form)"
+            )
     for skipped in result.skipped:
         print(f"\nleft out: {skipped}")
     if done.files:

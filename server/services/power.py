@@ -55,6 +55,8 @@ class PowerRequest:
     """Seeds every simulated study: the same seed gives the same numbers."""
     max_n: int = DEFAULT_MAX_N
     """The largest study size searched."""
+    at_n: tuple[int, ...] = ()
+    """Sizes (agents per arm) to give the power at, besides the sizes needed."""
     sessions: tuple[int, ...] | None = None
     """Session ids (any status); None: the study's finished sessions except advisors."""
     methods: tuple[str, ...] | None = None
@@ -76,6 +78,13 @@ class PowerRequest:
             raise Invalid("seed", f"seed must be 0 or more, got {self.seed}")
         if self.max_n < MIN_AGENTS:
             raise Invalid("max_n", f"max_n must be at least {MIN_AGENTS}, got {self.max_n}")
+        outside = [n for n in self.at_n if not MIN_AGENTS <= n <= self.max_n]
+        if outside:
+            raise Invalid(
+                "at_n",
+                f"sizes must be {MIN_AGENTS} to max_n={self.max_n} agents per arm, got "
+                f"{', '.join(map(str, outside))}",
+            )
         if self.n_episodes is not None and self.n_episodes < 1:
             raise Invalid("n_episodes", f"n_episodes must be at least 1, got {self.n_episodes}")
         if self.baseline == NO_BASELINE:
@@ -144,7 +153,7 @@ def study_power(
     }
     analysis = power_analysis(
         r_t, baseline, alpha=request.alpha, draws=request.draws, seed=request.seed,
-        max_n=request.max_n, progress=progress,
+        max_n=request.max_n, at_n=request.at_n, progress=progress,
     )  # fmt: skip
     if not analysis.comparisons:
         why = "; ".join(analysis.skipped) or f"only {method_name(baseline)} has sessions"

@@ -191,13 +191,21 @@ def test_the_command_prints_the_table_and_writes_the_figure(
         assert image.format == "PNG" and min(image.size) > 300
     assert "<svg" in (out / "power.svg").read_text()
 
-    assert main(["power", "--study", "pilot", "--json", "--seed", "7", *flags]) == 0
+    assert (
+        main(["power", "--study", "pilot", "--json", "--seed", "7", "--n", "2", "5", *flags]) == 0
+    )
     parsed = json.loads(capsys.readouterr().out)
     assert parsed["baseline"] == "autonomous" and parsed["draws"] == 2000
     assert parsed["n_episodes"] == 4 and len(parsed["sessions"]) == 6
     (oracle,) = parsed["comparisons"]
     assert oracle["method"] == "oracle" and oracle["delta"] == pytest.approx(13 / 3)
     assert [s["target"] for s in oracle["sample_sizes"]] == [0.8, 0.9]
+    at = oracle["at_sizes"]
+    assert at["n"] == [2, 5] and at["closed_form"][0] == pytest.approx(
+        normal_power(13 / 3, math.sqrt(1 / 12), math.sqrt(1 / 3), 2)
+    )
+    curve = dict(zip(oracle["curve"]["n"], oracle["curve"]["bootstrap"], strict=True))
+    assert at["bootstrap"] == [curve[2], curve[5]], "a size gets the same studies everywhere"
     rows_80 = next(r for r in rows if r[0] == "80%")
     assert str(oracle["sample_sizes"][0]["bootstrap"]) == rows_80[1], "same seed, same numbers"
 
@@ -212,6 +220,8 @@ def test_the_command_refuses_what_it_cannot_do(
     assert "alpha must be between 0 and 1" in capsys.readouterr().err
     assert main(["power", "--study", "pilot", "--draws", "10", *flags]) == 2
     assert "draws must be at least 100" in capsys.readouterr().err
+    assert main(["power", "--study", "pilot", "--n", "1", *flags]) == 2
+    assert "sizes must be 2 to max_n=1000 agents per arm, got 1" in capsys.readouterr().err
     assert main(["power", "--study", "pilot", "--baseline", "human", "--json", *flags]) == 2
     captured = capsys.readouterr()
     assert captured.out == "" and "no 'human' sessions" in captured.err
