@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -242,8 +242,6 @@ class PowerAnalysis:
 
 
 def _jsonable(comparison: Comparison) -> dict[str, object]:
-    from dataclasses import asdict
-
     out = asdict(comparison)
     out["d"] = comparison.d if math.isfinite(comparison.d) else None  # strict JSON
     for name in ("curve", "at_sizes"):

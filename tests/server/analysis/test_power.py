@@ -19,6 +19,7 @@ from server.analysis.power import (
     power_analysis,
     sample_size,
     simulated_power,
+    welch_rejects,
 )
 from server.cli import main
 from server.db.engine import make_engine, make_session_factory
@@ -39,6 +40,19 @@ def exact_power(d: float, n: int, alpha: float = 0.05) -> float:
     critical = stats.t.ppf(1 - alpha / 2, dof)
     shift = d * math.sqrt(n / 2)
     return float(stats.nct.sf(critical, dof, shift) + stats.nct.cdf(-critical, dof, shift))
+
+
+def test_the_vectorised_welch_test_is_scipys() -> None:
+    rng = np.random.default_rng(8)
+    a, b = rng.normal(1.5, 1.0, (300, 5)), rng.normal(0.0, 2.0, (300, 7))
+    p = stats.ttest_ind(a, b, axis=1, equal_var=False).pvalue
+    assert 20 < (p < 0.05).sum() < 280, "both outcomes occur"
+    assert (welch_rejects(a, b, 0.05) == (p < 0.05)).all()
+    constant = np.ones((2, 3))
+    assert welch_rejects(constant, np.vstack([2 * constant[0], constant[1]]), 0.05).tolist() == [
+        True,
+        False,
+    ], "constant arms: t is infinite when the means differ, undefined (no rejection) if not"
 
 
 @pytest.mark.parametrize("model", ["bootstrap", "fitted"])
