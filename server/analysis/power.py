@@ -254,11 +254,17 @@ def _rng(seed: int, n: int, model: Model) -> np.random.Generator:
     return np.random.default_rng([seed, n, MODELS.index(model)])
 
 
-def _curve_sizes(needed: Sequence[int | None], max_n: int, points: int = 24) -> list[int]:
+def _curve_sizes(needed: Sequence[int | None], max_n: int, dense: int = 24) -> list[int]:
+    """Sizes for the figure: every n up to `dense`, then powers of 2 and 1.5 times them up
+    to a little beyond the largest n needed, the sizes the search has simulated already."""
     top = max([n for n in needed if n is not None], default=max_n)
     top = min(max_n, max(10, math.ceil(top * 1.25)))
-    grid = np.unique(np.round(np.linspace(MIN_N, top, points)).astype(int))
-    return [int(n) for n in grid]
+    sizes = set(range(MIN_N, min(top, dense) + 1)) | {top}
+    power = 1
+    while power < top:
+        sizes |= {n for n in (power, power * 3 // 2) if dense < n < top}
+        power *= 2
+    return sorted(sizes)
 
 
 def compare(
