@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
@@ -26,6 +27,7 @@ from server.analysis.episodes import (
     order_methods,
     validate_episodes,
 )
+from server.analysis.power import PowerAnalysis
 from server.analysis.stats import agent_totals, improvement_pct
 
 METHOD_COLORS: dict[str, str] = {
@@ -88,11 +90,14 @@ VECTOR_FORMATS = ("svg", "pdf")
 
 def save_figure(figure: Figure, path: str | Path, *, dpi: int = 150) -> Path:
     """Write a figure as PNG (and as SVG and PDF beside it, same name) and return the PNG's
-    path (`vector_paths` gives the others)."""
+    path (`vector_paths` gives the others). SVG and PDF carry no date, and SVG a fixed id
+    salt, so the same figure gives the same files."""
     path = Path(path)
     figure.savefig(path, dpi=dpi, format="png")
-    for kind, vector in zip(VECTOR_FORMATS, vector_paths(path), strict=True):
-        figure.savefig(vector, format=kind, metadata={"Date": None} if kind == "pdf" else None)
+    svg, pdf = vector_paths(path)
+    with matplotlib.rc_context({"svg.hashsalt": "ideeprl"}):
+        figure.savefig(svg, format="svg", metadata={"Date": None})
+    figure.savefig(pdf, format="pdf", metadata={"CreationDate": None})
     return path
 
 
@@ -354,4 +359,56 @@ def plot_epsilon(episodes: pd.DataFrame, *, baseline: str | None = "autonomous")
     ax.set_ylabel("epsilon (% random actions, log scale)")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right")
+    return figure
+
+
+def plot_power(analysis: PowerAnalysis) -> Figure:
+    """Power of Welch's test on R_T against agents per arm, one panel per comparison with
+    the baseline: simulated from the observed R_T (bootstrap), from a normal fit, and the
+    closed form, with the 80 % and 90 % lines where a planned study aims."""
+    if not analysis.comparisons:
+        raise EpisodeTableError("no comparison to plot: every arm has too few agents")
+    count = len(analysis.comparisons)
+    columns = min(count, 3)
+    rows = -(-count // columns)
+    figure = Figure(figsize=(4.6 * columns, 3.8 * rows), layout="constrained")
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(rows, columns, squeeze=False).ravel()
+    methods = [analysis.baseline, *(c.method for c in analysis.comparisons)]
+    for ax, comparison in zip(axes, analysis.comparisons, strict=False):
+        curve = comparison.curve
+        color = method_color(comparison.method, methods)
+        percent = [[100 * p for p in values] for values in
+                   (curve.bootstrap, curve.fitted, curve.closed_form)]  # fmt: skip
+        ax.plot(curve.n, percent[0], color=color, lw=1.8, marker=".", label="simulated: bootstrap")
+        ax.plot(curve.n, percent[1], color=color, lw=1.2, ls="--", label="simulated: normal fit")
+        ax.plot(curve.n, percent[2], color="0.3", lw=1.2, ls=":", label="closed form (normal)")
+        for level in (80, 90):
+            ax.axhline(level, color="0.5", lw=0.8, ls="-.")
+            ax.annotate(
+                f"{level} %",
+                (0, level),
+                xycoords=("axes fraction", "data"),
+                xytext=(3, 2),
+                textcoords="offset points",
+                fontsize=8,
+                color="0.4",
+            )
+        ax.set_ylim(0, 101)
+        ax.set_title(
+            f"{method_name(comparison.method)} vs {method_name(comparison.baseline)}\n"
+            f"effect {comparison.delta:+.2f} R_T, d = {comparison.d:.2f}",
+            fontsize=10,
+        )
+        ax.set_xlabel("agents (participants) per arm")
+        ax.set_ylabel("power (%)")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right", fontsize=8)
+    for ax in axes[count:]:
+        ax.set_visible(False)
+    figure.suptitle(
+        f"Planning: power of Welch's two-sided t-test on R_T at α = {analysis.alpha:g} "
+        f"({analysis.draws} simulated studies per size)",
+        fontsize=11,
+    )
     return figure

@@ -32,10 +32,12 @@ from server.analysis.figures import (
     plot_epsilon,
     plot_individual_agents,
     plot_method_curves,
+    plot_power,
     save_figure,
     vector_paths,
 )
 from server.analysis.paper import PAPER_AGENTS, PAPER_EPISODES, paper_comparison
+from server.analysis.power import DEFAULT_DRAWS, MIN_AGENTS, PowerAnalysis, power_analysis
 from server.analysis.reference import REFERENCES, authors_totals, overlay_authors
 from server.analysis.rescoring import rescored_totals, rescoring_table
 from server.analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
@@ -51,6 +53,7 @@ FIGURE_FILES: dict[str, str] = {
     "cumulative_reward": "cumulative_reward.png",
     "confidence_bands": "reward_confidence_bands.png",
     "epsilon": "epsilon.png",
+    "power": "power.png",
 }
 TABLE_FILES: dict[str, str] = {
     "methods": "r_t_per_method.csv",
@@ -71,9 +74,10 @@ OPTIONAL_TABLE_FILES: dict[str, str] = {
     "comparisons": "primary_and_secondary_tests.csv",
     "advice_quality": "advice_quality.csv",
     "advice_correlations": "advice_quality_per_method.csv",
+    "power": "power.csv",
 }
 """Tables written when their input is given: the sessions' settings (the audit), the step
-logs (rescoring), a reference."""
+logs (rescoring), a reference, two agents per arm and a baseline (power)."""
 MAX_HEATMAP_AGENTS = 24
 """Above this many agents Figure 7 shows the paper's selection; the CSV keeps them all."""
 
@@ -98,6 +102,8 @@ class ReportResult:
     """What each method ran under and which pairs differ (None without a settings table)."""
     rescored: pd.DataFrame | None = None
     """R_T per method under each reward scheme (None without step logs)."""
+    power: PowerAnalysis | None = None
+    """Agents per arm a future study needs (None without a baseline)."""
 
     @property
     def vector_figures(self) -> list[Path]:
@@ -533,6 +539,8 @@ def write_report(
     reference: str | None = None,
     advice: pd.DataFrame | None = None,
     primary: str = "welch",
+    power_draws: int = DEFAULT_DRAWS,
+    power_seed: int = 0,
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -554,6 +562,8 @@ def write_report(
     `server.analysis.advice.ADVICE_COLUMNS`) adds each advised session's advice quality.
     `primary` is each comparison's primary test (`server.analysis.comparisons`): Welch's
     test of the agents' R_T, or the paired t-test where seeds pair; the rest are secondary.
+    The Power section plans a future study from these agents' R_T (`server.analysis.power`,
+    `power_draws` simulated studies per size, seeded by `power_seed`) at `alpha`.
     """
     if reference is not None and reference not in REFERENCES:
         raise EpisodeTableError(
@@ -581,6 +591,7 @@ def write_report(
     )
     heatmap_labels, heatmap_notes = _heatmap_labels(analysis, plan[0] if plan else "")
     report_notes = [*plan_notes, *heatmap_notes]
+    power = _power(analysis, alpha, power_draws, power_seed)
     out.mkdir(parents=True, exist_ok=True)
 
     tables = {
@@ -620,6 +631,8 @@ def write_report(
             tables["advice_correlations"] = quality_correlations(quality)
         else:
             quality = None
+    if power is not None and power.comparisons:
+        tables["power"] = power_table(power)
     table_paths = {}
     for name, frame in tables.items():
         table_paths[name] = out / {**TABLE_FILES, **OPTIONAL_TABLE_FILES}[name]
@@ -644,6 +657,8 @@ def write_report(
         )
     if "epsilon" in analysis.episodes:
         figures["epsilon"] = plot_epsilon(analysis.episodes, baseline=baseline)
+    if power is not None and power.comparisons:
+        figures["power"] = plot_power(power)
     figure_paths = {
         name: save_figure(figures[name], out / FIGURE_FILES[name])
         for name in FIGURE_FILES
@@ -658,7 +673,7 @@ def write_report(
     )
     extra = _Extras(
         checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes, quality,
-        tables.get("advice_correlations"), tables.get("comparisons"),
+        tables.get("advice_correlations"), tables.get("comparisons"), power,
     )  # fmt: skip
     report.write_text(
         _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra),
@@ -667,7 +682,7 @@ def write_report(
     warnings = tuple(checked.warnings()) if checked is not None else ()
     return ReportResult(
         out, report, figure_paths, table_paths, (*warnings, *report_notes), analysis,
-        checked, rescored,
+        checked, rescored, power,
     )  # fmt: skip
 
 
@@ -684,6 +699,7 @@ class _Extras:
     advice_quality: pd.DataFrame | None = None
     advice_correlations: pd.DataFrame | None = None
     comparisons: pd.DataFrame | None = None
+    power: PowerAnalysis | None = None
 
 
 def _outcomes_note(by_outcomes: tuple[int, int] | None) -> str:
@@ -935,6 +951,7 @@ def _markdown(
         _tests_table(analysis, alpha),
         "",
         *_intervals_section(analysis),
+        *_power_section(extra.power),
         "## Correlation between agents (the paper's Figure 7)",
         "",
         f"![Figure 7: Pearson's correlation between agents]({FIGURE_FILES['correlation']})",
@@ -974,6 +991,7 @@ def _markdown(
                 ("comparisons", extra.comparisons),
                 ("advice_quality", extra.advice_quality),
                 ("advice_correlations", extra.advice_quality),
+                ("power", extra.power if extra.power and extra.power.comparisons else None),
             )
             if part is not None
         ),
@@ -983,3 +1001,115 @@ def _markdown(
         "",
     ]
     return "\n".join(out)
+
+
+def _power(analysis: Analysis, alpha: float, draws: int, seed: int) -> PowerAnalysis | None:
+    """The power analysis of every method against the baseline (None without one)."""
+    if analysis.baseline is None:
+        return None
+    agents = analysis.agents
+    r_t = {
+        m: agents.loc[agents["method"] == m, "R_T"].to_numpy(dtype=float)
+        for m in analysis.method_order
+    }
+    return power_analysis(r_t, analysis.baseline, alpha=alpha, draws=draws, seed=seed)
+
+
+def power_table(power: PowerAnalysis) -> pd.DataFrame:
+    """One row per comparison and target power: the effect, the spreads, agents needed
+    (empty: more than `max_n`, or no effect)."""
+    rows = [
+        {
+            "method": c.method,
+            "baseline": c.baseline,
+            "agents": c.agents,
+            "baseline_agents": c.baseline_agents,
+            "mean_R_T": c.mean,
+            "baseline_mean_R_T": c.baseline_mean,
+            "effect": c.delta,
+            "sd": c.sd,
+            "baseline_sd": c.baseline_sd,
+            "d": c.d,
+            "alpha": power.alpha,
+            "power": size.target,
+            "n_bootstrap": size.bootstrap,
+            "n_fitted": size.fitted,
+            "n_closed_form": size.closed_form,
+            "max_n": power.max_n,
+            "draws": power.draws,
+            "seed": power.seed,
+        }
+        for c in power.comparisons
+        for size in c.sample_sizes
+    ]
+    counts = {f"n_{k}": "Int64" for k in ("bootstrap", "fitted", "closed_form")}
+    return pd.DataFrame(rows).astype(counts)
+
+
+def _needed(n: int | None, max_n: int) -> str:
+    return f"> {max_n}" if n is None else str(n)
+
+
+def _power_rows(power: PowerAnalysis) -> pd.DataFrame:
+    return pd.DataFrame(
+        [
+            {
+                "pair": f"{method_name(c.method)} vs {method_name(c.baseline)}",
+                "effect": f"{c.delta:+.2f} (d = {c.d:.2f})",
+                "sd": f"{c.sd:.2f} / {c.baseline_sd:.2f}",
+                "agents": f"{c.agents} + {c.baseline_agents}",
+                "power": f"{size.target * 100:g} %",
+                "bootstrap": _needed(size.bootstrap, power.max_n),
+                "fitted": _needed(size.fitted, power.max_n),
+                "closed": _needed(size.closed_form, power.max_n),
+            }
+            for c in power.comparisons
+            for size in c.sample_sizes
+        ]
+    )
+
+
+def _power_section(power: PowerAnalysis | None) -> list[str]:
+    """Planning information: the agents per arm a future study needs, or why it is left out."""
+    head = ["## Power: how many participants a study needs (planning, not a test)", ""]
+    if power is None:
+        why = "power compares each method with a baseline, and this report has none"
+        return [*head, f"Left out: {why} (name one with `--baseline`).", ""]
+    if not power.comparisons:
+        why = "; ".join(power.skipped) or "there is no method besides the baseline"
+        return [*head, f"Left out: {why}. Run at least {MIN_AGENTS} agents per arm.", ""]
+    table = md.table(
+        _power_rows(power),
+        {
+            "pair": "pair (a vs baseline)",
+            "effect": "observed effect on R_T (a − baseline)",
+            "sd": "sd of R_T (a / baseline)",
+            "agents": "pilot agents",
+            "power": "power",
+            "bootstrap": "n per arm: simulated, bootstrap",
+            "fitted": "n per arm: simulated, normal fit",
+            "closed": "n per arm: closed form",
+        },
+    )
+    return [
+        *head,
+        "Planning information for a future study, not a test of this one: taking these "
+        "agents' observed effect and spreads as true, how many agents (participants) per "
+        f"arm the report's per-agent Welch test (two-sided, α = {power.alpha:g}) needs to "
+        "detect the effect with 80 % and 90 % probability. Simulated: "
+        f"{power.draws} studies per size (seed {power.seed}), their agents drawn from each "
+        "arm's observed R_T (bootstrap) or from a normal with its mean and sd; closed form: "
+        "n = (z_{1−α/2} + z_power)² (sd_a² + sd_b²) / effect². With few pilot agents the "
+        "effect and sd are rough, and the bootstrap, which never draws beyond the observed "
+        "values, underestimates the spread (its variance is (k − 1)/k of the sample's for "
+        "k agents): plan with the largest n and some margin.",
+        "",
+        table,
+        "",
+        *(f"Left out: {s}." for s in power.skipped),
+        *([""] if power.skipped else []),
+        f"![Power against agents per arm]({FIGURE_FILES['power']}) "
+        f"([SVG]({Path(FIGURE_FILES['power']).with_suffix('.svg')}), "
+        f"[PDF]({Path(FIGURE_FILES['power']).with_suffix('.pdf')}))",
+        "",
+    ]

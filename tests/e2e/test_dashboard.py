@@ -97,7 +97,8 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
         expect(row.locator("td").nth(1)).to_have_text(str(method["agents"]))
         expect(row.locator("td").nth(3)).to_have_text(f"{method['R_T']:.2f}")
     figures = report.locator(".report-figures img")
-    expect(figures).to_have_count(sum(f["kind"] == "figure" for f in built["files"]))
+    pngs = [f for f in built["files"] if f["kind"] == "figure" and f["name"].endswith(".png")]
+    expect(figures).to_have_count(len(pngs))
     figures.first.scroll_into_view_if_needed()
     page.wait_for_function(
         "() => [...document.querySelectorAll('.report-figures img')]"

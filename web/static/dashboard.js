@@ -134,7 +134,7 @@
     );
     box.querySelector(".report-figures").replaceChildren(
       ...report.files
-        .filter((f) => f.kind === "figure")
+        .filter((f) => f.kind === "figure" && f.name.endsWith(".png")) // SVG: the same figure
         .map((f) => {
           const link = document.createElement("a");
           link.href = `${f.url}?t=${stamp}`;

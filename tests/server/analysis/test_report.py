@@ -12,6 +12,7 @@ from PIL import Image
 
 from server.analysis import EpisodeTableError, ReportResult, write_report
 from server.analysis.__main__ import main
+from server.analysis.power import normal_sample_size
 from server.analysis.report import FIGURE_FILES, TABLE_FILES
 from tests.server.analysis.helpers import HAND_CASE, episodes_from_curves
 
@@ -47,7 +48,7 @@ def test_every_file_is_written_and_listed(report: tuple[pd.DataFrame, ReportResu
     _, result = report
     assert result.report == result.out_dir / "report.md"
     assert set(result.figures) == set(FIGURE_FILES)
-    assert set(result.tables) == {*TABLE_FILES, "comparisons"}  # a baseline: tests against it
+    assert set(result.tables) == {*TABLE_FILES, "comparisons", "power"}  # against a baseline
     assert sorted(p.name for p in result.out_dir.iterdir()) == sorted(p.name for p in result.files)
     for path in result.figures.values():
         with Image.open(path) as image:
@@ -108,6 +109,49 @@ def test_the_markdown_shows_the_files_and_numbers_in_plain_words(
     assert f"these runs have {N_EPISODES} episodes per agent" in text
     assert "Figure 6 draws 3 of the 6 human-IDeepRL agents" in text
     assert "Mean epsilon reaches 1 %: autonomous DeepRL at episode 10" in text
+
+
+def test_the_power_section_plans_from_the_agents_r_t(
+    report: tuple[pd.DataFrame, ReportResult],
+) -> None:
+    """Each method against the baseline, both targets, by simulation and closed form,
+    labelled as planning; the numbers are those of the power table and the library."""
+    episodes, result = report
+    text = result.report.read_text(encoding="utf-8")
+    section = text.split("## Power: ")[1].split("\n## ")[0]
+    assert section.startswith("how many participants a study needs (planning, not a test)")
+    assert "not a test of this one" in section and "2000 studies per size (seed 0)" in section
+    table = pd.read_csv(result.tables["power"])
+    assert list(zip(table.method, table.power, strict=True)) == [
+        ("agent", 0.8), ("agent", 0.9), ("human", 0.8), ("human", 0.9)
+    ]  # fmt: skip
+    r_t = episodes.groupby("label")["collected_reward"].sum()
+    agent = r_t[[f"agent-{i}" for i in (1, 2, 3)]].to_numpy()
+    base = r_t[[f"autonomous-{i}" for i in (1, 2, 3)]].to_numpy()
+    row = table.iloc[0]
+    assert row["effect"] == pytest.approx(agent.mean() - base.mean())
+    assert (row["sd"], row["baseline_sd"]) == pytest.approx((agent.std(ddof=1), base.std(ddof=1)))
+    assert row["n_closed_form"] == normal_sample_size(
+        row["effect"], row["sd"], row["baseline_sd"], 0.8, 0.05
+    )
+    assert (
+        f"| agent-IDeepRL vs autonomous DeepRL | {row['effect']:+.2f} (d = {row['d']:.2f}) | "
+        f"{row['sd']:.2f} / {row['baseline_sd']:.2f} | 3 + 3 | 80 % | {row['n_bootstrap']} | "
+        f"{row['n_fitted']} | {row['n_closed_form']} |"
+    ) in section
+    assert "(power.png)" in section and "(power.svg)" in section
+
+
+def test_too_few_agents_leave_the_power_section_with_the_reason(tmp_path: Path) -> None:
+    result = write_report(episodes_from_curves(HAND_CASE), tmp_path / "hand")
+    section = result.report.read_text(encoding="utf-8").split("## Power: ")[1].split("\n## ")[0]
+    assert "Left out: human has 1 agent(s); power needs at least 2 per arm" in section
+    assert "| agent-IDeepRL vs autonomous DeepRL |" in section
+    assert "| human-IDeepRL vs autonomous DeepRL |" not in section
+    assert set(pd.read_csv(result.tables["power"]).method) == {"agent"}
+    alone = write_report(episodes_from_curves(HAND_CASE), tmp_path / "none", baseline=None)
+    assert "Left out: power compares each method with a baseline" in alone.report.read_text()
+    assert "power" not in alone.figures and "power" not in alone.tables
 
 
 def test_the_paper_comparison_needs_the_papers_methods(tmp_path: Path) -> None:

@@ -49,7 +49,7 @@ def test_each_control_follows_its_advised_runs_schedule(
         assert mine[0] == theirs[0] and mine[1] == theirs[1] and theirs[1]
         assert mine[2][:common] == theirs[2][:common]
     # run again: nothing to do
-    code, again = in_process(place, capsys, *args, *SCALE)
+    code, _ = in_process(place, capsys, *args, *SCALE)
     assert code == 0 and len(sessions(place.engine(), study)) == 4
 
     out_dir = tmp_path / "report"

@@ -50,7 +50,9 @@ def test_a_researcher_builds_and_downloads_a_studys_report(place: Place, api: ht
     for file in report["files"]:
         got = api.get(file["url"])
         assert got.status_code == 200, file
-        if file["kind"] == "figure":
+        if file["kind"] == "figure" and file["name"].endswith(".svg"):
+            assert got.headers["content-type"] == "image/svg+xml" and b"<svg" in got.content
+        elif file["kind"] == "figure":
             assert got.headers["content-type"] == "image/png" and got.content[:4] == b"\x89PNG"
     markdown = api.get(report["report_url"]).text
     assert markdown.startswith("# baselines: the paper's analysis")
