@@ -160,6 +160,15 @@ class Playbacks:
             self.close(playback_id)
         return idle
 
+    def close_sessions(self, gone: Callable[[int], bool]) -> list[str]:
+        """Close the playbacks of the sessions `gone(session_id)` says were deleted: what
+        they hold of a participant goes with the participant's data."""
+        with self._lock:
+            chosen = [p.id for p in self._open.values() if gone(p.session_id)]
+        for playback_id in chosen:
+            self.close(playback_id)
+        return chosen
+
     def open_ids(self) -> list[str]:
         with self._lock:
             return list(self._open)

@@ -16,9 +16,10 @@ from fastapi import APIRouter, HTTPException, Path, Request, WebSocket
 from fastapi.responses import RedirectResponse, Response
 from pydantic import BaseModel, Field
 from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 import sim
-from server.db.models import Advice, Episode
+from server.db.models import Advice, Episode, StudySession
 from server.deps import DbDep
 from server.live.playbacks import Playback, Playbacks, TooManyPlaybacks
 from server.routes.dashboard import LoginDep, _logged_in
@@ -51,6 +52,11 @@ def _open(request: Request, playback_id: str) -> Playback:
     if playback is None:
         raise HTTPException(404, "no such playback: it was closed, or idle too long; open it again")
     return playback
+
+
+def close_deleted(request: Request, db: Session) -> None:
+    """After a deletion: the playbacks of sessions that no longer exist end now."""
+    _playbacks(request).close_sessions(lambda sid: db.get(StudySession, sid) is None)
 
 
 # --- the page ----------------------------------------------------------------------------

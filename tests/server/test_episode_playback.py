@@ -163,7 +163,9 @@ def test_what_cannot_be_played_back_is_refused(
     finally:
         for o in opened:
             assert dashboard.delete(o.json()["url"]).status_code == 204
-    assert dashboard.post(f"{start}/pretrain/1/playback").status_code == 201
+    again = dashboard.post(f"{start}/pretrain/1/playback")
+    assert again.status_code == 201, "a closed playback frees its place"
+    assert dashboard.delete(again.json()["url"]).status_code == 204
 
     engine = create_engine(server.database_url)
     try:
@@ -179,6 +181,20 @@ def test_what_cannot_be_played_back_is_refused(
     assert unseeded.status_code == 409 and "reset seed" in unseeded.json()["detail"]
     listed = dashboard.get(start).json()
     assert [e["playable"] for e in listed if e["stage"] == "train"] == [False]
+
+
+def test_deleting_the_session_ends_its_playbacks(
+    server: LiveServer, recorded: dict[str, Any], dashboard: httpx.Client
+) -> None:
+    """What a playback holds of a participant goes with their data (runs last: it deletes
+    the module's session)."""
+    opened = dashboard.post(f"{API}/sessions/{recorded['id']}/episodes/pretrain/1/playback")
+    assert opened.status_code == 201
+    url = opened.json()["url"]
+    assert dashboard.get(url).status_code == 200
+    with server.client() as api:
+        assert api.delete(f"/api/sessions/{recorded['id']}").status_code == 204
+    assert dashboard.get(url).status_code == 404
 
 
 def test_an_idle_playback_is_closed_and_its_rerun_ended() -> None:

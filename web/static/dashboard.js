@@ -63,7 +63,7 @@
     cells[0].querySelector(".session-id").textContent = `#${s.id}`;
     cells[0].querySelector(".session-label").textContent = s.participant || s.label || `seed ${s.seed}`;
     const playback = cells[0].appendChild(document.createElement("a"));
-    playback.className = "link small playback-link";
+    playback.className = "playback-link small";
     playback.href = `/dashboard/sessions/${s.id}/playback`;
     playback.textContent = "episodes";
     playback.title = "Play back a recorded episode";
