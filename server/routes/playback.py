@@ -174,6 +174,8 @@ class PlaybackState(BaseModel):
     collected_reward: float
     steps: list[StepShown] = Field(default_factory=list)
     """Filled when the rerun is ready."""
+    end_image_url: str = ""
+    """The image after the last step (when ready): `steps/N.png`, N the number of steps."""
     advice: list[AdviceShown] = Field(default_factory=list)
 
 
@@ -207,6 +209,7 @@ def _state(playback: Playback) -> PlaybackState:
         ]
         if ready
         else [],
+        end_image_url=f"{base}/steps/{len(recorded.steps)}.png" if ready else "",
         advice=[
             AdviceShown(
                 advice_index=a.advice_index,
@@ -237,14 +240,17 @@ def step_image(request: Request, playback_id: PlaybackId, index: StepIndex) -> R
     rerun = playback.rerun
     if rerun is None:
         raise HTTPException(409, f"the episode is still {playback.state}: {playback.detail}")
-    if index >= len(rerun.steps):
-        raise HTTPException(404, f"the episode has {len(rerun.steps)} steps (0-based index)")
-    return Response(rerun.steps[index].observation_png, media_type="image/png")
+    if index > len(rerun.steps):
+        raise HTTPException(
+            404, f"the episode has {len(rerun.steps)} steps: 0 to {len(rerun.steps)} (its end)"
+        )
+    png = rerun.final_png if index == len(rerun.steps) else rerun.steps[index].observation_png
+    return Response(png, media_type="image/png")
 
 
 class Show(BaseModel):
     index: int = Field(ge=0, le=MAX_ID)
-    """0-based step whose decision the 3-D view draws."""
+    """0-based step whose decision the 3-D view draws; the number of steps: the end."""
 
 
 @router.post(f"{API}/playbacks/{{playback_id}}/show", dependencies=[LoginDep])
@@ -254,9 +260,10 @@ def show(request: Request, playback_id: PlaybackId, body: Show) -> dict[str, int
     rerun = playback.rerun
     if rerun is None:
         raise HTTPException(409, f"the episode is still {playback.state}; wait for it to be ready")
-    if body.index >= len(rerun.steps):
+    if body.index > len(rerun.steps):
         raise HTTPException(
-            422, f"index: the episode has {len(rerun.steps)} steps, 0 to {len(rerun.steps) - 1}"
+            422,
+            f"index: the episode has {len(rerun.steps)} steps, 0 to {len(rerun.steps)} (its end)",
         )
     return {"views": _viewer(request).show(playback_id, body.index)}
 

@@ -5,8 +5,9 @@ A playback page embeds viser's client with its websocket at `/viewer/playback/ID
 to this server's `/p/ID`; a websocket whose id is no open playback is closed before
 anything is sent to it. The page says which step it shows (`show`), and each of the
 playback's views draws the scene at that step's decision: the poses before its action,
-the moment the learner's 64x64 image shows. One step forward plays the previous step's
-motion, as the live view would have; any other jump is drawn at once.
+the moment the learner's 64x64 image shows; the index after the last step is the
+episode's end. One step forward plays the previous step's motion, as the live view would
+have; any other jump is drawn at once.
 """
 
 from __future__ import annotations
@@ -154,7 +155,7 @@ class PlaybackViewer:
 
     def _draw(self, view: _View, index: int) -> None:
         rerun = self._rerun_of(view.playback_id)
-        if rerun is None or not 0 <= index < max(1, len(rerun.steps)):
+        if rerun is None or not 0 <= index <= len(rerun.steps):
             return
         with self._drawing:  # the routes' threads and viser's
             self._draw_locked(view, index, rerun)

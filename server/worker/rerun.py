@@ -54,6 +54,8 @@ class Rerun:
     start: SceneReset
     """The scene's bodies and their poses after the reset."""
     steps: list[RerunStep] = field(default_factory=list)
+    final_png: bytes = b""
+    """The image after the last step: the episode's end, which no action follows."""
     mismatch: str = ""
     """Empty when every reward equals the logged one; else which step differs (the session
     ran with another environment than its run describes)."""
@@ -93,7 +95,7 @@ def rerun_episode(order: RerunOrder) -> Rerun:
                 global_step=index + 1,
             )
             steps.append(RerunStep(seen, motion, float(reward)))
-        return Rerun(start, steps, mismatch)
+        return Rerun(start, steps, encode_png(obs), mismatch)
     finally:
         env.close()
 

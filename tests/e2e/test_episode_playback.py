@@ -156,7 +156,7 @@ def test_a_researcher_plays_back_a_participants_episode(live: Live, browser: Any
     page.click("#play")
     expect(page.locator("#play")).to_have_text("Play")
     paused = shown_step(page)
-    page.wait_for_timeout(2500)  # longer than a played step takes
+    page.wait_for_timeout(2000)  # longer than two played steps take
     assert shown_step(page) == paused
     expect_step(page, steps[paused - 1])
 
@@ -189,6 +189,16 @@ def test_a_researcher_plays_back_a_participants_episode(live: Live, browser: Any
     assert image.ok and np.array_equal(pixels(image.body()), pixels(turn.observation_png))
     wait_drawn(live, playback_id, index)
     save_screenshot(page, "dashboard-playback", full_page=True)
+
+    # The episode's end: the scene after the last action, which no step follows.
+    page.locator("#scrub").fill(str(len(steps)))
+    expect(page.locator("#step-number")).to_have_text("end")
+    expect(page.locator("#step-action")).to_have_text("—")
+    total = f"{episode.collected_reward:.2f}"
+    expect(page.locator("#step-collected")).to_have_text(f"{total} of {total}")
+    expect(page.locator("#step-forward")).to_be_disabled()
+    assert abs(sum(row.reward for row in steps) - episode.collected_reward) < 1e-9
+    wait_drawn(live, playback_id, len(steps))
 
     # Leaving the page closes the playback.
     assert playback_id in live.app.state.playbacks.open_ids()

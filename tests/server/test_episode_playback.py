@@ -157,9 +157,12 @@ def test_what_cannot_be_played_back_is_refused(
         assert third.status_code == 429 and "playbacks are open" in third.json()["detail"]
         url = opened[0].json()["url"]
         steps = len(_ready(dashboard, url)["steps"])
-        assert dashboard.post(f"{url}/show", json={"index": steps}).status_code == 422
+        assert dashboard.post(f"{url}/show", json={"index": steps}).status_code == 200  # end
+        assert dashboard.post(f"{url}/show", json={"index": steps + 1}).status_code == 422
         assert dashboard.post(f"{url}/show", json={"index": -1}).status_code == 422
-        assert dashboard.get(f"{url}/steps/{steps}.png").status_code == 404
+        assert dashboard.post(f"{url}/show", json={"step": 1}).status_code == 422
+        assert dashboard.get(f"{url}/steps/{steps}.png").status_code == 200  # the end's image
+        assert dashboard.get(f"{url}/steps/{steps + 1}.png").status_code == 404
     finally:
         for o in opened:
             assert dashboard.delete(o.json()["url"]).status_code == 204

@@ -75,22 +75,24 @@
     return s === null || s === undefined ? "—" : `${s.toFixed(2)} s`;
   }
 
+  // Positions 0..n-1 are the steps' decisions; n is the episode's end (no action follows).
   function show(index, tellServer = true) {
     const steps = playback.steps;
-    current = Math.max(0, Math.min(steps.length - 1, index));
+    current = Math.max(0, Math.min(steps.length, index));
     const step = steps[current];
-    $("step-number").textContent = step.step;
+    const end = current === steps.length;
+    $("step-number").textContent = end ? "end" : step.step;
     $("step-count").textContent = steps.length;
-    $("step-global").textContent = step.global_step;
-    $("step-action").textContent = step.action_name;
-    $("step-action").dataset.action = step.action;
-    $("step-source").textContent = step.action_source;
+    $("step-global").textContent = end ? "—" : step.global_step;
+    $("step-action").textContent = end ? "—" : step.action_name;
+    $("step-action").dataset.action = end ? "" : step.action;
+    $("step-source").textContent = end ? "—" : step.action_source;
     const reward = $("step-reward");
-    reward.textContent = step.reward.toFixed(2);
-    reward.dataset.mood = step.reward > 0 ? "good" : step.reward < 0 ? "bad" : "neutral";
+    reward.textContent = end ? "—" : step.reward.toFixed(2);
+    reward.dataset.mood = end || step.reward === 0 ? "neutral" : step.reward > 0 ? "good" : "bad";
     const collected = steps.slice(0, current + 1).reduce((sum, s) => sum + s.reward, 0);
     $("step-collected").textContent = `${collected.toFixed(2)} of ${playback.collected_reward.toFixed(2)}`;
-    $("step-image").src = step.image_url;
+    $("step-image").src = end ? playback.end_image_url : step.image_url;
     $("scrub").value = current;
     const advice = adviceAt(current);
     $("step-advice").hidden = !advice;
@@ -102,7 +104,7 @@
     }
     for (const row of $("advice-list").children) row.classList.toggle("current", Number(row.dataset.index) === current);
     $("step-back").disabled = current === 0;
-    $("step-forward").disabled = current === steps.length - 1;
+    $("step-forward").disabled = end;
     if (tellServer) {
       call(`${API}/playbacks/${playback.id}/show`, { method: "POST", body: JSON.stringify({ index: current }) }).catch((e) =>
         showError(`3-D view: ${e.message}`)
@@ -143,11 +145,11 @@
   }
 
   function play() {
-    if (current >= playback.steps.length - 1) show(0);
+    if (current >= playback.steps.length) show(0);
     $("play").textContent = "Pause";
     $("play").dataset.playing = "yes";
     timer = setInterval(() => {
-      if (current >= playback.steps.length - 1) return pause();
+      if (current >= playback.steps.length) return pause();
       show(current + 1);
     }, PLAY_EVERY_MS);
   }
@@ -196,7 +198,7 @@
     $("playback-status").textContent =
       `${stage} episode ${episode}: ${state.steps.length} steps, collected reward ${state.collected_reward.toFixed(2)}` +
       (state.detail ? `. Note: ${state.detail}` : "");
-    $("scrub").max = state.steps.length - 1;
+    $("scrub").max = state.steps.length;
     adviceRows();
     $("player").hidden = false;
     const scene = $("scene");
