@@ -36,6 +36,7 @@ from server.settings import Settings
 from server.viewer import proxy as viewer_proxy
 from server.viewer import viewer_from_settings
 from server.viewer.episodes import PlaybackViewer
+from server.worker.rerun import Rerun
 from server.worker.worker import WorkerOptions
 
 API_VERSION = "2.0.0"
@@ -94,7 +95,7 @@ def credential_guards(settings: Settings) -> dict[Any, Any]:
 def episode_playback(settings: Settings) -> tuple[Playbacks, PlaybackViewer]:
     """The dashboard's playbacks and their 3-D view, each closing the other's part."""
 
-    def rerun_of(playback_id: str) -> Any:
+    def rerun_of(playback_id: str) -> Rerun | None:
         playback = playbacks.get(playback_id, touch=False)
         return playback.rerun if playback is not None else None
 
