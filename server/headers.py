@@ -3,10 +3,10 @@
 The pages load only their own scripts (no inline script: their configuration travels in
 `<script type="application/json">` blocks, which are not run), so `script-src 'self'`
 holds; style attributes (the advice meter) need `'unsafe-inline'` for styles only. The
-participant's page frames the 3-D view, relayed under /viewer/ by this server (or from
-`viewer_public_url`): `frame-src` names that origin when it is another one. No one may
-frame our pages (`frame-ancestors 'self'`). `/docs` loads Swagger UI's local files with an
-inline script, so it gets a policy that allows that.
+participant's page and the dashboard's playback frame the 3-D view, relayed under
+/viewer/ by this server (or from `viewer_public_url`): `frame-src` names that origin when
+it is another one. No one may frame our pages (`frame-ancestors 'self'`). `/docs` loads
+Swagger UI's local files with an inline script, so it gets a policy that allows that.
 """
 
 from __future__ import annotations
@@ -53,6 +53,10 @@ def viewer_policy(framed_from_anywhere: bool) -> str:
         "connect-src 'self' ws: wss: data: blob:; font-src 'self' data:; "
         f"frame-ancestors {ancestors}; object-src 'none'; base-uri 'self'"
     )
+
+
+FRAMING_PAGES = ("/p/", "/dashboard/sessions/")
+"""The pages that frame the 3-D view: the participant's, and the dashboard's playback."""
 
 
 def _viewer_elsewhere(scope: Scope) -> bool:
@@ -115,7 +119,7 @@ class SecurityHeaders:
         if path.startswith(VIEWER_PATH):
             return viewer_policy(_viewer_elsewhere(scope)).encode()
         html = any(n.lower() == b"content-type" and v.startswith(b"text/html") for n, v in headers)
-        origin = _viewer_origin(scope) if html and path.startswith("/p/") else None
+        origin = _viewer_origin(scope) if html and path.startswith(FRAMING_PAGES) else None
         if origin and origin == _own_origin(scope):
             origin = None
         return page_policy(origin).encode()

@@ -25,15 +25,18 @@ from server.guard import LOGIN, Describe, RequestGuard
 from server.headers import SecurityHeaders, validation_error, without_input
 from server.live.hub import Hub
 from server.live.manager import SessionManager
+from server.live.playbacks import Playbacks
 from server.logins import Logins
 from server.openapi import install as install_openapi
 from server.openapi import operation_id, path_methods
-from server.routes import ROUTERS, dashboard, pages, reports, sessions, viewing
+from server.routes import ROUTERS, dashboard, pages, playback, reports, sessions, viewing
 from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
 from server.settings import Settings
 from server.viewer import proxy as viewer_proxy
 from server.viewer import viewer_from_settings
+from server.viewer.episodes import PlaybackViewer
+from server.worker.rerun import Rerun
 from server.worker.worker import WorkerOptions
 
 API_VERSION = "2.0.0"
@@ -89,6 +92,23 @@ def credential_guards(settings: Settings) -> dict[Any, Any]:
     }
 
 
+def episode_playback(settings: Settings) -> tuple[Playbacks, PlaybackViewer]:
+    """The dashboard's playbacks and their 3-D view, each closing the other's part."""
+
+    def rerun_of(playback_id: str) -> Rerun | None:
+        playback = playbacks.get(playback_id, touch=False)
+        return playback.rerun if playback is not None else None
+
+    def exists(playback_id: str) -> bool:
+        return playbacks.get(playback_id, touch=False) is not None
+
+    viewer = PlaybackViewer(settings.viser_host, settings.viewer_playback_speed, rerun_of, exists)
+    playbacks = Playbacks(
+        settings.playback_limit, settings.playback_idle_s, lambda p: viewer.close(p.id)
+    )
+    return playbacks, viewer
+
+
 def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = RunSpec) -> FastAPI:
     """The web app. `spec_class`: the run's declaration (`learner.run.RunSpec`); the body
     that creates a session, its schema and the exports are made from it."""
@@ -106,13 +126,17 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         settings.max_trainers,
     )
     viewer = viewer_from_settings(settings, hub, factory)
+    playbacks, playback_viewer = episode_playback(settings)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         upgrade(engine, settings.data_dir / BACKUPS)
         await manager.open()
         viewer.start()
+        playbacks.open()
         yield
+        playbacks.close_all()
+        playback_viewer.stop()
         viewer.stop()
         await manager.close()
         engine.dispose()
@@ -132,6 +156,8 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
     app.state.hub = hub
     app.state.manager = manager
     app.state.viewer = viewer
+    app.state.playbacks = playbacks
+    app.state.playback_viewer = playback_viewer
     app.state.spec_class = spec_class
     app.state.participant_tokens = {}
     app.state.dashboard_logins = Logins(settings.dashboard_login_s)
@@ -142,6 +168,7 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         pages.router,
         viewing.router,
         dashboard.router,
+        playback.router,
         viewer_proxy.router,
     ):
         app.include_router(router)

@@ -85,6 +85,14 @@ class Settings(BaseSettings):
     viewer_playback_speed: float = Field(default=1.0, gt=0)
     """How fast the 3-D view replays the robot's motion; 1 is real time."""
 
+    playback_limit: int = Field(default=2, ge=1, le=32)
+    """Episode playbacks open at once in the dashboard (each reruns its episode in a process
+    of its own); more get 429 until one is closed or idle."""
+
+    playback_idle_s: float = Field(default=120.0, gt=0)
+    """A playback whose page has sent nothing for this long is closed (the page pings while
+    it is open, and says when it closes)."""
+
     max_request_bytes: int = Field(default=1_048_576, ge=1024)
     """Largest request body accepted (bytes); larger ones get 413 before they are read."""
 

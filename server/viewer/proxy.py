@@ -58,7 +58,7 @@ def client(request: Request) -> Response:
     return Response(plain, media_type="text/html; charset=utf-8", headers=headers)
 
 
-def _upstream(listen_host: str) -> str:
+def upstream_host(listen_host: str) -> str:
     """Where this process reaches the viser server it started."""
     host = "127.0.0.1" if listen_host in ("", "0.0.0.0") else listen_host
     if host == "::":
@@ -74,8 +74,13 @@ async def relay(websocket: WebSocket, token: str) -> None:
     if not TOKEN_PATH.match(f"/p/{token}") or viewer.server is None:
         await websocket.close(code=1008)
         return
+    await relay_to(websocket, f"ws://{upstream_host(viewer.config.host)}:{viewer.port}/p/{token}")
+
+
+async def relay_to(websocket: WebSocket, url: str) -> None:
+    """Relay a browser's websocket to a viser server's `url`, both ways, until one closes;
+    viser's close code and reason reach the browser."""
     offered = list(websocket.scope.get("subprotocols") or [])
-    url = f"ws://{_upstream(viewer.config.host)}:{viewer.port}/p/{token}"
     try:
         upstream = await connect(
             url,

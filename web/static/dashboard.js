@@ -62,6 +62,11 @@
     cells[0].querySelector(".swatch").style.background = color;
     cells[0].querySelector(".session-id").textContent = `#${s.id}`;
     cells[0].querySelector(".session-label").textContent = s.participant || s.label || `seed ${s.seed}`;
+    const playback = cells[0].appendChild(document.createElement("a"));
+    playback.className = "playback-link small";
+    playback.href = `/dashboard/sessions/${s.id}/playback`;
+    playback.textContent = "episodes";
+    playback.title = "Play back a recorded episode";
     cells[1].textContent = s.method;
     cells[2].innerHTML = `<span class="badge"></span>`;
     const shown = s.status === "running" && s.progress.queued ? "queued" : s.status;
