@@ -28,6 +28,7 @@ from server.db.models import (
     Step,
     StudySession,
 )
+from server.schemas.studies import FittedAdvisorPublic
 from server.services import learning
 from server.services.errors import Invalid, NotFound
 from server.services.outcomes import ReplayMismatch
@@ -213,7 +214,22 @@ def list_models(db: Session, study_id: int) -> list[FittedAdvisorModel]:
     return list(db.scalars(query.order_by(FittedAdvisorModel.id)))
 
 
-def models_using(db: Session, session_ids: set[int]) -> list[FittedAdvisorModel]:
-    """The stored models fitted from any of these sessions."""
-    rows = db.scalars(select(FittedAdvisorModel))
-    return [r for r in rows if session_ids & {int(i) for i in r.session_ids}]
+def get_model(db: Session, study_id: int, model_id: int) -> FittedAdvisorModel:
+    row = db.get(FittedAdvisorModel, model_id)
+    if row is None or row.study_id != study_id:
+        raise NotFound(
+            f"study {study_id} has no fitted advisor {model_id}; "
+            f"GET /api/studies/{study_id}/fitted lists them"
+        )
+    return row
+
+
+def public(row: FittedAdvisorModel) -> FittedAdvisorPublic:
+    return FittedAdvisorPublic(
+        id=row.id,
+        study_id=row.study_id,
+        created_at=row.created_at,
+        session_ids=[int(i) for i in row.session_ids],
+        summary=FittedModel.from_json(row.model).summary(),
+        model=row.model,
+    )
