@@ -45,13 +45,22 @@ EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
 agents on the same seed share a number across methods)."""
 """Per-episode counts that the per-method table averages when present."""
 
-METHOD_ORDER: tuple[str, ...] = ("autonomous", "agent", "human", "oracle", "random", "sb3-dqn")
+METHOD_ORDER: tuple[str, ...] = (
+    "autonomous",
+    "agent",
+    "human",
+    "fitted",
+    "oracle",
+    "random",
+    "sb3-dqn",
+)
 """The order methods appear in tables and legends; other methods follow alphabetically."""
 
 METHOD_NAMES: dict[str, str] = {
     "autonomous": "autonomous DeepRL",
     "agent": "agent-IDeepRL",
     "human": "human-IDeepRL",
+    "fitted": "fitted-IDeepRL",
     "oracle": "oracle-IDeepRL",
     "random": "random-IDeepRL",
     "sb3-dqn": "SB3 DQN",
