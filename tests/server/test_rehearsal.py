@@ -30,9 +30,11 @@ def test_a_fitted_advisor_advises_a_human_session_through_its_link(
     path = tmp_path / "model.json"
     path.write_text(json.dumps(model.to_json()))
     study = api.post("/api/studies", json={"name": "rehearsal"}).json()
-    body = session_body("human", advice_budget=BUDGET, pretraining_steps=10, episodes=1,
+    body = session_body("human", advice_budget=BUDGET, pretraining_steps=16, episodes=1,
                         max_episode_steps=20)  # fmt: skip
-    created = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+    response = api.post(f"/api/studies/{study['id']}/sessions", json=body)
+    assert response.status_code == 201, response.text
+    created = response.json()
     link = f"{server.url}/p/{created['participant_token']}"
 
     code = main(["rehearse", "--model", str(path), "--link", link, "--speed", "4", "--json"])
