@@ -25,6 +25,13 @@ def _methods(text: str) -> tuple[str, ...]:
     return tuple(m.strip() for m in text.split(",") if m.strip())
 
 
+def _ids(text: str) -> list[int]:
+    try:
+        return [int(n) for n in text.split(",") if n.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError("--sessions takes session ids: 3,4,7") from None
+
+
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "fit",
@@ -42,11 +49,11 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument(
         "--sessions",
-        type=lambda text: [int(n) for n in text.split(",") if n.strip()],
+        type=_ids,
         metavar="ID1,ID2",
         help="only these sessions (e.g. one participant's)",
     )
-    add_json_option(parser, "the stored model's id, file and summary")
+    add_json_option(parser, "the stored model's id, file, summary and whole model")
     add_database_options(parser)
     parser.set_defaults(func=fit)
 
@@ -70,6 +77,7 @@ def fit(args: argparse.Namespace) -> int:
         "path": str(fitted.path.resolve()),
         "without_situation": fitted.without_situation,
         "summary": fitted.model.summary(),
+        "model": fitted.model.to_json(),
     }
     if args.json:
         print_json(result)

@@ -20,6 +20,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from learner.fitted import AdviceSeen, FittedModel, SessionAdvice, fit, situation
+from learner.seeding import reset_seeds
 from server.db.models import (
     Advice,
     Episode,
@@ -56,7 +57,8 @@ class Fitted:
     """Its JSON file, what a `fitted` run's `fitted_model` names."""
     model: FittedModel
     without_situation: int
-    """Advice whose episode has no reset seed or no record (an episode cut short)."""
+    """Advice that could not be placed: its episode has no reset seed (recorded before
+    they were kept), or its step was not stored."""
 
 
 def session_advice(db: Session, session: StudySession) -> tuple[SessionAdvice, int]:
@@ -81,7 +83,16 @@ def session_advice(db: Session, session: StudySession) -> tuple[SessionAdvice, i
             }
             if here and episode.reset_seed is not None:
                 assert env is not None
-                seen += _replay(db, session, episode, here, env, spec.sort_rule)
+                first = episode.first_global_step
+                seen += _replay(db, session, first, episode.reset_seed, here, env, spec.sort_rule)
+        # The episode a person left in (an abandoned session) has no record yet: its
+        # steps are stored, and its reset seed is the run's next one.
+        first = episodes[-1].last_global_step + 1 if episodes else 1
+        here = {a.global_step: a for a in advice if a.global_step >= first}
+        if here and spec.learner == "dqn":
+            assert env is not None
+            reset_seed = reset_seeds(spec.seed, len(episodes) + 1)[-1]
+            seen += _replay(db, session, first, reset_seed, here, env, spec.sort_rule)
     finally:
         if env is not None:
             env.close()
@@ -92,7 +103,8 @@ def session_advice(db: Session, session: StudySession) -> tuple[SessionAdvice, i
 def _replay(
     db: Session,
     session: StudySession,
-    episode: Episode,
+    first_step: int,
+    reset_seed: int,
     advice: dict[int, Advice],
     env: object,
     sort_rule: object,
@@ -104,11 +116,11 @@ def _replay(
         select(Step)
         .where(
             Step.session_id == session.id,
-            Step.global_step.between(episode.first_global_step, max(advice)),
+            Step.global_step.between(first_step, max(advice)),
         )
         .order_by(Step.global_step)
     )
-    _, info = env.reset(seed=episode.reset_seed)  # type: ignore[attr-defined]
+    _, info = env.reset(seed=reset_seed)  # type: ignore[attr-defined]
     seen = []
     for step in steps:
         given = advice.get(step.global_step)
@@ -185,7 +197,8 @@ def resolve(db: Session, name: str, data_dir: Path | None) -> str:
     again if gone), or a path, which through the API must lie under `data_dir`."""
     if name.startswith("fitted:"):
         number = name.removeprefix("fitted:")
-        row = db.get(FittedAdvisorModel, int(number)) if number.isdigit() else None
+        known = number.isdigit() and len(number) < 10
+        row = db.get(FittedAdvisorModel, int(number)) if known else None
         if row is None or data_dir is None:
             raise Invalid(
                 "run.fitted_model",

@@ -13,12 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sqlalchemy import select
+from sqlalchemy import delete, select
 from sqlalchemy.orm import Session
 
 from learner.run import RunSpec
+from learner.seeding import reset_seeds
 from server.db.migrate import upgrade
-from server.db.models import Advice, FittedAdvisorModel, StudySession
+from server.db.models import Advice, Episode, FittedAdvisorModel, Step, StudySession
 from server.schemas.studies import StudyCreate
 from server.services import storage
 from server.services.errors import Invalid
@@ -84,6 +85,24 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
     path = Path(fitted["path"])
     assert path.is_file() and path.is_relative_to(place.data_dir.resolve())
 
+    with Session(engine) as db:  # as if the pilot had left during its last advised episode
+        episodes = list(db.scalars(select(Episode).where(Episode.session_id == oracle.id)
+                                   .order_by(Episode.id)))  # fmt: skip
+        assert reset_seeds(oracle.seed, len(episodes)) == [e.reset_seed for e in episodes]
+        (left_in,) = [e for e in episodes if e.first_global_step <= advice[-1].global_step
+                      <= e.last_global_step]  # fmt: skip
+        db.execute(delete(Episode).where(Episode.session_id == oracle.id,
+                                         Episode.id >= left_in.id))  # fmt: skip
+        db.execute(delete(Step).where(Step.session_id == oracle.id,
+                                      Step.global_step > advice[-1].global_step))  # fmt: skip
+        db.commit()
+    code, out = run(place, capsys, "fit", "--study", "fitted pilot", "--methods", "oracle",
+                    "--json")  # fmt: skip
+    assert code == 0, out
+    again = json.loads(out)  # its unrecorded episode replayed from the run's next reset seed
+    assert again["without_situation"] == 0
+    assert again["model"]["overall"] == {"advice": BUDGET, "wrong": wrong}
+
     advised = ["batch", "--study", "fitted pilot", "--methods", "fitted", *SCALE, *PILOT]
     code, out = run(place, capsys, *advised, "--fitted-model", str(path), "--dry-run")
     assert code == 0 and "fitted #1" in out and "new" in out, out  # the batch takes it
@@ -113,6 +132,7 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
     with Session(engine) as db:  # the pilot's data goes, and the model made from it
         storage.delete_session(db, place.data_dir, oracle.id, live_here=False)
         assert db.get(FittedAdvisorModel, fitted["id"]) is None
+        assert db.get(FittedAdvisorModel, again["id"]) is None
         assert db.get(StudySession, run_by_model.id) is not None
     assert not path.exists()
 
