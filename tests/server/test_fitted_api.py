@@ -55,3 +55,41 @@ def test_a_studys_fitted_models_are_listed_read_and_named_by_sessions(
         assert refused.status_code == 422 and words in refused.text, refused.text
     missing = api.post(f"/api/studies/{study}/sessions", json=session_body("fitted"))
     assert missing.status_code == 422 and "needs fitted_model" in missing.text
+
+
+def _store(server: LiveServer, study: int, session_ids: list[int]) -> int:
+    model = FittedModel(
+        advice=1, sessions=session_ids, methods=["human"], overall=Count(1, 0), by_held={},
+        by_situation={}, wrong_actions=[[0] * 4 for _ in range(4)],
+        decision_time_median_s=None, decision_time_sigma=None, decision_time_quantiles=[],
+        budget_used=[1.0],
+    )  # fmt: skip
+    engine = make_engine(server.database_url)
+    with make_session_factory(engine)() as db:
+        row = FittedAdvisorModel(study_id=study, model=model.to_json(), session_ids=session_ids)
+        db.add(row)
+        db.commit()
+        fitted_id = row.id
+    engine.dispose()
+    return fitted_id
+
+
+def test_deleting_a_participants_session_or_the_study_deletes_the_models_fitted_from_them(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = api.post("/api/studies", json={"name": "fitted deletion"}).json()["id"]
+    ids = []
+    for person in ("P1", "P2"):
+        body = session_body("human", participant=person, advice_budget=10)
+        ids.append(api.post(f"/api/studies/{study}/sessions", json=body).json()["id"])
+    from_p1 = _store(server, study, [ids[0]])
+    from_both = _store(server, study, ids)
+    from_p2 = _store(server, study, [ids[1]])
+    assert api.delete(f"/api/sessions/{ids[0]}").status_code == 204  # P1's data goes
+    left = [m["id"] for m in api.get(f"/api/studies/{study}/fitted").json()]
+    assert left == [from_p2] and from_p1 not in left and from_both not in left
+    assert api.delete(f"/api/studies/{study}").status_code == 204
+    engine = make_engine(server.database_url)
+    with make_session_factory(engine)() as db:
+        assert db.get(FittedAdvisorModel, from_p2) is None
+    engine.dispose()
