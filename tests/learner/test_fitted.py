@@ -156,3 +156,31 @@ def test_oracle_decision_times_leave_its_advice_unchanged() -> None:
         if terminated or truncated:
             _, info = env.reset()
     env.close()
+
+
+@pytest.mark.parametrize("kind", ["fitted", "oracle"])
+def test_advice_and_decision_times_resume_from_the_advisors_state(kind: str, tmp_path: Any) -> None:
+    """A run resumed from its checkpoint gets the advice and times it would have got."""
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(_model(0.5).to_json()))
+
+    def advisor() -> Any:
+        if kind == "fitted":
+            return make_advisor("fitted", model=path, seed=5)
+        return make_advisor("oracle", error_rate=0.5, seed=5, decision_time_median_s=2.0)
+
+    infos = [
+        {"station": station, "held": held, "held_color": held.split("/")[-1]}
+        for station in ("center", "left", "right")
+        for held in ("", "cube/blue", "disk/red")
+    ]
+    obs = np.zeros((64, 64, 3), np.uint8)
+    whole = advisor()
+    given = [(whole.advise(obs, i), whole.last_decision_time_s) for i in infos]
+    first = advisor()
+    for info in infos[:4]:
+        first.advise(obs, info)
+    resumed = advisor()
+    resumed.load_state_dict(json.loads(json.dumps(first.state_dict())))
+    again = [(resumed.advise(obs, i), resumed.last_decision_time_s) for i in infos[4:]]
+    assert again == given[4:]
