@@ -16,12 +16,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from learner.fitted import AdviceSeen, FittedModel, SessionAdvice, fit, situation
 from learner.seeding import reset_seeds
 from server.db.models import (
+    LIVE_STATUSES,
     Advice,
     Episode,
     FittedAdvisorModel,
@@ -43,7 +44,8 @@ ENDED = (
     Status.abandoned,
     Status.failed,
 )
-"""Sessions whose advice is over: a running one may still give more."""
+"""Sessions whose advice is over; a running or paused one counts once its budget is spent
+(it trains on without its advisor), never while its advisor may still give more."""
 ADVISED = ("human", "oracle", "random", "agent", "fitted")
 
 
@@ -144,6 +146,11 @@ def _replay(
     return seen
 
 
+def _budget_spent(db: Session, session: StudySession) -> bool:
+    given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+    return given >= learning.spec_of(session).advice_budget
+
+
 def fit_study(
     db: Session,
     data_dir: Path,
@@ -151,17 +158,21 @@ def fit_study(
     methods: Sequence[str] = ("human",),
     session_ids: Sequence[int] | None = None,
 ) -> Fitted:
-    """Fit the advisors of a study's ended sessions of these methods (or of the sessions
-    named), store the model and write its file."""
+    """Fit the advisors of a study's sessions of these methods whose advice is over (`ENDED`;
+    or of the sessions named among them), store the model and write its file."""
     get_study(db, study_id)
     unknown = sorted(set(methods) - set(ADVISED))
     if unknown or not methods:
         raise Invalid("methods", f"methods must be among the advised: {', '.join(ADVISED)}")
     query = select(StudySession).where(
         StudySession.study_id == study_id,
-        StudySession.status.in_([s.value for s in ENDED]),
+        StudySession.status.in_([s.value for s in (*ENDED, *LIVE_STATUSES)]),
     )
-    sessions = [s for s in db.scalars(query.order_by(StudySession.id)) if s.method in methods]
+    sessions = [
+        s
+        for s in db.scalars(query.order_by(StudySession.id))
+        if s.method in methods and (s.status in ENDED or _budget_spent(db, s))
+    ]
     if session_ids is not None:
         sessions = [s for s in sessions if s.id in set(session_ids)]
     fitted, lost = [], 0
@@ -172,8 +183,9 @@ def fit_study(
             fitted.append(advice)
     if not fitted:
         raise NotFound(
-            f"study {study_id} has no ended {'/'.join(methods)} session with advice to fit "
-            "(give --methods human,oracle to fit an oracle pilot)"
+            f"study {study_id} has no {'/'.join(methods)} session with advice to fit (a "
+            "session counts once its advice is over; --methods human,oracle fits an oracle "
+            "pilot too)"
         )
     model = fit(fitted, methods)
     row = FittedAdvisorModel(

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sqlalchemy import delete, select
+from sqlalchemy import delete, select, update
 from sqlalchemy.orm import Session
 
 from learner.run import RunSpec
@@ -129,10 +129,26 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
             create_session(db, study, outside, data_dir=place.data_dir)
         storage.delete_session(db, place.data_dir, made.id, live_here=False)
 
-    with Session(engine) as db:  # the pilot's data goes, and the model made from it
+    fit = ["fit", "--study", "fitted pilot", "--methods", "oracle", "--json"]
+    with Session(engine) as db:  # a session still running counts once its budget is spent
+        db.execute(update(StudySession).where(StudySession.id == oracle.id)
+                   .values(status="running"))  # fmt: skip
+        db.commit()
+    code, out = run(place, capsys, *fit)
+    assert code == 0 and json.loads(out)["summary"]["advice"] == BUDGET, out
+    with Session(engine) as db:  # ... never while its advisor may give more
+        db.execute(delete(Advice).where(Advice.id == advice[-1].id))
+        db.commit()
+    code, out = run(place, capsys, *fit)
+    assert code == 1 and "no oracle session with advice to fit" in out, out
+
+    with Session(engine) as db:  # the pilot's data goes, and the models made from it
+        db.execute(update(StudySession).where(StudySession.id == oracle.id)
+                   .values(status="finished"))  # fmt: skip
+        db.commit()
         storage.delete_session(db, place.data_dir, oracle.id, live_here=False)
-        assert db.get(FittedAdvisorModel, fitted["id"]) is None
-        assert db.get(FittedAdvisorModel, again["id"]) is None
+        left = db.scalars(select(FittedAdvisorModel).where(FittedAdvisorModel.study_id == study))
+        assert list(left) == []
         assert db.get(StudySession, run_by_model.id) is not None
     assert not path.exists()
 
@@ -142,7 +158,7 @@ def test_fit_says_what_is_missing(place: Place, capsys: pytest.CaptureFixture[st
     with Session(place.engine()) as db:
         create_study(db, StudyCreate(name="unadvised"))
     code, out = run(place, capsys, "fit", "--study", "unadvised")
-    assert code == 1 and "no ended human session with advice" in out, out
+    assert code == 1 and "no human session with advice to fit" in out, out
     code, out = run(place, capsys, "fit", "--study", "unadvised", "--methods", "sb3-dqn")
     assert code == 2 and "methods must be among the advised" in out, out
     code, out = run(place, capsys, "batch", "--study", "unadvised", "--methods", "fitted",
