@@ -134,8 +134,10 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
         db.execute(update(StudySession).where(StudySession.id == oracle.id)
                    .values(status="running"))  # fmt: skip
         db.commit()
-    code, out = run(place, capsys, *fit)
+    code, out = run(place, capsys, *fit, "--sessions", str(oracle.id))
     assert code == 0 and json.loads(out)["summary"]["advice"] == BUDGET, out
+    code, out = run(place, capsys, *fit, "--sessions", str(oracle.id + 1000))
+    assert code == 1 and "no oracle session with advice to fit" in out, out
     with Session(engine) as db:  # ... never while its advisor may give more
         db.execute(delete(Advice).where(Advice.id == advice[-1].id))
         db.commit()
