@@ -21,6 +21,7 @@ from learner.advisors import (
     make_advisor,
 )
 from learner.config import DQNConfig
+from learner.fitted import FittedAdvisor, FittedModel
 from learner.records import EpisodeRecord, StepRecord
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
 
@@ -48,6 +49,8 @@ __all__ = [
     "AgentAdvisor",
     "DQNConfig",
     "EpisodeRecord",
+    "FittedAdvisor",
+    "FittedModel",
     "Member",
     "OracleAdvisor",
     "Population",

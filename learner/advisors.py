@@ -12,8 +12,9 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from learner.config import DQNConfig
+from learner.fitted import FittedAdvisor, log_normal_time, read_model
 
-ADVISOR_KINDS = ("agent", "oracle", "random")
+ADVISOR_KINDS = ("agent", "fitted", "oracle", "random")
 
 
 @runtime_checkable
@@ -53,7 +54,11 @@ class RandomAdvisor:
 class OracleAdvisor:
     """The correct action from the simulator's ground truth, wrong with probability
     `error_rate` (then one of the other actions at random): a stand-in for a person of
-    known reliability."""
+    known reliability. With `decision_time_median_s`, each advice also gets a simulated
+    decision time (log-normal, `decision_time_sigma`; `last_decision_time_s`, logged as
+    the advice's `decision_time_s`), so an oracle pilot can stand in for people when an
+    advisor is fitted. The times come from their own random stream: the advice is the same
+    with or without them."""
 
     def __init__(
         self,
@@ -61,30 +66,46 @@ class OracleAdvisor:
         error_rate: float = 0.0,
         seed: int | None = None,
         n_actions: int = 4,
+        decision_time_median_s: float | None = None,
+        decision_time_sigma: float = 0.5,
     ) -> None:
         import sim
 
         if not 0.0 <= error_rate <= 1.0:
             raise ValueError(f"error_rate must be between 0 and 1, got {error_rate}")
+        if decision_time_median_s is not None and not decision_time_median_s > 0:
+            raise ValueError("decision_time_median_s must be above 0")
+        if not decision_time_sigma >= 0:
+            raise ValueError("decision_time_sigma must be at least 0")
         self.sort_rule = sim.SortRule.parse(sort_rule)
         self.error_rate = float(error_rate)
         self.n_actions = n_actions
         self.rng = np.random.default_rng(seed)
         self._oracle_action = sim.oracle_action
+        self.decision_time_median_s = decision_time_median_s
+        self.decision_time_sigma = float(decision_time_sigma)
+        self.time_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+        self.last_decision_time_s: float | None = None
 
     def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         correct = int(self._oracle_action(info, self.sort_rule))
         wrong = self.rng.random() < self.error_rate
         other = int(self.rng.integers(self.n_actions - 1))
+        if self.decision_time_median_s is not None:
+            self.last_decision_time_s = log_normal_time(
+                self.time_rng, self.decision_time_median_s, self.decision_time_sigma
+            )
         if not wrong:
             return correct
         return other if other < correct else other + 1
 
     def state_dict(self) -> dict[str, Any]:
-        return {"rng": self.rng.bit_generator.state}
+        return {"rng": self.rng.bit_generator.state, "time_rng": self.time_rng.bit_generator.state}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.rng.bit_generator.state = state["rng"]
+        if "time_rng" in state:  # checkpoints from before simulated times lack it
+            self.time_rng.bit_generator.state = state["time_rng"]
 
 
 class AgentAdvisor:
@@ -109,17 +130,29 @@ class AgentAdvisor:
 
 
 def make_advisor(kind: str, **options: Any) -> Advisor:
-    """`agent` (checkpoint=PATH, device=...), `oracle` (sort_rule=..., error_rate=...,
-    seed=...) or `random` (seed=...)."""
-    factories = {"agent": AgentAdvisor, "oracle": OracleAdvisor, "random": RandomAdvisor}
+    """`agent` (checkpoint=PATH, device=...), `fitted` (model=PATH, sort_rule=..., seed=...),
+    `oracle` (sort_rule=..., error_rate=..., seed=..., decision_time_median_s=...,
+    decision_time_sigma=...) or `random` (seed=...)."""
+    factories = {
+        "agent": AgentAdvisor,
+        "fitted": _fitted,
+        "oracle": OracleAdvisor,
+        "random": RandomAdvisor,
+    }
     if kind not in factories:
         raise ValueError(
             f"unknown advisor {kind!r}; valid advisors: {', '.join(ADVISOR_KINDS)} "
             "(the server provides 'human')"
         )
+    if kind == "fitted" and "model" not in options:
+        raise ValueError("the fitted advisor needs model=PATH of a fitted model (ideeprl fit)")
     if kind == "agent" and "checkpoint" not in options:
         raise ValueError("the agent advisor needs checkpoint=PATH of a trained learner")
     try:
         return factories[kind](**options)  # type: ignore[no-any-return]
     except TypeError as error:
         raise ValueError(f"bad options for the {kind} advisor: {error}") from error
+
+
+def _fitted(model: str | Path, **options: Any) -> FittedAdvisor:
+    return FittedAdvisor(read_model(model), **options)

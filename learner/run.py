@@ -50,12 +50,14 @@ if TYPE_CHECKING:
 
 SPEC_VERSION = 1
 """Version of the stored run document (`RunSpec.to_json`); `from_json` reads this and older."""
-METHODS = ("autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn")
+METHODS = ("autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn", "fitted")
 """A run's method: who advises it (nobody, a trained agent, a person, the oracle, a random
-advisor), `procedure` (the procedure control: an advised run's advising procedure with
-random actions, `learner.procedure`), or `sb3-dqn`, Stable-Baselines3's DQN unadvised (an
-independent baseline)."""
-Method = Literal["autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn"]
+advisor, an advisor fitted to a study's people), `procedure` (the procedure control: an
+advised run's advising procedure with random actions, `learner.procedure`), or `sb3-dqn`,
+Stable-Baselines3's DQN unadvised (an independent baseline)."""
+Method = Literal[
+    "autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn", "fitted"
+]
 UNADVISED = ("autonomous", "sb3-dqn")
 """Methods without an advisor: no strategy, no advice budget."""
 ADVISORS = ("none", *ADVISOR_KINDS, "human", "procedure")
@@ -134,7 +136,8 @@ class RunSpec:
     method: Method = bounded("autonomous", role="treatment")
     """Who advises: autonomous (nobody: the paper's DeepRL), agent (a trained learner's
     checkpoint), human (a person in the browser), oracle (the correct action, with an error
-    rate), random; or sb3-dqn, Stable-Baselines3's DQN unadvised (needs the sb3 extra)."""
+    rate), random, fitted (advises like a study's people: `fitted_model`); or sb3-dqn,
+    Stable-Baselines3's DQN unadvised (needs the sb3 extra)."""
     seed: int = bounded(0, 0, MAX_SEED, role="seed")
     """Fixes scene, network, memory, exploration and the machine advisors' draws."""
     preset: Preset = bounded("paper")
@@ -156,6 +159,24 @@ class RunSpec:
     schedule file (`learner.procedure.Schedule`; the batch writes one per paired run)."""
     error_rate: float = bounded(0.0, 0.0, 1.0, role="treatment", column="oracle_error_rate")
     """Chance that the oracle advises a wrong action (method oracle) [probability]."""
+    decision_time_median_s: float | None = bounded(
+        None,
+        0.0,
+        3600.0,
+        role="treatment",
+        exclusive_minimum=True,
+        column="oracle_decision_time_median_s",
+    )
+    """The oracle's simulated decision times (method oracle): their median, log-normal;
+    logged as each advice's decision_time_s, never waited. None: no times [s]."""
+    decision_time_sigma: float = bounded(
+        0.5, 0.0, 5.0, role="treatment", column="oracle_decision_time_sigma"
+    )
+    """The spread of the oracle's simulated decision times: the standard deviation of
+    their logarithm (method oracle, with decision_time_median_s)."""
+    fitted_model: str | None = bounded(None, role="treatment", max_length=1000)
+    """The fitted advisor's model (method fitted): `fitted:ID` through the API (a model
+    `ideeprl fit` stored), or the path of its JSON file."""
     motion: Motion | None = bounded(None)
     """fast (poses set directly) or physics (simulated motion); none: physics for a human
     session (a person watches it move), fast otherwise."""
@@ -275,6 +296,7 @@ class RunSpec:
         options = StrategyOptions(**({**defaults, **given} if self.advised else {}))
         config = self.config if self.advised else self.config.replace(advice_budget=0)
         motion = self.motion or ("physics" if self.method == "human" else "fast")
+        oracle = self.method == "oracle"
         return self.replace(
             sort_rule=rule,
             strategy=self.strategy if self.advised else "early",
@@ -282,6 +304,8 @@ class RunSpec:
             config=config,
             motion=motion,
             error_rate=self.error_rate if self.method == "oracle" else 0.0,
+            decision_time_median_s=self.decision_time_median_s if oracle else None,
+            decision_time_sigma=self.decision_time_sigma if oracle else 0.5,
         )
 
     def validate(self) -> RunSpec:
@@ -305,6 +329,14 @@ class RunSpec:
                 "method procedure needs schedule: the advised run whose procedure it follows"
                 if spec.method == "procedure"
                 else "only method procedure takes a schedule",
+            )
+        if spec.method != "fitted" and spec.fitted_model:
+            raise RunSpecError("fitted_model", "only method fitted takes a fitted_model")
+        if spec.method == "fitted" and not spec.fitted_model:
+            raise RunSpecError(
+                "fitted_model",
+                "method fitted needs fitted_model: a model `ideeprl fit` stored (fitted:ID "
+                "through the API, or the path of its JSON file)",
             )
         if not spec.advised:
             return spec
@@ -400,8 +432,20 @@ class RunSpec:
             return make_advisor("agent", checkpoint=self.advisor_checkpoint)
         if self.method == "oracle":
             return make_advisor(
-                "oracle", sort_rule=self.sort_rule, error_rate=self.error_rate, seed=self.seed
+                "oracle",
+                sort_rule=self.sort_rule,
+                error_rate=self.error_rate,
+                seed=self.seed,
+                decision_time_median_s=self.decision_time_median_s,
+                decision_time_sigma=self.decision_time_sigma,
             )
+        if self.method == "fitted":
+            try:
+                return make_advisor(
+                    "fitted", model=self.fitted_model, sort_rule=self.sort_rule, seed=self.seed
+                )
+            except ValueError as error:
+                raise RunSpecError("fitted_model", str(error)) from None
         if self.method in ("random", "procedure"):
             return make_advisor("random", seed=self.seed)
         return None

@@ -30,6 +30,7 @@ import numpy as np
 
 from learner.config import DQNConfig
 from learner.records import EpisodeRecord, StagedRun, StepRecord, stage_of
+from learner.seeding import draw_reset_seed, run_streams
 from sim.rewards import step_outcome
 
 METHOD = "sb3-dqn"
@@ -162,7 +163,7 @@ class SB3DQNTrainer(StagedRun):
         self.threads = configure_threads(config.torch_threads)
         self.callbacks = list(callbacks)
         self.seed = seed
-        _, env_seeds, _, _ = np.random.SeedSequence(seed).spawn(4)
+        _, env_seeds, _, _ = run_streams(seed)
         self._env_rng = np.random.default_rng(env_seeds)  # the Trainer's reset seeds
         model = DQN(
             h["sb3_policy"],
@@ -295,7 +296,7 @@ class SB3DQNTrainer(StagedRun):
         from learner.trainer import _Episode
 
         stage = self.stage
-        reset_seed = int(self._env_rng.integers(2**31 - 1))
+        reset_seed = draw_reset_seed(self._env_rng)
         obs, info = self.env.reset(seed=reset_seed)
         number = self.episodes_done[stage] + 1
         self._episode = _Episode(stage, number, reset_seed, obs, info, self.global_step + 1)

@@ -30,6 +30,7 @@ from learner.exploration import EpsilonSchedule
 from learner.procedure import Schedule, ScheduledAdvising
 from learner.records import EpisodeRecord, StagedRun, StepRecord, stage_of
 from learner.replay import ReplayMemory
+from learner.seeding import draw_reset_seed, run_streams
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
 from sim.rewards import step_outcome
 
@@ -116,7 +117,7 @@ class Trainer(StagedRun):
         self.strategy = strategy
         self.callbacks = list(callbacks)
         self.seed = seed
-        init, env_seeds, actions, memory = np.random.SeedSequence(seed).spawn(4)
+        init, env_seeds, actions, memory = run_streams(seed)
         image_shape = env.observation_space.shape
         self.agent = DQNAgent(
             config, self.device, N_ACTIONS, image_shape, int(init.generate_state(1)[0])
@@ -269,7 +270,7 @@ class Trainer(StagedRun):
 
     def _begin_episode(self) -> None:
         stage = self.stage
-        reset_seed = int(self._env_rng.integers(2**31 - 1))
+        reset_seed = draw_reset_seed(self._env_rng)
         obs, info = self.env.reset(seed=reset_seed)
         number = self.episodes_done[stage] + 1
         self._episode = _Episode(stage, number, reset_seed, obs, info, self.global_step + 1)

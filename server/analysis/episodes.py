@@ -46,7 +46,7 @@ agents on the same seed share a number across methods)."""
 """Per-episode counts that the per-method table averages when present."""
 
 METHOD_ORDER: tuple[str, ...] = (
-    "autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn",
+    "autonomous", "agent", "human", "fitted", "oracle", "random", "procedure", "sb3-dqn",
 )  # fmt: skip
 """The order methods appear in tables and legends; other methods follow alphabetically."""
 
@@ -54,6 +54,7 @@ METHOD_NAMES: dict[str, str] = {
     "autonomous": "autonomous DeepRL",
     "agent": "agent-IDeepRL",
     "human": "human-IDeepRL",
+    "fitted": "fitted-IDeepRL",
     "oracle": "oracle-IDeepRL",
     "random": "random-IDeepRL",
     "procedure": "procedure control",

@@ -37,11 +37,12 @@ METHOD_COLORS: dict[str, str] = {
     "oracle": "tab:green",
     "random": "tab:gray",
     "sb3-dqn": "tab:purple",
+    "fitted": "tab:orange",
 }
-"""The paper's colours (black, blue, red), two more for our extra advisors and one for
+"""The paper's colours (black, blue, red), three more for our extra advisors and one for
 Stable-Baselines3's DQN."""
 
-_SPARE_COLORS = ("tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:orange")
+_SPARE_COLORS = ("tab:brown", "tab:pink", "tab:olive", "tab:cyan")
 _AGENT_COLORS = (
     "tab:orange",
     "tab:green",

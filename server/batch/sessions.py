@@ -59,4 +59,6 @@ def ensure_session(
         return found, False
     if spec.advisor_checkpoint is not None:
         spec = spec.replace(advisor_checkpoint=str(Path(spec.advisor_checkpoint).resolve()))
+    if spec.fitted_model is not None:
+        spec = spec.replace(fitted_model=str(Path(spec.fitted_model).resolve()))
     return create_session(db, study_id, spec, SessionOptions(label=label)), True

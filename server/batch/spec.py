@@ -16,11 +16,11 @@ from learner.fields import FieldError
 from learner.run import RunSpec
 
 BATCH_METHODS: tuple[str, ...] = (
-    "autonomous", "agent", "oracle", "random", "procedure", "sb3-dqn",
+    "autonomous", "agent", "oracle", "random", "procedure", "sb3-dqn", "fitted",
 )  # fmt: skip
-"""Methods a batch can run: every machine advisor, no advisor at all, the procedure control
-of an advised method (`control_of`), and Stable-Baselines3's DQN (an independent baseline
-learner, the optional `sb3` extra)."""
+"""Methods a batch can run: every machine advisor (an advisor fitted to people included), no
+advisor at all, the procedure control of an advised method (`control_of`), and
+Stable-Baselines3's DQN (an independent baseline learner, the optional `sb3` extra)."""
 CONTROLLED = ("agent", "oracle", "random")
 """The advised methods a `procedure` control can follow."""
 
@@ -103,6 +103,16 @@ class BatchSpec:
             )
         for method in self.methods:
             self.spec_of(method, self.base_seed)  # every method's run checked before any runs
+        fitted = self.template.fitted_model
+        if fitted is not None and "fitted" not in self.methods:
+            raise BatchError("a fitted model is only used by the 'fitted' method")
+        if "fitted" in self.methods:
+            from learner.fitted import read_model
+
+            try:
+                read_model(fitted or "")
+            except ValueError as error:
+                raise BatchError(f"fitted: {error}") from None
         checkpoint = self.template.advisor_checkpoint
         if checkpoint is not None:
             if "agent" not in self.methods:
@@ -130,6 +140,7 @@ class BatchSpec:
                 seed=seed,
                 advisor_checkpoint=spec.advisor_checkpoint if method == "agent" else None,
                 schedule="-" if method == "procedure" else None,  # written once its pair ran
+                fitted_model=spec.fitted_model if method == "fitted" else None,
             )
             if method == "agent" and spec.advisor_checkpoint is None:
                 spec = spec.replace(advisor_checkpoint="-")  # filled in once the advisor trained

@@ -23,9 +23,9 @@ if TYPE_CHECKING:  # the command line starts without the batch's imports
     from server.settings import Settings
 
 DESCRIPTION = """\
-Run N agents per method (autonomous, agent, oracle, random, procedure, sb3-dqn) as sessions of a
-study, in parallel worker processes on this machine or on Ray. Agent i of every method gets
-seed BASE+i, so runs pair up across methods. The 'agent' method needs a trained advisor:
+Run N agents per method (autonomous, agent, oracle, random, procedure, sb3-dqn, fitted) as
+sessions of a study, in parallel worker processes on this machine or on Ray. Agent i of
+every method gets seed BASE+i, so runs pair up across methods. The 'agent' method needs a trained advisor:
 without --advisor-checkpoint the batch first trains one (autonomous, same settings, seed
 BASE+100000) and stores it as a session too. 'sb3-dqn' is Stable-Baselines3's DQN, unadvised,
 on the same scenario, seeds and scale, its hyperparameters mapped from the paper's (the
@@ -70,8 +70,8 @@ def settings_from(args: argparse.Namespace) -> Settings:
 def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     parser = subparsers.add_parser(
         "batch",
-        help="run baseline agents (autonomous, agent, oracle, random, sb3-dqn) as a study's "
-        "sessions",
+        help="run baseline agents (autonomous, agent, oracle, random, sb3-dqn, fitted) as a "
+        "study's sessions",
         description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -86,7 +86,7 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         nargs="+",
         default=["autonomous,agent"],
         metavar="METHOD",
-        help="autonomous, agent, oracle, random, sb3-dqn (space or comma separated; "
+        help="autonomous, agent, oracle, random, sb3-dqn, fitted (space or comma separated; "
         "default autonomous agent)",
     )
     what.add_argument("--agents", type=int, default=10, help="agents per method (default 10)")

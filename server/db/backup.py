@@ -2,8 +2,9 @@
 
 A backup is a folder: the database as of one instant (SQLite's online backup API; for
 PostgreSQL, `pg_dump` of a snapshot exported from the transaction that also reads the
-checkpoint paths), every checkpoint that database refers to (copied under `files/`, by its
-path relative to the data folder), the generated API key, and `manifest.json`.
+checkpoint paths), every checkpoint and fitted advisor model that database refers to
+(copied under `files/`, by its path relative to the data folder), the generated API key,
+and `manifest.json`.
 
 Why the checkpoints are consistent with the database: a worker saves a checkpoint file
 (atomically) before it records its path, and deletes the previous file only after. So a
@@ -69,11 +70,15 @@ def _libpq(url: URL) -> str:
     return url.set(drivername="postgresql").render_as_string(hide_password=False)
 
 
-def _advisor(run: Any) -> str | None:
-    """The advisor checkpoint a stored run names (`sessions.run`, JSON or its text)."""
+RUN_PATHS = ("advisor_checkpoint", "fitted_model")
+"""The fields of a stored run that name a file: the advising checkpoint, the fitted model."""
+
+
+def _run_paths(run: Any) -> dict[str, str]:
+    """The files a stored run names (`sessions.run`, JSON or its text), by field."""
     if isinstance(run, str):
         run = json.loads(run)
-    return (run or {}).get("advisor_checkpoint")
+    return {name: path for name in RUN_PATHS if (path := (run or {}).get(name))}
 
 
 def _referenced(rows: Any, run_document: bool = True) -> list[str]:
@@ -83,7 +88,10 @@ def _referenced(rows: Any, run_document: bool = True) -> list[str]:
         {
             path
             for checkpoint, run in rows
-            for path in (checkpoint, _advisor(run) if run_document else run)
+            for path in (
+                checkpoint,
+                *(_run_paths(run).values() if run_document else [run]),
+            )
             if path
         }
     )
@@ -317,7 +325,7 @@ def _move_paths(url: URL, manifest: dict[str, Any], data_dir: Path) -> int:
 
 
 def _move_run_paths(connection: Any, old: Path, manifest: dict[str, Any], data_dir: Path) -> int:
-    """The checkpoint paths and the run documents' advisor checkpoints moved."""
+    """The checkpoint paths and the files the run documents name (`RUN_PATHS`) moved."""
     moved = 0
     rows = connection.execute(
         select(SESSIONS.c.id, SESSIONS.c.checkpoint_path, SESSIONS.c.run)
@@ -327,10 +335,14 @@ def _move_run_paths(connection: Any, old: Path, manifest: dict[str, Any], data_d
         relative = _relative_to_old(checkpoint, old, manifest)
         if relative is not None:
             values["checkpoint_path"] = str(data_dir / relative)
-        relative = _relative_to_old(_advisor(run), old, manifest)
-        if relative is not None:
+        moves = {
+            name: str(data_dir / relative)
+            for name, path in _run_paths(run).items()
+            if (relative := _relative_to_old(path, old, manifest)) is not None
+        }
+        if moves:
             run = json.loads(run) if isinstance(run, str) else dict(run)
-            values["run"] = {**run, "advisor_checkpoint": str(data_dir / relative)}
+            values["run"] = {**run, **moves}
         if values:
             connection.execute(update(SESSIONS).where(SESSIONS.c.id == session_id).values(**values))
             moved += 1

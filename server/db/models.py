@@ -289,3 +289,20 @@ class Advice(Base):
     decision_time_s: Mapped[float | None] = mapped_column(Float)
     requested_at: Mapped[datetime] = mapped_column(UTCDateTime())
     answered_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+
+class FittedAdvisorModel(Base):
+    """An advisor model fitted to a study's sessions (`learner.fitted.FittedModel`). It is
+    made from their participants' advice, so deleting any of those sessions (or their
+    participant, or the study) deletes it (`server.services.storage`)."""
+
+    __tablename__ = "fitted_advisors"
+    __table_args__: ClassVar[Any] = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    model: Mapped[dict[str, Any]] = mapped_column()
+    """`FittedModel.to_json()`: versioned, with its rates, times and budget use."""
+    session_ids: Mapped[list[Any]] = mapped_column()
+    """The sessions whose advice it was fitted from."""

@@ -8,3 +8,4 @@ MAX_ID = 2**31 - 1
 StudyId = Annotated[int, Path(ge=1, le=MAX_ID, description="Study id.")]
 SessionId = Annotated[int, Path(ge=1, le=MAX_ID, description="Session id.")]
 AdviceIndex = Annotated[int, Path(ge=0, le=MAX_ID, description="Advice index (0-based).")]
+FittedId = Annotated[int, Path(ge=1, le=MAX_ID, description="Fitted advisor model id.")]

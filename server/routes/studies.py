@@ -6,9 +6,9 @@ from server.db.models import LIVE_STATUSES
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes import playback
 from server.routes.paging import PageDep
-from server.routes.params import StudyId
-from server.schemas.studies import StudyCreate, StudyPublic, StudyUpdate
-from server.services import storage, studies
+from server.routes.params import FittedId, StudyId
+from server.schemas.studies import FittedAdvisorPublic, StudyCreate, StudyPublic, StudyUpdate
+from server.services import fitting, storage, studies
 
 router = APIRouter(prefix="/api/studies", tags=["studies"], dependencies=[ResearcherDep])
 
@@ -52,3 +52,14 @@ def delete_study(
 def study_disk(db: DbDep, settings: SettingsDep, study_id: StudyId) -> storage.StudyDisk:
     """Bytes the study keeps on disk (checkpoints per session, report), beside its rows."""
     return storage.study_disk(db, settings.data_dir, study_id)
+
+
+@router.get("/{study_id}/fitted")
+def list_fitted_advisors(db: DbDep, study_id: StudyId) -> list[FittedAdvisorPublic]:
+    """The advisor models fitted to the study's people (`ideeprl fit`), oldest first."""
+    return [fitting.public(row) for row in fitting.list_models(db, study_id)]
+
+
+@router.get("/{study_id}/fitted/{fitted_id}")
+def get_fitted_advisor(db: DbDep, study_id: StudyId, fitted_id: FittedId) -> FittedAdvisorPublic:
+    return fitting.public(fitting.get_model(db, study_id, fitted_id))

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -46,3 +46,20 @@ class StudyPublic(StudyBase):
     texts: dict[str, str] = Field(default_factory=dict)
     created_at: datetime
     session_count: int = 0
+
+
+class FittedAdvisorPublic(BaseModel):
+    """An advisor model fitted to the study's people (`ideeprl fit`); a `fitted` session
+    names it as `fitted:ID` in `run.fitted_model`."""
+
+    id: int
+    study_id: int
+    created_at: datetime
+    session_ids: list[int] = Field(description="The sessions whose advice it was fitted from.")
+    summary: dict[str, Any] = Field(
+        description="Error rates by what the arm held and by situation (station/held), the "
+        "decision times' median and sigma, the share of sessions that stopped early."
+    )
+    model: dict[str, Any] = Field(
+        description="The whole model (`learner.fitted.FittedModel`, versioned JSON)."
+    )

@@ -89,7 +89,7 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session the advice belongs to."),
     "advice_index": ("integer", "Index of the advice in its session, from 0."),
     "global_step": ("integer", "Global step the advice was for (from 1, pretraining included)."),
-    "advisor": ("string", "Who advised: human, agent, oracle or random."),
+    "advisor": ("string", "Who advised: human, agent, oracle, random or fitted."),
     "action": ("integer", "Advised action: 0 grab, 1 move right, 2 move left, 3 drop."),
     "action_name": ("string", "The advised action's name."),
     "greedy_action": (
@@ -106,7 +106,9 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
         "number",
         "Browser side (people only): time from the action buttons becoming active to the "
         "click or key, on the browser's monotonic clock (performance.now()): the "
-        "participant's own decision time; empty for machine advisors [s].",
+        "participant's own decision time; for the fitted advisor and an oracle with "
+        "simulated times the time it drew (never waited); empty for other machine "
+        "advisors [s].",
     ),
     "requested_at": ("datetime", "Server side: when the page first read the request (UTC)."),
     "answered_at": ("datetime", "When the advice arrived (UTC)."),

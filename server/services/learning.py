@@ -59,6 +59,8 @@ def identity(spec: RunSpec) -> dict[str, Any]:
         "session:"
     ):
         doc["advisor_checkpoint"] = str(Path(doc["advisor_checkpoint"]).resolve())
+    if doc.get("fitted_model") and not doc["fitted_model"].startswith("fitted:"):
+        doc["fitted_model"] = str(Path(doc["fitted_model"]).resolve())
     for name in NUMERICS:
         if doc["config"].get(name) in OPEN:
             doc["config"].pop(name)

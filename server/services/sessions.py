@@ -83,6 +83,10 @@ def create_session(
     get_study(db, study_id)
     if spec.advisor_checkpoint and spec.method == "agent":
         spec = spec.replace(advisor_checkpoint=advisor_path(db, spec.advisor_checkpoint, data_dir))
+    if spec.fitted_model and spec.method == "fitted":
+        from server.services.fitting import resolve
+
+        spec = spec.replace(fitted_model=resolve(db, spec.fitted_model, data_dir))
     spec = learning.checked(spec, threads)
     if options.participant and spec.method != Method.human:
         raise Invalid("participant", "only method human has a participant")

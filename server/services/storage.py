@@ -3,7 +3,8 @@ much, and deletion that removes it all with the rows.
 
 Deleting is how a participant's data goes: their session's rows (steps, episodes, advice
 with the images they saw), its checkpoints, the study's report (built from their data),
-and their pseudonym once no session of theirs remains. Rows go first, in one
+the advisor models fitted from their advice (`fitted_advisors`, and their files), and their
+pseudonym once no session of theirs remains. Rows go first, in one
 transaction; files after, so a failure leaves files of a deleted session (removed again
 when the id would be used, which it never is: ids are not reused), never rows without
 their files.
@@ -19,7 +20,7 @@ from pydantic import BaseModel, Field
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from server.db.models import LIVE_STATUSES, Participant, Status, StudySession
+from server.db.models import LIVE_STATUSES, FittedAdvisorModel, Participant, Status, StudySession
 from server.services.errors import Conflict, NotFound
 from server.services.studies import get_study
 
@@ -70,6 +71,26 @@ def remove_study_files(data_dir: Path, study_id: int) -> None:
         _remove(path)
 
 
+def _fitted_from(db: Session, session_ids: set[int]) -> list[tuple[int, int]]:
+    """Delete the fitted advisor models made from these sessions' advice (a participant's
+    data lives on in them); returns their (study, model) ids, for their files."""
+    rows = db.scalars(select(FittedAdvisorModel))
+    used = [r for r in rows if session_ids & {int(i) for i in r.session_ids}]
+    for row in used:
+        db.delete(row)
+    return [(r.study_id, r.id) for r in used]
+
+
+def fitted_model_path(data_dir: Path, study_id: int, model_id: int) -> Path:
+    """A stored fitted advisor model's JSON file, which `fitted` runs name."""
+    return data_dir / "fitted" / f"study-{study_id}-model-{model_id}.json"
+
+
+def remove_fitted_files(data_dir: Path, models: list[tuple[int, int]]) -> None:
+    for study_id, model_id in models:
+        _remove(fitted_model_path(data_dir, study_id, model_id))
+
+
 def _refuse_live(session: StudySession, live_here: bool) -> None:
     if session.status in LIVE or live_here:
         raise Conflict(
@@ -113,6 +134,7 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
             )
         )
         participant_id = None if others else session.participant_id
+    fitted = _fitted_from(db, {session_id})
     db.delete(session)
     if participant_id is not None:
         participant = db.get(Participant, participant_id)
@@ -120,6 +142,7 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
             db.delete(participant)
     db.commit()
     remove_session_files(data_dir, session_id, checkpoint)
+    remove_fitted_files(data_dir, fitted)
     remove_study_files(data_dir, study_id)  # its report was built from this session's data
 
 
@@ -140,8 +163,17 @@ def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> 
             f"{', '.join(map(str, advised))} of other studies; delete or finish them first"
         )
     files = [(s.id, s.checkpoint_path) for s in sessions]
+    fitted = _fitted_from(db, {s.id for s in sessions})
+    fitted += [
+        (r.study_id, r.id)
+        for r in db.scalars(
+            select(FittedAdvisorModel).where(FittedAdvisorModel.study_id == study_id)
+        )
+        if (r.study_id, r.id) not in fitted
+    ]
     db.delete(study)
     db.commit()
+    remove_fitted_files(data_dir, fitted)
     for session_id, checkpoint in files:
         remove_session_files(data_dir, session_id, checkpoint)
     remove_study_files(data_dir, study_id)

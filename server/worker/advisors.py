@@ -102,8 +102,10 @@ class HumanAdvisor:
 
 
 class RecordingAdvisor:
-    """Wraps a machine advisor (agent, oracle, random): same advice, logged with the
-    observation and the time it took, as the study's exports treat every advisor alike."""
+    """Wraps a machine advisor (agent, oracle, random, fitted): same advice, logged with the
+    observation and the time it took, as the study's exports treat every advisor alike. A
+    simulated decision time (an advisor's `last_decision_time_s`: fitted, or an oracle with
+    times) is logged as `decision_time_s`, where a person's page puts theirs."""
 
     def __init__(
         self,
@@ -145,6 +147,7 @@ class RecordingAdvisor:
                 "greedy_action": None,  # filled in from the step record at flush
                 "observation_png": encode_png(obs),
                 "response_time_s": elapsed,
+                "decision_time_s": getattr(self._inner, "last_decision_time_s", None),
                 "requested_at": requested_at,
                 "answered_at": requested_at + timedelta(seconds=elapsed),
             }

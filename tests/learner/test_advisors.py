@@ -62,8 +62,9 @@ def test_agent_advisor_acts_greedily_like_the_saved_learner(make_env, tmp_path) 
 @pytest.mark.parametrize(
     ("kind", "options", "words"),
     [
-        ("human", {}, ["human", "agent, oracle, random"]),
+        ("human", {}, ["human", "agent, fitted, oracle, random"]),
         ("agent", {}, ["checkpoint"]),
+        ("fitted", {}, ["model=PATH", "ideeprl fit"]),
         ("oracle", {"error_rate": 1.5}, ["error_rate"]),
         ("oracle", {"errors": 0.1}, ["oracle", "errors"]),
     ],

@@ -1,0 +1,108 @@
+"""A rehearsal of a study's load: fitted advisors answer human sessions through the
+participant's own HTTP calls (what `web/static/advise.js` does: consent, the induction's
+Start, long-polled state, advice with its decision time), waiting their drawn decision
+times, so the server meets the traffic, the waits and the early leavers of real people.
+
+The simulated person sees only what the page shows (the arm's station and what it
+holds, in the participant state) and advises with `learner.fitted.FittedAdvisor`; it
+leaves early as often as the fitted people did (`FittedAdvisor.stop_after`). A client of
+the server's HTTP API only: it runs anywhere the participant links reach.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import httpx
+import numpy as np
+
+from learner.fitted import FittedAdvisor, FittedModel
+
+ENDED = ("finished", "stopped", "interrupted", "abandoned", "failed")
+NO_IMAGE = np.zeros((64, 64, 3), np.uint8)
+
+
+@dataclass(frozen=True)
+class Rehearsed:
+    """What one simulated participant did."""
+
+    token_tail: str
+    """The link's last characters (never the whole token: it opens the session)."""
+    advice: int
+    decision_times_s: list[float]
+    left_early: bool
+    status: str
+    """The session's status when the participant stopped."""
+
+
+def _info(state: dict[str, Any]) -> dict[str, Any]:
+    """The ground truth the page shows: station and held object."""
+    held = state.get("held") or {}
+    return {
+        "station": state.get("station") or "center",
+        "held": f"{held['shape']}/{held['color']}" if held else "",
+        "held_color": held.get("color", ""),
+        "held_shape": held.get("shape", ""),
+    }
+
+
+def rehearse(
+    base_url: str,
+    token: str,
+    model: FittedModel,
+    sort_rule: Any = "color",
+    seed: int | None = None,
+    speed: float = 1.0,
+    timeout_s: float = 600.0,
+) -> Rehearsed:
+    """One simulated participant through the session of `token`, until its advice is
+    over, it leaves early, or the session ends. `speed` > 1 divides the waits (a quick
+    rehearsal); the decision time sent is the drawn one."""
+    advisor = FittedAdvisor(model, sort_rule, seed)
+    headers = {"Authorization": f"Bearer {token}"}
+    times: list[float] = []
+    with httpx.Client(base_url=base_url, headers=headers, timeout=60) as client:
+        shown = _ok(client.get("/api/participant/consent"))
+        _ok(client.post("/api/participant/consent", json={"agree": True,
+                        "texts_version": shown["texts_version"]}))  # fmt: skip
+        state = _ok(client.post("/api/participant/start"))
+        stop_after = advisor.stop_after(int(state["advice_budget"]))
+        deadline = time.monotonic() + timeout_s
+        while state["status"] not in ENDED and time.monotonic() < deadline:
+            if stop_after is not None and len(times) >= stop_after:
+                break  # this person leaves: the session's idle limit will abandon it
+            if state["advice_wanted"] and state["advice_index"] is not None:
+                action = advisor.advise(NO_IMAGE, _info(state))
+                drawn = advisor.last_decision_time_s or 0.0
+                time.sleep(drawn / speed)
+                body = {"advice_index": state["advice_index"], "action": action,
+                        "decision_time_s": drawn}  # fmt: skip
+                receipt = _ok(client.post("/api/participant/advice", params={"wait": 20},
+                                          json=body))  # fmt: skip
+                if not receipt["duplicate"]:
+                    times.append(drawn)
+                state = receipt["state"] or _ok(client.get("/api/participant/state"))
+                continue
+            if state["advice_left"] == 0 and state["advice_given"] > 0:
+                break  # the advice is over; the learner trains on without the person
+            state = _ok(client.get("/api/participant/state",
+                                   params={"after": state["version"], "timeout": 20}))  # fmt: skip
+    return Rehearsed(
+        token_tail=token[-4:],
+        advice=len(times),
+        decision_times_s=times,
+        left_early=stop_after is not None and len(times) >= stop_after,
+        status=str(state["status"]),
+    )
+
+
+def _ok(response: httpx.Response) -> dict[str, Any]:
+    if response.status_code != 200:
+        raise RuntimeError(
+            f"{response.request.method} {response.request.url.path}: "
+            f"{response.status_code} {response.text[:300]}"
+        )
+    data: dict[str, Any] = response.json()
+    return data

@@ -1,0 +1,51 @@
+"""A rehearsal: a fitted advisor answers a human session through the participant's HTTP
+calls, and the session stores its advice with the decision times it drew."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import httpx
+import pytest
+
+from learner.fitted import HELD, Count, FittedModel
+from server.cli import main
+from tests.server.live import LiveServer
+from tests.server.scale import session_body, wait_for_status
+
+pytestmark = pytest.mark.slow
+BUDGET = 5
+
+
+def test_a_fitted_advisor_advises_a_human_session_through_its_link(
+    server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    model = FittedModel(
+        advice=300, sessions=[1], methods=["human"], overall=Count(300, 0),
+        by_held={h: Count(100, 0) for h in HELD}, by_situation={},
+        wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=0.2,
+        decision_time_sigma=0.3, decision_time_quantiles=[], budget_used=[1.0],
+    )  # fmt: skip
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(model.to_json()))
+    study = api.post("/api/studies", json={"name": "rehearsal"}).json()
+    body = session_body("human", advice_budget=BUDGET, pretraining_steps=16, episodes=1,
+                        max_episode_steps=20)  # fmt: skip
+    response = api.post(f"/api/studies/{study['id']}/sessions", json=body)
+    assert response.status_code == 201, response.text
+    created = response.json()
+    link = f"{server.url}/p/{created['participant_token']}"
+
+    code = main(["rehearse", "--model", str(path), "--link", link, "--speed", "4", "--json"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    (done,) = json.loads(out)["participants"]
+    assert done["advice"] == BUDGET and not done["left_early"]
+
+    wait_for_status(api, created["id"], {"finished"})
+    advice = api.get(f"/api/sessions/{created['id']}/advice").json()
+    assert [a["advisor"] for a in advice] == ["human"] * BUDGET
+    assert [a["decision_time_s"] for a in advice] == pytest.approx(done["decision_times_s"])
+    waited = zip(advice, done["decision_times_s"], strict=True)
+    assert all(a["response_time_s"] >= t / 4 for a, t in waited)  # it waited before answering
