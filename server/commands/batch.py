@@ -25,8 +25,8 @@ if TYPE_CHECKING:  # the command line starts without the batch's imports
 DESCRIPTION = """\
 Run N agents per method (autonomous, agent, oracle, random, procedure, sb3-dqn, fitted) as
 sessions of a study, in parallel worker processes on this machine or on Ray. Agent i of
-every method gets seed BASE+i, so runs pair up across methods. The 'agent' method needs a trained advisor:
-without --advisor-checkpoint the batch first trains one (autonomous, same settings, seed
+every method gets seed BASE+i, so runs pair up across methods. The 'agent' method needs a
+trained advisor: without --advisor-checkpoint the batch first trains one (autonomous, same settings, seed
 BASE+100000) and stores it as a session too. 'sb3-dqn' is Stable-Baselines3's DQN, unadvised,
 on the same scenario, seeds and scale, its hyperparameters mapped from the paper's (the
 optional extra: pip install 'ideeprl[sb3]'); the report flags it as another learner.
