@@ -26,10 +26,11 @@ DESCRIPTION = """\
 Run N agents per method (autonomous, agent, oracle, random, procedure, sb3-dqn, fitted) as
 sessions of a study, in parallel worker processes on this machine or on Ray. Agent i of
 every method gets seed BASE+i, so runs pair up across methods. The 'agent' method needs a
-trained advisor: without --advisor-checkpoint the batch first trains one (autonomous, same settings, seed
-BASE+100000) and stores it as a session too. 'sb3-dqn' is Stable-Baselines3's DQN, unadvised,
-on the same scenario, seeds and scale, its hyperparameters mapped from the paper's (the
-optional extra: pip install 'ideeprl[sb3]'); the report flags it as another learner.
+trained advisor: without --advisor-checkpoint the batch first trains one (autonomous, same
+settings, seed BASE+100000) and stores it as a session too. 'sb3-dqn' is Stable-
+Baselines3's DQN, unadvised, on the same scenario, seeds and scale, its hyperparameters
+mapped from the paper's (the optional extra: pip install 'ideeprl[sb3]'); the report flags
+it as another learner.
 
 Runs are identified by study, method, seed and configuration: the same command again skips
 finished runs, resumes interrupted ones from their checkpoints and creates only the missing
