@@ -222,7 +222,7 @@ def _report(args: argparse.Namespace, result: dict[str, Any]) -> int:
     if result["changed"]:
         print(f"changed: {', '.join(result['changed'])}")
     if "status" not in result:
-        print(f"not run: ideeprl replay runs it when started, or run session {result['session_id']}")
+        print(f"not run (--no-run): session {result['session_id']} is created")
         return 0
     print(f"status: {result['status']}")
     advice = result["advice"]

@@ -112,7 +112,7 @@ def stream_of_session(db: Session, session_id: int) -> Stream:
 
 def stream_of_export(path: Path, session_id: int) -> Stream:
     """The stream of session `session_id` of a study export (its zip, or its folder)."""
-    from server.analysis.exported import ExportError, _provenance, _rows, _table, run_of
+    from server.analysis.exported import ExportError, _provenance, _table, run_of
 
     path = Path(path)
     if path.is_file() and zipfile.is_zipfile(path):
@@ -123,21 +123,23 @@ def stream_of_export(path: Path, session_id: int) -> Stream:
     if not path.is_dir():
         raise NotFound(f"no study export at {path}")
     try:
-        sessions = [r for r in _rows(_table(path, "sessions")) if int(r["session_id"]) == session_id]
+        sessions = _of(_table(path, "sessions"), session_id)
         if not sessions:
             raise NotFound(f"the export at {path} has no session {session_id}")
-        study = json.loads((path / "study.json").read_text()) if (path / "study.json").is_file() else {}
-        advice = [r for r in _rows(_table(path, "advice")) if int(r["session_id"]) == session_id]
-        advice = [r for r in advice if not _missing(r["action"])]
+        info = path / "study.json"
+        study = json.loads(info.read_text()) if info.is_file() else {}
+        advice = [r for r in _of(_table(path, "advice"), session_id) if not _missing(r["action"])]
         advice.sort(key=lambda r: int(r["advice_index"]))
-        steps = [r for r in _rows(_table(path, "steps")) if int(r["session_id"]) == session_id]
+        steps = _of(_table(path, "steps"), session_id)
         hashes = tuple(_png_hash((path / r["observation_file"]).read_bytes()) for r in advice)
         run = run_of(sessions[0])
         recorded = (_provenance(_table(path, "sessions")) or {}).get(session_id, [])
     except (ExportError, OSError, KeyError, ValueError) as error:
         if isinstance(error, NotFound):
             raise
-        raise Invalid("export", f"{path}: not a study export this version reads ({error})") from None
+        raise Invalid("export", f"{path}: not a study export this version reads ({error})") from (
+            None
+        )
     return Stream(
         run=run,
         actions=tuple(int(r["action"]) for r in advice),
@@ -146,6 +148,11 @@ def stream_of_export(path: Path, session_id: int) -> Stream:
         provenance=recorded,
         steps=[_typed_step(r) for r in sorted(steps, key=lambda r: int(r["global_step"]))],
     )
+
+
+def _of(table: Any, session_id: int) -> list[dict[str, Any]]:
+    """The rows of one session in an exported table."""
+    return [dict(row) for _, row in table[table["session_id"].astype(int) == session_id].iterrows()]
 
 
 def _missing(value: Any) -> bool:
@@ -264,7 +271,9 @@ def replay_steps(db: Session, session_id: int) -> list[dict[str, Any]]:
     return [dict(row._mapping) for row in db.execute(query)]
 
 
-def compare(original: Iterable[Mapping[str, Any]], replay: Iterable[Mapping[str, Any]]) -> Comparison:
+def compare(
+    original: Iterable[Mapping[str, Any]], replay: Iterable[Mapping[str, Any]]
+) -> Comparison:
     """The first step and column where the replay differs from the original (`DECIDING`)."""
     original, replay = list(original), list(replay)
     for mine, theirs in zip(original, replay, strict=False):

@@ -4,10 +4,10 @@ much, and deletion that removes it all with the rows.
 Deleting is how a participant's data goes: their session's rows (steps, episodes, advice
 with the images they saw), its checkpoints, the study's report (built from their data),
 the replays made from their advice (`sessions.replay_of`, in any study, with their files
-and their studies' reports), and their pseudonym once no session of theirs remains. Rows go first, in one
-transaction; files after, so a failure leaves files of a deleted session (removed again
-when the id would be used, which it never is: ids are not reused), never rows without
-their files.
+and their studies' reports), and their pseudonym once no session of theirs remains. Rows go
+first, in one transaction; files after, so a failure leaves files of a deleted session
+(removed again when the id would be used, which it never is: ids are not reused), never
+rows without their files.
 """
 
 from __future__ import annotations
