@@ -224,3 +224,57 @@ def test_a_replay_of_a_replay_and_of_strategies_that_weigh_values_are_refused_cl
         spec = RunSpec.from_json({"method": "replayed", "config": SCALE})
         with pytest.raises(Invalid, match="ideeprl replay"):
             create_session(db, 1, spec)
+
+
+def test_deleting_the_source_deletes_its_replays_and_the_export_says_which_derives(
+    database: Database, tmp_path: Path
+) -> None:
+    """A replay into another study: that study's export names its source
+    (`replay_of`); deleting the source session (as deleting a participant does) deletes
+    the replay's rows and files, and a replay of the replay, wherever they are."""
+    import csv
+
+    from server.services.export import export_study
+    from server.services.storage import delete_session, session_dir
+
+    original = database.session("oracle", seed=9, motion="fast", config=EARLY)
+    code, first = database.replay(original, "--study", "reuse", "--preset", "authors")
+    assert code == 0, first
+    code, second = database.replay(first["session_id"], "--no-run")
+    assert code == 0, second
+    replays = [first["session_id"], second["session_id"]]
+    assert session_dir(database.data_dir, replays[0]).is_dir()
+    with database.factory()() as db:
+        export_study(db, first["study_id"], tmp_path / "export")
+    with open(tmp_path / "export" / "sessions.csv", newline="") as file:
+        rows = {int(r["session_id"]): r for r in csv.DictReader(file)}
+    assert rows[replays[0]]["replay_of"] == str(original)
+    assert rows[replays[1]]["replay_of"] == str(replays[0])
+    assert json.loads(rows[replays[0]]["replay_source"])["session"] == original
+    with database.factory()() as db:
+        delete_session(db, database.data_dir, original, live_here=False)
+    with database.factory()() as db:
+        assert db.scalars(select(StudySession).where(StudySession.id.in_(replays))).all() == []
+        for table in (Step, Advice):
+            left = db.scalars(select(table.id).where(table.session_id.in_(replays))).all()
+            assert left == [], table
+    assert not session_dir(database.data_dir, replays[0]).exists()
+
+
+def test_a_session_of_an_export_replays_unchanged(
+    database: Database, oracle_early: int, tmp_path: Path
+) -> None:
+    from server.services.export import export_study
+
+    with database.factory()() as db:
+        export_study(db, 1, tmp_path / "export")
+    code, report = database.replay(
+        oracle_early, "--export", str(tmp_path / "export"), "--study", "from an export"
+    )
+    assert code == 0, report
+    assert report["source"]["export"] == str(tmp_path / "export")
+    assert report["comparison"]["difference"] is None and report["comparison"]["steps"] > 40
+    assert report["advice"]["same_observation"] == 10
+    with database.factory()() as db:
+        replay = db.get(StudySession, report["session_id"])
+        assert replay is not None and replay.replay_of is None  # not this database's session
