@@ -8,6 +8,7 @@ checkpoint, and only the missing ones are created.
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import threading
 import time
@@ -23,7 +24,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from learner.run import RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.progress import BatchProgress
-from server.batch.sessions import ensure_session, find_session
+from server.batch.sessions import completed_sources, ensure_session, find_session
 from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, run_spec
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import BACKUPS, upgrade
@@ -149,6 +150,16 @@ class BatchRunner:
         if migrate:
             upgrade(engine, options.data_dir / BACKUPS)
         self.factory: sessionmaker[Session] = make_session_factory(engine)
+        if spec.replay_study is not None:
+            with self.factory() as db:
+                get_study(db, spec.replay_study)
+                sources = completed_sources(db, spec.replay_study, spec.replay_methods)
+            if not sources:
+                raise BatchError(
+                    f"study {spec.replay_study} has no finished session of method "
+                    f"{' or '.join(spec.replay_methods)} to replay"
+                )
+            self.spec = spec = dataclasses.replace(spec, replay_sources=tuple(sources))
         self.states = [RunState(run) for run in plan_runs(spec)]
         given = spec.template.advisor_checkpoint
         self.advisor_checkpoint: str | None = str(Path(given).resolve()) if given else None
@@ -169,7 +180,9 @@ class BatchRunner:
         spec = self._run_spec(state, self.advisor_checkpoint)
         label = f"{self.spec.label} advisor" if state.run.is_advisor else self.spec.label
         try:
-            session, _ = ensure_session(db, self.study_id, spec, label, self.spec_class)
+            session, _ = ensure_session(
+                db, self.study_id, spec, label, self.spec_class, state.run.source
+            )
         except Invalid as error:
             raise BatchError(error.message) from None
         state.session_id, state.status = session.id, session.status
@@ -218,8 +231,9 @@ class BatchRunner:
                     row["status"] = "waits for the advisor"
                     continue
                 found = find_session(
-                    db, self.study_id, self._run_spec(state, checkpoint), self.spec_class
-                )
+                    db, self.study_id, self._run_spec(state, checkpoint), self.spec_class,
+                    run.source,
+                )  # fmt: skip
                 if run.is_advisor and found is not None and found.status == Status.finished:
                     checkpoint = found.checkpoint_path
                 if found is not None:

@@ -91,6 +91,21 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     )
     what.add_argument("--agents", type=int, default=10, help="agents per method (default 10)")
     what.add_argument(
+        "--replay-study",
+        type=int,
+        metavar="ID",
+        help="with method replayed: the study whose completed sessions are re-run under this "
+        "batch's run, each fed its recorded advice by order (the same people's advice, "
+        "another learner); replayed run i gets seed BASE+i",
+    )
+    what.add_argument(
+        "--replay-methods",
+        default="human",
+        metavar="METHODS",
+        help="with --replay-study: the methods of the sessions to replay (comma separated; "
+        "default human)",
+    )
+    what.add_argument(
         "--label", default="baselines", help="the batch's name, every run's session label"
     )
     run = parser.add_argument_group(
@@ -189,6 +204,8 @@ def spec_from(args: argparse.Namespace) -> BatchSpec:
         agents=args.agents,
         label=args.label,
         per_method=per_method,
+        replay_study=getattr(args, "replay_study", None),
+        replay_methods=_methods([getattr(args, "replay_methods", "human")]),
     )
 
 
@@ -207,6 +224,9 @@ def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     """The command that reruns (or resumes) exactly this batch, every choice spelled out."""
     parts = ["ideeprl", "batch", "--study", str(args.study), "--methods", *spec.methods]
     parts += ["--agents", str(spec.agents), "--label", spec.label]
+    if spec.replay_study is not None:
+        parts += ["--replay-study", str(spec.replay_study)]
+        parts += ["--replay-methods", ",".join(spec.replay_methods)]
     template = spec.template
     base = type(template).from_json({"preset": template.preset}).values()
     for leaf in leaves(type(template)):
