@@ -278,3 +278,38 @@ def test_a_session_of_an_export_replays_unchanged(
     with database.factory()() as db:
         replay = db.get(StudySession, report["session_id"])
         assert replay is not None and replay.replay_of is None  # not this database's session
+
+
+@pytest.mark.slow
+def test_a_persons_session_replays_unchanged_in_physics_and_goes_with_them(
+    server: Any, api: Any
+) -> None:
+    """A human session (physics motion) driven through the participant API, replayed
+    unchanged: every deciding column equal. Deleting the person's session through the API
+    (how a person's data is deleted) deletes the replay, which has no participant."""
+    from tests.server.participant import SimulatedParticipant
+    from tests.server.scale import session_body, wait_for_status
+
+    study = api.post("/api/studies", json={"name": "people to replay"}).json()
+    body = session_body("human", advice_budget=5, motion="physics", episodes=1)
+    body["run"]["config"].update(pretraining_steps=20, max_episode_steps=15)
+    created = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+    participant = SimulatedParticipant(server.url, created["participant_token"])
+    participant.begin()
+    for index in range(5):
+        state = participant.next_request()
+        assert state["advice_index"] == index, state
+        assert participant.advise(index, (3 * index) % 4, wait=10).status_code == 200
+    wait_for_status(api, created["id"], {"finished"})
+    participant.close()
+
+    where = ["--database-url", server.database_url, "--data-dir", str(server.data_dir)]
+    code, report = _run_json(["replay", "--session", str(created["id"]), *where, "--json"])
+    assert code == 0, report
+    assert report["comparison"]["difference"] is None and report["comparison"]["steps"] > 20
+    assert report["advice"]["replayed"] == 5 and report["advice"]["same_observation"] == 5
+    replay = api.get(f"/api/sessions/{report['session_id']}").json()
+    assert replay["run"]["motion"] == "physics" and replay["participant"] is None
+
+    assert api.delete(f"/api/sessions/{created['id']}").status_code in (200, 204)
+    assert api.get(f"/api/sessions/{report['session_id']}").status_code == 404
