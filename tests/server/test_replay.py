@@ -310,6 +310,13 @@ def test_a_persons_session_replays_unchanged_in_physics_and_goes_with_them(
     assert report["advice"]["replayed"] == 5 and report["advice"]["same_observation"] == 5
     replay = api.get(f"/api/sessions/{report['session_id']}").json()
     assert replay["run"]["motion"] == "physics" and replay["participant"] is None
+    longer = ["--advice-budget", "7", "--motion", "fast", "--episodes", "1"]
+    code, report = _run_json(["replay", "--session", str(created["id"]), *longer, *where, "--json"])
+    assert code == 0 and report["advice"]["beyond_stream"] == 2, report
+    advice = api.get(f"/api/sessions/{report['session_id']}/advice")
+    assert advice.status_code == 200, advice.text
+    assert [a["action"] is None for a in advice.json()] == [False] * 5 + [True] * 2
+    assert [a["advisor"] for a in advice.json()] == ["replayed"] * 7
 
     assert api.delete(f"/api/sessions/{created['id']}").status_code in (200, 204)
     assert api.get(f"/api/sessions/{report['session_id']}").status_code == 404
