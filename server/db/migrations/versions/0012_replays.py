@@ -26,7 +26,7 @@ depends_on: str | Sequence[str] | None = None
 def upgrade() -> None:
     with op.batch_alter_table("steps") as batch:
         batch.add_column(sa.Column("observation_hash", sa.String(16), nullable=True))
-    with op.batch_alter_table("sessions") as batch:
+    with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
         batch.add_column(sa.Column("replay_of", sa.Integer(), nullable=True))
         batch.add_column(sa.Column("replay_stream", sa.JSON(), nullable=True))
         batch.create_foreign_key(
@@ -42,7 +42,7 @@ def downgrade() -> None:
     with op.batch_alter_table("advice") as batch:
         batch.alter_column("action", existing_type=sa.Integer(), nullable=False)
         batch.drop_column("same_observation")
-    with op.batch_alter_table("sessions") as batch:
+    with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
         batch.drop_index("ix_sessions_replay_of")
         batch.drop_constraint("fk_sessions_replay_of", type_="foreignkey")
         batch.drop_column("replay_stream")
