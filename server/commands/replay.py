@@ -142,7 +142,9 @@ def replay(args: argparse.Namespace) -> int:
     with factory() as db:
         result["advice"] = vars(replays.advice_summary(db, replay_id))
         if result["unchanged"] and stream.steps:
-            comparison = replays.compare(stream.steps, replays.replay_steps(db, replay_id))
+            comparison = replays.compare(
+                stream.steps, replays.replay_steps(db, replay_id), stream.finished
+            )
             result["comparison"] = {"steps": comparison.steps, "difference": comparison.difference}
     return _report(args, result)
 

@@ -33,11 +33,12 @@ from learner.config import DQNConfig
 from learner.fields import FieldError
 from learner.records import observation_hash
 from learner.run import RunSpec
-from server.db.models import Advice, Step, StudySession
+from server.db.models import LIVE_STATUSES, Advice, Status, Step, StudySession
 from server.schemas.sessions import SessionOptions
-from server.services.errors import Invalid, NotFound
+from server.services.errors import Conflict, Invalid, NotFound
 from server.services.sessions import create_session
 
+LIVE = {s.value for s in LIVE_STATUSES}
 DECIDING = (
     "global_step", "stage", "episode", "episode_step", "action", "action_source",
     "advised_action", "advice_remaining", "reward", "terminated", "truncated",
@@ -66,6 +67,8 @@ class Stream:
     """The source's step records (the `DECIDING` columns), for `compare`."""
     session_id: int | None = None
     """The source's id in this database (None: from an export)."""
+    finished: bool = True
+    """The source ran to its end (else its steps are a prefix of its run's)."""
 
     def stored(self) -> dict[str, Any]:
         """What the replay's session keeps (`sessions.replay_stream`)."""
@@ -87,6 +90,11 @@ def stream_of_session(db: Session, session_id: int) -> Stream:
     session = db.get(StudySession, session_id)
     if session is None:
         raise NotFound(f"no session with id {session_id}")
+    if session.status in LIVE:
+        raise Conflict(
+            f"session {session_id} is {session.status}: its advice is still being recorded; "
+            "replay it once it has finished or stopped"
+        )
     advice = list(
         db.scalars(
             select(Advice)
@@ -107,6 +115,7 @@ def stream_of_session(db: Session, session_id: int) -> Stream:
         provenance=list(session.provenance),
         steps=[dict(row._mapping) for row in steps],
         session_id=session_id,
+        finished=session.status == Status.finished.value,
     )
 
 
@@ -141,6 +150,7 @@ def stream_of_export(path: Path, session_id: int) -> Stream:
             None
         )
     return Stream(
+        finished=sessions[0].get("status") == Status.finished.value,
         run=run,
         actions=tuple(int(r["action"]) for r in advice),
         observation_hashes=hashes,
@@ -272,10 +282,16 @@ def replay_steps(db: Session, session_id: int) -> list[dict[str, Any]]:
 
 
 def compare(
-    original: Iterable[Mapping[str, Any]], replay: Iterable[Mapping[str, Any]]
+    original: Iterable[Mapping[str, Any]],
+    replay: Iterable[Mapping[str, Any]],
+    complete: bool = True,
 ) -> Comparison:
-    """The first step and column where the replay differs from the original (`DECIDING`)."""
+    """The first step and column where the replay differs from the original (`DECIDING`);
+    an original that did not run to its end (not `complete`) is compared as the prefix it
+    is."""
     original, replay = list(original), list(replay)
+    if not complete:
+        replay = replay[: len(original)]
     for mine, theirs in zip(original, replay, strict=False):
         for column in DECIDING:
             if mine[column] != theirs[column]:
