@@ -115,6 +115,21 @@ def test_an_unchanged_replay_takes_the_originals_steps(
         assert all(h is not None and len(h) == 16 for h in hashes)
 
 
+def test_an_agent_advised_session_replays_unchanged(database: Database) -> None:
+    """Advice from a trained agent's checkpoint: the replay needs only the stream (the
+    checkpoint is not the replay's), and takes the original's steps."""
+    advisor = database.session("autonomous", seed=4, motion="fast", config=EARLY)
+    with database.factory()() as db:
+        checkpoint = db.get(StudySession, advisor).checkpoint_path  # type: ignore[union-attr]
+    original = database.session(
+        "agent", seed=6, motion="fast", advisor_checkpoint=checkpoint, config=EARLY
+    )
+    code, report = database.replay(original)
+    assert code == 0, report
+    assert report["unchanged"] and report["comparison"]["difference"] is None
+    assert report["advice"]["replayed"] == report["advice"]["same_observation"] == 10
+
+
 def test_under_another_preset_early_advice_meets_the_same_states(
     database: Database, oracle_early: int
 ) -> None:
@@ -210,7 +225,7 @@ def test_on_another_cpu_a_difference_is_explained_and_on_the_same_one_a_fault(
     assert report["comparison"]["difference"]["global_step"] == 35
 
 
-def test_a_replay_of_a_replay_and_of_strategies_that_weigh_values_are_refused_clearly(
+def test_strategies_that_weigh_values_and_a_replay_without_a_stream_are_refused(
     database: Database, oracle_early: int
 ) -> None:
     code = main(
@@ -264,15 +279,16 @@ def test_deleting_the_source_deletes_its_replays_and_the_export_says_which_deriv
 def test_a_session_of_an_export_replays_unchanged(
     database: Database, oracle_early: int, tmp_path: Path
 ) -> None:
+    import shutil
+
     from server.services.export import export_study
 
     with database.factory()() as db:
         export_study(db, 1, tmp_path / "export")
-    code, report = database.replay(
-        oracle_early, "--export", str(tmp_path / "export"), "--study", "from an export"
-    )
+    archive = shutil.make_archive(str(tmp_path / "export"), "zip", tmp_path / "export")
+    code, report = database.replay(oracle_early, "--export", archive, "--study", "from a zip")
     assert code == 0, report
-    assert report["source"]["export"] == str(tmp_path / "export")
+    assert report["source"]["export"] == archive
     assert report["comparison"]["difference"] is None and report["comparison"]["steps"] > 40
     assert report["advice"]["same_observation"] == 10
     with database.factory()() as db:
