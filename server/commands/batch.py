@@ -30,6 +30,9 @@ without --advisor-checkpoint the batch first trains one (autonomous, same settin
 BASE+100000) and stores it as a session too. 'sb3-dqn' is Stable-Baselines3's DQN, unadvised,
 on the same scenario, seeds and scale, its hyperparameters mapped from the paper's (the
 optional extra: pip install 'ideeprl[sb3]'); the report flags it as another learner.
+'replayed' re-runs every finished session of --replay-study (human ones by default,
+--replay-methods) under this batch's run, fed its recorded advice by order: the same
+people's advice, another learner (replayed run i gets seed BASE+i).
 
 Runs are identified by study, method, seed and configuration: the same command again skips
 finished runs, resumes interrupted ones from their checkpoints and creates only the missing
@@ -86,7 +89,7 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         nargs="+",
         default=["autonomous,agent"],
         metavar="METHOD",
-        help="autonomous, agent, oracle, random, sb3-dqn (space or comma separated; "
+        help="autonomous, agent, oracle, random, sb3-dqn, replayed (space or comma separated; "
         "default autonomous agent)",
     )
     what.add_argument("--agents", type=int, default=10, help="agents per method (default 10)")
