@@ -44,23 +44,28 @@ from sim.scenario import ScenarioOptions
 if TYPE_CHECKING:
     import gymnasium as gym
 
+    from learner.procedure import Schedule
     from learner.sb3_dqn import SB3DQNTrainer
     from learner.trainer import Trainer
 
 SPEC_VERSION = 1
 """Version of the stored run document (`RunSpec.to_json`); `from_json` reads this and older."""
-METHODS = ("autonomous", "agent", "human", "oracle", "random", "sb3-dqn", "replayed")
+METHODS = ("autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn", "replayed")
 """A run's method: who advises it (nobody, a trained agent, a person, the oracle, a random
-advisor), `sb3-dqn`, Stable-Baselines3's DQN unadvised (an independent baseline), or
-`replayed`: a recorded session's advice stream fed by order (its session names the stream,
-`sessions.replay_of`; `ideeprl replay`)."""
-Method = Literal["autonomous", "agent", "human", "oracle", "random", "sb3-dqn", "replayed"]
+advisor), `procedure` (the procedure control: an advised run's advising procedure with
+random actions, `learner.procedure`), `sb3-dqn`, Stable-Baselines3's DQN unadvised (an
+independent baseline), or `replayed`: a recorded session's advice stream fed by order (its
+session holds the stream, `sessions.replay_stream`; `ideeprl replay`)."""
+Method = Literal[
+    "autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn", "replayed"
+]
 UNADVISED = ("autonomous", "sb3-dqn")
 """Methods without an advisor: no strategy, no advice budget."""
-ADVISORS = ("none", *ADVISOR_KINDS, "human", "replayed")
+ADVISORS = ("none", *ADVISOR_KINDS, "human", "procedure", "replayed")
 """Who advises: nobody, a machine advisor the learner builds, a person (`human`: the
-caller supplies the advisor to `build`, the server's `HumanAdvisor`) or a recorded stream
-(`replayed`: the caller supplies a `learner.advisors.RecordedAdvisor`)."""
+caller supplies the advisor to `build`, the server's `HumanAdvisor`), the procedure control's
+random advice, or a recorded stream (`replayed`: the caller supplies a
+`learner.advisors.RecordedAdvisor`)."""
 REPLAY_STRATEGIES = ("early", "alternating")
 """Strategies a replayed stream can follow: those that ask without weighing the advisor's
 own values (a stream has none)."""
@@ -155,6 +160,9 @@ class RunSpec:
     advisor_checkpoint: str | None = bounded(None, role="treatment", max_length=1000)
     """The trained learner whose checkpoint advises (method agent): `session:ID` through the
     API, or a checkpoint file's path."""
+    schedule: str | None = bounded(None, role="treatment", max_length=1000)
+    """The advised run whose advising procedure this control follows (method procedure): a
+    schedule file (`learner.procedure.Schedule`; the batch writes one per paired run)."""
     error_rate: float = bounded(0.0, 0.0, 1.0, role="treatment", column="oracle_error_rate")
     """Chance that the oracle advises a wrong action (method oracle) [probability]."""
     motion: Motion | None = bounded(None)
@@ -300,6 +308,13 @@ class RunSpec:
             raise RunSpecError(
                 "advisor_checkpoint", "only method agent takes an advisor_checkpoint"
             )
+        if (spec.method == "procedure") != bool(spec.schedule):
+            raise RunSpecError(
+                "schedule",
+                "method procedure needs schedule: the advised run whose procedure it follows"
+                if spec.method == "procedure"
+                else "only method procedure takes a schedule",
+            )
         if not spec.advised:
             return spec
         if spec.method == "agent" and not spec.advisor_checkpoint:
@@ -313,7 +328,7 @@ class RunSpec:
                 f"a replayed stream has no Q-values for the {spec.strategy} strategy to weigh; "
                 f"replay with {' or '.join(REPLAY_STRATEGIES)} advising",
             )
-        if _STRATEGIES[spec.strategy].needs_values and spec.method != "agent":
+        if _STRATEGIES[spec.strategy].needs_values and spec.method not in ("agent", "procedure"):
             raise RunSpecError(
                 "strategy",
                 f"the {spec.strategy} strategy weighs the advisor's Q-values, which only an "
@@ -403,7 +418,7 @@ class RunSpec:
             return make_advisor(
                 "oracle", sort_rule=self.sort_rule, error_rate=self.error_rate, seed=self.seed
             )
-        if self.method == "random":
+        if self.method in ("random", "procedure"):
             return make_advisor("random", seed=self.seed)
         return None
 
@@ -439,9 +454,21 @@ class RunSpec:
         if wrap_advisor is not None:
             advisor = wrap_advisor(advisor)
         trainer = Trainer(
-            env, spec.config, advisor, spec.make_strategy(), spec.seed, list(callbacks)
-        )
+            env, spec.config, advisor, spec.make_strategy(), spec.seed, list(callbacks),
+            schedule=spec.make_schedule(),
+        )  # fmt: skip
         return trainer, env
+
+    def make_schedule(self) -> Schedule | None:
+        """The procedure control's schedule (None for other methods)."""
+        if self.method != "procedure" or not self.schedule:
+            return None
+        from learner.procedure import Schedule
+
+        try:
+            return Schedule.load(self.schedule)
+        except ValueError as error:
+            raise RunSpecError("schedule", str(error)) from None
 
 
 def from_old_settings(settings: Mapping[str, Any], config: DQNConfig) -> RunSpec:

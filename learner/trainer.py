@@ -27,6 +27,7 @@ from learner.checkpoint import read_checkpoint, write_checkpoint
 from learner.config import DQNConfig
 from learner.device import configure_threads, resolve_device
 from learner.exploration import EpsilonSchedule
+from learner.procedure import Schedule, ScheduledAdvising
 from learner.records import EpisodeRecord, StagedRun, StepRecord, observation_hash, stage_of
 from learner.replay import ReplayMemory
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
@@ -90,7 +91,11 @@ class Trainer(StagedRun):
         strategy: AdvisingStrategy | str | None = None,
         seed: int = 0,
         callbacks: Iterable[Any] = (),
+        schedule: Schedule | None = None,
     ) -> None:
+        """`schedule`: the procedure control's (`learner.procedure`): advice (from `advisor`,
+        a random one) exactly at the recorded advised steps, fits exactly after the recorded
+        pretraining steps, and the recorded epsilon at every recorded step."""
         self.config = config = config or DQNConfig()
         self.env = env
         _check_spaces(env)
@@ -98,6 +103,9 @@ class Trainer(StagedRun):
         self.threads = configure_threads(config.torch_threads)
         if isinstance(strategy, str):
             strategy = make_strategy(strategy, config.advice_budget)
+        self.schedule = schedule
+        if schedule is not None:
+            strategy = ScheduledAdvising(schedule)
         if advisor is not None and strategy is None:
             strategy = make_strategy("early", config.advice_budget)
         if strategy is not None:
@@ -156,6 +164,10 @@ class Trainer(StagedRun):
         global_step = self.global_step + 1
         pretraining = episode.stage == "pretrain"
         greedy = int(np.argmax(q_values))
+        if self.schedule is not None:
+            recorded = self.schedule.epsilon_at(global_step)
+            if recorded is not None:
+                self.epsilon.value = recorded
         rng_state = self._action_rng.bit_generator.state
         if pretraining:
             source = "random"
@@ -191,7 +203,9 @@ class Trainer(StagedRun):
             self.agent.encode(episode.obs), action, reward,
             self.agent.encode(obs), terminated, truncated,
         )  # fmt: skip
-        updates = self._updates_now(pretraining, advised is not None, terminated or truncated)
+        updates = self._updates_now(
+            pretraining, advised is not None, terminated or truncated, global_step
+        )
         return _Step(
             episode.stage, source, action, greedy, q_values, advised, obs, reward, terminated,
             truncated, info, self.epsilon.value, updates,
@@ -241,11 +255,13 @@ class Trainer(StagedRun):
             self._notify("on_episode", self.episode_record)
         return record
 
-    def _updates_now(self, pretraining: bool, advised: bool, final: bool) -> bool:
+    def _updates_now(self, pretraining: bool, advised: bool, final: bool, global_step: int) -> bool:
         """Whether this step is followed by an update: every training step (Algorithm 2),
         with the authors' options also advised pretraining steps once the memory holds a
-        batch, and not an episode's final step."""
+        batch, and not an episode's final step; in pretraining, a schedule's fits."""
         config = self.config
+        if pretraining and self.schedule is not None:
+            return global_step in self.schedule.fitted and len(self.memory) >= config.batch_size
         if final and not config.update_on_final_step:
             return False
         if pretraining:

@@ -45,7 +45,9 @@ EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
 agents on the same seed share a number across methods)."""
 """Per-episode counts that the per-method table averages when present."""
 
-METHOD_ORDER: tuple[str, ...] = ("autonomous", "agent", "human", "oracle", "random", "sb3-dqn")
+METHOD_ORDER: tuple[str, ...] = (
+    "autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn",
+)  # fmt: skip
 """The order methods appear in tables and legends; other methods follow alphabetically."""
 
 METHOD_NAMES: dict[str, str] = {
@@ -54,6 +56,7 @@ METHOD_NAMES: dict[str, str] = {
     "human": "human-IDeepRL",
     "oracle": "oracle-IDeepRL",
     "random": "random-IDeepRL",
+    "procedure": "procedure control",
     "sb3-dqn": "SB3 DQN",
 }
 """Display names in the paper's words (and Stable-Baselines3's DQN, the independent

@@ -82,11 +82,23 @@ def _new_figure(width: float = 9.0, height: float = 5.0) -> tuple[Figure, Axes]:
     return figure, figure.add_subplot()
 
 
+VECTOR_FORMATS = ("svg", "pdf")
+"""Besides each PNG: the formats a paper's figures are set in."""
+
+
 def save_figure(figure: Figure, path: str | Path, *, dpi: int = 150) -> Path:
-    """Write a figure as PNG and return its path."""
+    """Write a figure as PNG (and as SVG and PDF beside it, same name) and return the PNG's
+    path (`vector_paths` gives the others)."""
     path = Path(path)
     figure.savefig(path, dpi=dpi, format="png")
+    for kind, vector in zip(VECTOR_FORMATS, vector_paths(path), strict=True):
+        figure.savefig(vector, format=kind, metadata={"Date": None} if kind == "pdf" else None)
     return path
+
+
+def vector_paths(png: Path) -> tuple[Path, ...]:
+    """The SVG and PDF written beside a figure's PNG."""
+    return tuple(png.with_suffix(f".{kind}") for kind in VECTOR_FORMATS)
 
 
 def plot_method_curves(
@@ -112,6 +124,50 @@ def plot_method_curves(
     )
     ax.set_xlabel("episode")
     ax.set_ylabel("collected reward per episode (sum of step rewards)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    return figure
+
+
+def plot_confidence_bands(
+    episodes: pd.DataFrame,
+    *,
+    baseline: str | None = "autonomous",
+    window: int = 10,
+    resamples: int = 2000,
+    seed: int = 0,
+) -> Figure:
+    """Each method's mean collected reward per episode (a moving average over `window`
+    episodes) with a 95 % percentile bootstrap band over its agents, as `rliable` draws
+    sample-efficiency curves: the band says how sure the mean is, where Figure 5's ±1
+    standard deviation says how much agents differ."""
+    table = validate_episodes(episodes)
+    figure, ax = _new_figure()
+    methods = order_methods(table["method"], baseline)
+    rng = np.random.default_rng(seed)
+    for method in methods:
+        rows = table[table["method"] == method]
+        curves = rows.pivot(index="session_id", columns="episode", values="collected_reward")
+        values = curves.to_numpy(dtype=float)
+        kernel = np.ones(min(window, values.shape[1])) / min(window, values.shape[1])
+        smoothed = np.array([np.convolve(v, kernel, mode="valid") for v in values])
+        x = curves.columns.to_numpy()[len(kernel) - 1 :]
+        color = method_color(method, methods)
+        n = len(values)
+        ax.plot(
+            x, smoothed.mean(axis=0), color=color, lw=1.6, label=f"{method_name(method)} (n={n})"
+        )
+        if n > 1:
+            picks = rng.integers(0, n, size=(resamples, n))
+            means = smoothed[picks].mean(axis=1)
+            low, high = np.percentile(means, [2.5, 97.5], axis=0)
+            ax.fill_between(x, low, high, color=color, alpha=0.22, lw=0)
+    ax.set_title(
+        f"Mean collected reward per episode (moving average over {window}), "
+        "shaded: 95 % bootstrap interval of the mean over agents"
+    )
+    ax.set_xlabel("episode")
+    ax.set_ylabel("collected reward per episode")
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     return figure

@@ -19,17 +19,21 @@ import pandas as pd
 import scipy
 
 from server.analysis import markdown as md
+from server.analysis.advice import advice_quality, quality_correlations
 from server.analysis.audit import Audit, audit, label
+from server.analysis.comparisons import compare
 from server.analysis.episodes import EpisodeTableError, agents_of, method_name
 from server.analysis.figures import (
     example_agents,
     pick_reference_agent,
+    plot_confidence_bands,
     plot_correlation,
     plot_cumulative_reward,
     plot_epsilon,
     plot_individual_agents,
     plot_method_curves,
     save_figure,
+    vector_paths,
 )
 from server.analysis.paper import PAPER_AGENTS, PAPER_EPISODES, paper_comparison
 from server.analysis.reference import REFERENCES, authors_totals, overlay_authors
@@ -45,6 +49,7 @@ FIGURE_FILES: dict[str, str] = {
     "individual_agents": "figure6_individual_agents.png",
     "correlation": "figure7_correlation.png",
     "cumulative_reward": "cumulative_reward.png",
+    "confidence_bands": "reward_confidence_bands.png",
     "epsilon": "epsilon.png",
 }
 TABLE_FILES: dict[str, str] = {
@@ -63,6 +68,9 @@ OPTIONAL_TABLE_FILES: dict[str, str] = {
     "rescored": "r_t_rescored.csv",
     "rescored_agents": "r_t_rescored_per_agent.csv",
     "reference": "authors_reference.csv",
+    "comparisons": "primary_and_secondary_tests.csv",
+    "advice_quality": "advice_quality.csv",
+    "advice_correlations": "advice_quality_per_method.csv",
 }
 """Tables written when their input is given: the sessions' settings (the audit), the step
 logs (rescoring), a reference."""
@@ -92,9 +100,14 @@ class ReportResult:
     """R_T per method under each reward scheme (None without step logs)."""
 
     @property
+    def vector_figures(self) -> list[Path]:
+        """Each figure as SVG and PDF, beside its PNG."""
+        return [v for png in self.figures.values() for v in vector_paths(png)]
+
+    @property
     def files(self) -> list[Path]:
         """Every file written, the report first."""
-        return [self.report, *self.figures.values(), *self.tables.values()]
+        return [self.report, *self.figures.values(), *self.vector_figures, *self.tables.values()]
 
 
 MAX_INDIVIDUAL_AGENTS = 5
@@ -180,7 +193,91 @@ def _describe_test(row: pd.Series, alpha: float) -> str:
     return f"t = {row['t']:.2f}, p = {md.p_value(row['p'])}, {verdict} at α = {alpha:g}"
 
 
-def _summary(analysis: Analysis, alpha: float) -> list[str]:
+def _describe_primary(comparisons: pd.DataFrame | None, method: str, alpha: float) -> str:
+    """The comparison's primary test in words."""
+    rows = None if comparisons is None else comparisons[comparisons["method"] == method]
+    if rows is None or rows.empty:
+        return "Primary test: none"
+    row = rows.iloc[0]
+    name = "paired t-test over seeds" if row["primary"] == "paired" else "Welch's t-test"
+    what = f"Primary test ({name} of the agents' R_T)"
+    if isinstance(row.get("withheld"), str) and row["withheld"]:
+        return f"{what}: withheld ({row['withheld']})"
+    if np.isnan(row["primary_p"]):
+        return f"{what}: undefined (n = {row['n']} + {row['n_baseline']}: needs 2+ varying values)"
+    verdict = "significant" if row["primary_p"] < alpha else "not significant"
+    return (
+        f"{what}: t = {row['primary_statistic']:.2f}, p = {md.p_value(row['primary_p'])}, "
+        f"{verdict} at α = {alpha:g}; probability of improvement "
+        f"{row['probability_of_improvement']:.2f} "
+        f"{_interval(row['poi_low'], row['poi_high'])}"
+    )
+
+
+def _comparisons_section(comparisons: pd.DataFrame | None, alpha: float) -> list[str]:
+    """The primary test of each comparison first, then the secondary ones."""
+    if comparisons is None or comparisons.empty:
+        return []
+    frame = comparisons.copy()
+    frame["pair"] = [
+        f"{method_name(m)} vs {method_name(b)}"
+        for m, b in zip(frame["method"], frame["baseline"], strict=True)
+    ]
+    frame["n_shown"] = [f"{a} + {b}" for a, b in zip(frame["n"], frame["n_baseline"], strict=True)]
+    frame["poi"] = [
+        "–" if np.isnan(p) else f"{p:.2f} {_interval(lo, hi)}"
+        for p, lo, hi in zip(
+            frame["probability_of_improvement"], frame["poi_low"], frame["poi_high"], strict=True
+        )
+    ]
+    frame["significant"] = [
+        "–" if np.isnan(p) else ("yes" if p < alpha else "no") for p in frame["primary_p"]
+    ]
+    columns = {
+        "pair": "comparison",
+        "n_shown": "agents",
+        "difference": "difference in R_T",
+        "primary": "primary test",
+        "primary_statistic": "t",
+        "primary_p": "p",
+        "significant": f"p < {alpha:g}",
+        "welch_p": "Welch p",
+        "permutation_p": "permutation p",
+        "mann_whitney_p": "Mann-Whitney p",
+        "paired_p": "paired p",
+        "poi": "P(improvement)",
+    }
+    formats = {
+        "difference": md.fixed(2),
+        "primary_statistic": md.fixed(3),
+        "primary_p": md.p_value,
+        "welch_p": md.p_value,
+        "permutation_p": md.p_value,
+        "mann_whitney_p": md.p_value,
+        "paired_p": md.p_value,
+    }
+    return [
+        "## The primary test, then the secondary ones",
+        "",
+        "Each method is compared with the baseline by **one primary test** on the agents' "
+        "R_T (the runs are the independent units): Welch's t-test, or the paired t-test over "
+        "seeds when the analysis plan fixes it and every agent has a baseline agent of the "
+        f"same seed. Its p is the one to read against α = {alpha:g}. The others are "
+        "**secondary**, shown so a reader can see whether the conclusion depends on the "
+        "test: Welch, a permutation test of the difference in means, Mann-Whitney's U, the "
+        "paired t-test where seeds pair, and the probability of improvement (the chance "
+        "that an agent of the method beats an agent of the baseline, ties counting half, "
+        "with a 95 % bootstrap interval; Agarwal et al. 2021). The paper's own test on the "
+        "average curves is further down, labelled so.",
+        "",
+        md.table(frame, columns, formats),
+        "",
+    ]
+
+
+def _summary(
+    analysis: Analysis, alpha: float, comparisons: pd.DataFrame | None = None
+) -> list[str]:
     """The report's first section: each method's R_T and tests in one sentence."""
     methods = analysis.methods.set_index("method")
     tests = analysis.t_tests.set_index(["method_a", "method_b", "sample"])
@@ -200,9 +297,10 @@ def _summary(analysis: Analysis, alpha: float) -> list[str]:
         more = "more" if row["R_T"] >= methods.loc[base, "R_T"] else "less"
         lines.append(
             f"{head}; it collects {md.signed_pct(row['improvement_pct'])} ({more} reward) "
-            f"compared with {method_name(base)}. Average curves: "
-            f"{_describe_test(tests.loc[(method, base, EPISODE_MEANS)], alpha)}; agents' R_T: "
-            f"{_describe_test(tests.loc[(method, base, AGENT_TOTALS)], alpha)}."
+            f"compared with {method_name(base)}. "
+            + _describe_primary(comparisons, method, alpha)
+            + "; the paper's own test on the average curves: "
+            f"{_describe_test(tests.loc[(method, base, EPISODE_MEANS)], alpha)}."
         )
     for (a, b, sample), row in tests.iterrows():
         if base not in (a, b) and sample == EPISODE_MEANS:
@@ -433,6 +531,8 @@ def write_report(
     steps: pd.DataFrame | None = None,
     allow_mismatch: bool = False,
     reference: str | None = None,
+    advice: pd.DataFrame | None = None,
+    primary: str = "welch",
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -450,7 +550,10 @@ def write_report(
     (the warning stays).
     `steps` (training steps, `server.analysis.rescoring.STEP_COLUMNS`) with `settings` adds
     R_T rescored under each reward scheme. `reference="authors"` draws the authors' mean
-    curves on Figure 5 and lists the paper's R_T beside them.
+    curves on Figure 5 and lists the paper's R_T beside them. `advice` (the advised steps,
+    `server.analysis.advice.ADVICE_COLUMNS`) adds each advised session's advice quality.
+    `primary` is each comparison's primary test (`server.analysis.comparisons`): Welch's
+    test of the agents' R_T, or the paired t-test where seeds pair; the rest are secondary.
     """
     if reference is not None and reference not in REFERENCES:
         raise EpisodeTableError(
@@ -498,6 +601,25 @@ def write_report(
         tables["rescored_agents"] = rescored_agents
     if reference == "authors":
         tables["reference"] = authors_totals(analysis.n_episodes)
+    comparisons = compare(analysis.episodes, baseline, primary)
+    if checked is not None and not allow_mismatch and len(comparisons):
+        comparisons["withheld"] = [
+            "the methods differ in " + " and ".join(checked.differ(m, b))
+            if checked.differ(m, b) else ""
+            for m, b in zip(comparisons["method"], comparisons["baseline"], strict=True)
+        ]  # fmt: skip
+        tested = [c for c in comparisons.columns if c.endswith(("_p", "_t", "_statistic"))]
+        comparisons.loc[comparisons["withheld"] != "", tested] = np.nan
+    if len(comparisons):
+        tables["comparisons"] = comparisons
+    quality = None
+    if advice is not None:
+        quality = advice_quality(advice, analysis.agents)
+        if len(quality):
+            tables["advice_quality"] = quality
+            tables["advice_correlations"] = quality_correlations(quality)
+        else:
+            quality = None
     table_paths = {}
     for name, frame in tables.items():
         table_paths[name] = out / {**TABLE_FILES, **OPTIONAL_TABLE_FILES}[name]
@@ -510,6 +632,7 @@ def write_report(
         "reward_per_method": figure5,
         "correlation": plot_correlation(analysis.correlation.loc[heatmap_labels, heatmap_labels]),
         "cumulative_reward": plot_cumulative_reward(analysis.episodes, baseline=baseline),
+        "confidence_bands": plot_confidence_bands(analysis.episodes, baseline=baseline),
     }
     if plan is not None:
         figures["individual_agents"] = plot_individual_agents(
@@ -533,7 +656,10 @@ def write_report(
         if rescored_agents is None
         else (int(rescored_agents["by_outcomes"].sum()), len(rescored_agents))
     )
-    extra = _Extras(checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes)
+    extra = _Extras(
+        checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes, quality,
+        tables.get("advice_correlations"), tables.get("comparisons"),
+    )  # fmt: skip
     report.write_text(
         _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra),
         encoding="utf-8",
@@ -555,6 +681,9 @@ class _Extras:
     allow_mismatch: bool
     by_outcomes: tuple[int, int] | None = None
     """Sessions rescored by their steps' outcomes, of all rescored."""
+    advice_quality: pd.DataFrame | None = None
+    advice_correlations: pd.DataFrame | None = None
+    comparisons: pd.DataFrame | None = None
 
 
 def _outcomes_note(by_outcomes: tuple[int, int] | None) -> str:
@@ -667,6 +796,54 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
     return out
 
 
+def _advice_section(extra: _Extras) -> list[str]:
+    """Each advised session's advice: what it did, and whether better advice went with a
+    better outcome."""
+    quality, per_method = extra.advice_quality, extra.advice_correlations
+    if quality is None or per_method is None:
+        return []
+    rows = [
+        f"| {r.label} | {method_name(r.method)} | {r.advice} | {r.placed} | {r.misplaced} | "
+        f"{r.lost} | {r.longest_repeat} | {r.R_T:.2f} |"
+        for r in quality.itertuples()
+    ]
+    rhos = [
+        f"- {method_name(r.method)}: {r.agents} agents, {r.mean_placed:.1f} correct placements "
+        "on average; Spearman's rho between an agent's correct placements and its R_T "
+        + ("not defined (fewer than 3 agents, or no variation)" if np.isnan(r.spearman_rho)
+           else f"{r.spearman_rho:+.2f} (p {r.spearman_p:.3g})")
+        for r in per_method.itertuples()
+    ]  # fmt: skip
+    unknown = int(quality["unknown_outcome"].sum())
+    return [
+        "## Advice quality",
+        "",
+        "What each advised session's advice did, counted from the steps whose action came "
+        "from the advisor: objects placed where they belong, placed on the wrong side, "
+        "knocked off, and the most advised steps in a row with one action (a working "
+        "policy crossing the scene repeats a move at most twice; an advisor stuck in a "
+        "state repeats one action until its budget ends). An effect of advice is only "
+        "credible where the advice was good.",
+        "",
+        "| agent | method | advice | placed | misplaced | lost | longest repeat | R_T |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+        *rows,
+        "",
+        *rhos,
+        *_unknown_outcomes(unknown),
+        "",
+    ]
+
+
+def _unknown_outcomes(unknown: int) -> list[str]:
+    if not unknown:
+        return []
+    return [
+        f"- {unknown} advised steps have no recorded outcome (logged before outcomes were "
+        "kept): run `ideeprl outcomes --study ID` to replay them."
+    ]
+
+
 def _markdown(
     analysis: Analysis,
     title: str,
@@ -695,10 +872,11 @@ def _markdown(
         "",
         "## In short",
         "",
-        *_summary(analysis, alpha),
+        *_summary(analysis, alpha, extra.comparisons),
         *(f"- {n}" for n in report_notes),
         "",
         *_comparability(extra, analysis.baseline),
+        *_comparisons_section(extra.comparisons, alpha),
         "## Average collected reward per method (the paper's Figure 5)",
         "",
         "![Figure 5: average collected reward per episode per method]"
@@ -714,6 +892,13 @@ def _markdown(
         "",
         f"![Cumulative collected reward per method]({FIGURE_FILES['cumulative_reward']})",
         "",
+        f"![Mean collected reward with 95 % bootstrap bands]({FIGURE_FILES['confidence_bands']})",
+        "",
+        "The same curves as a mean with a 95 % bootstrap interval over agents (moving "
+        "average over 10 episodes), as `rliable` draws them: where the bands of two methods "
+        "part, the difference is larger than the agents' spread explains. Every figure is "
+        "also written as SVG and PDF beside its PNG.",
+        "",
     ]
     if plan is not None:
         method, reference, _ = plan
@@ -728,7 +913,7 @@ def _markdown(
             "",
         ]
     out += [
-        "## Student's t-tests between methods (the paper's Table 2)",
+        "## The paper's own test: t-tests between methods (the paper's Table 2)",
         "",
         "Each pair of methods is compared twice, with the independent two-sample "
         + (
@@ -767,6 +952,7 @@ def _markdown(
             f"![Epsilon per episode]({FIGURE_FILES['epsilon']})",
             "",
         ]
+    out += _advice_section(extra)
     out += ["## Compared with the paper", "", _scale_note(analysis), ""]
     if len(analysis.paper):
         out += [_paper_table(analysis), ""]
@@ -785,6 +971,9 @@ def _markdown(
                 ("rescored", extra.rescored),
                 ("rescored_agents", extra.rescored),
                 ("reference", extra.reference),
+                ("comparisons", extra.comparisons),
+                ("advice_quality", extra.advice_quality),
+                ("advice_correlations", extra.advice_quality),
             )
             if part is not None
         ),

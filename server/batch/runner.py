@@ -21,6 +21,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
+from learner.advisor_check import AdvisorCheck, checked_advisor
 from learner.run import RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.progress import BatchProgress
@@ -32,6 +33,7 @@ from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySes
 from server.services import numerics
 from server.services.errors import Invalid
 from server.services.ownership import set_status, take_back
+from server.services.schedules import write_schedule
 from server.services.studies import get_study
 from server.worker.worker import WorkerOptions
 
@@ -39,6 +41,8 @@ TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
 LIVE = {s.value for s in LIVE_STATUSES}
 WAITING = "waiting for the advisor"
 BLOCKED = "not run: the advisor did not finish"
+WAITING_PAIR = "waiting for its advised run"
+BLOCKED_PAIR = "not run: its advised run did not finish"
 REFUSED = "not resumed: its pinned numerics"
 
 
@@ -70,6 +74,12 @@ class RunnerOptions:
     override_numerics: bool = False
     """Resume runs whose pinned numerics this machine cannot honour, recording the override;
     without it they are left as they are, with the reason."""
+    advisor_check: str = "require"
+    """`require`: an advisor checkpoint (given or trained) must pass its check
+    (`learner.advisor_check`) before it advises; a trained one that fails is trained again
+    from the next seed. `record`: checked and recorded, never refused. `skip`: not checked."""
+    advisor_attempts: int = 3
+    """Advisors the batch trains at most (seeds advisor_seed, +1, ...) to get one that passes."""
 
 
 @dataclass
@@ -160,9 +170,14 @@ class BatchRunner:
                     f"{' or '.join(spec.replay_methods)} to replay"
                 )
             self.spec = spec = dataclasses.replace(spec, replay_sources=tuple(sources))
-        self.states = [RunState(run) for run in plan_runs(spec)]
+        self.states = [
+            RunState(run, status=WAITING_PAIR if run.method == "procedure" else WAITING)
+            for run in plan_runs(spec)
+        ]
         given = spec.template.advisor_checkpoint
         self.advisor_checkpoint: str | None = str(Path(given).resolve()) if given else None
+        self.advisor_checks: list[tuple[str, AdvisorCheck]] = []
+        """Every advisor checkpoint checked by this batch, in order, with its check."""
         self.queue: list[RunState] = []
         self.elsewhere: list[RunState] = []
         self.log: Callable[[str], None] = print
@@ -192,8 +207,10 @@ class BatchRunner:
             if problem and not self.options.override_numerics:
                 state.status, state.detail = REFUSED, problem
 
-    def _advisor_ready(self, db: Session, advisor: RunState) -> None:
-        """The trained advisor's final checkpoint becomes the `agent` runs' advisor."""
+    def _advisor_ready(self, db: Session, advisor: RunState) -> bool:
+        """The trained advisor's final checkpoint becomes the `agent` runs' advisor once it
+        passes its check; when it fails, the next advisor seed is trained (queued here, and
+        False returned) until `advisor_attempts` are spent."""
         session = db.get(StudySession, advisor.session_id)
         assert session is not None and session.status == Status.finished.value
         path = session.checkpoint_path
@@ -203,7 +220,74 @@ class BatchRunner:
                 f"{path or '(none)'} is gone; pass --advisor-checkpoint, or delete session "
                 f"{session.id} to train the advisor again"
             )
-        self.advisor_checkpoint = str(Path(path).resolve())
+        checkpoint = str(Path(path).resolve())
+        check = self._check_advisor(checkpoint)
+        if check is None or check.passed or self.options.advisor_check == "record":
+            self.advisor_checkpoint = checkpoint
+            return True
+        attempt = advisor.run.seed - self.spec.advisor_seed + 1
+        if attempt >= self.options.advisor_attempts:
+            raise BatchError(
+                f"{attempt} trained advisors failed their check (the last: session "
+                f"{session.id}, {'; '.join(check.problems)}); raise --advisor-attempts, give a "
+                "checked --advisor-checkpoint, or --advisor-check record to use it anyway"
+            )
+        self.log(
+            f"the advisor of seed {advisor.run.seed} (session {session.id}) failed its check "
+            f"({'; '.join(check.problems)}): training the advisor of seed {advisor.run.seed + 1}"
+        )
+        retry = RunState(Run("autonomous", -1, advisor.run.seed + 1))
+        self.states.insert(self.states.index(advisor) + 1, retry)
+        self._ensure(db, retry)
+        if retry.status == Status.finished.value:
+            return self._advisor_ready(db, retry)
+        if retry.status in LIVE:
+            self.elsewhere.append(retry)
+        else:
+            self._enqueue([retry])
+        return False
+
+    def _check_advisor(self, checkpoint: str) -> AdvisorCheck | None:
+        """`checkpoint` checked for this batch's agent runs (from their advice-time states),
+        stored beside it and logged; None when checks are skipped or no agent runs."""
+        if self.options.advisor_check == "skip" or "agent" not in self.spec.methods:
+            return None
+        spec = run_spec(self.spec, Run("agent", 0, self.spec.seed(0)), checkpoint)
+        seeds = [self.spec.seed(i) for i in range(self.spec.agents)]
+        check = checked_advisor(checkpoint, spec, seeds, allow_failed=True)
+        self.advisor_checks.append((checkpoint, check))
+        self.log(f"{checkpoint}: {check.summary()}")
+        return check
+
+    def _pair_controls(self, db: Session) -> list[RunState]:
+        """Create the procedure controls whose advised run (same agent number, method
+        `control_of`) has finished, each with that run's schedule; returns them."""
+        created = []
+        for state in self.states:
+            if state.run.method != "procedure" or state.session_id is not None:
+                continue
+            pair = next(
+                (
+                    s
+                    for s in self.states
+                    if s.run.method == self.spec.control_of and s.run.index == state.run.index
+                ),
+                None,
+            )
+            if pair is None or pair.session_id is None or pair.status != Status.finished.value:
+                continue
+            row = db.get(StudySession, pair.session_id)
+            assert row is not None
+            path = write_schedule(db, row, self.options.data_dir / "schedules")
+            state.spec = run_spec(self.spec, state.run, None).replace(schedule=str(path))
+            self._ensure(db, state)
+            created.append(state)
+        return created
+
+    def _start_controls(self, db: Session) -> None:
+        created = self._pair_controls(db)
+        self._enqueue([s for s in created if s.status in TO_RUN])
+        self.elsewhere += [s for s in created if s.status in LIVE]
 
     def _create_agent_runs(self, db: Session) -> list[RunState]:
         waiting = [s for s in self.states if s.status == WAITING]
@@ -230,6 +314,9 @@ class BatchRunner:
                 if run.method == "agent" and checkpoint is None:
                     row["status"] = "waits for the advisor"
                     continue
+                if run.method == "procedure":
+                    row["status"] = f"follows {self.spec.control_of} #{run.index + 1} once it ran"
+                    continue
                 found = find_session(
                     db, self.study_id, self._run_spec(state, checkpoint), self.spec_class,
                     run.source,
@@ -243,14 +330,26 @@ class BatchRunner:
     def prepare(self) -> None:
         """Find or create every run's session; take back the ones whose worker died. (Every
         run was checked when the `BatchSpec` was made, before anything is written.)"""
+        given = self.spec.template.advisor_checkpoint
+        if given and self.advisor_checkpoint:
+            check = self._check_advisor(self.advisor_checkpoint)
+            if check is not None and not check.passed and self.options.advisor_check == "require":
+                raise BatchError(
+                    f"the advisor {given} failed its check ({'; '.join(check.problems)}); give "
+                    "another, or --advisor-check record to use it anyway"
+                )
         with self.factory() as db:
             get_study(db, self.study_id)
-            for state in self.states:
+            for state in list(self.states):
                 if state.run.method == "agent" and self.advisor_checkpoint is None:
                     continue  # created once the advisor has finished
-                self._ensure(db, state)
+                if state.run.method == "procedure":
+                    continue  # created once its advised run has finished
+                if state.session_id is None:
+                    self._ensure(db, state)
                 if state.run.is_advisor and state.status == Status.finished.value:
                     self._advisor_ready(db, state)
+            self._pair_controls(db)
             live = [s.session_id for s in self.states if s.status in LIVE and s.session_id]
             for session_id in take_back(db, live, self.options.stale_after_s):  # type: ignore[arg-type]
                 self._state(session_id).status = Status.interrupted.value
@@ -316,10 +415,12 @@ class BatchRunner:
                 state.status, state.detail = Status.interrupted.value, problem
             if state.run.is_advisor:
                 self._after_advisor(db, state)
+        self._start_controls(db)
 
     def _after_advisor(self, db: Session, advisor: RunState) -> None:
         if advisor.status == Status.finished.value:
-            self._advisor_ready(db, advisor)
+            if not self._advisor_ready(db, advisor):
+                return  # the next advisor seed trains
             created = self._create_agent_runs(db)
             fresh = [s for s in created if s.status in TO_RUN]
             self._enqueue(fresh)
@@ -344,6 +445,7 @@ class BatchRunner:
             self.elsewhere.remove(state)
             if state.run.is_advisor:
                 self._after_advisor(db, state)
+        self._start_controls(db)
 
     def run(self) -> BatchResult:
         started = time.monotonic()
@@ -379,6 +481,9 @@ class BatchRunner:
                 take_back(db, running, 0.0)
                 bar.update(self._refresh(db))
         finally:
+            for state in self.states:
+                if state.status == WAITING_PAIR and not interrupted:
+                    state.status = BLOCKED_PAIR
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
             bar.close()

@@ -15,11 +15,15 @@ from typing import Any
 from learner.fields import FieldError
 from learner.run import RunSpec
 
-BATCH_METHODS: tuple[str, ...] = ("autonomous", "agent", "oracle", "random", "sb3-dqn", "replayed")
-"""Methods a batch can run: every machine advisor, no advisor at all, Stable-Baselines3's
-DQN (an independent baseline learner, the optional `sb3` extra), and `replayed`: each
-completed session of another study re-run under the batch's run, fed its advice by order
-(`server.services.replays`)."""
+BATCH_METHODS: tuple[str, ...] = (
+    "autonomous", "agent", "oracle", "random", "procedure", "sb3-dqn", "replayed",
+)  # fmt: skip
+"""Methods a batch can run: every machine advisor, no advisor at all, the procedure control
+of an advised method (`control_of`), Stable-Baselines3's DQN (an independent baseline
+learner, the optional `sb3` extra), and `replayed`: each completed session of another study
+re-run under the batch's run, fed its advice by order (`server.services.replays`)."""
+CONTROLLED = ("agent", "oracle", "random")
+"""The advised methods a `procedure` control can follow."""
 
 MAX_SEED = 2**31 - 1
 ADVISOR_SEED_OFFSET = 100_000
@@ -53,6 +57,9 @@ class BatchSpec:
     (`{"autonomous": {"reward_scheme": "authors-autonomous"}, "agent": {"reward_scheme":
     "authors-interactive"}}`). The report flags such a comparison. The advisor trained for
     `agent` runs is an autonomous run and takes the autonomous changes."""
+    control_of: str = "agent"
+    """The advised method whose runs the `procedure` runs follow: agent i's control replays
+    the schedule of that method's agent i (same seed), with its settings."""
     replay_study: int | None = None
     """The study whose completed sessions the `replayed` method re-runs (required with it)."""
     replay_methods: tuple[str, ...] = ("human",)
@@ -101,6 +108,14 @@ class BatchSpec:
             raise BatchError(
                 f"settings are given for {', '.join(strays)}, which the batch does not run"
             )
+        if "procedure" in self.methods and (
+            self.control_of not in CONTROLLED or self.control_of not in self.methods
+        ):
+            raise BatchError(
+                "the procedure control follows an advised method of the batch "
+                f"({', '.join(CONTROLLED)}); --control-of {self.control_of} is not among "
+                "--methods"
+            )
         for method in self.methods:
             self.spec_of(method, self.base_seed)  # every method's run checked before any runs
         checkpoint = self.template.advisor_checkpoint
@@ -121,12 +136,15 @@ class BatchSpec:
     def spec_of(self, method: str, seed: int) -> RunSpec:
         """The run of one of `method`'s agents (or of the advisor) on `seed`, checked."""
         changes = dict(self.per_method.get(method, {}))
+        if method == "procedure":  # the control runs with its advised method's settings
+            changes = {**self.per_method.get(self.control_of, {}), **changes}
         try:
             spec = self.template.with_values(changes) if changes else self.template
             spec = spec.replace(
                 method=method,
                 seed=seed,
                 advisor_checkpoint=spec.advisor_checkpoint if method == "agent" else None,
+                schedule="-" if method == "procedure" else None,  # written once its pair ran
             )
             if method == "agent" and spec.advisor_checkpoint is None:
                 spec = spec.replace(advisor_checkpoint="-")  # filled in once the advisor trained

@@ -23,9 +23,9 @@ if TYPE_CHECKING:  # the command line starts without the batch's imports
     from server.settings import Settings
 
 DESCRIPTION = """\
-Run N agents per method (autonomous, agent, oracle, random, sb3-dqn) as sessions of a
-study, in parallel worker processes on this machine or on Ray. Agent i of every method gets
-seed BASE+i, so runs pair up across methods. The 'agent' method needs a trained advisor:
+Run N agents per method (autonomous, agent, oracle, random, procedure, sb3-dqn, replayed) as
+sessions of a study, in parallel worker processes on this machine or on Ray. Agent i of every
+method gets seed BASE+i, so runs pair up across methods. The 'agent' method needs a trained advisor:
 without --advisor-checkpoint the batch first trains one (autonomous, same settings, seed
 BASE+100000) and stores it as a session too. 'sb3-dqn' is Stable-Baselines3's DQN, unadvised,
 on the same scenario, seeds and scale, its hyperparameters mapped from the paper's (the
@@ -89,8 +89,8 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         nargs="+",
         default=["autonomous,agent"],
         metavar="METHOD",
-        help="autonomous, agent, oracle, random, sb3-dqn, replayed (space or comma separated; "
-        "default autonomous agent)",
+        help="autonomous, agent, oracle, random, procedure, sb3-dqn, replayed (space or comma "
+        "separated; default autonomous agent)",
     )
     what.add_argument("--agents", type=int, default=10, help="agents per method (default 10)")
     what.add_argument(
@@ -110,6 +110,14 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     )
     what.add_argument(
         "--label", default="baselines", help="the batch's name, every run's session label"
+    )
+    what.add_argument(
+        "--control-of",
+        default="agent",
+        metavar="METHOD",
+        help="the advised method (agent, oracle, random) whose runs the 'procedure' method's "
+        "runs follow: agent i's control asks at the same steps, fits as often and follows "
+        "the same epsilon, with random actions in place of the advice (default agent)",
     )
     run = parser.add_argument_group(
         "the runs",
@@ -162,6 +170,21 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         action="store_true",
         help="resume runs pinned to numerics this machine cannot honour (recorded per run)",
     )
+    how.add_argument(
+        "--advisor-check",
+        choices=("require", "record", "skip"),
+        default="require",
+        help="the agent runs' advisor is checked first (greedy on 10 fresh episodes and from "
+        "the states where it advises: mean reward >= 2.5, no action more than 10 times in a "
+        "row); require (default): a given advisor that fails is refused and a trained one is "
+        "trained again from the next seed; record: checked, used anyway; skip",
+    )
+    how.add_argument(
+        "--advisor-attempts",
+        type=int,
+        default=3,
+        help="advisors the batch trains at most to get one that passes (default 3)",
+    )
     how.add_argument("--report", type=Path, metavar="DIR", help="write the report at the end")
     how.add_argument(
         "--dry-run", action="store_true", help="show the runs and their state; write nothing"
@@ -207,6 +230,7 @@ def spec_from(args: argparse.Namespace) -> BatchSpec:
         agents=args.agents,
         label=args.label,
         per_method=per_method,
+        control_of=args.control_of,
         replay_study=getattr(args, "replay_study", None),
         replay_methods=_methods([getattr(args, "replay_methods", "human")]),
     )
@@ -227,6 +251,8 @@ def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     """The command that reruns (or resumes) exactly this batch, every choice spelled out."""
     parts = ["ideeprl", "batch", "--study", str(args.study), "--methods", *spec.methods]
     parts += ["--agents", str(spec.agents), "--label", spec.label]
+    if "procedure" in spec.methods:
+        parts += ["--control-of", spec.control_of]
     if spec.replay_study is not None:
         parts += ["--replay-study", str(spec.replay_study)]
         parts += ["--replay-methods", ",".join(spec.replay_methods)]
@@ -250,6 +276,10 @@ def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
         parts += ["--nice", str(args.nice)]
     if args.override_numerics:
         parts += ["--override-numerics"]
+    if args.advisor_check != "require":
+        parts += ["--advisor-check", args.advisor_check]
+    if args.advisor_attempts != 3:
+        parts += ["--advisor-attempts", str(args.advisor_attempts)]
     if args.data_dir:
         parts += ["--data-dir", str(args.data_dir)]
     if args.database_url:
@@ -383,6 +413,8 @@ def _check_counts(args: argparse.Namespace) -> None:
         raise BatchError("--nice must be between 0 and 19")
     if args.address and args.backend != "ray":
         raise BatchError("--address is for the Ray backend: add --backend ray")
+    if not 1 <= args.advisor_attempts <= 100:
+        raise BatchError("--advisor-attempts must be between 1 and 100")
     if args.json and not args.dry_run:
         raise BatchError("--json goes with --dry-run")
 
@@ -401,6 +433,8 @@ def _options(args: argparse.Namespace, settings: Settings) -> RunnerOptions:
         nice=args.nice,
         progress=show_progress(args.no_progress),
         override_numerics=args.override_numerics,
+        advisor_check=args.advisor_check,
+        advisor_attempts=args.advisor_attempts,
     )
 
 

@@ -20,8 +20,9 @@ from server.commands.common import (
 DESCRIPTION = """\
 Write the paper's analysis of a study's sessions into a folder: report.md with Figures 5-7
 (reward per method with its spread, individual agents, Pearson's correlation), R_T per
-agent and method with the improvement over autonomous DeepRL, and Student's t-tests,
-as PNG and CSV files.
+agent and method with the improvement over autonomous DeepRL, each comparison's primary
+test (Welch's, or the paired t-test over seeds) with the secondary ones, and the paper's
+own t-tests, as PNG (with SVG and PDF) and CSV files.
 
 By default the study's finished sessions, except the agent trained as an advisor, grouped
 by method; autonomous DeepRL is the baseline when there is one."""
@@ -63,6 +64,14 @@ def register(subparsers: Any) -> None:
         "--allow-mismatch",
         action="store_true",
         help="also give the t-tests of methods whose settings differ (the warning stays)",
+    )
+    parser.add_argument(
+        "--primary",
+        choices=("welch", "paired"),
+        default="welch",
+        help="each comparison's primary test on the agents' R_T: welch (default), or paired "
+        "over seeds (when every agent has a baseline agent of its seed); the others are "
+        "reported as secondary",
     )
     parser.add_argument(
         "--reference",
@@ -111,6 +120,7 @@ def report(args: argparse.Namespace) -> int:
         notes=tuple(args.note),
         allow_mismatch=args.allow_mismatch,
         reference=args.reference,
+        primary=args.primary,
     )
     with make_session_factory(engine)() as db:
         study_id, _ = find_study(db, args.study)

@@ -20,7 +20,13 @@ from server.services.studies import get_study
 
 router = APIRouter(prefix="/api/studies", tags=["reports"], dependencies=[ResearcherDep])
 
-MEDIA_TYPES = {".md": "text/markdown", ".png": "image/png", ".csv": "text/csv"}
+MEDIA_TYPES = {
+    ".md": "text/markdown",
+    ".png": "image/png",
+    ".svg": "image/svg+xml",
+    ".pdf": "application/pdf",
+    ".csv": "text/csv",
+}
 FileName = Annotated[
     str, PathParam(pattern=r"^[A-Za-z0-9_.-]+$", max_length=100, description="A report file.")
 ]
@@ -59,11 +65,16 @@ class ReportCreate(BaseModel):
     reference: Literal["authors"] | None = Field(
         default=None, description="authors: draw the authors' published curves on Figure 5."
     )
+    primary: Literal["welch", "paired"] = Field(
+        default="welch",
+        description="Each comparison's primary test on the agents' R_T: welch, or paired "
+        "(the paired t-test over seeds, where every agent has a baseline agent of its seed).",
+    )
 
 
 class ReportFile(BaseModel):
     name: str
-    kind: str = Field(description="report (Markdown), figure (PNG) or table (CSV).")
+    kind: str = Field(description="report (Markdown), figure (PNG, SVG, PDF) or table (CSV).")
     url: str
 
 
@@ -126,6 +137,7 @@ def build_report(
         title=body.title,
         allow_mismatch=body.allow_mismatch,
         reference=body.reference,
+        primary=body.primary,
     )
     description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
     return public_report(description, study_id)

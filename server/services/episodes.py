@@ -13,6 +13,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from learner.run import RunSpec
+from server.analysis.advice import ADVICE_COLUMNS
 from server.analysis.episodes import EPISODE_TABLE_COLUMNS
 from server.analysis.rescoring import STEP_COLUMNS
 from server.analysis.settings import settings_table
@@ -62,6 +63,17 @@ def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame
     )
     rows = [tuple(row) for row in db.execute(query)]
     return pd.DataFrame(rows, columns=[*STEP_COLUMNS, "outcome"])
+
+
+def load_advised_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
+    """The steps whose action came from the advisor (`server.analysis.advice.ADVICE_COLUMNS`)."""
+    query = (
+        select(Step.session_id, Step.global_step, Step.action, Step.outcome)
+        .where(Step.session_id.in_(list(session_ids)), Step.action_source == "advisor")
+        .order_by(Step.session_id, Step.global_step)
+    )
+    rows = [tuple(row) for row in db.execute(query)]
+    return pd.DataFrame(rows, columns=ADVICE_COLUMNS)
 
 
 def session_settings(

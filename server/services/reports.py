@@ -21,7 +21,12 @@ from sqlalchemy.orm import Session
 
 from server.analysis import EpisodeTableError, ReportResult, method_name, write_report
 from server.db.models import Status, StudySession
-from server.services.episodes import load_episodes, load_training_steps, session_settings
+from server.services.episodes import (
+    load_advised_steps,
+    load_episodes,
+    load_training_steps,
+    session_settings,
+)
 from server.services.errors import Conflict, Invalid, NotFound
 from server.services.sessions import list_sessions
 from server.services.studies import get_study
@@ -59,6 +64,8 @@ class ReportRequest:
     """Give the t-tests of methods whose settings differ too (the warning stays)."""
     reference: str | None = None
     """`authors`: draw the authors' published curves on Figure 5."""
+    primary: str = "welch"
+    """Each comparison's primary test: `welch`, or `paired` over seeds where they pair."""
 
 
 def advisor_sessions(sessions: list[StudySession]) -> set[int]:
@@ -168,6 +175,7 @@ def build_report(
     episodes = load_episodes(db, [s.id for s in sessions])
     settings = session_settings(sessions)
     steps = load_training_steps(db, [s.id for s in sessions])
+    advice = load_advised_steps(db, [s.id for s in sessions])
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
     if empty:
         raise Conflict(
@@ -206,6 +214,8 @@ def build_report(
             steps=steps,
             allow_mismatch=request.allow_mismatch,
             reference=request.reference,
+            advice=advice,
+            primary=request.primary,
         )
     except EpisodeTableError as error:
         raise Conflict(f"these sessions cannot be compared as they are: {error}") from None
@@ -227,6 +237,7 @@ def describe_report(study_id: int, built: StudyReport) -> dict[str, Any]:
     result = built.result
     files = [("report", result.report)]
     files += [("figure", p) for p in result.figures.values()]
+    files += [("figure", p) for p in result.vector_figures]
     files += [("table", p) for p in result.tables.values()]
     return {
         "study_id": study_id,

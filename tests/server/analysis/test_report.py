@@ -47,11 +47,13 @@ def test_every_file_is_written_and_listed(report: tuple[pd.DataFrame, ReportResu
     _, result = report
     assert result.report == result.out_dir / "report.md"
     assert set(result.figures) == set(FIGURE_FILES)
-    assert set(result.tables) == set(TABLE_FILES)
+    assert set(result.tables) == {*TABLE_FILES, "comparisons"}  # a baseline: tests against it
     assert sorted(p.name for p in result.out_dir.iterdir()) == sorted(p.name for p in result.files)
     for path in result.figures.values():
         with Image.open(path) as image:
             assert image.format == "PNG" and min(image.size) > 300
+        assert path.with_suffix(".svg").read_text().lstrip().startswith("<?xml")
+        assert path.with_suffix(".pdf").read_bytes().startswith(b"%PDF")
 
 
 def test_the_csv_tables_match_the_input(report: tuple[pd.DataFrame, ReportResult]) -> None:

@@ -7,8 +7,11 @@ import json
 from pathlib import Path
 
 import pytest
+from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 from server.cli import main
+from server.db.models import Step
 from tests.server.batch.conftest import BASELINES
 from tests.server.batch.helpers import (
     ADVICE,
@@ -98,6 +101,20 @@ def test_report_tables_match_the_database(
     report = (out / "report.md").read_text()
     assert f"Left out session(s) {advisor.id}" in report and "- pilot run" in report
     assert "![Figure 5" in report and "figure7_correlation.png" in report
+
+    # each advised session's advice, counted as its advisor steps in the database did
+    quality = {int(r["session_id"]): r for r in read_csv(out / "advice_quality.csv")}
+    assert set(quality) == {s.id for s in runs if s.method == "agent"}
+    with Session(engine) as db:
+        for session_id, row in quality.items():
+            advised = db.scalars(
+                select(Step.outcome).where(
+                    Step.session_id == session_id, Step.action_source == "advisor"
+                )
+            ).all()
+            assert int(row["advice"]) == len(advised) == ADVICE
+            assert int(row["placed"]) == advised.count("placed")
+    assert "## Advice quality" in report
 
 
 def test_report_json_is_the_apis_description_of_it(
