@@ -225,6 +225,23 @@ def test_on_another_cpu_a_difference_is_explained_and_on_the_same_one_a_fault(
     assert report["comparison"]["difference"]["global_step"] == 35
 
 
+def test_a_missing_source_is_named_and_nothing_is_created(
+    database: Database, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    where = ["--database-url", database.url, "--data-dir", str(database.data_dir)]
+    with database.factory()() as db:
+        before = len(db.scalars(select(StudySession.id)).all())
+    assert main(["replay", "--session", "424242", *where]) == 1
+    assert "no session with id 424242" in capsys.readouterr().err
+    missing = ["--export", str(tmp_path / "nothing"), "--study", "x"]
+    assert main(["replay", "--session", "1", *missing, *where]) == 1
+    assert "no study export at" in capsys.readouterr().err
+    assert main(["replay", "--session", "1", "--export", str(tmp_path), *where]) == 2
+    assert "--export needs --study" in capsys.readouterr().err
+    with database.factory()() as db:
+        assert len(db.scalars(select(StudySession.id)).all()) == before
+
+
 def test_strategies_that_weigh_values_and_a_replay_without_a_stream_are_refused(
     database: Database, oracle_early: int
 ) -> None:
@@ -333,6 +350,9 @@ def test_a_persons_session_replays_unchanged_in_physics_and_goes_with_them(
     assert advice.status_code == 200, advice.text
     assert [a["action"] is None for a in advice.json()] == [False] * 5 + [True] * 2
     assert [a["advisor"] for a in advice.json()] == ["replayed"] * 7
+
+    refused = api.post(f"/api/studies/{study['id']}/sessions", json=session_body("replayed"))
+    assert refused.status_code == 422 and "ideeprl replay" in refused.text
 
     assert api.delete(f"/api/sessions/{created['id']}").status_code in (200, 204)
     assert api.get(f"/api/sessions/{report['session_id']}").status_code == 404
