@@ -225,6 +225,18 @@ def test_on_another_cpu_a_difference_is_explained_and_on_the_same_one_a_fault(
     assert report["comparison"]["difference"]["global_step"] == 35
 
 
+def test_steps_recorded_without_observation_hashes_compare_on_the_other_columns() -> None:
+    from server.services.replays import DECIDING, compare
+
+    step = {column: 1 for column in DECIDING}
+    old = {**step, "observation_hash": None}
+    assert compare([old], [{**step, "observation_hash": "ab" * 8}]).equal
+    changed = compare([old], [{**step, "action": 2, "observation_hash": "ab" * 8}])
+    assert changed.difference == {
+        "global_step": 1, "column": "action", "original": 1, "replay": 2
+    }  # fmt: skip
+
+
 def test_a_missing_source_is_named_and_nothing_is_created(
     database: Database, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
