@@ -195,6 +195,12 @@ def replay_run(original: RunSpec, values: Mapping[str, Any]) -> RunSpec:
     (`RunSpec.with_values`). A new `preset` takes that preset's config, keeping the fields
     the original set apart from its own preset (its scale: episodes, pretraining steps,
     budget; its pinned numerics); `Invalid` names a field that cannot be."""
+    if original.method == "procedure":
+        raise Invalid(
+            "run.method",
+            "a procedure control's advice is random by design, its schedule its own; replay "
+            "the advised session it follows instead",
+        )
     values = dict(values)
     values.pop("method", None)
     preset = values.pop("preset", original.preset)
