@@ -43,7 +43,7 @@ def test_a_batch_replays_a_studys_sessions_under_its_run_and_reports_the_arm(
     source_study, sources = _advised_study(place)
     engine = place.engine()
     replayed = [
-        "batch", "--study", "reuse", "--methods", "autonomous,replayed", "--agents", "1",
+        "batch", "--study", "reuse", "--methods", "replayed", "--agents", "1",
         "--replay-study", str(source_study), "--replay-methods", "oracle",
         "--preset", "authors", "--report", str(tmp_path / "report"), *SCALE,
     ]  # fmt: skip
@@ -53,9 +53,9 @@ def test_a_batch_replays_a_studys_sessions_under_its_run_and_reports_the_arm(
     replays = [s for s in rows if s.method == "replayed"]
     assert sorted(s.replay_of for s in replays) == sources
     assert all(s.status == "finished" and s.spec.preset == "authors" for s in rows)
-    assert [s.seed for s in replays] == [0]  # paired with autonomous #1
+    assert [s.seed for s in replays] == [0]  # the base seed, as agent #1 of every method
     report = (tmp_path / "report" / "report.md").read_text()
-    assert "replayed" in report
+    assert "\n| replayed | 1 |" in report, report  # its row: the arm and its one session
     # the same command again finds every replay: nothing new is created
     code, output = in_process(place, capsys, *replayed[:-3], *SCALE)
-    assert code == 0 and len(sessions(engine, study_id(engine, "reuse"))) == 2, output
+    assert code == 0 and len(sessions(engine, study_id(engine, "reuse"))) == 1, output
