@@ -121,7 +121,7 @@ def stream_of_session(db: Session, session_id: int) -> Stream:
 
 def stream_of_export(path: Path, session_id: int) -> Stream:
     """The stream of session `session_id` of a study export (its zip, or its folder)."""
-    from server.analysis.exported import ExportError, _provenance, _table, run_of
+    from server.analysis.exported import ExportError, _provenance, _table, _with_stage, run_of
 
     path = Path(path)
     if path.is_file() and zipfile.is_zipfile(path):
@@ -139,7 +139,7 @@ def stream_of_export(path: Path, session_id: int) -> Stream:
         study = json.loads(info.read_text()) if info.is_file() else {}
         advice = [r for r in _of(_table(path, "advice"), session_id) if not _missing(r["action"])]
         advice.sort(key=lambda r: int(r["advice_index"]))
-        steps = _of(_table(path, "steps"), session_id)
+        steps = _of(_with_stage(_table(path, "steps")), session_id)  # old exports' `phase`
         hashes = tuple(_png_hash((path / r["observation_file"]).read_bytes()) for r in advice)
         run = run_of(sessions[0])
         recorded = (_provenance(_table(path, "sessions")) or {}).get(session_id, [])
