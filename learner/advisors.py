@@ -6,6 +6,8 @@ same protocol: `advise` may block as long as the person takes.
 
 from __future__ import annotations
 
+import enum
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -15,6 +17,17 @@ from learner.config import DQNConfig
 from learner.fitted import FittedAdvisor, log_normal_time, read_model
 
 ADVISOR_KINDS = ("agent", "fitted", "oracle", "random")
+
+
+class NoAdvice(enum.Enum):
+    """What an advisor answers when it was asked and has nothing to give: a recorded stream
+    that ran out. The strategy counts the request against its budget (the run asked, as
+    the original did), and the learner takes its own action."""
+
+    NO_ADVICE = "no advice"
+
+
+NO_ADVICE = NoAdvice.NO_ADVICE
 
 
 @runtime_checkable
@@ -127,6 +140,45 @@ class AgentAdvisor:
 
     def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         return int(np.argmax(self.q_values(obs)))
+
+
+class RecordedAdvisor:
+    """A recorded advice stream fed by order (SPEC section 5, "Replay"): the i-th call gets
+    the i-th recorded action, whatever the state; past the stream's end, `NO_ADVICE`.
+    `observation_hashes[i]` is the hash of the image the advisor saw for advice i
+    (`learner.records.observation_hash`): `same_observation` says whether the learner now
+    shows the advisor the same one."""
+
+    def __init__(self, actions: Sequence[int], observation_hashes: Sequence[str | None]) -> None:
+        if len(actions) != len(observation_hashes):
+            raise ValueError("a recorded stream needs one observation hash per action")
+        self.actions = [int(a) for a in actions]
+        self.observation_hashes = list(observation_hashes)
+        self.count = 0
+        """Requests so far, answered or not."""
+        self.same_observation: bool | None = None
+        """Whether the last advice met the image its advisor saw (None: no advice given)."""
+
+    @property
+    def exhausted(self) -> bool:
+        return self.count >= len(self.actions)
+
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int | NoAdvice:
+        from learner.records import observation_hash
+
+        index = self.count
+        self.count += 1
+        if index >= len(self.actions):
+            self.same_observation = None
+            return NO_ADVICE
+        self.same_observation = observation_hash(obs) == self.observation_hashes[index]
+        return self.actions[index]
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"count": self.count}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.count = int(state["count"])
 
 
 def make_advisor(kind: str, **options: Any) -> Advisor:

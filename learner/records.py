@@ -16,6 +16,7 @@ one is cut when pretraining ends.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -85,6 +86,11 @@ class StepRecord:
     on the wrong side), `lost` (one knocked off the center table) or `none`. Rescoring
     under another reward scheme keeps the rewards of placements only (empty in logs
     recorded before it was kept, until `ideeprl outcomes` replays them)."""
+    observation_hash: str
+    """What the learner saw when it chose this step's action: the first 16 hex digits of
+    the BLAKE2b hash of the 64x64x3 uint8 image (`observation_hash`). Equal hashes, equal
+    images: a replay compares its steps with the original's by them (empty in rows recorded
+    before it was kept)."""
     epsilon: float
     """Exploration rate used to choose this step's action."""
     loss: float | None
@@ -134,6 +140,15 @@ class EpisodeRecord:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+
+def observation_hash(obs: Any) -> str:
+    """A short fingerprint of an observation (its uint8 bytes): what a replay compares, step
+    by step and advice by advice, without storing every image."""
+    import numpy as np
+
+    data = np.ascontiguousarray(obs, dtype=np.uint8)
+    return hashlib.blake2b(data.tobytes(), digest_size=8).hexdigest()
 
 
 def column_docs(record_type: type) -> dict[str, str]:

@@ -50,19 +50,37 @@ if TYPE_CHECKING:
 
 SPEC_VERSION = 1
 """Version of the stored run document (`RunSpec.to_json`); `from_json` reads this and older."""
-METHODS = ("autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn", "fitted")
+METHODS = (
+    "autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn", "fitted",
+    "replayed",
+)  # fmt: skip
 """A run's method: who advises it (nobody, a trained agent, a person, the oracle, a random
 advisor, an advisor fitted to a study's people), `procedure` (the procedure control: an
-advised run's advising procedure with random actions, `learner.procedure`), or `sb3-dqn`,
-Stable-Baselines3's DQN unadvised (an independent baseline)."""
+advised run's advising procedure with random actions, `learner.procedure`), `sb3-dqn`,
+Stable-Baselines3's DQN unadvised (an independent baseline), or `replayed`: a recorded
+session's advice stream fed by order (its session holds the stream,
+`sessions.replay_stream`; `ideeprl replay`)."""
 Method = Literal[
-    "autonomous", "agent", "human", "oracle", "random", "procedure", "sb3-dqn", "fitted"
+    "autonomous",
+    "agent",
+    "human",
+    "oracle",
+    "random",
+    "procedure",
+    "sb3-dqn",
+    "fitted",
+    "replayed",
 ]
 UNADVISED = ("autonomous", "sb3-dqn")
 """Methods without an advisor: no strategy, no advice budget."""
-ADVISORS = ("none", *ADVISOR_KINDS, "human", "procedure")
-"""Who advises: nobody, a machine advisor the learner builds, or a person (`human`: the
-caller supplies the advisor to `build`, the server's `HumanAdvisor`)."""
+ADVISORS = ("none", *ADVISOR_KINDS, "human", "procedure", "replayed")
+"""Who advises: nobody, a machine advisor the learner builds, a person (`human`: the
+caller supplies the advisor to `build`, the server's `HumanAdvisor`), the procedure control's
+random advice, or a recorded stream (`replayed`: the caller supplies a
+`learner.advisors.RecordedAdvisor`)."""
+REPLAY_STRATEGIES = ("early", "alternating")
+"""Strategies a replayed stream can follow: those that ask without weighing the advisor's
+own values (a stream has none)."""
 LEARNERS = ("dqn", "sb3-dqn")
 """The paper's learner (`learner.trainer`), or Stable-Baselines3's DQN (`learner.sb3_dqn`,
 an independent baseline; the optional `sb3` extra)."""
@@ -136,8 +154,9 @@ class RunSpec:
     method: Method = bounded("autonomous", role="treatment")
     """Who advises: autonomous (nobody: the paper's DeepRL), agent (a trained learner's
     checkpoint), human (a person in the browser), oracle (the correct action, with an error
-    rate), random, fitted (advises like a study's people: `fitted_model`); or sb3-dqn,
-    Stable-Baselines3's DQN unadvised (needs the sb3 extra)."""
+    rate), random, fitted (advises like a study's people: `fitted_model`); sb3-dqn,
+    Stable-Baselines3's DQN unadvised (needs the sb3 extra); or replayed, a recorded
+    session's advice fed by order (made by ideeprl replay)."""
     seed: int = bounded(0, 0, MAX_SEED, role="seed")
     """Fixes scene, network, memory, exploration and the machine advisors' draws."""
     preset: Preset = bounded("paper")
@@ -345,6 +364,12 @@ class RunSpec:
                 "advisor_checkpoint",
                 "method agent needs advisor_checkpoint: the trained learner that advises",
             )
+        if spec.method == "replayed" and spec.strategy not in REPLAY_STRATEGIES:
+            raise RunSpecError(
+                "strategy",
+                f"a replayed stream has no Q-values for the {spec.strategy} strategy to weigh; "
+                f"replay with {' or '.join(REPLAY_STRATEGIES)} advising",
+            )
         if _STRATEGIES[spec.strategy].needs_values and spec.method not in ("agent", "procedure"):
             raise RunSpecError(
                 "strategy",
@@ -427,7 +452,8 @@ class RunSpec:
         )
 
     def make_advisor(self) -> Advisor | None:
-        """The machine advisor (None for none and human: a person is the caller's)."""
+        """The machine advisor (None for none, human and replayed: a person, or a recorded
+        stream, is the caller's)."""
         if self.method == "agent":
             return make_advisor("agent", checkpoint=self.advisor_checkpoint)
         if self.method == "oracle":

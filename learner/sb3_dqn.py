@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from learner.config import DQNConfig
-from learner.records import EpisodeRecord, StagedRun, StepRecord, stage_of
+from learner.records import EpisodeRecord, StagedRun, StepRecord, observation_hash, stage_of
 from learner.seeding import draw_reset_seed, run_streams
 from sim.rewards import step_outcome
 
@@ -278,6 +278,7 @@ class SB3DQNTrainer(StagedRun):
             reward=reward,
             terminated=terminated,
             truncated=truncated,
+            observation_hash=observation_hash(episode.obs),
             outcome=step_outcome(episode.info, info),  # type: ignore[arg-type]
             epsilon=epsilon,
             loss=loss,

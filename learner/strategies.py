@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from learner.advisors import Advisor
+from learner.advisors import NO_ADVICE, Advisor
 
 STRATEGY_NAMES = ("early", "alternating", "importance", "mistake_correcting")
 
@@ -76,11 +76,16 @@ class AdvisingStrategy:
         return self.budget - self.used
 
     def advise(self, moment: AdviceMoment, advisor: Advisor, n_actions: int = 4) -> int | None:
-        """The advised action to execute, or None; counts the advice against the budget."""
+        """The advised action to execute, or None; counts the advice against the budget.
+        An advisor that answers `NO_ADVICE` (a replayed stream that ran out) was asked all
+        the same: the request is counted, and the learner acts on its own."""
         if self.remaining <= 0:
             return None
         action = self._advise(moment, advisor)
         if action is None:
+            return None
+        if action is NO_ADVICE:
+            self.used += 1
             return None
         if isinstance(action, bool) or not isinstance(action, int | np.integer):
             raise ValueError(

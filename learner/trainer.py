@@ -28,7 +28,7 @@ from learner.config import DQNConfig
 from learner.device import configure_threads, resolve_device
 from learner.exploration import EpsilonSchedule
 from learner.procedure import Schedule, ScheduledAdvising
-from learner.records import EpisodeRecord, StagedRun, StepRecord, stage_of
+from learner.records import EpisodeRecord, StagedRun, StepRecord, observation_hash, stage_of
 from learner.replay import ReplayMemory
 from learner.seeding import draw_reset_seed, run_streams
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
@@ -241,6 +241,7 @@ class Trainer(StagedRun):
             reward=step.reward,
             terminated=step.terminated,
             truncated=step.truncated,
+            observation_hash=observation_hash(episode.obs),
             outcome=step_outcome(episode.info, step.info),  # type: ignore[arg-type]
             epsilon=step.epsilon,
             loss=loss,

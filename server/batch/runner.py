@@ -8,6 +8,7 @@ checkpoint, and only the missing ones are created.
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import threading
 import time
@@ -24,7 +25,7 @@ from learner.advisor_check import AdvisorCheck, checked_advisor
 from learner.run import RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.progress import BatchProgress
-from server.batch.sessions import ensure_session, find_session
+from server.batch.sessions import completed_sources, ensure_session, find_session
 from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, run_spec
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import BACKUPS, upgrade
@@ -159,6 +160,16 @@ class BatchRunner:
         if migrate:
             upgrade(engine, options.data_dir / BACKUPS)
         self.factory: sessionmaker[Session] = make_session_factory(engine)
+        if spec.replay_study is not None:
+            with self.factory() as db:
+                get_study(db, spec.replay_study)
+                sources = completed_sources(db, spec.replay_study, spec.replay_methods)
+            if not sources:
+                raise BatchError(
+                    f"study {spec.replay_study} has no finished session of method "
+                    f"{' or '.join(spec.replay_methods)} to replay"
+                )
+            self.spec = spec = dataclasses.replace(spec, replay_sources=tuple(sources))
         self.states = [
             RunState(run, status=WAITING_PAIR if run.method == "procedure" else WAITING)
             for run in plan_runs(spec)
@@ -184,7 +195,9 @@ class BatchRunner:
         spec = self._run_spec(state, self.advisor_checkpoint)
         label = f"{self.spec.label} advisor" if state.run.is_advisor else self.spec.label
         try:
-            session, _ = ensure_session(db, self.study_id, spec, label, self.spec_class)
+            session, _ = ensure_session(
+                db, self.study_id, spec, label, self.spec_class, state.run.source
+            )
         except Invalid as error:
             raise BatchError(error.message) from None
         state.session_id, state.status = session.id, session.status
@@ -305,8 +318,9 @@ class BatchRunner:
                     row["status"] = f"follows {self.spec.control_of} #{run.index + 1} once it ran"
                     continue
                 found = find_session(
-                    db, self.study_id, self._run_spec(state, checkpoint), self.spec_class
-                )
+                    db, self.study_id, self._run_spec(state, checkpoint), self.spec_class,
+                    run.source,
+                )  # fmt: skip
                 if run.is_advisor and found is not None and found.status == Status.finished:
                     checkpoint = found.checkpoint_path
                 if found is not None:

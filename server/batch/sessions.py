@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session
 from learner.run import RunSpec
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
 from server.schemas.sessions import SessionOptions
-from server.services import learning
+from server.services import learning, replays
 from server.services.sessions import create_session
 
 _RANK = {
@@ -30,11 +30,23 @@ _RANK = {
 from its last checkpoint, like an interrupted one)."""
 
 
+def completed_sources(db: Session, study_id: int, methods: tuple[str, ...]) -> list[int]:
+    """The study's finished sessions of these methods, by id: what `replayed` re-runs."""
+    query = select(StudySession).where(
+        StudySession.study_id == study_id, StudySession.status == Status.finished.value
+    )
+    return [s.id for s in db.scalars(query.order_by(StudySession.id)) if s.method in methods]
+
+
 def find_session(
-    db: Session, study_id: int, spec: RunSpec, spec_class: type[RunSpec] = RunSpec
+    db: Session,
+    study_id: int,
+    spec: RunSpec,
+    spec_class: type[RunSpec] = RunSpec,
+    replay_of: int | None = None,
 ) -> StudySession | None:
-    """The study's session for this run (`learning.same_run`), the furthest along if several
-    match; None if the run has none yet."""
+    """The study's session for this run (`learning.same_run`; a replay's, of `replay_of`),
+    the furthest along if several match; None if the run has none yet."""
     wanted = learning.identity(spec)
     query = select(StudySession).where(StudySession.study_id == study_id)
     matches = [
@@ -43,6 +55,7 @@ def find_session(
         if s.status in _RANK
         and s.method == spec.method
         and s.seed == spec.seed
+        and s.replay_of == replay_of
         and learning.same_run(wanted, s, spec_class)
     ]
     if not matches:
@@ -51,12 +64,21 @@ def find_session(
 
 
 def ensure_session(
-    db: Session, study_id: int, spec: RunSpec, label: str, spec_class: type[RunSpec] = RunSpec
+    db: Session,
+    study_id: int,
+    spec: RunSpec,
+    label: str,
+    spec_class: type[RunSpec] = RunSpec,
+    replay_of: int | None = None,
 ) -> tuple[StudySession, bool]:
-    """The run's session, created (pinned on this machine) if missing; True if created now."""
-    found = find_session(db, study_id, spec, spec_class)
+    """The run's session, created (pinned on this machine) if missing; True if created now.
+    A replay (`replay_of`: its source session) is fed the source's advice stream."""
+    found = find_session(db, study_id, spec, spec_class, replay_of)
     if found is not None:
         return found, False
+    if replay_of is not None:
+        stream = replays.stream_of_session(db, replay_of)
+        return replays.create_replay(db, study_id, stream, spec, label), True
     if spec.advisor_checkpoint is not None:
         spec = spec.replace(advisor_checkpoint=str(Path(spec.advisor_checkpoint).resolve()))
     if spec.fitted_model is not None:

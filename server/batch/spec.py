@@ -16,11 +16,13 @@ from learner.fields import FieldError
 from learner.run import RunSpec
 
 BATCH_METHODS: tuple[str, ...] = (
-    "autonomous", "agent", "oracle", "random", "procedure", "sb3-dqn", "fitted",
+    "autonomous", "agent", "oracle", "random", "procedure", "sb3-dqn", "fitted", "replayed",
 )  # fmt: skip
 """Methods a batch can run: every machine advisor (an advisor fitted to people included), no
-advisor at all, the procedure control of an advised method (`control_of`), and
-Stable-Baselines3's DQN (an independent baseline learner, the optional `sb3` extra)."""
+advisor at all, the procedure control of an advised method (`control_of`), Stable-Baselines3's
+DQN (an independent baseline learner, the optional `sb3` extra), and `replayed`: each
+completed session of another study re-run under the batch's run, fed its advice by order
+(`server.services.replays`)."""
 CONTROLLED = ("agent", "oracle", "random")
 """The advised methods a `procedure` control can follow."""
 
@@ -59,6 +61,13 @@ class BatchSpec:
     control_of: str = "agent"
     """The advised method whose runs the `procedure` runs follow: agent i's control replays
     the schedule of that method's agent i (same seed), with its settings."""
+    replay_study: int | None = None
+    """The study whose completed sessions the `replayed` method re-runs (required with it)."""
+    replay_methods: tuple[str, ...] = ("human",)
+    """Which of its sessions: those of these methods (people's advice by default)."""
+    replay_sources: tuple[int, ...] = ()
+    """The sessions the `replayed` runs replay, in id order, found in the database when the
+    batch runs (`completed_sources`); replayed run i gets seed `base_seed + i`."""
 
     def __post_init__(self) -> None:
         unknown = [m for m in self.methods if m not in BATCH_METHODS]
@@ -79,11 +88,18 @@ class BatchSpec:
 
             if not available():
                 raise BatchError(MISSING)
+        if ("replayed" in self.methods) != (self.replay_study is not None):
+            raise BatchError(
+                "the replayed method needs --replay-study ID, the study whose completed "
+                "sessions it re-runs"
+                if self.replay_study is None
+                else "--replay-study is for the replayed method: add it to --methods"
+            )
         if len(set(self.methods)) != len(self.methods):
             raise BatchError(f"methods repeat: {', '.join(self.methods)}; name each once")
         if not 1 <= self.agents <= MAX_AGENTS:
             raise BatchError(f"agents must be between 1 and {MAX_AGENTS}, got {self.agents}")
-        top = self.base_seed + ADVISOR_SEED_OFFSET + self.agents
+        top = self.base_seed + ADVISOR_SEED_OFFSET + max(self.agents, len(self.replay_sources))
         if top > MAX_SEED:
             raise BatchError(
                 f"the base seed must be at most {MAX_SEED - ADVISOR_SEED_OFFSET - self.agents}"
@@ -171,6 +187,8 @@ class Run:
     """Agent number within its method, from 0; -1 for the advisor."""
     seed: int
     """The session's seed."""
+    source: int | None = None
+    """A `replayed` run's source session (whose advice it is fed)."""
 
     @property
     def is_advisor(self) -> bool:
@@ -178,6 +196,8 @@ class Run:
 
     @property
     def name(self) -> str:
+        if self.source is not None:
+            return f"{self.method} #{self.index + 1} (of session {self.source})"
         return "advisor" if self.is_advisor else f"{self.method} #{self.index + 1}"
 
 
@@ -185,8 +205,14 @@ def plan_runs(spec: BatchSpec) -> list[Run]:
     """Every run of the batch: the advisor first (when one is trained), then agent by agent,
     each agent's methods together, so a batch cut short still has paired runs."""
     runs = [Run("autonomous", -1, spec.advisor_seed)] if spec.trains_advisor else []
+    methods = [m for m in spec.methods if m != "replayed"]
     for index in range(spec.agents):
-        runs += [Run(method, index, spec.seed(index)) for method in spec.methods]
+        runs += [Run(method, index, spec.seed(index)) for method in methods]
+    if "replayed" in spec.methods:
+        runs += [
+            Run("replayed", index, spec.seed(index), source)
+            for index, source in enumerate(spec.replay_sources)
+        ]
     return runs
 
 

@@ -23,7 +23,8 @@ if TYPE_CHECKING:  # the command line starts without the batch's imports
     from server.settings import Settings
 
 DESCRIPTION = """\
-Run N agents per method (autonomous, agent, oracle, random, procedure, sb3-dqn, fitted) as
+Run N agents per method (autonomous, agent, oracle, random, procedure, sb3-dqn, fitted,
+replayed) as
 sessions of a study, in parallel worker processes on this machine or on Ray. Agent i of
 every method gets seed BASE+i, so runs pair up across methods. The 'agent' method needs a
 trained advisor: without --advisor-checkpoint the batch first trains one (autonomous, same
@@ -31,6 +32,10 @@ settings, seed BASE+100000) and stores it as a session too. 'sb3-dqn' is Stable-
 Baselines3's DQN, unadvised, on the same scenario, seeds and scale, its hyperparameters
 mapped from the paper's (the optional extra: pip install 'ideeprl[sb3]'); the report flags
 it as another learner.
+
+'replayed' re-runs every finished session of --replay-study (human ones by default,
+--replay-methods) under this batch's run, fed its recorded advice by order: the same
+people's advice, another learner (replayed run i gets seed BASE+i).
 
 Runs are identified by study, method, seed and configuration: the same command again skips
 finished runs, resumes interrupted ones from their checkpoints and creates only the missing
@@ -87,10 +92,25 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         nargs="+",
         default=["autonomous,agent"],
         metavar="METHOD",
-        help="autonomous, agent, oracle, random, sb3-dqn, fitted (space or comma separated; "
-        "default autonomous agent)",
+        help="autonomous, agent, oracle, random, procedure, sb3-dqn, fitted, replayed (space or "
+        "comma separated; default autonomous agent)",
     )
     what.add_argument("--agents", type=int, default=10, help="agents per method (default 10)")
+    what.add_argument(
+        "--replay-study",
+        type=int,
+        metavar="ID",
+        help="with method replayed: the study whose completed sessions are re-run under this "
+        "batch's run, each fed its recorded advice by order (the same people's advice, "
+        "another learner); replayed run i gets seed BASE+i",
+    )
+    what.add_argument(
+        "--replay-methods",
+        default="human",
+        metavar="METHODS",
+        help="with --replay-study: the methods of the sessions to replay (comma separated; "
+        "default human)",
+    )
     what.add_argument(
         "--label", default="baselines", help="the batch's name, every run's session label"
     )
@@ -214,6 +234,8 @@ def spec_from(args: argparse.Namespace) -> BatchSpec:
         label=args.label,
         per_method=per_method,
         control_of=args.control_of,
+        replay_study=getattr(args, "replay_study", None),
+        replay_methods=_methods([getattr(args, "replay_methods", "human")]),
     )
 
 
@@ -234,6 +256,9 @@ def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     parts += ["--agents", str(spec.agents), "--label", spec.label]
     if "procedure" in spec.methods:
         parts += ["--control-of", spec.control_of]
+    if spec.replay_study is not None:
+        parts += ["--replay-study", str(spec.replay_study)]
+        parts += ["--replay-methods", ",".join(spec.replay_methods)]
     template = spec.template
     base = type(template).from_json({"preset": template.preset}).values()
     for leaf in leaves(type(template)):

@@ -183,6 +183,16 @@ class StudySession(Base):
     declined_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     induction_done_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
 
+    replay_of: Mapped[int | None] = mapped_column(
+        ForeignKey("sessions.id", ondelete="CASCADE"), index=True
+    )
+    """The session whose advice this one replays (method `replayed`), when it is in this
+    database: deleting it (or its participant) deletes this replay too."""
+    replay_stream: Mapped[dict[str, Any] | None] = mapped_column()
+    """A replay's recorded advice stream, copied when it was made so that it resumes and
+    reads the same without its source: `source` (study, session, export file or None),
+    `actions` and `observation_hashes` (of the images the advisor saw), in advice order."""
+
     study: Mapped[Study] = relationship(back_populates="sessions")
     participant: Mapped[Participant | None] = relationship()
     texts_version: Mapped[StudyTexts | None] = relationship()
@@ -237,6 +247,8 @@ class Step(Base):
     whose episodes were not replayed yet (`server.services.outcomes`)."""
     epsilon: Mapped[float] = mapped_column(Float)
     loss: Mapped[float | None] = mapped_column(Float)
+    observation_hash: Mapped[str | None] = mapped_column(String(16))
+    """NULL in rows stored before 0012."""
     wall_time: Mapped[float] = mapped_column(Float)
 
 
@@ -282,13 +294,19 @@ class Advice(Base):
     advice_index: Mapped[int] = mapped_column(Integer)
     global_step: Mapped[int] = mapped_column(Integer)
     advisor: Mapped[str] = mapped_column(String(20))
-    action: Mapped[int] = mapped_column(Integer)
+    action: Mapped[int | None] = mapped_column(Integer)
+    """The advised action; NULL only for a replay's request beyond its recorded stream (it
+    was asked for, counted against the budget, and none was given)."""
     greedy_action: Mapped[int | None] = mapped_column(Integer)
     observation_png: Mapped[bytes] = mapped_column(LargeBinary)
     response_time_s: Mapped[float] = mapped_column(Float)
     decision_time_s: Mapped[float | None] = mapped_column(Float)
     requested_at: Mapped[datetime] = mapped_column(UTCDateTime())
     answered_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    same_observation: Mapped[bool | None] = mapped_column()
+    """Replayed advice: whether the replay showed the advice the image its advisor saw
+    (equal observation hashes); NULL for advice given live, and for requests beyond the
+    stream."""
 
 
 class FittedAdvisorModel(Base):

@@ -200,9 +200,17 @@ class AdvicePublic(BaseModel):
     advice_index: int
     global_step: int
     advisor: str
-    action: int
+    action: int | None = Field(
+        description="The advised action; null only for a replay's request beyond its recorded "
+        "stream (asked, counted against the budget, none given)."
+    )
     greedy_action: int | None
     response_time_s: float
     decision_time_s: float | None = None
     requested_at: datetime
     answered_at: datetime
+    same_observation: bool | None = Field(
+        default=None,
+        description="Replayed advice: whether it met the image its advisor saw; null for "
+        "advice given live and for requests beyond the stream.",
+    )

@@ -56,6 +56,16 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
         "Where the run was computed (JSON list, one entry per start or resume: code version, "
         "commit, CPU kind, torch and Python versions, numerics, and the step it started from).",
     ),
+    "replay_of": (
+        "integer",
+        "The session whose recorded advice this one replays (method replayed), when it is in "
+        "the same database; empty otherwise. Deleting that session deletes its replays.",
+    ),
+    "replay_source": (
+        "string",
+        "Where a replay's advice stream came from (JSON: study, session, export file); empty "
+        "for sessions that are not replays.",
+    ),
     "run_spec": (
         "string",
         "The whole run as stored (learner.run.RunSpec's JSON document, with its version): "
@@ -89,8 +99,12 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session the advice belongs to."),
     "advice_index": ("integer", "Index of the advice in its session, from 0."),
     "global_step": ("integer", "Global step the advice was for (from 1, pretraining included)."),
-    "advisor": ("string", "Who advised: human, agent, oracle, random or fitted."),
-    "action": ("integer", "Advised action: 0 grab, 1 move right, 2 move left, 3 drop."),
+    "advisor": ("string", "Who advised: human, agent, oracle, random, fitted or replayed."),
+    "action": (
+        "integer",
+        "Advised action: 0 grab, 1 move right, 2 move left, 3 drop; empty for a replay's "
+        "request beyond its recorded stream (asked, counted against the budget, none given).",
+    ),
     "action_name": ("string", "The advised action's name."),
     "greedy_action": (
         "integer",
@@ -113,6 +127,11 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
     "requested_at": ("datetime", "Server side: when the page first read the request (UTC)."),
     "answered_at": ("datetime", "When the advice arrived (UTC)."),
     "observation_file": ("string", "PNG (64x64 RGB, lossless) of what the advisor saw."),
+    "same_observation": (
+        "boolean",
+        "Replayed advice: whether the replay showed it the image its advisor saw (equal "
+        "observation hashes); empty for advice given live and for requests beyond the stream.",
+    ),
 }
 RECORD_EXTRA: dict[str, tuple[str, str]] = {
     "logged_at": ("datetime", "When the session's worker logged the record (UTC)."),

@@ -90,6 +90,10 @@ def _session_rows(
             else None,
             "code_version": where(s.provenance, "code") if s.provenance else None,
             "provenance": json.dumps(s.provenance) if s.provenance else None,
+            "replay_of": s.replay_of,
+            "replay_source": json.dumps(s.replay_stream["source"], sort_keys=True)
+            if s.replay_stream
+            else None,
             "run_spec": json.dumps(s.run, sort_keys=True),
         }
 
@@ -132,13 +136,14 @@ def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterat
                 "global_step": a.global_step,
                 "advisor": a.advisor,
                 "action": a.action,
-                "action_name": ACTION_NAMES[a.action],
+                "action_name": None if a.action is None else ACTION_NAMES[a.action],
                 "greedy_action": a.greedy_action,
                 "response_time_s": a.response_time_s,
                 "decision_time_s": a.decision_time_s,
                 "requested_at": a.requested_at,
                 "answered_at": a.answered_at,
                 "observation_file": f"advice/{name}",
+                "same_observation": a.same_observation,
             }
 
 

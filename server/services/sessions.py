@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import secrets
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -74,12 +75,21 @@ def create_session(
     options: SessionOptions | None = None,
     data_dir: Path | None = None,
     threads: int | None = None,
+    replay: tuple[int | None, dict[str, Any]] | None = None,
 ) -> StudySession:
     """A new session in `created` state, its run validated and pinned on this machine and
     stored whole; a human one gets its participant and token. `data_dir`: where an advisor's
     checkpoint file must lie (see `advisor_path`; None: anywhere, for the researcher's own
-    command line); `threads`: torch threads of a run that leaves them open."""
+    command line); `threads`: torch threads of a run that leaves them open; `replay`: a
+    replayed run's source session (None: not in this database) and its recorded stream
+    (`server.services.replays`, the only maker of replays)."""
     options = options or SessionOptions()
+    if (spec.method == Method.replayed) != (replay is not None):
+        raise Invalid(
+            "run.method",
+            "method replayed is made from a recorded session by `ideeprl replay`, which gives "
+            "it the session's advice stream; choose another method",
+        )
     get_study(db, study_id)
     if spec.advisor_checkpoint and spec.method == "agent":
         spec = spec.replace(advisor_checkpoint=advisor_path(db, spec.advisor_checkpoint, data_dir))
@@ -99,6 +109,8 @@ def create_session(
         keep_replay_memory=options.keep_replay_memory,
         idle_limit_s=options.idle_limit_s,
     )
+    if replay is not None:
+        session.replay_of, session.replay_stream = replay
     if spec.method == Method.human:
         pseudonym = options.participant or f"p-{secrets.token_hex(4)}"
         participant = db.scalar(

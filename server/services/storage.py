@@ -3,11 +3,12 @@ much, and deletion that removes it all with the rows.
 
 Deleting is how a participant's data goes: their session's rows (steps, episodes, advice
 with the images they saw), its checkpoints, the study's report (built from their data),
-the advisor models fitted from their advice (`fitted_advisors`, and their files), and their
-pseudonym once no session of theirs remains. Rows go first, in one
-transaction; files after, so a failure leaves files of a deleted session (removed again
-when the id would be used, which it never is: ids are not reused), never rows without
-their files.
+the advisor models fitted from their advice (`fitted_advisors`, and their files), the
+replays made from their advice (`sessions.replay_of`, in any study, with their files and
+their studies' reports), and their pseudonym once no session of theirs remains. Rows go
+first, in one transaction; files after, so a failure leaves files of a deleted session
+(removed again when the id would be used, which it never is: ids are not reused), never
+rows without their files.
 """
 
 from __future__ import annotations
@@ -17,11 +18,19 @@ import shutil
 from pathlib import Path
 
 from pydantic import BaseModel, Field
-from sqlalchemy import func, select
+from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
-from server.db.models import LIVE_STATUSES, FittedAdvisorModel, Participant, Status, StudySession
+from server.db.models import (
+    LIVE_STATUSES,
+    FittedAdvisorModel,
+    Participant,
+    Status,
+    Study,
+    StudySession,
+)
 from server.services.errors import Conflict, NotFound
+from server.services.replays import replays_of
 from server.services.studies import get_study
 
 log = logging.getLogger(__name__)
@@ -119,13 +128,17 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
     if session is None:
         raise NotFound(f"no session with id {session_id}")
     _refuse_live(session, live_here)
-    advised = _advised_by(db, [session])
+    replays = replays_of(db, [session_id])
+    for replay in replays:
+        _refuse_live(replay, False)
+    advised = _advised_by(db, [session, *replays])
     if advised:
         raise Conflict(
             f"session {session_id}'s checkpoint advises unfinished session(s) "
             f"{', '.join(map(str, advised))}; delete or finish them first"
         )
     study_id, checkpoint, participant_id = session.study_id, session.checkpoint_path, None
+    derived = [(r.id, r.checkpoint_path, r.study_id) for r in replays]
     if session.participant_id is not None:
         others = db.scalar(
             select(func.count()).where(
@@ -134,8 +147,8 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
             )
         )
         participant_id = None if others else session.participant_id
-    fitted = _fitted_from(db, {session_id})
-    db.delete(session)
+    fitted = _fitted_from(db, {session_id, *(r.id for r in replays)})
+    db.delete(session)  # the database deletes its replays (replay_of cascades)
     if participant_id is not None:
         participant = db.get(Participant, participant_id)
         if participant is not None:
@@ -144,6 +157,9 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
     remove_session_files(data_dir, session_id, checkpoint)
     remove_fitted_files(data_dir, fitted)
     remove_study_files(data_dir, study_id)  # its report was built from this session's data
+    for replay_id, replay_checkpoint, replay_study in derived:
+        remove_session_files(data_dir, replay_id, replay_checkpoint)
+        remove_study_files(data_dir, replay_study)
 
 
 def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> None:
@@ -156,14 +172,21 @@ def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> 
             f"study {study_id} has {len(running)} running session(s) "
             f"({', '.join(map(str, running))}); stop them first"
         )
-    advised = _advised_by(db, sessions)
+    replays = [r for r in replays_of(db, [s.id for s in sessions]) if r.study_id != study_id]
+    running += [r.id for r in replays if r.status in LIVE or r.id in live]
+    if running:
+        raise Conflict(
+            f"study {study_id}'s sessions have running replay(s) in other studies "
+            f"({', '.join(map(str, running))}); stop them first"
+        )
+    advised = _advised_by(db, [*sessions, *replays])
     if advised:
         raise Conflict(
             f"study {study_id}'s sessions advise unfinished session(s) "
             f"{', '.join(map(str, advised))} of other studies; delete or finish them first"
         )
-    files = [(s.id, s.checkpoint_path) for s in sessions]
-    fitted = _fitted_from(db, {s.id for s in sessions})
+    files = [(s.id, s.checkpoint_path) for s in [*sessions, *replays]]
+    fitted = _fitted_from(db, {s.id for s in [*sessions, *replays]})
     fitted += [
         (r.study_id, r.id)
         for r in db.scalars(
@@ -171,12 +194,15 @@ def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> 
         )
         if (r.study_id, r.id) not in fitted
     ]
-    db.delete(study)
+    # The database deletes its sessions, and their replays anywhere (foreign keys cascade):
+    # the ORM would delete a replay of this study twice.
+    db.execute(delete(Study).where(Study.id == study_id))
     db.commit()
     remove_fitted_files(data_dir, fitted)
     for session_id, checkpoint in files:
         remove_session_files(data_dir, session_id, checkpoint)
-    remove_study_files(data_dir, study_id)
+    for other in {study_id, *(r.study_id for r in replays)}:
+        remove_study_files(data_dir, other)
 
 
 class SessionDisk(BaseModel):

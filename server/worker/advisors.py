@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from learner.advisors import Advisor
+from learner.advisors import NO_ADVICE, Advisor, NoAdvice
 from server.worker.link import WorkerLink
 from server.worker.messages import AdviceRequest, AdviceResult
 
@@ -102,10 +102,12 @@ class HumanAdvisor:
 
 
 class RecordingAdvisor:
-    """Wraps a machine advisor (agent, oracle, random, fitted): same advice, logged with the
-    observation and the time it took, as the study's exports treat every advisor alike. A
-    simulated decision time (an advisor's `last_decision_time_s`: fitted, or an oracle with
-    times) is logged as `decision_time_s`, where a person's page puts theirs."""
+    """Wraps a machine advisor (agent, oracle, random, fitted) or a replayed stream: same
+    advice, logged with the observation and the time it took, as the study's exports treat
+    every advisor alike. A simulated decision time (an advisor's `last_decision_time_s`:
+    fitted, or an oracle with times) is logged as `decision_time_s`, where a person's page
+    puts theirs. A replayed advice also logs whether it met the image its advisor saw
+    (`same_observation`); a request beyond the stream is logged without an action."""
 
     def __init__(
         self,
@@ -133,10 +135,11 @@ class RecordingAdvisor:
         if state["inner"] is not None:
             self._inner.load_state_dict(state["inner"])
 
-    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int | NoAdvice:
         started = time.perf_counter()
         requested_at = datetime.now(UTC)
-        action = int(self._inner.advise(obs, info))
+        answer = self._inner.advise(obs, info)
+        action = None if answer is NO_ADVICE else int(answer)
         elapsed = time.perf_counter() - started
         self._record(
             {
@@ -150,7 +153,8 @@ class RecordingAdvisor:
                 "decision_time_s": getattr(self._inner, "last_decision_time_s", None),
                 "requested_at": requested_at,
                 "answered_at": requested_at + timedelta(seconds=elapsed),
+                "same_observation": getattr(self._inner, "same_observation", None),
             }
         )
         self.count += 1
-        return action
+        return NO_ADVICE if action is None else action

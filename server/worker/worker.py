@@ -22,6 +22,7 @@ from typing import Any
 from sqlalchemy import select, update
 
 from learner import provenance
+from learner.advisors import RecordedAdvisor
 from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
 from server.db.models import Advice, Method, Status, StudySession, utcnow
@@ -194,6 +195,20 @@ class _Run:
                 self._until_participant_ready,
             )
             self.env.after_step.append(self.advisor.after_step)
+        elif s.method == Method.replayed:
+            stream = s.replay_stream
+            if not stream:
+                raise Conflict(
+                    f"session {s.id} is a replay without its recorded stream: make replays "
+                    "with `ideeprl replay`"
+                )
+            self.advisor = RecordingAdvisor(
+                RecordedAdvisor(stream["actions"], stream["observation_hashes"]),
+                s.method,
+                self.start_advice,
+                self.recorder.add_advice,
+                lambda: self.recorder.steps + 1,
+            )
         elif machine is not None:
             self.advisor = RecordingAdvisor(
                 machine,

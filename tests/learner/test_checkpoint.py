@@ -82,3 +82,32 @@ def test_resume_refuses_an_environment_that_does_not_replay(make_env, tmp_path) 
     )
     with pytest.raises(RuntimeError, match="not deterministic"):
         Trainer(inverted, small_config(), seed=1).load_checkpoint(tmp_path / "run.pt")
+
+
+def test_a_replayed_stream_resumes_where_it_stopped(make_env, tmp_path) -> None:
+    """A replay stopped in the middle of its stream, and again past its end, continues with
+    the next recorded advice (and the requests it counted) as if never stopped."""
+    from learner.advisors import RecordedAdvisor
+
+    def replay(recorder: Recorder) -> Trainer:
+        stream = RecordedAdvisor([0, 1, 2, 3] * 3, ["none"] * 12)  # 12 advice, budget 16
+        strategy = make_strategy("alternating", 16, interval=2)
+        return Trainer(make_env(), small_config(), stream, strategy, seed=4, callbacks=[recorder])
+
+    whole = Recorder()
+    replay(whole).run()
+    advised = [r.advised_action for r in whole.steps if r.advised_action is not None]
+    assert advised == [0, 1, 2, 3] * 3
+    assert whole.steps[60 + 31 - 1].advice_remaining == 0  # four requests beyond the stream
+    for stop_at in (60 + 11, 60 + 27):  # six advice in; then past the stream's end
+        before, after = Recorder(), Recorder()
+        first = replay(before)
+        for _ in range(stop_at):
+            first.step()
+        first.save_checkpoint(tmp_path / "replay.pt")
+        second = replay(after)
+        second.load_checkpoint(tmp_path / "replay.pt")
+        second.run()
+        assert [r.to_dict() for r in before.steps + after.steps] == [
+            r.to_dict() for r in whole.steps
+        ]

@@ -110,3 +110,22 @@ def test_bad_strategy_arguments_say_what_is_wrong(call, words: list[str]) -> Non
         call()
     for word in words:
         assert word in str(error.value)
+
+
+def test_a_recorded_stream_is_fed_by_order_and_past_its_end_the_requests_count_unanswered():
+    from learner.advisors import RecordedAdvisor
+    from learner.records import observation_hash
+
+    other = np.full((64, 64, 3), 7, dtype=np.uint8)
+    seen = observation_hash(IMAGE)
+    stream = RecordedAdvisor([3, 1, 2], [seen, seen, "not this image"])
+    strategy = make_strategy("alternating", budget=5, interval=1)
+    answers, same = [], []
+    for step, image in enumerate([IMAGE, other, IMAGE, IMAGE, IMAGE, IMAGE], start=11):
+        moment = AdviceMoment(image, {}, "train", step, 10, 0, 0)
+        answers.append(strategy.advise(moment, stream))
+        same.append(stream.same_observation)
+    assert answers == [3, 1, 2, None, None, None]  # by order, whatever the state
+    assert same == [True, False, False, None, None, None]
+    assert stream.count == 5  # asked five times: three answered, two beyond the stream
+    assert strategy.used == 5 and strategy.remaining == 0  # the sixth step asks no more
