@@ -204,9 +204,16 @@ def new_study(db: DbDep, body: NewStudy) -> dict[str, int]:
     "/dashboard/api/studies/{study_id}/participants", dependencies=[LoginDep], status_code=201
 )
 def new_participant(
-    db: DbDep, settings: SettingsDep, study_id: StudyId, body: NewParticipant
+    db: DbDep,
+    settings: SettingsDep,
+    manager: ManagerDep,
+    background: BackgroundTasks,
+    study_id: StudyId,
+    body: NewParticipant,
 ) -> dict[str, Any]:
-    """A human session with the paper's settings, and its link to hand out."""
+    """A human session with the paper's settings, and its link to hand out. Its random
+    pretraining starts now (after the response), so the robot is ready for the first turn
+    however fast the participant reads the induction."""
     try:
         options = SessionOptions(participant=body.participant or None)
     except FieldError as error:
@@ -215,6 +222,7 @@ def new_participant(
         db, study_id, RunSpec(method="human"), options, settings.data_dir, settings.worker_threads
     )
     public = sessions.session_public(created, settings.base_url)
+    background.add_task(manager.welcome, created.id)
     return {"id": created.id, "participant_url": public.participant_url}
 
 

@@ -194,6 +194,8 @@ class _Run:
                 self._until_participant_ready,
             )
             self.env.after_step.append(self.advisor.after_step)
+            advisor = self.advisor
+            self.env.advised = lambda: advisor.carrying_out
         elif machine is not None:
             self.advisor = RecordingAdvisor(
                 machine,

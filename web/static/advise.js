@@ -145,8 +145,8 @@
     setButtons(false);
     setStatus("That was your last choice. Thank you!", "turn");
     showArm({}, false);
-    // Show the last advised move, but no more: the view goes on to replay the robot's own
-    // training moves, which never end while it learns.
+    // Show the last advised move (the view shows the robot's own moves without motion,
+    // but never wait on it for long).
     await Promise.race([waitForPlayback(gen), sleep(LAST_MOVE_MS)]);
     await sleep(800);
     window.location.assign(`/p/${config.token}/thanks`);
