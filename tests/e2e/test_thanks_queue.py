@@ -60,7 +60,8 @@ def test_queued_sessions_show_their_place_and_it_falls(one_slot: LiveServer, bro
             pages.append(page)
         for place, page in enumerate(pages, 1):
             expect(page.locator("#queue-place-text")).to_contain_text(f"number {place} in line")
-            expect(page.locator("#learning-status")).to_have_text(f"Waiting in line: number {place}")
+            status = page.locator("#learning-status")
+            expect(status).to_have_text(f"Waiting in line: number {place}")
             expect(page.locator("#curve")).to_be_hidden()
             expect(page.locator("#curve-waiting")).to_be_hidden()
             text = page.locator("main").inner_text().lower()
