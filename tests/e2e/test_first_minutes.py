@@ -9,10 +9,12 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 from playwright.sync_api import expect
 
-from tests.e2e.conftest import Live
+from sim.layout import Layout
+from tests.e2e.conftest import Live, save_screenshot
 from tests.e2e.scene import wait_for_scene, wait_idle
 from tests.server.scale import rest_body
 
@@ -98,3 +100,93 @@ def wait_for_progress(api: Any, session_id: int, done: Any, timeout: float = 120
             return progress
         assert time.monotonic() < deadline, f"no progress: {progress}"
         time.sleep(0.2)
+
+
+PHONE = {"width": 390, "height": 844}
+TABLET = {"width": 820, "height": 1180}
+SCENE_MIN = {390: 240, 820: 320}
+"""The scene's stated minimum height at each width (px; web/static/site.css)."""
+IN_VIEW = ["#scene", "#holding", ".counter-block", *(f"button.action >> nth={i}" for i in range(4))]
+
+
+def assert_all_in_view(page: Any) -> None:
+    """The scene at its minimum height, the sentence, the choices left and the four buttons
+    inside the viewport without scrolling, nothing wider than it, buttons big enough to tap."""
+    size = page.viewport_size
+    width, height = size["width"], size["height"]
+    assert page.evaluate("window.scrollY") == 0
+    assert page.evaluate("document.documentElement.scrollWidth") <= width, "horizontal scroll"
+    for selector in IN_VIEW:
+        box = page.locator(selector).bounding_box()
+        assert box is not None, f"{selector} is not shown"
+        assert box["x"] >= 0 and box["x"] + box["width"] <= width + 0.5, (selector, box)
+        assert box["y"] >= 0 and box["y"] + box["height"] <= height + 0.5, (selector, box)
+        if selector.startswith("button"):
+            assert box["height"] >= 44 and box["width"] >= 44, (selector, box)
+    assert page.locator("#scene").bounding_box()["height"] >= SCENE_MIN[width]
+
+
+def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
+    live: Live, browser: Any
+) -> None:
+    budget = 10
+    session = live.human_session(
+        "phone",
+        seed=5,
+        advice_budget=budget,
+        motion="fast",
+        config={"pretraining_steps": budget + 8, "batch_size": 8, "memory_size": 500},
+    )
+    context = browser.new_context(viewport=PHONE, has_touch=True, is_mobile=True)
+    page = context.new_page()
+    page.goto(session["participant_url"])
+    page.locator("#agree").tap()
+    for step in (1, 2, 3):
+        expect(page).to_have_url(re.compile(rf"/induction/{step}$"))
+        assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
+        if step == 3:
+            expect(page.locator(".prose")).to_contain_text("with the mouse or a finger")
+            save_screenshot(page, "induction-3-phone", full_page=True)
+        page.locator("#start" if step == 3 else "#next").tap()
+    expect(page).to_have_url(re.compile(r"/advise$"), timeout=30_000)
+    expect(page.locator(".scene-hint .for-touch")).to_be_visible()
+    expect(page.locator("button.action kbd").first).to_be_hidden()
+    stations = set()
+    for index in range(budget):
+        action = (0, 1, 3, 0, 2, 3)[index % 6]
+        button = page.locator(f"button.action[data-action='{action}']")
+        expect(button).to_be_enabled(timeout=120_000)
+        station = live.app.state.manager.handles[session["id"]].request.info["station"]
+        expect(page.locator("#station-map")).to_have_attribute("data-station", station)
+        assert_spot_on(live, session["id"], station)
+        stations.add(station)
+        assert_all_in_view(page)
+        if index == 0:
+            save_screenshot(page, "advice-phone")
+        if index == 4:
+            page.set_viewport_size(TABLET)
+            assert_all_in_view(page)
+            page.wait_for_timeout(1500)  # viser redraws its canvas at the new size
+            save_screenshot(page, "advice-tablet")
+            page.set_viewport_size(PHONE)
+            assert_all_in_view(page)
+        button.tap()
+        expect(page.locator("#advice-left")).to_have_text(str(budget - index - 1))
+    expect(page).to_have_url(re.compile(r"/thanks$"), timeout=30_000)
+    assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
+    context.close()
+    assert stations == {"center", "left", "right"}, "the visit reached every station"
+
+
+def assert_spot_on(live: Live, session_id: int, station: str) -> None:
+    """The 3-D view's plumb line hangs from the suction cup to a spot on the station's
+    table (within its top), however the perspective makes it look."""
+    view = wait_for_scene(live, session_id)
+    wait_idle(live, session_id)
+    cup = view.mirror.positions()["arm/suction_cup"]
+    plumb = np.asarray(view.mirror.markers["plumb"].position)
+    spot = np.asarray(view.mirror.markers["spot"].position)
+    assert np.allclose(plumb[:2], cup[:2]) and np.allclose(spot[:2], cup[:2])
+    table = getattr(Layout(), f"{station}_table")
+    inside = np.abs(spot[:2] - np.asarray(table.center)) <= np.asarray(table.half_size)
+    assert inside.all(), f"the spot {spot} is not on the {station} table"
