@@ -4,6 +4,7 @@ advised moves are shown as motion."""
 
 from __future__ import annotations
 
+import os
 import re
 import time
 from collections.abc import Iterator
@@ -106,6 +107,9 @@ PHONE = {"width": 390, "height": 844}
 TABLET = {"width": 820, "height": 1180}
 SCENE_MIN = {390: 240, 820: 320}
 """The scene's stated minimum height at each width (px; web/static/site.css)."""
+PHONE_PLAN = (0, 3, 0, 1, 3, 0, 2, 3, 0, 1)
+"""Grab, drop it back on the center table, grab, carry right, drop; grab, carry left, drop:
+every station with and without an object."""
 IN_VIEW = ["#scene", "#holding", ".counter-block", *(f"button.action >> nth={i}" for i in range(4))]
 
 
@@ -153,14 +157,17 @@ def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
     expect(page.locator("button.action kbd").first).to_be_hidden()
     stations = set()
     for index in range(budget):
-        action = (0, 1, 3, 0, 2, 3)[index % 6]
+        action = PHONE_PLAN[index]
         button = page.locator(f"button.action[data-action='{action}']")
         expect(button).to_be_enabled(timeout=120_000)
-        station = live.app.state.manager.handles[session["id"]].request.info["station"]
+        station = request_info(live, session["id"])["station"]
         expect(page.locator("#station-map")).to_have_attribute("data-station", station)
         assert_spot_on(live, session["id"], station)
         stations.add(station)
         assert_all_in_view(page)
+        held = "holding" if request_info(live, session["id"])["held"] else "empty"
+        if os.environ.get("IDEEPRL_SCREENSHOTS_TO_DOCS") == "1":  # the README's pictures
+            save_screenshot(page, f"station-{station}-{held}")
         if index == 0:
             save_screenshot(page, "advice-phone")
         if index == 4:
@@ -176,6 +183,12 @@ def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
     assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
     context.close()
     assert stations == {"center", "left", "right"}, "the visit reached every station"
+
+
+def request_info(live: Live, session_id: int) -> dict[str, Any]:
+    request = live.app.state.manager.handles[session_id].request
+    assert request is not None, "the robot waits for advice"
+    return request.info
 
 
 def assert_spot_on(live: Live, session_id: int, station: str) -> None:
