@@ -137,6 +137,10 @@ class NewStudy(BaseModel):
 class NewParticipant(BaseModel):
     participant: Text | None = Field(default=None, max_length=64)
     """Pseudonym; generated when empty."""
+    pretrain: bool = False
+    """Start the session's random pretraining now (as `?pretrain=true` of the REST API), so
+    the robot is ready when the participant's induction ends; otherwise it starts when the
+    participant opens the link."""
 
 
 @router.get("/dashboard/api/overview", dependencies=[LoginDep])
@@ -211,9 +215,8 @@ def new_participant(
     study_id: StudyId,
     body: NewParticipant,
 ) -> dict[str, Any]:
-    """A human session with the paper's settings, and its link to hand out. Its random
-    pretraining starts now (after the response), so the robot is ready for the first turn
-    however fast the participant reads the induction."""
+    """A human session with the paper's settings, and its link to hand out; with `pretrain`
+    its random pretraining starts now (after the response)."""
     try:
         options = SessionOptions(participant=body.participant or None)
     except FieldError as error:
@@ -222,7 +225,8 @@ def new_participant(
         db, study_id, RunSpec(method="human"), options, settings.data_dir, settings.worker_threads
     )
     public = sessions.session_public(created, settings.base_url)
-    background.add_task(manager.welcome, created.id)
+    if body.pretrain:
+        background.add_task(manager.welcome, created.id)
     return {"id": created.id, "participant_url": public.participant_url}
 
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import re
-import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -17,7 +16,6 @@ from playwright.sync_api import expect
 from sim.layout import Layout
 from tests.e2e.conftest import Live, save_screenshot
 from tests.e2e.scene import wait_for_scene, wait_idle
-from tests.server.scale import rest_body
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 PRACTICE = 40
@@ -70,37 +68,6 @@ def test_the_first_turn_does_not_wait_for_the_practice_to_be_replayed(
     wait_idle(live, paused["id"])
     assert view.player.steps_animated == 1, "the participant's own move was shown moving"
     context.close()
-
-
-def test_a_session_made_with_pretrain_practises_before_its_link_is_opened(live: Live) -> None:
-    with live.api() as api:
-        study = api.post("/api/studies", json={"name": "made to practise"}).json()
-        body = rest_body(
-            method="human",
-            seed=4,
-            motion="fast",
-            advice_budget=2,
-            episodes=1,
-            config={"pretraining_steps": 30, "batch_size": 8, "memory_size": 500},
-        )
-        made = api.post(f"/api/studies/{study['id']}/sessions?pretrain=true", json=body)
-        assert made.status_code == 201, made.text
-        session_id = made.json()["id"]
-        progress = wait_for_progress(api, session_id, lambda p: p["global_step"] >= 20)
-        assert progress["advice_given"] == 0 and progress["status"] == "running"
-        bad = api.post(f"/api/studies/{study['id']}/sessions?pretrain=maybe", json=body)
-        assert bad.status_code == 422
-        api.post(f"/api/sessions/{session_id}/stop")
-
-
-def wait_for_progress(api: Any, session_id: int, done: Any, timeout: float = 120) -> dict:
-    deadline = time.monotonic() + timeout
-    while True:
-        progress = api.get(f"/api/sessions/{session_id}/progress").json()
-        if done(progress):
-            return progress
-        assert time.monotonic() < deadline, f"no progress: {progress}"
-        time.sleep(0.2)
 
 
 PHONE = {"width": 390, "height": 844}

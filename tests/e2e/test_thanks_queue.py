@@ -1,6 +1,7 @@
 """The thank-you page while the robot waits for a training slot (issue 21): three queued
 sessions show places 1, 2 and 3 with a time estimate and no empty plot, and the places fall
-as a slot frees. Its own server (one trainer slot, a setting), reached by Chromium."""
+as a slot frees. Its own server (one trainer slot, a setting), reached by Chromium. The
+sessions are made with `?pretrain=true`: they practise before anyone opens their link."""
 
 from __future__ import annotations
 
@@ -38,8 +39,14 @@ def test_queued_sessions_show_their_place_and_it_falls(one_slot: LiveServer, bro
     with one_slot.client() as api:
         study = api.post("/api/studies", json={"name": "queue"}).json()
         body = session_body("human", advice_budget=1, episodes=300)
-        made = [api.post(f"/api/studies/{study['id']}/sessions", json=body).json() for _ in "abcd"]
+        sessions = f"/api/studies/{study['id']}/sessions"
+        assert api.post(f"{sessions}?pretrain=maybe", json=body).status_code == 422
+        # Made to start practising at once (?pretrain=true), before any link is opened.
+        made = [api.post(f"{sessions}?pretrain=true", json=body).json() for _ in "abcd"]
         progress = lambda s: api.get(f"/api/sessions/{s['id']}/progress").json()  # noqa: E731
+        for session in made:
+            _until(lambda s=session: progress(s)["global_step"] > 0)
+            assert progress(session)["consented"] is False
         for i, session in enumerate(made):
             participant = SimulatedParticipant(one_slot.url, session["participant_token"])
             participant.begin()
