@@ -59,8 +59,13 @@ def _session(server: LiveServer, study: int, steps: int, budget: int = 100) -> d
         return made.json()
 
 
+VIEWERS = """async (token) => (await (await fetch('/api/participant/playback',
+    {headers: {Authorization: `Bearer ${token}`}})).json()).viewers"""
+
+
 def first_turn(browser: Any, server: LiveServer, study: int, args: argparse.Namespace) -> None:
     waits: list[float] = []
+    views: list[float] = []
     for _ in range(args.runs):
         session = _session(server, study, args.pretraining_steps)
         time.sleep(args.head_start)
@@ -75,19 +80,21 @@ def first_turn(browser: Any, server: LiveServer, study: int, args: argparse.Name
         page.click("#start")
         page.wait_for_function(ENABLED, timeout=600_000, polling=50)
         waits.append(time.perf_counter() - started)
-        viewers = page.evaluate(
-            """async (token) => (await (await fetch('/api/participant/playback',
-                {headers: {Authorization: `Bearer ${token}`}})).json()).viewers""",
-            session["participant_token"],
-        )
+        while page.evaluate(VIEWERS, session["participant_token"]) < 1:
+            assert time.perf_counter() - started < 300, "the 3-D view never connected"
+            time.sleep(0.05)
+        views.append(time.perf_counter() - started)
+        assert page.evaluate(ENABLED), "the buttons stay active once the view is open"
         context.close()
         with server.client() as api:
             api.post(f"/api/sessions/{session['id']}/stop")
-        print(f"  Start -> buttons active {waits[-1]:.2f} s (3-D views open: {viewers})")
+        print(f"  Start -> buttons active {waits[-1]:.2f} s, -> 3-D view open {views[-1]:.2f} s")
     print(
         f"first turn in Chromium, {args.pretraining_steps} pretraining steps (physics motion), "
-        f"head start {args.head_start:.0f} s: median {statistics.median(waits):.2f} s "
-        f"(min {min(waits):.2f}, max {max(waits):.2f}) over {args.runs} runs; {_load()}"
+        f"head start {args.head_start:.0f} s, over {args.runs} runs: Start -> buttons active "
+        f"median {statistics.median(waits):.2f} s ({min(waits):.2f}-{max(waits):.2f}); "
+        f"-> 3-D view open {statistics.median(views):.2f} s ({min(views):.2f}-{max(views):.2f}); "
+        f"{_load()}"
     )
 
 

@@ -74,9 +74,24 @@ PHONE = {"width": 390, "height": 844}
 TABLET = {"width": 820, "height": 1180}
 SCENE_MIN = {390: 240, 820: 320}
 """The scene's stated minimum height at each width (px; web/static/site.css)."""
-PHONE_PLAN = (0, 3, 0, 1, 3, 0, 2, 3, 0, 1)
-"""Grab, drop it back on the center table, grab, carry right, drop; grab, carry left, drop:
-every station with and without an object."""
+PHONE_PLAN = ("grab", "wrong", "right", "drop", "other", "grab", "wrong", "drop", "grab", "drop")
+"""Grab, carry it to the wrong side and then the right one (by the study's colour rule),
+drop it there, go empty-handed to the other side, grab, drop one on the wrong table (the
+objects are laid out again, the arm back at the center): every station with and without
+an object."""
+MOVE = {"right": 1, "left": 2}
+
+
+def phone_action(intent: str, info: dict[str, Any]) -> int:
+    if intent in ("grab", "drop"):
+        return 0 if intent == "grab" else 3
+    side = "right" if info["held_color"] == "blue" else "left"  # the default rule, "color"
+    if intent == "wrong" or intent == "other":
+        current = side if intent == "wrong" else info["station"]
+        side = "left" if current == "right" else "right"
+    return MOVE[side]
+
+
 IN_VIEW = ["#scene", "#holding", ".counter-block", *(f"button.action >> nth={i}" for i in range(4))]
 
 
@@ -122,17 +137,19 @@ def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
     expect(page).to_have_url(re.compile(r"/advise$"), timeout=30_000)
     expect(page.locator(".scene-hint .for-touch")).to_be_visible()
     expect(page.locator("button.action kbd").first).to_be_hidden()
-    stations = set()
+    seen = set()
     for index in range(budget):
-        action = PHONE_PLAN[index]
+        expect(page.locator("button.action").first).to_be_enabled(timeout=120_000)
+        info = request_info(live, session["id"])
+        action = phone_action(PHONE_PLAN[index], info)
         button = page.locator(f"button.action[data-action='{action}']")
-        expect(button).to_be_enabled(timeout=120_000)
-        station = request_info(live, session["id"])["station"]
+        expect(button).to_be_enabled()
+        station = info["station"]
         expect(page.locator("#station-map")).to_have_attribute("data-station", station)
         assert_spot_on(live, session["id"], station)
-        stations.add(station)
         assert_all_in_view(page)
-        held = "holding" if request_info(live, session["id"])["held"] else "empty"
+        held = "holding" if info["held"] else "empty"
+        seen.add((station, held))
         if os.environ.get("IDEEPRL_SCREENSHOTS_TO_DOCS") == "1":  # the README's pictures
             save_screenshot(page, f"station-{station}-{held}")
         if index == 0:
@@ -149,7 +166,7 @@ def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
     expect(page).to_have_url(re.compile(r"/thanks$"), timeout=30_000)
     assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
     context.close()
-    assert stations == {"center", "left", "right"}, "the visit reached every station"
+    assert seen == {(s, h) for s in ("center", "left", "right") for h in ("holding", "empty")}
 
 
 def request_info(live: Live, session_id: int) -> dict[str, Any]:
