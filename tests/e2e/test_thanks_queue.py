@@ -86,6 +86,8 @@ def test_queued_sessions_show_their_place_and_it_falls(one_slot: LiveServer, bro
         expect(pages[0].locator("#learning-status")).to_contain_text("Practising: round")
         expect(pages[1].locator("#queue-place-text")).to_contain_text("number 1 in line")
         expect(pages[2].locator("#queue-place-text")).to_contain_text("number 2 in line")
+        expect(pages[0].locator("#curve circle.dot").first).to_be_visible(timeout=120_000)
+        expect(pages[0].locator("#curve-caption")).to_be_visible()
         context.close()
         for session in made:
             api.post(f"/api/sessions/{session['id']}/stop")

@@ -41,7 +41,7 @@
     $("queue").hidden = !queued;
     if (queued) showQueue(data);
     const plotted = !queued && points.length > 0;
-    $("curve").hidden = !plotted;
+    $("curve").toggleAttribute("hidden", !plotted); // an <svg> has no `hidden` property
     $("curve-caption").hidden = !plotted;
     if (plotted) {
       window.drawCurves($("curve"), [{ label: "the robot", points }], {
