@@ -135,7 +135,9 @@ def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
         assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
         if step == 3:
             expect(page.locator(".prose")).to_contain_text("with the mouse or a finger")
-            save_screenshot(page, "induction-3-phone", full_page=True)
+            expect(page.locator(".preview-buttons kbd").first).to_be_hidden()
+            # The viewport only: a full-page capture drops the touch emulation meanwhile.
+            save_screenshot(page, "induction-3-phone")
         page.locator("#start" if step == 3 else "#next").tap()
     expect(page).to_have_url(re.compile(r"/advise$"), timeout=30_000)
     expect(page.locator(".scene-hint .for-touch")).to_be_visible()
