@@ -132,7 +132,7 @@ class Wire:
         self.sizes.clear()
         self.frames.clear()
 
-    def report(self, title: str, started: float, window_s: float, socket_too: bool) -> None:
+    def report(self, title: str, started: float, window_s: float) -> None:
         early = [(t, n) for t, n in self.frames if t - started <= window_s]
         socket = sum(n for _, n in early)
         seen, scene_at = 0, float("nan")
@@ -183,7 +183,6 @@ def weight(browser: Any, server: LiveServer, study: int, args: argparse.Namespac
             f"the advice page at 390x844 over Slow 4G (1.6 Mbit/s, 150 ms), {load}:",
             started,
             window_s,
-            socket_too=load == "first load",
         )
         print(
             f"  first contentful paint {paint / 1000:.2f} s, buttons active {buttons:.2f} s "
