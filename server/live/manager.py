@@ -100,6 +100,10 @@ class WorkerHandle:
     """Waiting for a trainer slot after its advice."""
     training: bool = False
     """Holds a trainer slot."""
+    training_since: float | None = None
+    """`time.monotonic()` when it took its slot, and the episodes done then: how fast it
+    trains, for the queue's time estimate."""
+    episodes_at_slot: int = 0
     steps_before_first_turn: int = 0
     """Random pretraining steps before the first advice (what the page's progress counts)."""
     last_reward: float | None = None
@@ -285,9 +289,66 @@ class SessionManager:
                 continue
             handle.queued = False
             handle.training = True
+            handle.training_since = time.monotonic()
+            handle.episodes_at_slot = handle.progress.episode if handle.progress else 0
             busy += 1
             handle.send(Command("train"))
             self.notify(handle.session_id)
+
+    def set_trainer_slots(self, slots: int) -> None:
+        """Change how many human sessions may train at once (0: none); freed slots go to
+        the queue at once. Sessions already training keep theirs."""
+        assert slots >= 0
+        self.max_trainers = slots
+        self._grant_training()
+
+    def queue_place(self, session_id: int) -> int | None:
+        """1 for the queued session next in line for a trainer slot, 2 for the one after,
+        ...; None when the session is not queued."""
+        handle = self.handles.get(session_id)
+        if handle is None or not handle.queued:
+            return None
+        waiting = [sid for sid in dict.fromkeys(self._train_queue) if self._is_queued(sid)]
+        return waiting.index(session_id) + 1 if session_id in waiting else None
+
+    def _is_queued(self, session_id: int) -> bool:
+        handle = self.handles.get(session_id)
+        return handle is not None and handle.queued
+
+    def queue_wait_s(self, session_id: int) -> float | None:
+        """Seconds until a queued session gets a slot, estimated from how fast the sessions
+        in the slots train now: a slot frees when its session has run its remaining
+        episodes, and each session ahead in the queue then holds the earliest free slot for
+        its own episodes. None while no session in a slot has finished an episode there
+        (nothing to estimate from)."""
+        place = self.queue_place(session_id)
+        if place is None or self.max_trainers <= 0:
+            return None
+        now = time.monotonic()
+        training = [h for h in self.handles.values() if h.training and h.progress is not None]
+        rates = {
+            h.session_id: (now - h.training_since) / (h.progress.episode - h.episodes_at_slot)
+            for h in training
+            if h.training_since is not None and h.progress.episode > h.episodes_at_slot  # type: ignore[union-attr]
+        }
+        if not rates:
+            return None
+        typical = sum(rates.values()) / len(rates)
+
+        def left(handle: WorkerHandle) -> float:
+            assert handle.progress is not None
+            episodes = max(0, handle.progress.episodes - handle.progress.episode)
+            return episodes * rates.get(handle.session_id, typical)
+
+        idle = max(0, self.max_trainers - len(training))
+        frees = sorted([left(h) for h in training] + [0.0] * idle)
+        ahead = [sid for sid in dict.fromkeys(self._train_queue) if self._is_queued(sid)]
+        for sid in ahead[: place - 1]:
+            handle = self.handles[sid]
+            if handle.progress is not None:
+                frees[0] += left(handle)
+            frees.sort()
+        return frees[0]
 
     def _claim(self, session_id: int, resume: bool, override_numerics: bool = False) -> str:
         with self.factory() as db:

@@ -137,6 +137,10 @@ class NewStudy(BaseModel):
 class NewParticipant(BaseModel):
     participant: Text | None = Field(default=None, max_length=64)
     """Pseudonym; generated when empty."""
+    pretrain: bool = False
+    """Start the session's random pretraining now (as `?pretrain=true` of the REST API), so
+    the robot is ready when the participant's induction ends; otherwise it starts when the
+    participant opens the link."""
 
 
 @router.get("/dashboard/api/overview", dependencies=[LoginDep])
@@ -204,9 +208,15 @@ def new_study(db: DbDep, body: NewStudy) -> dict[str, int]:
     "/dashboard/api/studies/{study_id}/participants", dependencies=[LoginDep], status_code=201
 )
 def new_participant(
-    db: DbDep, settings: SettingsDep, study_id: StudyId, body: NewParticipant
+    db: DbDep,
+    settings: SettingsDep,
+    manager: ManagerDep,
+    background: BackgroundTasks,
+    study_id: StudyId,
+    body: NewParticipant,
 ) -> dict[str, Any]:
-    """A human session with the paper's settings, and its link to hand out."""
+    """A human session with the paper's settings, and its link to hand out; with `pretrain`
+    its random pretraining starts now (after the response)."""
     try:
         options = SessionOptions(participant=body.participant or None)
     except FieldError as error:
@@ -215,6 +225,8 @@ def new_participant(
         db, study_id, RunSpec(method="human"), options, settings.data_dir, settings.worker_threads
     )
     public = sessions.session_public(created, settings.base_url)
+    if body.pretrain:
+        background.add_task(manager.welcome, created.id)
     return {"id": created.id, "participant_url": public.participant_url}
 
 

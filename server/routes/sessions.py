@@ -2,7 +2,7 @@
 
 from typing import Literal
 
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, BackgroundTasks, Query, Request
 from fastapi.responses import Response
 from sqlalchemy import select
 
@@ -39,8 +39,17 @@ def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
     def create_session(
         db: DbDep,
         settings: SettingsDep,
+        manager: ManagerDep,
+        background: BackgroundTasks,
         study_id: StudyId,
         body: body_model,  # type: ignore[valid-type]
+        pretrain: bool = Query(
+            default=False,
+            description="A human session: start its random pretraining now, so the robot "
+            "is ready for the first turn when the participant's induction ends (otherwise it "
+            "starts when the participant opens the link). Off by default because every "
+            "started session holds a worker process.",
+        ),
     ) -> SessionCreated:
         """A session: `run` (the run, learner.run.RunSpec, every field optional: unset ones
         take their defaults, the config's its preset's) and the session's own options.
@@ -55,6 +64,8 @@ def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
         )
         storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
         public = sessions.session_public(session, settings.base_url)
+        if pretrain and session.participant_token:
+            background.add_task(manager.welcome, session.id)
         return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
 
     return creating

@@ -26,6 +26,16 @@ class LearningCurve(BaseModel):
     queued: bool = Field(
         default=False, description="Waiting in the server's queue for a free trainer slot."
     )
+    queue_place: int | None = Field(
+        default=None,
+        description="While queued: 1 for the session next in line for a trainer slot, 2 for "
+        "the one after, ...",
+    )
+    wait_s: float | None = Field(
+        default=None,
+        description="While queued: the estimated seconds until it starts training, from how "
+        "fast the sessions in the slots train now (null until one has finished an episode).",
+    )
     episodes: int = Field(description="Training episodes the session will run.")
     curve: list[CurvePoint] = Field(description="Collected reward per finished episode.")
 
@@ -52,9 +62,12 @@ def learning_curve(session: ParticipantDep, db: DbDep, manager: ManagerDep) -> L
         .order_by(Episode.episode)
     ).all()
     handle = manager.handles.get(session.id)
+    wait = manager.queue_wait_s(session.id)
     return LearningCurve(
         status=manager.status(session.id),
         queued=handle is not None and handle.queued,
+        queue_place=manager.queue_place(session.id),
+        wait_s=round(wait, 1) if wait is not None else None,
         episodes=row.spec.config.episodes,
         curve=[CurvePoint(episode=e, collected_reward=r) for e, r in episodes],
     )

@@ -4,6 +4,11 @@ Bodies are built once per scene (`sim.BodySpec`: boxes, cylinders, meshes in the
 colours) under their stable names as scene paths (`/tables/left`, `/arm/link_3`), and
 then only moved. Nothing goes into viser's shared scene, so a client without a session
 sees nothing.
+
+Seen at an angle, an arm over a side table can look as if it were over the center table.
+Two markers that are not part of the simulation settle it: a plumb line straight down from
+the suction cup, and a spot where that line meets the tables' height (where a drop would
+land); each table carries its name in large letters.
 """
 
 from __future__ import annotations
@@ -15,13 +20,26 @@ import numpy as np
 import viser
 
 import sim
+from sim.layout import Layout
 
 POSITION_EPS = 1e-5
 """Metres: a body that moved less than this is not sent again."""
 SHADOWS = False
 """Shadows cost a second render pass; browsers without a GPU (software WebGL) then lag."""
-LABELS = {"tables/left": "left table", "tables/right": "right table"}
-"""Names shown above bodies, so a participant knows which side is which from any angle."""
+LABELS = {
+    "tables/left": ("LEFT table", (0.0, 1.0)),
+    "tables/right": ("RIGHT table", (0.0, -1.0)),
+    "tables/center": ("CENTER table", (1.0, 0.0)),
+}
+"""Names shown above the tables, so a participant knows which is which from any angle; each
+at the table's edge away from the arm (x, y in half extents), clear of the objects."""
+LABEL_SCALE = 1.5
+"""Label text at 1.5 times viser's default size: readable at a glance on a phone."""
+MARKER_RGB = (255, 140, 0)
+CUP = "arm/suction_cup"
+PLUMB_LENGTH = 0.32
+"""Metres: from the cup at its hover height down to the tables' tops (sim.layout)."""
+TABLE_TOP = Layout().table_height
 
 
 def _rgb(rgba: tuple[float, float, float, float]) -> tuple[int, int, int]:
@@ -76,25 +94,60 @@ class SceneMirror:
         self.handles: dict[str, Any] = {}
         self._sent: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
         self._names: tuple[str, ...] = ()
+        self.markers: dict[str, Any] = {}
+        """The plumb line and the spot under the cup (not simulated bodies)."""
 
     def build(self, bodies: list[sim.BodySpec]) -> None:
         """Create the bodies; a scene with the same bodies is kept as it is."""
         names = tuple(body.name for body in bodies)
         if names == self._names:
             return
-        for handle in self.handles.values():
+        for handle in [*self.handles.values(), *self.markers.values()]:
             handle.remove()
         self.handles.clear()
+        self.markers.clear()
         self._sent.clear()
         with self.client.atomic():
             for body in bodies:
                 self.handles[body.name] = add_body(self.client.scene, body)
                 if body.name in LABELS and isinstance(body.geometry, sim.Box):
-                    top = float(body.geometry.half_extents[2]) + 0.03
+                    text, (fx, fy) = LABELS[body.name]
+                    hx, hy, hz = (float(h) for h in body.geometry.half_extents)
                     self.client.scene.add_label(
-                        f"/{body.name}/label", LABELS[body.name], position=(0.0, 0.0, top)
+                        f"/{body.name}/label",
+                        text,
+                        position=(fx * hx, fy * hy, hz + 0.03),
+                        font_screen_scale=LABEL_SCALE,
+                        anchor="bottom-center",
                     )
+            if CUP in names:
+                self._add_markers()
         self._names = names
+
+    def _add_markers(self) -> None:
+        scene = self.client.scene
+        self.markers["plumb"] = scene.add_cylinder(
+            "/markers/plumb",
+            radius=0.004,
+            height=PLUMB_LENGTH,
+            color=MARKER_RGB,
+            cast_shadow=False,
+            receive_shadow=False,
+        )
+        self.markers["spot"] = scene.add_cylinder(
+            "/markers/spot",
+            radius=0.055,
+            height=0.004,
+            color=MARKER_RGB,
+            opacity=0.85,
+            cast_shadow=False,
+            receive_shadow=False,
+        )
+
+    def _move_markers(self, cup: tuple[float, ...]) -> None:
+        x, y, z = cup
+        self.markers["plumb"].position = (x, y, z - PLUMB_LENGTH / 2)
+        self.markers["spot"].position = (x, y, TABLE_TOP + 0.003)
 
     def apply(self, poses: Mapping[str, sim.Pose]) -> int:
         """Move the bodies to `poses` in one atomic update; returns how many moved."""
@@ -113,6 +166,8 @@ class SceneMirror:
                 handle.wxyz = wxyz
                 self._sent[name] = (position, wxyz)
                 moved += 1
+                if name == CUP and self.markers:
+                    self._move_markers(position)
         return moved
 
     def positions(self) -> dict[str, np.ndarray]:

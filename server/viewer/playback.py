@@ -2,11 +2,16 @@
 
 A worker's `SceneStep` carries the step's motion as frames stamped with simulated time
 (30 a second in the physics mode; before and after in the fast mode). A `Player` thread
-per client replays them at their timestamps (times `speed`), interpolating at `tick_hz`
-so the arm moves smoothly however sparse the frames, and ends at the step's final poses.
-When steps arrive faster than they can be shown (the learner exploring on its own), it
-fast-forwards: with a few waiting it plays faster, with more it jumps to the latest.
-Hub callbacks only `push`; all viser calls happen on the player's thread.
+per client shows them. Only a step that carried out the participant's own advice
+(`SceneStep.advised`) is replayed as motion: at its timestamps (times `speed`),
+interpolated at `tick_hz` so the arm moves smoothly however sparse the frames, ending at
+the step's final poses. Every other step (the robot's random practice before the first
+turn, its own moves between advice) is shown at once at its final poses, and a run of
+them collapses into the latest, so the view is never behind and never holds back the
+participant's turn (the page keeps its buttons off while `remaining_s` > 0). Advised steps
+that arrive faster than they can be shown play faster, and with more waiting the view
+jumps to the latest. Hub callbacks only `push`; all viser calls happen on the player's
+thread.
 """
 
 from __future__ import annotations
@@ -70,6 +75,22 @@ class Item:
     message: SceneReset | SceneStep
     instant: bool = False
 
+    @property
+    def moves(self) -> bool:
+        """Shown as motion: the participant's own advised step, with motion to show."""
+        message = self.message
+        return (
+            isinstance(message, SceneStep)
+            and message.advised
+            and not self.instant
+            and motion_duration(message) > 0.0
+        )
+
+    @property
+    def jumps(self) -> bool:
+        """A step shown at its final poses only."""
+        return isinstance(self.message, SceneStep) and not self.moves
+
 
 class Player:
     """One client's playback thread."""
@@ -81,6 +102,10 @@ class Player:
         self.tick_s = 1.0 / tick_hz
         self.updates = 0
         """Pose updates sent so far (frames of motion and final poses)."""
+        self.steps_received = 0
+        """Scene steps pushed to this view so far."""
+        self.steps_animated = 0
+        """Steps shown as motion (the participant's advised ones) so far."""
         self._queue: deque[Item] = deque()
         self._cond = threading.Condition()
         self._playing_until = 0.0
@@ -103,6 +128,8 @@ class Player:
         """Queue a scene event (from any thread; returns at once)."""
         with self._cond:
             self._queue.append(Item(message, instant))
+            if isinstance(message, SceneStep):
+                self.steps_received += 1
             self._cond.notify_all()
 
     def remaining_s(self) -> float:
@@ -111,7 +138,7 @@ class Player:
         with self._cond:
             now = time.monotonic()
             left = max(0.0, self._playing_until - now)
-            steps = [i for i in self._queue if isinstance(i.message, SceneStep) and not i.instant]
+            steps = [i for i in self._queue if i.moves]
             if len(steps) < JUMP_BACKLOG:
                 left += sum(motion_duration(i.message) for i in steps) / self.speed  # type: ignore[arg-type]
             return left + (self.tick_s if self._queue else 0.0)
@@ -127,7 +154,9 @@ class Player:
             if self._closed:
                 return None
             item = self._queue.popleft()
-            backlog = len(self._queue)
+            while item.jumps and self._queue and self._queue[0].jumps:
+                item = self._queue.popleft()  # each step carries every pose: the latest will do
+            backlog = sum(1 for i in self._queue if i.moves)
             # Busy from the moment it is taken, so `remaining_s` never reads 0 in between.
             self._playing_until = time.monotonic() + self.tick_s
             if self._animated(item, backlog):
@@ -137,13 +166,7 @@ class Player:
 
     @staticmethod
     def _animated(item: Item, backlog: int) -> bool:
-        message = item.message
-        return (
-            isinstance(message, SceneStep)
-            and not item.instant
-            and backlog < JUMP_BACKLOG
-            and motion_duration(message) > 0.0
-        )
+        return item.moves and backlog < JUMP_BACKLOG
 
     def _run(self) -> None:
         while True:
@@ -167,9 +190,9 @@ class Player:
             return
         if not self._animated(item, backlog):
             self._apply(message.poses)
-            if backlog:
-                time.sleep(self.tick_s)  # at most one update a tick while catching up
+            time.sleep(self.tick_s)  # at most one update a tick, however fast steps come
             return
+        self.steps_animated += 1
         duration = motion_duration(message)
         speed = self.speed * (1 + backlog)
         start = time.monotonic()

@@ -69,6 +69,11 @@ class HumanAdvisor:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.count = int(state["count"])
 
+    @property
+    def carrying_out(self) -> bool:
+        """The step being taken is the one the participant just advised."""
+        return self._answered is not None
+
     def after_step(self, action: int, reward: float, episode_over: bool) -> None:
         """Tell the participant what their last advice earned."""
         if self._answered is not None:

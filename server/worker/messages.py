@@ -93,6 +93,9 @@ class SceneStep:
     """`sim.Pose` of every body after the step."""
     global_step: int
     """The step's global step (from 1, as the learner's StepRecord)."""
+    advised: bool = False
+    """The step carried out the participant's advice: the only steps the 3-D view replays
+    as motion (the others it shows at their end, so it never makes a person wait)."""
 
 
 @dataclass(frozen=True)

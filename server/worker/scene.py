@@ -21,6 +21,9 @@ class SceneBroadcast(gym.Wrapper):
         self.episode = -1
         self.after_step: list[Callable[[int, float, bool], None]] = []
         """Called with (action, reward, episode_over) after every step."""
+        self.advised: Callable[[], bool] = lambda: False
+        """Whether the step being taken carries out a participant's advice (asked before
+        `after_step` runs): the view animates only those."""
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
@@ -31,6 +34,7 @@ class SceneBroadcast(gym.Wrapper):
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
+        advised = self.advised()
         self.collected_reward += float(reward)
         self.steps += 1
         for hook in self.after_step:
@@ -44,6 +48,7 @@ class SceneBroadcast(gym.Wrapper):
                     frames=list(getattr(scene, "last_motion", None) or []),
                     poses=dict(scene.body_poses()),
                     global_step=self.steps,
+                    advised=advised,
                 )
             )
         return obs, reward, terminated, truncated, info

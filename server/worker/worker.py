@@ -195,6 +195,8 @@ class _Run:
                 self._until_participant_ready,
             )
             self.env.after_step.append(self.advisor.after_step)
+            advisor = self.advisor
+            self.env.advised = lambda: advisor.carrying_out
         elif s.method == Method.replayed:
             stream = s.replay_stream
             if not stream:

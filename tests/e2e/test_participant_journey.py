@@ -161,8 +161,8 @@ def test_a_participant_gives_all_advice_and_is_thanked(live: Live, browser) -> N
     navigation = page.evaluate("performance.getEntriesByType('navigation')[0].type")
     assert navigation == "navigate" and page.evaluate("document.referrer").endswith("/advise")
     expect(page.locator("h1")).to_have_text("Thank you for your help")
-    expect(page.locator("#curve-caption")).to_contain_text("Each dot is one training episode")
-    expect(page.locator("#curve circle.dot").nth(2)).to_be_attached(timeout=180_000)
+    expect(page.locator("#curve-caption")).to_contain_text("Each dot is one round")
+    expect(page.locator("#curve circle.dot").nth(2)).to_be_visible(timeout=180_000)
     save_screenshot(page, "thank-you", full_page=True)
     context.close()
 

@@ -29,3 +29,15 @@ def test_the_relay_reaches_viser_with_or_without_a_trailing_slash(
     except InvalidStatus as refused:  # the relay itself refused the upgrade
         pytest.fail(f"{url}: HTTP {refused.response.status_code} instead of a relayed socket")
     assert closed.value.rcvd is not None and closed.value.rcvd.code == 4003  # viser's "forbidden"
+
+
+def test_the_viewer_client_is_sent_once_then_revalidated(server: LiveServer) -> None:
+    """viser's client is the page's largest part: a reload gets a 304, not 650 KB again."""
+    with server.client(key=None) as client:
+        first = client.get("/viewer/")
+        assert first.status_code == 200 and len(first.content) > 100_000
+        etag = first.headers["etag"]
+        again = client.get("/viewer/", headers={"If-None-Match": etag})
+        assert again.status_code == 304 and again.content == b""
+        stale = client.get("/viewer/", headers={"If-None-Match": '"another"'})
+        assert stale.status_code == 200 and stale.headers["etag"] == etag

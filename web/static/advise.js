@@ -88,10 +88,16 @@
     $("observation-empty").hidden = true;
   }
 
+  // The sentence, and beside the camera image a small map of the three tables with the
+  // arm's one lit: the image alone can make a side table look like the center one.
   function showArm(s, on) {
     $("holding").hidden = !on;
     $("holding").textContent = on ? window.describeArm(s) : "";
     $("holding").dataset.held = on && s.held ? "yes" : "no";
+    const map = $("station-map");
+    map.hidden = !on || !s.station;
+    map.dataset.station = on && s.station ? s.station : "";
+    map.setAttribute("aria-label", on && s.station ? `The arm is ${window.describeStation(s.station)}` : "");
   }
 
   async function waitForPlayback(gen) {
@@ -145,8 +151,8 @@
     setButtons(false);
     setStatus("That was your last choice. Thank you!", "turn");
     showArm({}, false);
-    // Show the last advised move, but no more: the view goes on to replay the robot's own
-    // training moves, which never end while it learns.
+    // Show the last advised move (the view shows the robot's own moves without motion,
+    // but never wait on it for long).
     await Promise.race([waitForPlayback(gen), sleep(LAST_MOVE_MS)]);
     await sleep(800);
     window.location.assign(`/p/${config.token}/thanks`);

@@ -32,6 +32,8 @@
 
   const STATIONS = { center: "above the center table", left: "at the left table", right: "at the right table" };
 
+  window.describeStation = (station) => STATIONS[station] || "";
+
   // "The robot is holding the red cube, above the center table." (or holds nothing)
   window.describeArm = (state) => {
     const where = STATIONS[state.station] || "";

@@ -1,0 +1,50 @@
+"""The place in line and the time estimate a queued session's thank-you page shows, from
+the manager's own bookkeeping (no worker processes: the handles are made by hand)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from server.live.hub import Hub
+from server.live.manager import SessionManager, WorkerHandle
+from server.worker.messages import Progress
+from server.worker.worker import WorkerOptions
+
+
+def _handle(session_id: int, episode: int, episodes: int = 20) -> WorkerHandle:
+    handle = WorkerHandle(session_id, f"token-{session_id}", None, None, 1, {})  # type: ignore[arg-type]
+    handle.progress = Progress("train", 0, episode, episodes, 0.1, 0.0, None, 1, 1)
+    return handle
+
+
+@pytest.fixture
+def manager() -> SessionManager:
+    return SessionManager(None, "", Hub(), WorkerOptions(), 60.0, max_trainers=1)  # type: ignore[arg-type]
+
+
+def test_places_count_the_queued_sessions_in_order(manager: SessionManager) -> None:
+    training, first, second = _handle(1, 0), _handle(2, 0), _handle(3, 0)
+    training.training, training.training_since = True, time.monotonic()
+    first.queued = second.queued = True
+    manager.handles = {h.session_id: h for h in (training, first, second)}
+    manager._train_queue.extend([2, 3])
+    assert [manager.queue_place(i) for i in (1, 2, 3)] == [None, 1, 2]
+    assert manager.queue_wait_s(2) is None, "nothing to estimate from before an episode ends"
+
+
+def test_the_estimate_runs_the_sessions_ahead_through_the_free_slot(
+    manager: SessionManager,
+) -> None:
+    training, first, second = _handle(1, 5), _handle(2, 0), _handle(3, 0)
+    training.training = True
+    training.training_since = time.monotonic() - 10.0  # 5 episodes in 10 s: 2 s each
+    first.queued = second.queued = True
+    manager.handles = {h.session_id: h for h in (training, first, second)}
+    manager._train_queue.extend([2, 3])
+    assert manager.queue_wait_s(2) == pytest.approx(15 * 2.0, abs=0.5)  # 15 episodes left
+    assert manager.queue_wait_s(3) == pytest.approx(15 * 2.0 + 20 * 2.0, abs=0.5)
+    manager.max_trainers = 2  # a second slot, free now: the next in line starts at once
+    assert manager.queue_wait_s(2) == pytest.approx(0.0)
+    assert manager.queue_wait_s(3) == pytest.approx(15 * 2.0, abs=0.5)
