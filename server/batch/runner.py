@@ -504,7 +504,10 @@ class BatchRunner:
                 else "to start"
             )
             counts[key] = counts.get(key, 0) + 1
-        methods = ", ".join(f"{self.spec.agents} {m}" for m in self.spec.methods)
+        methods = ", ".join(
+            f"{sum(s.run.method == m and not s.run.is_advisor for s in self.states)} {m}"
+            for m in self.spec.methods
+        )
         advisor = " and the advisor" if self.spec.trains_advisor else ""
         parts = ", ".join(f"{n} {k}" for k, n in counts.items())
         self.log(

@@ -28,13 +28,25 @@ fitted() {  # 3. sessions advised by the fitted model
 }
 replayed() {  # 4. the people's advice, by order, into the authors' learner
   ideeprl batch --study pilot --label replayed-authors --methods replayed \
-    --replay-study pilot --replay-methods oracle --preset authors "${SCALE[@]}"
+    --replay-study 1 --replay-methods oracle --preset authors "${SCALE[@]}"
 }
 report() {
-  ideeprl report --study pilot --label people --out "$OUT/report-people" --baseline none
-  ideeprl export --study pilot --out "$OUT/pilot-export.zip"
+  ideeprl report --study pilot --out "$OUT/report" --baseline oracle
+  gzip -c "$DATA/ideeprl.sqlite3" > "$OUT/ideeprl.sqlite3.gz"  # the pilot database (export it with ideeprl export)
+}
+power() {  # the paper's comparison planned with the effect sizes the replication measured
+  local REPL=${REPL:-/work/replication-copy}
+  mkdir -p "$REPL"
+  gunzip -c docs/results/replication/state/ideeprl.sqlite3.gz > "$REPL/ideeprl.sqlite3"
+  local db=(--data-dir "$REPL" --database-url "sqlite:///$REPL/ideeprl.sqlite3")
+  # (b) the paper's learner under one rule, 10 + 10
+  nice "$PY" -m server.cli power --study replication-paper "${db[@]}" --out "$OUT/power-b" \
+    > "$OUT/power-b.txt"
+  # (a') the authors' learner under one rule: (a)'s advised runs against the one-rule ones
+  nice "$PY" -m server.cli power --study replication-authors --sessions 22 24 26 47 53 48 49 \
+    50 51 54 "${db[@]}" --out "$OUT/power-a-prime" > "$OUT/power-a-prime.txt"
 }
 case "${1:-all}" in
-  all) people; fit; fitted; replayed; report ;;
+  all) people; fit; fitted; replayed; report; power ;;
   *) "$@" ;;
 esac
