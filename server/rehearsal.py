@@ -1,7 +1,9 @@
 """A rehearsal of a study's load: fitted advisors answer human sessions through the
 participant's own HTTP calls (what `web/static/advise.js` does: consent, the induction's
 Start, long-polled state, advice with its decision time), waiting their drawn decision
-times, so the server meets the traffic, the waits and the early leavers of real people.
+times, with the 3-D view's websocket open as the page keeps it (`/viewer/p/TOKEN`, every
+scene message read), so the server meets the traffic, the waits and the early leavers of
+real people.
 
 The simulated person sees only what the page shows (the arm's station and what it
 holds, in the participant state) and advises with `learner.fitted.FittedAdvisor`; it
@@ -11,6 +13,7 @@ the server's HTTP API only: it runs anywhere the participant links reach.
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -35,6 +38,45 @@ class Rehearsed:
     left_early: bool
     status: str
     """The session's status when the participant stopped."""
+    viewer_messages: int = 0
+    """Scene messages the 3-D view's websocket delivered (0 without the view)."""
+    viewer_bytes: int = 0
+
+
+class _Viewer(threading.Thread):
+    """The page's 3-D view: viser's websocket through the server's relay, read until closed."""
+
+    def __init__(self, base_url: str, token: str) -> None:
+        super().__init__(daemon=True)
+        self.url = base_url.replace("http", "ws", 1).rstrip("/") + f"/viewer/p/{token}"
+        self.messages = self.bytes = 0
+        self.error: str | None = None
+        self._done = threading.Event()
+
+    def run(self) -> None:
+        import viser
+        from websockets.exceptions import ConnectionClosed
+        from websockets.sync.client import connect
+
+        try:
+            with connect(
+                self.url, subprotocols=[f"viser-v{viser.__version__}"], open_timeout=30
+            ) as socket:
+                while not self._done.is_set():
+                    try:
+                        message = socket.recv(timeout=0.5)
+                    except TimeoutError:
+                        continue
+                    self.messages += 1
+                    self.bytes += len(message)
+        except ConnectionClosed:
+            pass
+        except (OSError, ValueError) as error:
+            self.error = str(error)
+
+    def close(self) -> None:
+        self._done.set()
+        self.join(timeout=5)
 
 
 def _info(state: dict[str, Any]) -> dict[str, Any]:
@@ -56,11 +98,14 @@ def rehearse(
     seed: int | None = None,
     speed: float = 1.0,
     timeout_s: float = 600.0,
+    viewer: bool = True,
 ) -> Rehearsed:
     """One simulated participant through the session of `token`, until its advice is
     over, it leaves early, or the session ends. `speed` > 1 divides the waits (a quick
-    rehearsal); the decision time sent is the drawn one."""
+    rehearsal); the decision time sent is the drawn one. `viewer`: keep the 3-D view's
+    websocket open meanwhile, as the page does."""
     advisor = FittedAdvisor(model, sort_rule, seed)
+    view = _Viewer(base_url, token) if viewer else None
     headers = {"Authorization": f"Bearer {token}"}
     times: list[float] = []
     with httpx.Client(base_url=base_url, headers=headers, timeout=60) as client:
@@ -68,6 +113,8 @@ def rehearse(
         _ok(client.post("/api/participant/consent", json={"agree": True,
                         "texts_version": shown["texts_version"]}))  # fmt: skip
         state = _ok(client.post("/api/participant/start"))
+        if view is not None:
+            view.start()
         stop_after = advisor.stop_after(int(state["advice_budget"]))
         deadline = time.monotonic() + timeout_s
         while state["status"] not in ENDED and time.monotonic() < deadline:
@@ -89,12 +136,16 @@ def rehearse(
                 break  # the advice is over; the learner trains on without the person
             state = _ok(client.get("/api/participant/state",
                                    params={"after": state["version"], "timeout": 20}))  # fmt: skip
+    if view is not None:
+        view.close()
     return Rehearsed(
         token_tail=token[-4:],
         advice=len(times),
         decision_times_s=times,
         left_early=stop_after is not None and len(times) >= stop_after,
         status=str(state["status"]),
+        viewer_messages=view.messages if view is not None else 0,
+        viewer_bytes=view.bytes if view is not None else 0,
     )
 
 

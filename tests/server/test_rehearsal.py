@@ -42,6 +42,7 @@ def test_a_fitted_advisor_advises_a_human_session_through_its_link(
     assert code == 0, out
     (done,) = json.loads(out)["participants"]
     assert done["advice"] == BUDGET and not done["left_early"]
+    assert done["viewer_messages"] >= 1  # the view's socket was accepted with this link's token
 
     wait_for_status(api, created["id"], {"finished"})
     advice = api.get(f"/api/sessions/{created['id']}/advice").json()
