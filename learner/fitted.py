@@ -259,12 +259,15 @@ class FittedAdvisor:
     by the fitted confusions, uniform where none were seen), each advice with a decision
     time drawn from the fitted log-normal (`last_decision_time_s`, which the server logs
     as the advice's `decision_time_s`). It sleeps that long only when `sleep` is set (a
-    rehearsal through the participant's page), never in batch or worker runs."""
+    rehearsal through the participant's page), never in batch or worker runs. Given the
+    run's `budget`, it leaves early as the fitted people did (`stop_after`, drawn once):
+    past that many advice it answers `NO_ADVICE` (asked, counted, none given)."""
 
     model: FittedModel
     sort_rule: Any = "color"
     seed: int | None = None
     sleep: bool = False
+    budget: int | None = None
     last_decision_time_s: float | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
@@ -273,8 +276,17 @@ class FittedAdvisor:
         self._rule = sim.SortRule.parse(self.sort_rule)
         self._oracle_action = sim.oracle_action
         self.rng = np.random.default_rng(self.seed)
+        self.leaves_after = None if self.budget is None else self.stop_after(self.budget)
+        """Advice given before this person leaves (None: the whole budget)."""
+        self.given = 0
 
-    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> Any:
+        from learner.advisors import NO_ADVICE
+
+        if self.leaves_after is not None and self.given >= self.leaves_after:
+            self.last_decision_time_s = None
+            return NO_ADVICE
+        self.given += 1
         correct = int(self._oracle_action(info, self._rule))
         rate = self.model.error_rate(*situation(info))
         action = self._wrong(correct) if self.rng.random() < rate else correct
@@ -301,7 +313,10 @@ class FittedAdvisor:
         return None if share >= 1.0 else int(share * budget)
 
     def state_dict(self) -> dict[str, Any]:
-        return {"rng": self.rng.bit_generator.state}
+        return {"rng": self.rng.bit_generator.state, "given": self.given,
+                "leaves_after": self.leaves_after}  # fmt: skip
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.rng.bit_generator.state = state["rng"]
+        self.given = int(state.get("given", 0))
+        self.leaves_after = state.get("leaves_after", self.leaves_after)

@@ -468,7 +468,11 @@ class RunSpec:
         if self.method == "fitted":
             try:
                 return make_advisor(
-                    "fitted", model=self.fitted_model, sort_rule=self.sort_rule, seed=self.seed
+                    "fitted",
+                    model=self.fitted_model,
+                    sort_rule=self.sort_rule,
+                    seed=self.seed,
+                    budget=self.advice_budget,
                 )
             except ValueError as error:
                 raise RunSpecError("fitted_model", str(error)) from None

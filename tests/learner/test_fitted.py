@@ -131,6 +131,29 @@ def test_the_fitted_advisor_errs_where_its_model_says_and_draws_decision_times(
     assert FittedAdvisor(read_model(path), seed=1).state_dict() == state
 
 
+def test_a_fitted_person_leaves_early_as_the_fitted_people_did() -> None:
+    """Budget use [1.0, 0.5]: a run's advisor gives its whole budget or half of it, then
+    answers NO_ADVICE (asked, counted, none given), and keeps that on resume."""
+    from learner.advisors import NO_ADVICE
+
+    env = sim.SortingEnv(motion="fast", max_episode_steps=40)
+    _, info = env.reset(seed=0)
+    obs = np.zeros((64, 64, 3), np.uint8)
+    given = set()
+    for seed in range(12):
+        advisor = FittedAdvisor(_model(0.0), seed=seed, budget=10)
+        answers = [advisor.advise(obs, info) for _ in range(10)]
+        count = sum(a is not NO_ADVICE for a in answers)
+        assert answers[count:] == [NO_ADVICE] * (10 - count)  # once left, gone
+        given.add(count)
+        resumed = FittedAdvisor(_model(0.0), seed=99, budget=10)
+        resumed.load_state_dict(advisor.state_dict())
+        assert (resumed.advise(obs, info) is NO_ADVICE) == (count < 10)
+    env.close()
+    assert given == {5, 10}
+    assert FittedAdvisor(_model(0.0), seed=0).leaves_after is None  # no budget: never leaves
+
+
 def test_a_bad_model_file_is_refused_with_what_to_do(tmp_path: Any) -> None:
     with pytest.raises(ValueError, match="ideeprl fit"):
         read_model(tmp_path / "missing.json")
