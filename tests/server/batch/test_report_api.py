@@ -52,6 +52,9 @@ def test_a_researcher_builds_and_downloads_a_studys_report(place: Place, api: ht
         assert got.status_code == 200, file
         if file["kind"] == "figure" and file["name"].endswith(".svg"):
             assert got.headers["content-type"] == "image/svg+xml" and b"<svg" in got.content
+        elif file["kind"] == "figure" and file["name"].endswith(".pdf"):
+            assert got.headers["content-type"] == "application/pdf"
+            assert got.content[:5] == b"%PDF-"
         elif file["kind"] == "figure":
             assert got.headers["content-type"] == "image/png" and got.content[:4] == b"\x89PNG"
     markdown = api.get(report["report_url"]).text
