@@ -220,15 +220,21 @@ def _describe_primary(comparisons: pd.DataFrame | None, method: str, alpha: floa
     )
 
 
+def _pairs(a: Sequence[str], b: Sequence[str]) -> list[str]:
+    """Each pair of methods by their display names: "agent-IDeepRL vs autonomous DeepRL"."""
+    return [f"{method_name(x)} vs {method_name(y)}" for x, y in zip(a, b, strict=True)]
+
+
+def _significant(p_values: Sequence[float], alpha: float) -> list[str]:
+    return ["–" if np.isnan(p) else ("yes" if p < alpha else "no") for p in p_values]
+
+
 def _comparisons_section(comparisons: pd.DataFrame | None, alpha: float) -> list[str]:
     """The primary test of each comparison first, then the secondary ones."""
     if comparisons is None or comparisons.empty:
         return []
     frame = comparisons.copy()
-    frame["pair"] = [
-        f"{method_name(m)} vs {method_name(b)}"
-        for m, b in zip(frame["method"], frame["baseline"], strict=True)
-    ]
+    frame["pair"] = _pairs(frame["method"], frame["baseline"])
     frame["n_shown"] = [f"{a} + {b}" for a, b in zip(frame["n"], frame["n_baseline"], strict=True)]
     frame["poi"] = [
         "–" if np.isnan(p) else f"{p:.2f} {_interval(lo, hi)}"
@@ -236,9 +242,7 @@ def _comparisons_section(comparisons: pd.DataFrame | None, alpha: float) -> list
             frame["probability_of_improvement"], frame["poi_low"], frame["poi_high"], strict=True
         )
     ]
-    frame["significant"] = [
-        "–" if np.isnan(p) else ("yes" if p < alpha else "no") for p in frame["primary_p"]
-    ]
+    frame["significant"] = _significant(frame["primary_p"], alpha)
     columns = {
         "pair": "comparison",
         "n_shown": "agents",
@@ -352,17 +356,12 @@ def _methods_table(analysis: Analysis) -> str:
 
 def _tests_table(analysis: Analysis, alpha: float) -> str:
     frame = analysis.t_tests.copy()
-    frame["pair"] = [
-        f"{method_name(a)} vs {method_name(b)}"
-        for a, b in zip(frame.method_a, frame.method_b, strict=True)
-    ]
+    frame["pair"] = _pairs(frame.method_a, frame.method_b)
     frame["what"] = frame["sample"].map(
         {EPISODE_MEANS: "average curves (Table 2)", AGENT_TOTALS: "agents' R_T"}
     )
     frame["n"] = [f"{a} + {b}" for a, b in zip(frame.n_a, frame.n_b, strict=True)]
-    frame["significant"] = [
-        "–" if np.isnan(p) else ("yes" if p < alpha else "no") for p in frame["p"]
-    ]
+    frame["significant"] = _significant(frame["p"], alpha)
     columns = {
         "pair": "pair (a vs b)",
         "what": "samples compared",

@@ -11,9 +11,10 @@ private attributes is here, so a viser upgrade breaks this file, loudly, and not
 
 from __future__ import annotations
 
+import asyncio
 import re
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import Any, TypeVar
 from urllib.parse import urlsplit
 
 import viser
@@ -33,6 +34,49 @@ class ViserInternalsChanged(RuntimeError):
             f"was verified with viser {VERIFIED_VISER}. Pin viser=={VERIFIED_VISER} or adapt "
             "server/viewer/connection.py"
         )
+
+
+Key = TypeVar("Key")
+
+
+def guarded_server(
+    host: str,
+    port: int,
+    admit: Callable[[int], Awaitable[None]],
+    forget: Callable[[int], None],
+    connected: Callable[[viser.ClientHandle], None],
+) -> viser.ViserServer:
+    """A viser server for views opened by token: no logo, no share button, its panel
+    minimised; `admit` runs on every raw websocket before any message, `forget` when one
+    closes, `connected` once viser knows the client."""
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    server.gui.configure_theme(show_logo=False, show_share_button=False)
+    server.gui.main_panel.minimize()
+    refuse_share_requests(server)
+    on_raw_connect(server, admit)
+    on_raw_disconnect(server, forget)
+    server.on_client_connect(connected)
+    return server
+
+
+async def admitted(
+    server: viser.ViserServer,
+    client_id: int,
+    lookup: Callable[[str], Key | None],
+    refused: Callable[[], None],
+    reason: str,
+) -> Key | None:
+    """What the token in the client's request path names (`lookup`, run off the event loop:
+    it may read the database), or None: then `refused()` is called (before the client can
+    see it) and the websocket is closed with `reason`."""
+    token = token_from_path(request_path(server, client_id) or "")
+    found = None
+    if token is not None:
+        found = await asyncio.get_running_loop().run_in_executor(None, lookup, token)
+    if found is None:
+        refused()
+        await close(server, client_id, reason)
+    return found
 
 
 def _websock_server(server: viser.ViserServer) -> Any:

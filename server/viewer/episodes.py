@@ -12,7 +12,6 @@ have; any other jump is drawn at once.
 
 from __future__ import annotations
 
-import asyncio
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -64,13 +63,9 @@ class PlaybackViewer:
         with self._lock:
             if self.server is not None:
                 return
-            server = viser.ViserServer(host=self.host, port=0, verbose=False)
-            server.gui.configure_theme(show_logo=False, show_share_button=False)
-            server.gui.main_panel.minimize()
-            connection.refuse_share_requests(server)
-            connection.on_raw_connect(server, self._admit)
-            connection.on_raw_disconnect(server, self._forget)
-            server.on_client_connect(self._connected)
+            server = connection.guarded_server(
+                self.host, 0, self._admit, self._forget, self._connected
+            )
             self.server = server
 
     def stop(self) -> None:
@@ -92,20 +87,19 @@ class PlaybackViewer:
     # --- who may connect -----------------------------------------------------------------
     async def _admit(self, client_id: int) -> None:
         assert self.server is not None
-        path = connection.request_path(self.server, client_id) or ""
-        playback_id = connection.token_from_path(path)
-        loop = asyncio.get_running_loop()
-        known = playback_id is not None and await loop.run_in_executor(
-            None, self._exists, playback_id
+        playback_id = await connection.admitted(
+            self.server, client_id, self._known, self._refused, "no open playback"
         )
-        if not known:
+        if playback_id is not None:
             with self._lock:
-                self.refused += 1
-            await connection.close(self.server, client_id, "no open playback")
-            return
-        assert playback_id is not None
+                self._admitted[client_id] = playback_id
+
+    def _refused(self) -> None:
         with self._lock:
-            self._admitted[client_id] = playback_id
+            self.refused += 1
+
+    def _known(self, playback_id: str) -> str | None:
+        return playback_id if self._exists(playback_id) else None
 
     def _connected(self, client: viser.ClientHandle) -> None:
         with self._lock:

@@ -12,7 +12,6 @@ where it is at once.
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import threading
 from collections.abc import Callable
@@ -102,13 +101,9 @@ class ParticipantViewer:
 
     # --- lifecycle ---------------------------------------------------------------------
     def start(self) -> None:
-        server = viser.ViserServer(host=self.config.host, port=self.config.port, verbose=False)
-        server.gui.configure_theme(show_logo=False, show_share_button=False)
-        server.gui.main_panel.minimize()
-        connection.refuse_share_requests(server)
-        connection.on_raw_connect(server, self._admit)
-        connection.on_raw_disconnect(server, self._forget)
-        server.on_client_connect(self._connected)
+        server = connection.guarded_server(
+            self.config.host, self.config.port, self._admit, self._forget, self._connected
+        )
         self.server = server
 
     def stop(self) -> None:
@@ -131,19 +126,20 @@ class ParticipantViewer:
     # --- who may connect -----------------------------------------------------------------
     async def _admit(self, client_id: int) -> None:
         assert self.server is not None
-        path = connection.request_path(self.server, client_id) or ""
-        token = connection.token_from_path(path)
-        session_id = None
-        if token is not None:
-            loop = asyncio.get_running_loop()
-            session_id = await loop.run_in_executor(None, self._session_for_token, token)
-        if session_id is None:
+        session_id = await connection.admitted(
+            self.server,
+            client_id,
+            self._session_for_token,
+            self._refused,
+            "no valid participant token",
+        )
+        if session_id is not None:
             with self._lock:
-                self.refused += 1
-            await connection.close(self.server, client_id, "no valid participant token")
-            return
+                self._admitted[client_id] = session_id
+
+    def _refused(self) -> None:
         with self._lock:
-            self._admitted[client_id] = session_id
+            self.refused += 1
 
     def _connected(self, client: viser.ClientHandle) -> None:
         with self._lock:

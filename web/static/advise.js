@@ -271,22 +271,8 @@
     event.preventDefault();
     send(action);
   });
-  // Without a GPU (software WebGL) full-resolution rendering starves this page: draw the
-  // 3-D view at a lower resolution there.
-  function softwareWebGL() {
-    try {
-      const gl = document.createElement("canvas").getContext("webgl");
-      if (!gl) return false;
-      const info = gl.getExtension("WEBGL_debug_renderer_info");
-      const renderer = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
-      gl.getExtension("WEBGL_lose_context")?.loseContext();
-      return /swiftshader|llvmpipe|softpipe|software/i.test(renderer);
-    } catch {
-      return false;
-    }
-  }
   const scene = $("scene");
-  scene.src = window.sceneUrl(scene, softwareWebGL());
+  scene.src = window.sceneUrl(scene);
   window.keepKeysOnPage(scene);
   follow();
 })();

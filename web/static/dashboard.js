@@ -21,23 +21,7 @@
     $("dashboard-error").hidden = !message;
   }
 
-  async function call(path, options = {}) {
-    const response = await fetch(path, {
-      ...options,
-      headers: { "X-Requested-With": "ideeprl-dashboard", "Content-Type": "application/json" },
-      cache: "no-store",
-    });
-    if (response.status === 401) {
-      window.location.assign("/dashboard/login");
-      throw new Error("logged out");
-    }
-    const body = await response.json().catch(() => ({}));
-    if (!response.ok) {
-      const detail = Array.isArray(body.detail) ? body.detail.map((d) => d.msg).join("; ") : body.detail;
-      throw new Error(detail || `error ${response.status}`);
-    }
-    return body;
-  }
+  const call = window.dashboardCall;
 
   function progressText(s) {
     const p = s.progress;

@@ -18,36 +18,8 @@
     $("playback-error").hidden = !message;
   }
 
-  async function call(path, options = {}) {
-    const response = await fetch(path, {
-      ...options,
-      headers: { "X-Requested-With": "ideeprl-dashboard", "Content-Type": "application/json" },
-      cache: "no-store",
-    });
-    if (response.status === 401) {
-      window.location.assign("/dashboard/login");
-      throw new Error("logged out");
-    }
-    const body = response.status === 204 ? {} : await response.json().catch(() => ({}));
-    if (!response.ok) {
-      const detail = Array.isArray(body.detail) ? body.detail.map((d) => d.msg).join("; ") : body.detail;
-      throw new Error(detail || `error ${response.status}`);
-    }
-    return body;
-  }
+  const call = window.dashboardCall;
 
-  function softwareWebGL() {
-    try {
-      const gl = document.createElement("canvas").getContext("webgl");
-      if (!gl) return false;
-      const info = gl.getExtension("WEBGL_debug_renderer_info");
-      const renderer = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
-      gl.getExtension("WEBGL_lose_context")?.loseContext();
-      return /swiftshader|llvmpipe|softpipe|software/i.test(renderer);
-    } catch {
-      return false;
-    }
-  }
 
   async function loadEpisodes() {
     const episodes = await call(`${API}/sessions/${config.session}/episodes`);
@@ -203,7 +175,7 @@
     $("player").hidden = false;
     const scene = $("scene");
     scene.dataset.socket = `playback/${state.id}`;
-    scene.src = window.sceneUrl(scene, softwareWebGL());
+    scene.src = window.sceneUrl(scene);
     show(0);
   }
 

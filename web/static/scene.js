@@ -2,9 +2,24 @@
 // and what the robot holds, in words.
 "use strict";
 (() => {
+  // Without a GPU (software WebGL) full-resolution rendering starves the page.
+  function softwareWebGL() {
+    try {
+      const gl = document.createElement("canvas").getContext("webgl");
+      if (!gl) return false;
+      const info = gl.getExtension("WEBGL_debug_renderer_info");
+      const renderer = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+      gl.getExtension("WEBGL_lose_context")?.loseContext();
+      return /swiftshader|llvmpipe|softpipe|software/i.test(renderer);
+    } catch {
+      return false;
+    }
+  }
+
   // viser's client under /viewer/ of this server (or the configured viewer URL); its
-  // websocket on the same host, wss when the page came over https.
-  window.sceneUrl = (iframe, softwareWebGL) => {
+  // websocket on the same host, wss when the page came over https; drawn at a lower
+  // resolution without a GPU.
+  window.sceneUrl = (iframe) => {
     const src = new URL(iframe.dataset.src, window.location.href);
     const socket = new URL(iframe.dataset.socket, src);
     socket.protocol = src.protocol === "https:" ? "wss:" : "ws:";
@@ -12,8 +27,7 @@
     // viser reads `websocket` verbatim (no decoding): it must come unescaped.
     let url = `${src.origin}${src.pathname}?websocket=${socket.href}`;
     if (src.search.length > 1) url += `&${src.search.slice(1)}`;
-    // Without a GPU (software WebGL) full-resolution rendering starves the page.
-    return softwareWebGL ? `${url}&fixedDpr=0.75` : url;
+    return softwareWebGL() ? `${url}&fixedDpr=0.75` : url;
   };
 
   // Dragging the view gives the frame the keyboard focus, and viser would take the arrow
