@@ -23,6 +23,7 @@ from sqlalchemy import (
     Text,
     TypeDecorator,
     UniqueConstraint,
+    false,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
@@ -71,6 +72,18 @@ class Status(enum.StrEnum):
     failed = "failed"
 
 
+class Outcome(enum.StrEnum):
+    """How a participant's visit ended (`sessions.outcome`); each has its own code and
+    redirect in an online study's design. `full` is never stored: an arrival turned away
+    gets no session."""
+
+    completed = "completed"
+    declined = "declined"
+    excluded = "excluded"
+    timed_out = "timed_out"
+    full = "full"
+
+
 LIVE_STATUSES = (Status.running, Status.paused)
 RESUMABLE_STATUSES = (Status.stopped, Status.interrupted, Status.abandoned, Status.failed)
 
@@ -84,6 +97,13 @@ class Study(Base):
     description: Mapped[str] = mapped_column(Text, default="")
     texts: Mapped[dict[str, Any]] = mapped_column(default=dict)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    design: Mapped[dict[str, Any] | None] = mapped_column()
+    """An online study's design (`server.schemas.design.StudyDesign`, every default written
+    out); None for a lab study, whose sessions are made by hand."""
+    join_key: Mapped[str | None] = mapped_column(String(64), unique=True)
+    """The unguessable key of the study's public link `/join/{join_key}`."""
+    assignment_seed: Mapped[int | None] = mapped_column(Integer)
+    """Seed of the block randomization over the design's conditions."""
 
     sessions: Mapped[list[StudySession]] = relationship(
         back_populates="study", cascade="all, delete-orphan", passive_deletes=True
@@ -182,6 +202,14 @@ class StudySession(Base):
     consented_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     declined_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     induction_done_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    condition: Mapped[str | None] = mapped_column(String(100))
+    """The design condition this session was assigned to (None outside an online study)."""
+    preview: Mapped[bool] = mapped_column(default=False, server_default=false())
+    """A researcher's walk through the study link: takes no place, stays out of exports
+    and reports."""
+    outcome: Mapped[str | None] = mapped_column(String(20))
+    """How the participant's visit ended (`Outcome`); None while it goes on."""
+    outcome_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
 
     replay_of: Mapped[int | None] = mapped_column(
         ForeignKey("sessions.id", ondelete="CASCADE"), index=True

@@ -1,0 +1,51 @@
+"""Online studies: a study's design and public link; a session's condition and outcome
+
+Revision ID: 0013
+Revises: 0012
+
+A study may carry a design (`studies.design`: conditions, targets, capacity, alpha, panel
+setting, check, questionnaire, outcome codes; NULL for a lab study as before), the key of
+its public link (`studies.join_key`, unguessable, unique) and the seed of its block
+randomization (`studies.assignment_seed`). A session made through the link records its
+condition (`sessions.condition`), whether it is a researcher's preview (`sessions.preview`,
+kept out of exports and reports) and how the visit ended (`sessions.outcome`: completed,
+declined, excluded, timed_out; with `sessions.outcome_at`).
+"""
+
+from collections.abc import Sequence
+
+import sqlalchemy as sa
+from alembic import op
+
+revision: str = "0013"
+down_revision: str | None = "0012"
+branch_labels: str | Sequence[str] | None = None
+depends_on: str | Sequence[str] | None = None
+
+
+def upgrade() -> None:
+    with op.batch_alter_table("studies", table_kwargs={"sqlite_autoincrement": True}) as batch:
+        batch.add_column(sa.Column("design", sa.JSON(), nullable=True))
+        batch.add_column(sa.Column("join_key", sa.String(64), nullable=True))
+        batch.add_column(sa.Column("assignment_seed", sa.Integer(), nullable=True))
+        batch.create_unique_constraint("uq_studies_join_key", ["join_key"])
+    with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
+        batch.add_column(sa.Column("condition", sa.String(100), nullable=True))
+        batch.add_column(
+            sa.Column("preview", sa.Boolean(), nullable=False, server_default=sa.false())
+        )
+        batch.add_column(sa.Column("outcome", sa.String(20), nullable=True))
+        batch.add_column(sa.Column("outcome_at", sa.DateTime(timezone=True), nullable=True))
+
+
+def downgrade() -> None:
+    with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
+        batch.drop_column("outcome_at")
+        batch.drop_column("outcome")
+        batch.drop_column("preview")
+        batch.drop_column("condition")
+    with op.batch_alter_table("studies", table_kwargs={"sqlite_autoincrement": True}) as batch:
+        batch.drop_constraint("uq_studies_join_key", type_="unique")
+        batch.drop_column("assignment_seed")
+        batch.drop_column("join_key")
+        batch.drop_column("design")
