@@ -31,13 +31,45 @@ class Subscale(NamedTuple):
 
 
 NASA_TLX: tuple[Subscale, ...] = (
-    Subscale("mental", "Mental demand", "How mentally demanding was the task?", "Very low", "Very high"),
-    Subscale("physical", "Physical demand", "How physically demanding was the task?", "Very low", "Very high"),
-    Subscale("temporal", "Temporal demand", "How hurried or rushed was the pace of the task?", "Very low", "Very high"),
-    Subscale("performance", "Performance", "How successful were you in accomplishing what you were asked to do?", "Perfect", "Failure"),
-    Subscale("effort", "Effort", "How hard did you have to work to accomplish your level of performance?", "Very low", "Very high"),
-    Subscale("frustration", "Frustration", "How insecure, discouraged, irritated, stressed, and annoyed were you?", "Very low", "Very high"),
-)  # fmt: skip
+    Subscale(
+        "mental", "Mental demand", "How mentally demanding was the task?", "Very low", "Very high"
+    ),
+    Subscale(
+        "physical",
+        "Physical demand",
+        "How physically demanding was the task?",
+        "Very low",
+        "Very high",
+    ),
+    Subscale(
+        "temporal",
+        "Temporal demand",
+        "How hurried or rushed was the pace of the task?",
+        "Very low",
+        "Very high",
+    ),
+    Subscale(
+        "performance",
+        "Performance",
+        "How successful were you in accomplishing what you were asked to do?",
+        "Perfect",
+        "Failure",
+    ),
+    Subscale(
+        "effort",
+        "Effort",
+        "How hard did you have to work to accomplish your level of performance?",
+        "Very low",
+        "Very high",
+    ),
+    Subscale(
+        "frustration",
+        "Frustration",
+        "How insecure, discouraged, irritated, stressed, and annoyed were you?",
+        "Very low",
+        "Very high",
+    ),
+)
 """The six subscales in the instrument's order, with its own questions and anchors."""
 TLX_MIN, TLX_MAX, TLX_STEP = 0, 100, 5
 

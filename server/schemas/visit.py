@@ -85,11 +85,16 @@ def default_questions() -> list[CheckQuestion]:
     ]
     where = "Under the sorting rule of this study, where does a {} go?"
     return [
-        CheckQuestion(id="blue_cube", text=where.format("blue cube"), choices=sides, side_of="cube/blue"),
-        CheckQuestion(id="red_disk", text=where.format("red disk"), choices=sides, side_of="disk/red"),
+        CheckQuestion(
+            id="blue_cube", text=where.format("blue cube"), choices=sides, side_of="cube/blue"
+        ),
+        CheckQuestion(
+            id="red_disk", text=where.format("red disk"), choices=sides, side_of="disk/red"
+        ),
         CheckQuestion(
             id="drop_at_centre",
-            text="The robot holds an object and its arm is over the centre table. What does Drop do?",
+            text="The robot holds an object and its arm is over the centre table. "
+            "What does Drop do?",
             choices=[
                 Choice(value="release", label="It puts the object back on the centre table"),
                 Choice(value="keep", label="Nothing: the robot keeps holding it where it is"),
@@ -97,7 +102,7 @@ def default_questions() -> list[CheckQuestion]:
             ],
             answer="keep",
         ),
-    ]  # fmt: skip
+    ]
 
 
 class CheckSpec(BaseModel):
@@ -123,6 +128,20 @@ class CheckSpec(BaseModel):
 
 
 Kind = Literal["likert", "choice", "number", "text"]
+SHAPE_FIELDS = ("points", "anchors", "choices", "minimum", "maximum", "step", "max_length")
+NEEDS: dict[str, set[str]] = {
+    "likert": {"points", "anchors"},
+    "choice": {"choices"},
+    "number": {"minimum", "maximum"},
+    "text": set(),
+}
+MAY: dict[str, set[str]] = {
+    "likert": set(),
+    "choice": set(),
+    "number": {"step", "anchors"},
+    "text": {"max_length"},
+}
+"""Which of `SHAPE_FIELDS` an item of each kind needs, and which it may have besides."""
 
 
 class Item(BaseModel):
@@ -148,16 +167,8 @@ class Item(BaseModel):
 
     @model_validator(mode="after")
     def _fits_kind(self) -> Self:
-        needs = {
-            "likert": {"points", "anchors"},
-            "choice": {"choices"},
-            "number": {"minimum", "maximum"},
-            "text": set(),
-        }[self.kind]
-        allowed = needs | {"likert": set(), "choice": set(), "number": {"step", "anchors"},
-                           "text": {"max_length"}}[self.kind]  # fmt: skip
-        optional = ("points", "anchors", "choices", "minimum", "maximum", "step", "max_length")
-        for name in optional:
+        needs, allowed = NEEDS[self.kind], NEEDS[self.kind] | MAY[self.kind]
+        for name in SHAPE_FIELDS:
             given = getattr(self, name) is not None
             if name in needs and not given:
                 raise ValueError(f"item {self.id}: a {self.kind} item needs `{name}`")
@@ -228,8 +239,14 @@ class QuestionnaireSpec(BaseModel):
         if self.trust:
             out.append(_trust())
         if self.items:
-            out.append(Section(instrument="custom", title="A few more questions", intro="",
-                               items=list(self.items)))  # fmt: skip
+            out.append(
+                Section(
+                    instrument="custom",
+                    title="A few more questions",
+                    intro="",
+                    items=list(self.items),
+                )
+            )
         if self.demographics:
             out.append(_demographics())
         return out
@@ -237,30 +254,49 @@ class QuestionnaireSpec(BaseModel):
 
 def _nasa_tlx() -> Section:
     items = [
-        Item(id=s.id, kind="number", text=f"{s.title}: {s.question}", required=True,
-             minimum=inst.TLX_MIN, maximum=inst.TLX_MAX, step=inst.TLX_STEP,
-             anchors=[s.low, s.high])
+        Item(
+            id=s.id,
+            kind="number",
+            text=f"{s.title}: {s.question}",
+            required=True,
+            minimum=inst.TLX_MIN,
+            maximum=inst.TLX_MAX,
+            step=inst.TLX_STEP,
+            anchors=[s.low, s.high],
+        )
         for s in inst.NASA_TLX
-    ]  # fmt: skip
+    ]
     intro = "About the advice you just gave: move each slider to where it fits best."
     return Section(instrument="nasa_tlx", title="Workload", intro=intro, items=items)
 
 
 def _trust() -> Section:
     items = [
-        Item(id=inst.trust_item_id(n), kind="likert", text=text, required=True,
-             points=inst.TRUST_POINTS, anchors=list(inst.TRUST_ANCHORS))
+        Item(
+            id=inst.trust_item_id(n),
+            kind="likert",
+            text=text,
+            required=True,
+            points=inst.TRUST_POINTS,
+            anchors=list(inst.TRUST_ANCHORS),
+        )
         for n, text in enumerate(inst.TRUST_ITEMS, start=1)
-    ]  # fmt: skip
+    ]
     intro = "How much does each statement fit your impression of the robot you advised?"
     return Section(instrument="trust", title="The robot", intro=intro, items=items)
 
 
 def _demographics() -> Section:
     items = [
-        Item(id=id_, kind="choice" if choices else "text", text=text, choices=list(choices)
-             if choices else None, max_length=None if choices else 100, prefer_not_to_say=True)
+        Item(
+            id=id_,
+            kind="choice" if choices else "text",
+            text=text,
+            choices=list(choices) if choices else None,
+            max_length=None if choices else 100,
+            prefer_not_to_say=True,
+        )
         for id_, text, choices in inst.DEMOGRAPHICS
-    ]  # fmt: skip
+    ]
     intro = "Every question here is optional."
     return Section(instrument="demographics", title="About you", intro=intro, items=items)
