@@ -359,7 +359,7 @@ class CheckAttempt(Base):
 
 
 class QuestionnaireAnswer(Base):
-    """One answered item of an online study's questionnaire; an item left empty has no row."""
+    """One item of an online study's questionnaire as submitted; an item skipped has no value."""
 
     __tablename__ = "questionnaire_answers"
     __table_args__ = (UniqueConstraint("session_id", "instrument", "item"),)
