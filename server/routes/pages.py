@@ -145,7 +145,13 @@ async def _load(request: Request, token: str, warm_up: bool = True) -> Visit | N
     """The visit; opening the link starts the session's random pretraining (the robot
     practises while the participant reads), advice waits for consent and induction."""
     visit = await run_in_threadpool(_visit, request, token)
-    if visit is not None and warm_up and visit.status in (Status.created, Status.abandoned):
+    ended = visit is not None and visit.outcome is not None
+    if (
+        visit is not None
+        and warm_up
+        and not ended
+        and visit.status in (Status.created, Status.abandoned)
+    ):
         await request.app.state.manager.welcome(visit.session_id)
         visit = await run_in_threadpool(_visit, request, token)
     return visit
