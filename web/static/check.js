@@ -77,6 +77,7 @@
         for (const set of sets) set.querySelector(".field-error").hidden = !result.wrong.includes(set.dataset.question);
         const left = result.tries - result.tries_used;
         document.getElementById("tries-left").textContent = left;
+        document.getElementById("tries-word").textContent = left === 1 ? "try" : "tries";
         fail(`Some answers are not right. You have ${left} ${left === 1 ? "try" : "tries"} left.`, submit, "Check my answers");
       }
     } catch (e) {

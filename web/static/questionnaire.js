@@ -12,11 +12,18 @@
     const shown = slider.parentElement.querySelector(".slider-value");
     const touch = () => {
       slider.dataset.touched = "true";
+      slider.parentElement.classList.add("touched");
       shown.textContent = slider.value;
     };
     slider.addEventListener("input", touch);
     slider.addEventListener("change", touch);
   }
+
+  // An answer given clears that item's "please answer".
+  form.addEventListener("change", (event) => {
+    const item = event.target.closest("fieldset.item");
+    if (item) item.querySelector(".field-error").hidden = true;
+  });
 
   function answerOf(item) {
     const kind = item.dataset.kind;
