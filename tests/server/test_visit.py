@@ -15,10 +15,10 @@ from typing import Any
 import httpx
 import pytest
 from pydantic import ValidationError
-from sqlalchemy import update
+from sqlalchemy import func, select, update
 
 from server.db.engine import make_engine, make_session_factory
-from server.db.models import Study, StudySession
+from server.db.models import CheckAttempt, QuestionnaireAnswer, Study, StudySession
 from server.schemas.design import StudyDesign
 from server.schemas.instruments import score_nasa_tlx, score_trust
 from server.schemas.visit import CheckSpec, Item, QuestionnaireSpec
@@ -168,6 +168,8 @@ RIGHT = {"blue_cube": "left", "red_disk": "right", "drop_at_centre": "keep"}
 def test_the_check_is_graded_under_the_sessions_rule_and_gates_the_start(
     server: LiveServer, api: httpx.Client, online: dict[str, Any]
 ) -> None:
+    """And a design without a questionnaire completes the visit with the last advice."""
+    set_design(server, online["id"], StudyDesign(questionnaire=None).model_dump(mode="json"))
     created, participant = new_participant(server, api, online["id"])
     client = participant.client
     before = client.post("/api/participant/check", json={"answers": RIGHT})
@@ -205,7 +207,21 @@ def test_the_check_is_graded_under_the_sessions_rule_and_gates_the_start(
     started = client.post("/api/participant/start")
     assert started.status_code == 200, started.text
     assert stored(server, created["id"]).outcome is None, "a pass ends nothing"
-    assert api.post(f"/api/sessions/{created['id']}/stop").status_code == 200
+
+    assert participant.next_request()["advice_index"] == 0
+    assert participant.advise(0, 0).status_code == 200
+    assert stored(server, created["id"]).outcome is None, "one advice of two"
+    assert participant.next_request()["advice_index"] == 1
+    assert participant.advise(1, 0).status_code == 200
+    row = stored(server, created["id"])
+    assert row.outcome == "completed", "no questionnaire: the last advice completes"
+    assert row.status in ("running", "finished"), "the learner trains on"
+    token = created["participant_token"]
+    for path in ("", "/questionnaire", "/advise"):
+        page = httpx.get(f"{server.url}/p/{token}{path}", follow_redirects=False)
+        assert page.headers["location"].endswith(f"/p/{token}/end"), path
+    assert client.get("/api/participant/questionnaire").json()["required"] is False
+    wait_for_status(api, created["id"], {"finished"})
     participant.client.close()
 
 
@@ -229,7 +245,17 @@ def test_every_try_wrong_excludes_the_participant_and_stops_the_session(
     assert client.post("/api/participant/start").status_code == 409
     page = httpx.get(f"{server.url}/p/{created['participant_token']}", follow_redirects=False)
     assert page.headers["location"].endswith(f"/p/{created['participant_token']}/end")
+    assert stored(server, created["id"]).status == "stopped", "the link started nothing"
     participant.client.close()
+
+    assert api.delete(f"/api/sessions/{created['id']}").status_code == 204
+    engine = make_engine(server.database_url)
+    try:
+        with make_session_factory(engine)() as db:
+            query = select(func.count()).where(CheckAttempt.session_id == created["id"])
+            assert db.scalar(query) == 0, "deletion deletes the check's tries"
+    finally:
+        engine.dispose()
 
 
 @pytest.mark.slow
@@ -353,3 +379,13 @@ def test_the_questionnaire_comes_once_after_the_advice_and_completes_the_visit(
         ("1", q, "passed") for q in RIGHT
     ]
     participant.client.close()
+
+    assert api.delete(f"/api/sessions/{created['id']}").status_code == 204
+    engine = make_engine(server.database_url)
+    try:
+        with make_session_factory(engine)() as db:
+            for model in (CheckAttempt, QuestionnaireAnswer):
+                query = select(func.count()).where(model.session_id == created["id"])
+                assert db.scalar(query) == 0, f"deletion deletes {model.__tablename__}"
+    finally:
+        engine.dispose()
