@@ -125,7 +125,11 @@ def answer_check(db: Session, session: StudySession, answers: Mapping[str, str])
             correct=not wrong,
         )
     )
-    db.commit()
+    try:
+        db.commit()
+    except IntegrityError:  # the same try sent twice at once: the first one counts
+        db.rollback()
+        raise Conflict("this try was sent twice at once; reload the page") from None
     after = check_state(db, session)
     return CheckResult(**after.model_dump(), correct=not wrong, wrong=wrong)
 
