@@ -16,6 +16,7 @@ from sqlalchemy import select, update
 
 from server.db.models import CheckAttempt, QuestionnaireAnswer, Study, StudySession
 from server.schemas.design import StudyDesign
+from server.schemas.visit import Item, QuestionnaireSpec
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -28,13 +29,23 @@ TLX = {"mental": 60, "physical": 10, "temporal": 45, "performance": 25, "effort"
        "frustration": 20}  # fmt: skip
 
 
+CUSTOM = [
+    Item(id="clarity", kind="likert", text="The robot's moves were clear.", required=True,
+         points=5, anchors=["Strongly disagree", "Disagree", "Neutral", "Agree", "Strongly agree"]),
+    Item(id="minutes", kind="number", text="About how many minutes did it take?", minimum=0,
+         maximum=120),
+    Item(id="comments", kind="text", text="Anything else?", max_length=500),
+]  # fmt: skip
+"""The researcher's own items, after the built-ins."""
+
+
 def online_session(live: Live) -> dict[str, object]:
     session = live.human_session(
         "online visit", advice_budget=BUDGET, motion="fast", episodes=1, max_episode_steps=20
     )
     with live.app.state.session_factory() as db:
         study_id = db.get(StudySession, session["id"]).study_id
-        design = StudyDesign().model_dump(mode="json")
+        design = StudyDesign(questionnaire=QuestionnaireSpec(items=CUSTOM)).model_dump(mode="json")
         db.execute(update(Study).where(Study.id == study_id).values(design=design))
         db.commit()
     return session
@@ -93,18 +104,22 @@ def test_an_online_participant_passes_the_check_advises_and_answers_the_question
             expect(page.locator("#advice-left")).to_have_text(str(BUDGET - index - 1))
 
     expect(page).to_have_url(re.compile(r"/questionnaire$"), timeout=60_000)
-    expect(page.locator("section.q-section")).to_have_count(3)
+    expect(page.locator("section.q-section")).to_have_count(4)
     phone_screenshot(browser, page.url, "questionnaire-phone")
     page.click("#submit")
-    expect(page.locator("#questionnaire-error")).to_contain_text("Please answer the 18 questions")
+    expect(page.locator("#questionnaire-error")).to_contain_text("Please answer the 19 questions")
     for item, value in TLX.items():
         page.fill(f"input[name='nasa_tlx.{item}']", str(value))
     for number in range(1, 13):
         page.check(f"input[name='trust.item_{number:02d}'][value='{1 + number % 7}']")
     page.check("input[name='demographics.age'][value='25-34']")
     page.check("input[name='demographics.gender.prefer']")
+    page.check("input[name='custom.clarity'][value='4']")
+    page.fill("input[name='custom.minutes']", "12.5")
+    page.fill("input[name='custom.comments']", "Fun, if slow.")
     expect(page.locator(".slider-value").first).to_have_text("60")
     expect(page.locator("fieldset[data-item='mental'] .field-error")).to_be_hidden()
+    expect(page.locator("#questionnaire-error")).to_be_hidden()
     save_screenshot(page, "questionnaire", full_page=True)
     page.click("#submit")
     expect(page).to_have_url(re.compile(rf"/p/{token}/end$"), timeout=30_000)
@@ -120,8 +135,11 @@ def test_an_online_participant_passes_the_check_advises_and_answers_the_question
         assert tries[0].answers["blue_cube"] == "left" and tries[1].expected == RIGHT
         query = select(QuestionnaireAnswer).where(QuestionnaireAnswer.session_id == row.id)
         answers = {(a.instrument, a.item): a for a in db.scalars(query)}
-    assert len(answers) == 6 + 12 + 4
+    assert len(answers) == 6 + 12 + 4 + 3
     assert {k: answers["nasa_tlx", k].value_number for k in TLX} == TLX
     assert answers["trust", "item_06"].value_number == 7
     assert answers["demographics", "gender"].value_text == "Prefer not to say"
     assert answers["demographics", "robots"].value_text is None, "skipped"
+    assert answers["custom", "clarity"].value_number == 4
+    assert answers["custom", "minutes"].value_number == 12.5
+    assert answers["custom", "comments"].value_text == "Fun, if slow."

@@ -289,11 +289,25 @@ def test_a_lab_study_asks_no_check_and_no_questionnaire(
     participant.client.close()
 
 
+CUSTOM = [
+    {"id": "clarity", "kind": "likert", "text": "The robot's moves were clear.", "required": True,
+     "points": 5, "anchors": ["Strongly disagree", "Disagree", "Neutral", "Agree",
+                              "Strongly agree"]},
+    {"id": "minutes", "kind": "number", "text": "About how many minutes did it take?",
+     "minimum": 0, "maximum": 120},
+    {"id": "comments", "kind": "text", "text": "Anything else?", "max_length": 500},
+    {"id": "strategy", "kind": "choice", "text": "How did you choose?",
+     "choices": ["By colour", "By shape", "Other"]},
+]  # fmt: skip
+"""The researcher's own items, one of each kind, after the built-ins."""
+
+
 def full_answers() -> dict[str, dict[str, Any]]:
     return {
         "nasa_tlx": dict(TLX),
         "trust": trust_answers(),
         "demographics": {"age": "25-34", "gender": "Prefer not to say", "robots": "Some"},
+        "custom": {"clarity": 4, "minutes": 7.5, "strategy": "By colour"},
     }
 
 
@@ -301,6 +315,8 @@ def full_answers() -> dict[str, dict[str, Any]]:
 def test_the_questionnaire_comes_once_after_the_advice_and_completes_the_visit(
     server: LiveServer, api: httpx.Client, online: dict[str, Any], tmp_path: Path
 ) -> None:
+    design = StudyDesign(questionnaire=QuestionnaireSpec.model_validate({"items": CUSTOM}))
+    set_design(server, online["id"], design.model_dump(mode="json"))
     created, participant = new_participant(server, api, online["id"])
     client = participant.client
     participant.consent()
@@ -333,6 +349,11 @@ def test_the_questionnaire_comes_once_after_the_advice_and_completes_the_visit(
         (with_("demographics", "age", "17"), "not one of the choices"),
         (with_("demographics", "gender", "x" * 101), "at most 100 characters"),
         (with_("custom", "q", 1), "no item custom.q"),
+        (with_("custom", "clarity", 6), "from 1 to 5"),
+        (with_("custom", "clarity", None), "custom.clarity must be answered"),
+        (with_("custom", "minutes", 121), "a number from 0 to 120"),
+        (with_("custom", "minutes", "7"), "a number from 0 to 120"),
+        (with_("custom", "strategy", "By size"), "By colour; By shape; Other"),
     ]:
         refused = client.post("/api/participant/questionnaire", json=bad)
         assert refused.status_code == 422 and where in refused.text, (where, refused.text)
@@ -364,12 +385,15 @@ def test_the_questionnaire_comes_once_after_the_advice_and_completes_the_visit(
         return [r for r in found if r["session_id"] == str(created["id"])]
 
     answers = rows("questionnaire.csv")
-    assert len(answers) == 6 + 12 + 4, "one row per item shown, skipped ones too"
+    assert len(answers) == 6 + 12 + 4 + 4, "one row per item shown, skipped ones too"
     by_item = {(r["instrument"], r["item"]): r for r in answers}
     assert by_item["nasa_tlx", "mental"]["value_number"] == "70.0"
     assert by_item["trust", "item_01"]["value_number"] == "2.0", "stored as answered"
     assert by_item["demographics", "gender"]["value_text"] == "Prefer not to say"
     assert by_item["demographics", "ai"]["value_text"] == "", "skipped"
+    assert by_item["custom", "minutes"]["value_number"] == "7.5"
+    assert by_item["custom", "strategy"]["value_text"] == "By colour"
+    assert by_item["custom", "comments"]["text"] == "Anything else?"
     scales = {r["scale"]: r for r in rows("scales.csv")}
     assert float(scales["nasa_tlx"]["score"]) == 45.0
     assert float(scales["trust"]["score"]) == pytest.approx(70 / 12)

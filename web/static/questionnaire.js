@@ -23,6 +23,7 @@
   form.addEventListener("change", (event) => {
     const item = event.target.closest("fieldset.item");
     if (item) item.querySelector(".field-error").hidden = true;
+    if (!form.querySelector(".field-error:not([hidden])")) error.hidden = true;
   });
 
   function answerOf(item) {
@@ -61,7 +62,7 @@
     }
     if (missing.length) {
       for (const item of missing) item.querySelector(".field-error").hidden = false;
-      error.textContent = `Please answer the ${missing.length} question${missing.length === 1 ? "" : "s"} marked below.`;
+      error.textContent = `Please answer the ${missing.length} question${missing.length === 1 ? "" : "s"} marked in red.`;
       error.hidden = false;
       missing[0].scrollIntoView({ block: "center" });
       return;
