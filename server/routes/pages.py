@@ -285,7 +285,7 @@ def thanks(request: Request, token: str) -> Response:
     visit = _visit(request, token)
     if visit is None:
         return _error(request)
-    if not visit.started or not visit.done:
+    if not visit.started or not visit.done or visit.online:  # an online visit ends at /end
         return _go(visit, _resume_point(visit))
     return _page(request, "participant/thanks.html", visit, body=visit.text("thanks"))
 

@@ -217,7 +217,7 @@ def test_the_check_is_graded_under_the_sessions_rule_and_gates_the_start(
     assert row.outcome == "completed", "no questionnaire: the last advice completes"
     assert row.status in ("running", "finished"), "the learner trains on"
     token = created["participant_token"]
-    for path in ("", "/questionnaire", "/advise"):
+    for path in ("", "/questionnaire", "/advise", "/thanks", "/check"):
         page = httpx.get(f"{server.url}/p/{token}{path}", follow_redirects=False)
         assert page.headers["location"].endswith(f"/p/{token}/end"), path
     assert client.get("/api/participant/questionnaire").json()["required"] is False
