@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -159,7 +160,8 @@ class CheckResult(CheckState):
     )
 
 
-Answer = Int | Number | Text | None
+Answer = Int | Number | Annotated[Text, Field(max_length=5000)] | None
+"""One item's answer; an item's own `max_length` (at most 5000) is checked against it."""
 
 
 class QuestionnaireCreate(BaseModel):
