@@ -143,15 +143,11 @@ visit_for_token = _visit
 
 async def _load(request: Request, token: str, warm_up: bool = True) -> Visit | None:
     """The visit; opening the link starts the session's random pretraining (the robot
-    practises while the participant reads), advice waits for consent and induction."""
+    practises while the participant reads), advice waits for consent and induction. A visit
+    that ended (an outcome) starts nothing."""
     visit = await run_in_threadpool(_visit, request, token)
-    ended = visit is not None and visit.outcome is not None
-    if (
-        visit is not None
-        and warm_up
-        and not ended
-        and visit.status in (Status.created, Status.abandoned)
-    ):
+    waiting = visit is not None and visit.status in (Status.created, Status.abandoned)
+    if visit is not None and warm_up and waiting and visit.outcome is None:
         await request.app.state.manager.welcome(visit.session_id)
         visit = await run_in_threadpool(_visit, request, token)
     return visit
