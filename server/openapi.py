@@ -82,6 +82,8 @@ EXTRA_ERRORS: dict[str, tuple[int, ...]] = {
     "participant_give_consent": (409,),
     "participant_give_advice": (409,),
     "participant_start": (409,),
+    "participant_answer_check": (409,),
+    "participant_submit_questionnaire": (409,),
 }
 """Statuses a route returns beyond what its dependencies and path ids imply (by name)."""
 

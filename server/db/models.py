@@ -337,6 +337,47 @@ class Advice(Base):
     stream."""
 
 
+class CheckAttempt(Base):
+    """One try at an online study's comprehension check (`server.schemas.visit.CheckSpec`):
+    what the participant chose and what was right under their session's sort rule."""
+
+    __tablename__ = "check_attempts"
+    __table_args__ = (UniqueConstraint("session_id", "attempt"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
+    attempt: Mapped[int] = mapped_column(Integer)
+    """1 for the first try."""
+    answers: Mapped[dict[str, Any]] = mapped_column()
+    """{question id: the chosen value}."""
+    expected: Mapped[dict[str, Any]] = mapped_column()
+    """{question id: the right value}, computed from the session's sort rule at the time."""
+    questions: Mapped[dict[str, Any]] = mapped_column()
+    """{question id: its text}, exactly as shown."""
+    correct: Mapped[bool] = mapped_column()
+    answered_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+
+class QuestionnaireAnswer(Base):
+    """One item of an online study's questionnaire as submitted; an item skipped has no value."""
+
+    __tablename__ = "questionnaire_answers"
+    __table_args__ = (UniqueConstraint("session_id", "instrument", "item"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
+    instrument: Mapped[str] = mapped_column(String(40))
+    """`nasa_tlx`, `trust`, `demographics` or `custom` (the researcher's items)."""
+    item: Mapped[str] = mapped_column(String(40))
+    text: Mapped[str] = mapped_column(Text)
+    """The item exactly as shown."""
+    value_number: Mapped[float | None] = mapped_column(Float)
+    """A Likert point (1..points) or a number; None for choices and text."""
+    value_text: Mapped[str | None] = mapped_column(Text)
+    """A choice, free text, or "Prefer not to say"."""
+    answered_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+
 class FittedAdvisorModel(Base):
     """An advisor model fitted to a study's sessions (`learner.fitted.FittedModel`). It is
     made from their participants' advice, so deleting any of those sessions (or their

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import html
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +28,13 @@ from sqlalchemy import func, select
 from starlette.concurrency import run_in_threadpool
 
 import sim
-from server.db.models import Advice, Status
+from server.db.models import Advice, Outcome, Status
+from server.live.visits import end_visit
+from server.schemas.instruments import PREFER_NOT_TO_SAY
+from server.schemas.participant import CheckState
+from server.schemas.visit import Section
 from server.services import consent as consent_service
+from server.services import visit as visit_service
 from server.services.errors import Conflict, Invalid
 from server.services.sessions import session_for_token
 from server.viewer.camera import viser_camera_params
@@ -63,6 +68,18 @@ class Visit:
     ready: bool = False
     shown_texts: dict[str, str] | None = None
     """The stored texts version this participant consented to (None before consent)."""
+    online: bool = False
+    """The study has a design (an online study): check, questionnaire, an outcome page."""
+    check: CheckState = field(default_factory=lambda: CheckState(required=False))
+    questionnaire_due: bool = False
+    """The design asks a questionnaire and this participant has not submitted it."""
+    outcome: str | None = None
+    """How the visit ended (`Outcome`); None while it goes on, and always in a lab study."""
+
+    @property
+    def check_pending(self) -> bool:
+        """A comprehension check must be passed before the advice starts."""
+        return self.check.required and not self.check.passed
 
     @property
     def started(self) -> bool:
@@ -97,6 +114,7 @@ def _visit(request: Request, token: str) -> Visit | None:
             return None
         given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
         version = session.texts_version
+        questionnaire = visit_service.questionnaire_state(db, session)
         return Visit(
             token=token,
             session_id=session.id,
@@ -113,6 +131,10 @@ def _visit(request: Request, token: str) -> Visit | None:
                 if version is not None and session.consented_at is not None
                 else None
             ),
+            online=session.study.design is not None,
+            check=visit_service.check_state(db, session),
+            questionnaire_due=questionnaire.required and questionnaire.submitted_at is None,
+            outcome=session.outcome,
         )
 
 
@@ -121,9 +143,11 @@ visit_for_token = _visit
 
 async def _load(request: Request, token: str, warm_up: bool = True) -> Visit | None:
     """The visit; opening the link starts the session's random pretraining (the robot
-    practises while the participant reads), advice waits for consent and induction."""
+    practises while the participant reads), advice waits for consent and induction. A visit
+    that ended (an outcome) starts nothing."""
     visit = await run_in_threadpool(_visit, request, token)
-    if visit is not None and warm_up and visit.status in (Status.created, Status.abandoned):
+    waiting = visit is not None and visit.status in (Status.created, Status.abandoned)
+    if visit is not None and warm_up and waiting and visit.outcome is None:
         await request.app.state.manager.welcome(visit.session_id)
         visit = await run_in_threadpool(_visit, request, token)
     return visit
@@ -147,11 +171,15 @@ def _go(visit: Visit, where: str) -> RedirectResponse:
 
 
 def _resume_point(visit: Visit) -> str:
+    if visit.outcome is not None:
+        return "end"
     if not visit.consented:
         return "consent"
     if not visit.ready:
-        return "induction/1"
-    return "thanks" if visit.done else "advise"
+        return "check" if visit.check.tries_used else "induction/1"
+    if visit.done:
+        return "questionnaire" if visit.online else "thanks"
+    return "advise"
 
 
 @router.get("/p/{token}")
@@ -253,9 +281,51 @@ def thanks(request: Request, token: str) -> Response:
     visit = _visit(request, token)
     if visit is None:
         return _error(request)
-    if not visit.started or not visit.done:
+    if not visit.started or not visit.done or visit.online:  # an online visit ends at /end
         return _go(visit, _resume_point(visit))
     return _page(request, "participant/thanks.html", visit, body=visit.text("thanks"))
+
+
+@router.get("/p/{token}/check")
+async def check(request: Request, token: str) -> Response:
+    """An online study's comprehension check, between the induction and the advice."""
+    visit = await _load(request, token)
+    if visit is None:
+        return _error(request)
+    if visit.outcome is not None or not visit.consented or visit.started:
+        return _go(visit, _resume_point(visit))
+    if not visit.check.required:
+        return _go(visit, "induction/3")
+    return _page(request, "participant/check.html", visit, check=visit.check)
+
+
+@router.get("/p/{token}/questionnaire")
+async def questionnaire(request: Request, token: str) -> Response:
+    """An online study's questionnaire after the advice; a design without one completes
+    the visit here (the server already did with the last advice)."""
+    visit = await run_in_threadpool(_visit, request, token)
+    if visit is None:
+        return _error(request)
+    if visit.outcome is not None or not visit.started or not visit.done or not visit.online:
+        return _go(visit, _resume_point(visit))
+    if not visit.questionnaire_due:
+        await end_visit(request.app.state.manager, visit.session_id, Outcome.completed)
+        return _go(visit, "end")
+    sections = await run_in_threadpool(_sections, request, token)
+    return _page(
+        request,
+        "participant/questionnaire.html",
+        visit,
+        sections=sections,
+        prefer_not_to_say=PREFER_NOT_TO_SAY,
+    )
+
+
+def _sections(request: Request, token: str) -> list[Section]:
+    with request.app.state.session_factory() as db:
+        session = session_for_token(db, token)
+        assert session is not None, "the visit was just read"
+        return visit_service.questionnaire_state(db, session).sections
 
 
 def scene_src(request: Request) -> str:

@@ -1,26 +1,38 @@
 """What a participant's page calls, with the token from their link (one session only)."""
 
+from collections.abc import Callable
+from typing import TypeVar
+
 from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
+from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
-from server.db.models import StudySession
+from server.db.models import Outcome, StudySession
 from server.deps import ManagerDep, ParticipantDep
 from server.live import advising
+from server.live.visits import end_visit
 from server.routes.pages import visit_for_token
 from server.schemas.participant import (
     AdviceCreate,
     AdviceReceipt,
+    CheckCreate,
+    CheckResult,
+    CheckState,
     ConsentCreate,
     ConsentState,
     ParticipantState,
+    QuestionnaireCreate,
+    QuestionnaireState,
     Readiness,
 )
 from server.services import consent as consent_service
-from server.services.errors import NotFound
+from server.services import visit as visit_service
+from server.services.errors import Conflict, NotFound
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
 MAX_WAIT_S = 30.0
+T = TypeVar("T")
 
 
 @router.get("/state")
@@ -82,13 +94,19 @@ def _finish_induction(manager: ManagerDep, session_id: int) -> None:
         row = db.get(StudySession, session_id)
         if row is None:
             raise NotFound("this session no longer exists")
+        if not visit_service.check_passed(db, row):
+            raise Conflict(
+                "the comprehension check comes first: pass it (GET/POST "
+                "/api/participant/check), then start"
+            )
         consent_service.finish_induction(db, row)
 
 
 @router.post("/start")
 async def start(session: ParticipantDep, manager: ManagerDep) -> ParticipantState:
-    """The participant finished the induction (after consent; 409 before it): start the
-    session if its link has not already, and let it ask for advice."""
+    """The participant finished the induction (after consent, and after an online study's
+    comprehension check; 409 before them): start the session if its link has not already,
+    and let it ask for advice."""
     await run_in_threadpool(_finish_induction, manager, session.id)
     await manager.welcome(session.id)
     manager.set_ready(session.id)
@@ -129,6 +147,9 @@ async def give_advice(
     ),
 ) -> AdviceReceipt:
     receipt = await advising.submit_advice(manager, session, body)
+    last = not receipt.duplicate and receipt.advice_index + 1 >= session.advice_budget
+    if last and await run_in_threadpool(_visit_ends_with_advice, manager, session.id):
+        await end_visit(manager, session.id, Outcome.completed)
     if wait > 0:
         await manager.wait_change(session.id, receipt.version, wait)
         receipt.state = await advising.current_state(manager, session)
@@ -143,3 +164,71 @@ def observation(session: ParticipantDep, manager: ManagerDep) -> Response:
     if png is None:
         raise NotFound("there is no observation yet; the session has not asked for advice")
     return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
+
+
+def _visit_ends_with_advice(manager: ManagerDep, session_id: int) -> bool:
+    """An online study without a questionnaire completes the visit with the last advice."""
+    with manager.factory() as db:
+        row = db.get(StudySession, session_id)
+        if row is None or visit_service.design_of(row) is None:
+            return False
+        return visit_service.questionnaire_of(row) is None and visit_service.advice_done(db, row)
+
+
+def _with_session(
+    manager: ManagerDep, session_id: int, act: Callable[[Session, StudySession], T]
+) -> T:
+    with manager.factory() as db:
+        row = db.get(StudySession, session_id)
+        if row is None:
+            raise NotFound("this session no longer exists")
+        return act(db, row)
+
+
+@router.get("/check")
+async def get_check(session: ParticipantDep, manager: ManagerDep) -> CheckState:
+    """An online study's comprehension check (questions and choices, never the answers)
+    and this participant's tries; `required` False for a lab study."""
+    return await run_in_threadpool(_with_session, manager, session.id, visit_service.check_state)
+
+
+@router.post("/check")
+async def answer_check(
+    session: ParticipantDep, manager: ManagerDep, body: CheckCreate
+) -> CheckResult:
+    """One try at the check, graded under the session's sort rule. The last try wrong ends
+    the visit as `excluded` (its worker stops); a pass lets `POST /start` go on."""
+    result = await run_in_threadpool(
+        _with_session,
+        manager,
+        session.id,
+        lambda db, row: visit_service.answer_check(db, row, body.answers),
+    )
+    if result.excluded:
+        await end_visit(manager, session.id, Outcome.excluded)
+    return result
+
+
+@router.get("/questionnaire")
+async def get_questionnaire(session: ParticipantDep, manager: ManagerDep) -> QuestionnaireState:
+    """An online study's questionnaire (its sections and items), whether it may be
+    answered yet (after the advice) and whether it was; `required` False for a lab study."""
+    return await run_in_threadpool(
+        _with_session, manager, session.id, visit_service.questionnaire_state
+    )
+
+
+@router.post("/questionnaire")
+async def submit_questionnaire(
+    session: ParticipantDep, manager: ManagerDep, body: QuestionnaireCreate
+) -> QuestionnaireState:
+    """The questionnaire, once, after the advice: it completes the visit (the learner
+    trains on; the completion never waits for it)."""
+    state = await run_in_threadpool(
+        _with_session,
+        manager,
+        session.id,
+        lambda db, row: visit_service.submit_questionnaire(db, row, body.answers),
+    )
+    await end_visit(manager, session.id, Outcome.completed)
+    return state

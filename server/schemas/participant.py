@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.schemas.types import Int, Number
+from server.schemas.types import Int, Key, Number, Text
+from server.schemas.visit import Section
 from sim.actions import ACTION_NAMES
 
 MAX_DECISION_TIME_S = 86_400.0
@@ -117,3 +119,67 @@ class Readiness(BaseModel):
     steps_done: int = Field(description="Environment steps taken so far.")
     steps_before_first_turn: int = Field(description="Random steps before the first advice.")
     ready: bool = Field(description="The robot waits for (or already asks) the first advice.")
+
+
+class CheckChoice(BaseModel):
+    value: str
+    label: str
+
+
+class CheckQuestionShown(BaseModel):
+    """A comprehension check question as the participant sees it (never its answer)."""
+
+    id: str
+    text: str
+    choices: list[CheckChoice]
+
+
+class CheckState(BaseModel):
+    """The comprehension check of an online study, and how far this participant is."""
+
+    required: bool = Field(description="The study asks the check before the advice starts.")
+    questions: list[CheckQuestionShown] = Field(default_factory=list)
+    tries: int = Field(default=0, description="Tries allowed.")
+    tries_used: int = 0
+    passed: bool = False
+    excluded: bool = Field(default=False, description="Every try failed: the visit has ended.")
+
+
+class CheckCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    answers: dict[Key, Key] = Field(
+        max_length=50, description="{question id: chosen value}, one for every question."
+    )
+
+
+class CheckResult(CheckState):
+    correct: bool = Field(description="Every answer of this try was right.")
+    wrong: list[str] = Field(
+        default_factory=list, description="Ids of the questions answered wrong (not the answers)."
+    )
+
+
+Answer = Int | Number | Annotated[Text, Field(max_length=5000)] | None
+"""One item's answer; an item's own `max_length` (at most 5000) is checked against it."""
+
+
+class QuestionnaireCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    answers: dict[Key, dict[Key, Answer]] = Field(
+        max_length=20,
+        description="{instrument: {item id: answer}}: a Likert point (1..points), a number, a "
+        'choice or text, or "Prefer not to say" where offered; leave an optional item out '
+        "(or null) to skip it.",
+    )
+
+
+class QuestionnaireState(BaseModel):
+    """The questionnaire of an online study (the sections with their items, as the design
+    has them) and whether this participant submitted it."""
+
+    required: bool = Field(description="The study asks a questionnaire after the advice.")
+    sections: list[Section] = Field(default_factory=list)
+    available: bool = Field(default=False, description="The advice is done: it may be answered.")
+    submitted_at: datetime | None = None

@@ -15,6 +15,7 @@ from learner.fields import leaves
 from learner.records import EpisodeRecord, StepRecord
 from learner.run import RunSpec
 from server.services.tables import Column, column
+from server.services.visit_export import VISIT_COLUMNS
 
 SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session id (unique in the database)."),
@@ -206,4 +207,8 @@ def table_columns(spec_class: type[RunSpec] = RunSpec) -> dict[str, list[Column]
         "steps": _record_columns("steps"),
         "advice": [column(name, *spec) for name, spec in ADVICE_COLUMNS.items()],
         "texts_versions": [column(name, *spec) for name, spec in TEXTS_COLUMNS.items()],
+        **{
+            table: [column(name, *spec) for name, spec in specs.items()]
+            for table, specs in VISIT_COLUMNS.items()
+        },
     }

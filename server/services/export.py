@@ -29,7 +29,7 @@ from learner.fields import leaves
 from learner.run import RunSpec
 from server.analysis.settings import where
 from server.db.models import Advice, Episode, Step, StudySession, StudyTexts
-from server.services import learning
+from server.services import learning, visit_export
 from server.services.columns import TEXT_KEYS, table_columns
 from server.services.studies import get_study
 from server.services.tables import column, resource, write_csv, write_parquet
@@ -37,13 +37,14 @@ from sim.actions import ACTION_NAMES
 from sim.rules import SortRule
 
 FORMATS = ("csv", "parquet")
-TABLES = ("sessions", "episodes", "steps", "advice", "texts_versions")
+TABLES = ("sessions", "episodes", "steps", "advice", "texts_versions", *visit_export.KEYS)
 KEYS: dict[str, dict[str, Any]] = {
     "sessions": {"primaryKey": ["session_id"]},
     "episodes": {"primaryKey": ["session_id", "stage", "episode"]},
     "steps": {"primaryKey": ["session_id", "global_step"]},
     "advice": {"primaryKey": ["session_id", "advice_index"]},
     "texts_versions": {"primaryKey": ["study_id", "texts_version"]},
+    **visit_export.KEYS,
 }
 BATCH = 5000
 DICTIONARY_COLUMNS = [
@@ -179,6 +180,7 @@ def export_study(
         "episodes": _records(db, Episode, sessions, Episode.first_global_step),
         "steps": _records(db, Step, sessions, Step.global_step),
         "advice": _advice_rows(db, sessions, out),
+        **visit_export.visit_rows(db, sessions),
     }
     write = write_parquet if fmt == "parquet" else write_csv
     counts, resources = {}, []

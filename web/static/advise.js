@@ -155,7 +155,7 @@
     // but never wait on it for long).
     await Promise.race([waitForPlayback(gen), sleep(LAST_MOVE_MS)]);
     await sleep(800);
-    window.location.assign(`/p/${config.token}/thanks`);
+    window.location.assign(`/p/${config.token}`);  // thanks, or an online study's questionnaire
   }
 
   // Before the first turn the robot practises with random moves; show how far it is.

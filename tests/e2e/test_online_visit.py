@@ -1,0 +1,145 @@
+"""In a real browser, through nginx as deployed: a participant of an online study (a study
+with a design) consents, reads the induction, answers the comprehension check wrong once
+(the page says which question, the start stays refused) and right the second time, gives
+the advice, is sent to the questionnaire instead of the thank-you page, fills it in (the
+page refuses it with a required item left), and lands on the visit's end page. The
+database then holds both tries, every item, and the completed outcome. Screenshots of the
+check and the questionnaire, on a desktop and on a phone (390x844)."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from playwright.sync_api import expect
+from sqlalchemy import select, update
+
+from server.db.models import CheckAttempt, QuestionnaireAnswer, Study, StudySession
+from server.schemas.design import StudyDesign
+from server.schemas.visit import Item, QuestionnaireSpec
+from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+BUDGET = 3
+PHONE = {"width": 390, "height": 844}
+RIGHT = {"blue_cube": "right", "red_disk": "left", "drop_at_centre": "keep"}
+"""Under the default sort rule by colour: blue right, red left."""
+TLX = {"mental": 60, "physical": 10, "temporal": 45, "performance": 25, "effort": 55,
+       "frustration": 20}  # fmt: skip
+
+
+CUSTOM = [
+    Item(id="clarity", kind="likert", text="The robot's moves were clear.", required=True,
+         points=5, anchors=["Strongly disagree", "Disagree", "Neutral", "Agree", "Strongly agree"]),
+    Item(id="minutes", kind="number", text="About how many minutes did it take?", minimum=0,
+         maximum=120),
+    Item(id="comments", kind="text", text="Anything else?", max_length=500),
+]  # fmt: skip
+"""The researcher's own items, after the built-ins."""
+
+
+def online_session(live: Live) -> dict[str, object]:
+    session = live.human_session(
+        "online visit", advice_budget=BUDGET, motion="fast", episodes=1, max_episode_steps=20
+    )
+    with live.app.state.session_factory() as db:
+        study_id = db.get(StudySession, session["id"]).study_id
+        design = StudyDesign(questionnaire=QuestionnaireSpec(items=CUSTOM)).model_dump(mode="json")
+        db.execute(update(Study).where(Study.id == study_id).values(design=design))
+        db.commit()
+    return session
+
+
+def phone_screenshot(browser, url: str, name: str) -> None:
+    """The same page on a phone, side by side with the desktop one (a GET changes nothing)."""
+    context = browser.new_context(viewport=PHONE, device_scale_factor=2, is_mobile=True)
+    page = context.new_page()
+    page.goto(url)
+    width = page.evaluate("document.documentElement.scrollWidth")
+    assert width <= PHONE["width"], f"the page is {width} px wide on a phone"
+    save_screenshot(page, name)
+    context.close()
+
+
+def test_an_online_participant_passes_the_check_advises_and_answers_the_questionnaire(
+    live: Live, browser
+) -> None:
+    session = online_session(live)
+    token = session["participant_token"]
+    context = browser.new_context(viewport=VIEWPORT)
+    page = context.new_page()
+    page.goto(session["participant_url"])
+    page.click("#agree")
+    for step in (1, 2, 3):
+        expect(page).to_have_url(re.compile(rf"/induction/{step}$"))
+        expect(page.locator("#start")).to_have_count(0)
+        page.click("#next")
+
+    expect(page).to_have_url(re.compile(r"/check$"))
+    expect(page.locator("h1")).to_have_text("A few questions about the task")
+    expect(page.locator("#tries-left")).to_have_text("2")
+    phone_screenshot(browser, page.url, "check-phone")
+    for question, value in {**RIGHT, "blue_cube": "left"}.items():
+        page.check(f"input[name='{question}'][value='{value}']")
+    page.click("#submit")
+    expect(page.locator("#check-error")).to_contain_text("Some answers are not right")
+    expect(page.locator("#tries-left")).to_have_text("1")
+    wrong = page.locator("fieldset[data-question='blue_cube'] .field-error")
+    expect(wrong).to_be_visible()
+    expect(page.locator("fieldset[data-question='red_disk'] .field-error")).to_be_hidden()
+    save_screenshot(page, "check", full_page=True)
+    with live.api(token) as participant:
+        refused = participant.post("/api/participant/start")
+        assert refused.status_code == 409, "no advice before the check is passed"
+    page.check("input[name='blue_cube'][value='right']")
+    page.click("#submit")
+
+    expect(page).to_have_url(re.compile(r"/advise$"), timeout=60_000)
+    for index in range(BUDGET):
+        button = page.locator(f"button.action[data-action='{index % 4}']")
+        expect(button).to_be_enabled(timeout=180_000)
+        button.click()
+        if index < BUDGET - 1:
+            expect(page.locator("#advice-left")).to_have_text(str(BUDGET - index - 1))
+
+    expect(page).to_have_url(re.compile(r"/questionnaire$"), timeout=60_000)
+    expect(page.locator("section.q-section")).to_have_count(4)
+    phone_screenshot(browser, page.url, "questionnaire-phone")
+    page.click("#submit")
+    expect(page.locator("#questionnaire-error")).to_contain_text("Please answer the 19 questions")
+    for item, value in TLX.items():
+        page.fill(f"input[name='nasa_tlx.{item}']", str(value))
+    for number in range(1, 13):
+        page.check(f"input[name='trust.item_{number:02d}'][value='{1 + number % 7}']")
+    page.check("input[name='demographics.age'][value='25-34']")
+    page.check("input[name='demographics.gender.prefer']")
+    page.check("input[name='custom.clarity'][value='4']")
+    page.fill("input[name='custom.minutes']", "12.5")
+    page.fill("input[name='custom.comments']", "Fun, if slow.")
+    expect(page.locator(".slider-value").first).to_have_text("60")
+    expect(page.locator("fieldset[data-item='mental'] .field-error")).to_be_hidden()
+    expect(page.locator("#questionnaire-error")).to_be_hidden()
+    save_screenshot(page, "questionnaire", full_page=True)
+    page.click("#submit")
+    expect(page).to_have_url(re.compile(rf"/p/{token}/end$"), timeout=30_000)
+    context.close()
+
+    with live.app.state.session_factory() as db:
+        row = db.get(StudySession, session["id"])
+        assert row.outcome == "completed" and row.outcome_at is not None
+        tries = db.scalars(
+            select(CheckAttempt).where(CheckAttempt.session_id == row.id).order_by("attempt")
+        ).all()
+        assert [t.correct for t in tries] == [False, True]
+        assert tries[0].answers["blue_cube"] == "left" and tries[1].expected == RIGHT
+        query = select(QuestionnaireAnswer).where(QuestionnaireAnswer.session_id == row.id)
+        answers = {(a.instrument, a.item): a for a in db.scalars(query)}
+    assert len(answers) == 6 + 12 + 4 + 3
+    assert {k: answers["nasa_tlx", k].value_number for k in TLX} == TLX
+    assert answers["trust", "item_06"].value_number == 7
+    assert answers["demographics", "gender"].value_text == "Prefer not to say"
+    assert answers["demographics", "robots"].value_text is None, "skipped"
+    assert answers["custom", "clarity"].value_number == 4
+    assert answers["custom", "minutes"].value_number == 12.5
+    assert answers["custom", "comments"].value_text == "Fun, if slow."

@@ -1,0 +1,87 @@
+// The questionnaire after the advice: collect each item's answer (a slider counts only
+// once moved), send them once, then go to the visit's end page.
+"use strict";
+(() => {
+  const config = JSON.parse(document.getElementById("page-config").textContent);
+  const form = document.getElementById("questionnaire-form");
+  const error = document.getElementById("questionnaire-error");
+  const submit = document.getElementById("submit");
+  const items = [...form.querySelectorAll("fieldset.item")];
+
+  for (const slider of form.querySelectorAll("input[type=range]")) {
+    const shown = slider.parentElement.querySelector(".slider-value");
+    const touch = () => {
+      slider.dataset.touched = "true";
+      slider.parentElement.classList.add("touched");
+      shown.textContent = slider.value;
+    };
+    slider.addEventListener("input", touch);
+    slider.addEventListener("change", touch);
+  }
+
+  // An answer given clears that item's "please answer".
+  form.addEventListener("change", (event) => {
+    const item = event.target.closest("fieldset.item");
+    if (item) item.querySelector(".field-error").hidden = true;
+    if (!form.querySelector(".field-error:not([hidden])")) error.hidden = true;
+  });
+
+  function answerOf(item) {
+    const kind = item.dataset.kind;
+    const prefer = item.querySelector("input[type=checkbox]:checked");
+    if (prefer) return prefer.value;
+    const range = item.querySelector("input[type=range]");
+    if (range) return range.dataset.touched ? Number(range.value) : null;
+    const checked = item.querySelector("input[type=radio]:checked");
+    if (kind === "likert") return checked ? Number(checked.value) : null;
+    if (kind === "choice") return checked ? checked.value : null;
+    const field = item.querySelector("input.field");
+    const text = field.value.trim();
+    if (!text) return null;
+    return kind === "number" ? Number(text) : text;
+  }
+
+  async function detail(response) {
+    const body = await response.json().catch(() => ({}));
+    if (typeof body.detail === "string") return body.detail;
+    if (Array.isArray(body.detail) && body.detail.length) return body.detail[0].msg;
+    return `error ${response.status}`;
+  }
+
+  form.addEventListener("submit", async (event) => {
+    event.preventDefault();
+    error.hidden = true;
+    const answers = {};
+    const missing = [];
+    for (const item of items) {
+      const value = answerOf(item);
+      item.querySelector(".field-error").hidden = true;
+      if (value === null && "required" in item.dataset) missing.push(item);
+      if (value === null) continue;
+      (answers[item.dataset.instrument] ??= {})[item.dataset.item] = value;
+    }
+    if (missing.length) {
+      for (const item of missing) item.querySelector(".field-error").hidden = false;
+      error.textContent = `Please answer the ${missing.length} question${missing.length === 1 ? "" : "s"} marked in red.`;
+      error.hidden = false;
+      missing[0].scrollIntoView({ block: "center" });
+      return;
+    }
+    submit.disabled = true;
+    submit.textContent = "Sending…";
+    try {
+      const response = await fetch("/api/participant/questionnaire", {
+        method: "POST",
+        headers: { Authorization: `Bearer ${config.token}`, "Content-Type": "application/json" },
+        body: JSON.stringify({ answers }),
+      });
+      if (!response.ok && response.status !== 409) throw new Error(await detail(response));
+      window.location.assign(`/p/${config.token}/end`);
+    } catch (e) {
+      error.textContent = `Your answers could not be sent (${e.message}). Please try again.`;
+      error.hidden = false;
+      submit.disabled = false;
+      submit.textContent = "Send my answers";
+    }
+  });
+})();
