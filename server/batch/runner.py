@@ -26,7 +26,7 @@ from learner.advisor_check import AdvisorCheck, checked_advisor
 from learner.run import PROCESS_BYTES, RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from server.batch.population import population_key
-from server.batch.progress import BatchProgress
+from server.batch.progress import BatchProgress, MachineShare
 from server.batch.sessions import completed_sources, ensure_session, find_session
 from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, run_spec
 from server.db.engine import make_engine, make_session_factory
@@ -492,7 +492,10 @@ class BatchRunner:
         if pending:
             self._announce_populations()
         backend = self.make_backend() if pending else None
-        bar = BatchProgress(self.states, enabled=self.options.progress)
+        share = (
+            MachineShare(usable_cores(), self.threads) if self.options.backend == "local" else None
+        )
+        bar = BatchProgress(self.states, self.options.progress, share)
         previous = _stop_on_sigterm()
         try:
             while backend is not None:
