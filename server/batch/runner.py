@@ -413,7 +413,8 @@ class BatchRunner:
             mates = [s for s in self.queue if self._key(db, s) == key]
         size = min(self.population, -(-len(mates) // max(1, free)))
         group = mates[: max(1, size)]
-        self.queue = [s for s in self.queue if s not in group]
+        taken = {id(s) for s in group}
+        self.queue = [s for s in self.queue if id(s) not in taken]
         return group
 
     def make_backend(self) -> Backend:
