@@ -101,10 +101,7 @@ def run_population(
             fail_session(factory, session_id, token, error)
             end(session_id, Status.failed.value)
     if runs:
-        _train(runs, conn, end)
-    for session_id in session_ids:
-        if session_id not in statuses:  # ended in a way nothing reported (a failing finish)
-            end(session_id, Status.failed.value)
+        _train(runs, conn, end, statuses)
     return statuses
 
 
@@ -112,7 +109,9 @@ def _train(
     runs: list[_Run],
     conn: Connection | None,
     end: Callable[[int, str], None],
+    ended: dict[int, str],
 ) -> None:
+    """Step the runs together until each has ended; `ended` holds those that have."""
     from learner.population import Population
 
     try:
@@ -127,11 +126,11 @@ def _train(
             run.saver = AgentSaver(population, index)
             _record_numerics(run, population.numerics(index))
         _step_until_done(population, runs, conn, end)
-    except Exception as error:
-        for index in population.active:
-            run = runs[index]
-            fail_session(run.factory, run.session_id, run.token, error)
-            end(run.session_id, Status.failed.value)
+    except Exception as error:  # every run not ended yet fails (a finish that failed too)
+        for run in runs:
+            if run.session_id not in ended:
+                fail_session(run.factory, run.session_id, run.token, error)
+                end(run.session_id, Status.failed.value)
     finally:
         population.close()
 
