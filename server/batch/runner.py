@@ -392,7 +392,7 @@ class BatchRunner:
         """Runs trained together at most (`RunnerOptions.population`, or the default rule)."""
         if self.options.population is not None:
             return self.options.population
-        return default_population(self.spec.template.pinned())
+        return default_population(self.spec.template.pinned(), workers=self.options.workers)
 
     def _key(self, db: Session, state: RunState) -> Any:
         """The run's population key (`population_key`), from its session as stored."""
@@ -581,13 +581,13 @@ MEMORY_SHARE = 0.8
 """Of the machine's memory, what a batch's populations may fill with their agents."""
 
 
-def default_population(run: RunSpec, cores: int | None = None) -> int:
+def default_population(run: RunSpec, cores: int | None = None, workers: int | None = None) -> int:
     """How many runs a worker trains together when the batch leaves it open, by a simple
     rule: 16 on CUDA (one batched forward pass keeps the GPU busy), 8 on a CPU that runs
     bfloat16 natively (AVX-512 BF16 or AMX: each agent's update is short, so the process
     and the batched action choice are shared by more), 4 on other CPUs; and no more than
-    the memory holds when every core's worker (cores / torch threads) trains a population
-    of the run's size (`RunSpec.memory_needed`, `MEMORY_SHARE` of the memory).
+    the memory holds when each of the `workers` (default: cores / torch threads) trains a
+    population of the run's size (`RunSpec.memory_needed`, `MEMORY_SHARE` of the memory).
     benchmarks/bench_population.py measures agent-steps per second for 1, 2, 4 and 8; its
     run on a quiet machine is what decides these numbers."""
     config = run.config
@@ -597,7 +597,7 @@ def default_population(run: RunSpec, cores: int | None = None) -> int:
         size = POPULATION_BF16
     else:
         size = POPULATION_CPU
-    workers = max(1, (cores or usable_cores()) // max(1, config.torch_threads))
+    workers = workers or max(1, (cores or usable_cores()) // max(1, config.torch_threads))
     total = machine.total_memory()
     if total:  # one process's torch and simulator per worker, a replay memory per agent
         agent = run.memory_needed() - PROCESS_BYTES

@@ -32,6 +32,7 @@ def test_the_memory_caps_it_and_one_always_runs() -> None:
     assert 1 <= big < paper
     # More workers share the memory: each population is smaller.
     assert default_population(run(device="cuda", memory_size=frames // 20), cores=8) < big
+    assert default_population(run(device="cuda", memory_size=frames // 20), workers=8) < big
     # One agent's frames fill the machine: a population of one (the run alone).
     whole = min(frames, 10_000_000)
     assert default_population(run(device="cuda", memory_size=whole), cores=2) == 1
