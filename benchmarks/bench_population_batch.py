@@ -9,8 +9,9 @@
    side (`workers`: this machine's cores, one torch thread each). N=1 is the reference,
    today's best use of the cores: single runs side by side (two on two cores). The rate is
    training agent-steps per second, from the step records (all training steps of the batch,
-   over the time from its first training step to its last), and the batch's wall time
-   beside it. The sizes are run in turn, `--repeats` rounds; the ratio to the reference is
+   over the time from its first training step to its last), and beside it the batch's
+   wall time and its workers' peak resident memory (N separate runs against one
+   population of N). The sizes are run in turn, `--repeats` rounds; the ratio to the reference is
    taken within each round (the same machine load) and its median reported.
 2. A population step of N agents split into its parts, in this process, through the batch's
    own population worker (`server.batch.population.run_population`, recording to SQLite
@@ -30,6 +31,7 @@ import argparse
 import os
 import statistics
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
@@ -101,9 +103,45 @@ def training_rate(url: str, session_ids: list[int]) -> tuple[int, float]:
     return len(stamps), float(max(stamps) - min(stamps)) if stamps else 0.0
 
 
+def children_rss(parent: int) -> int:
+    """Resident bytes of `parent`'s child processes (the batch's workers), from /proc."""
+    total = 0
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rpartition(")")[2].split()
+            if int(fields[1]) == parent:
+                total += int(fields[21]) * os.sysconf("SC_PAGE_SIZE")
+        except (OSError, ValueError, IndexError):
+            continue
+    return total
+
+
+class PeakMemory:
+    """The peak of the workers' summed resident memory, sampled on a thread while a batch
+    runs (each run's process, or each population's: what N separate runs cost against one
+    population of N)."""
+
+    def __init__(self, every_s: float = 0.5) -> None:
+        self.peak = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sample, args=(every_s,), daemon=True)
+
+    def _sample(self, every_s: float) -> None:
+        while not self._stop.wait(every_s):
+            self.peak = max(self.peak, children_rss(os.getpid()))
+
+    def __enter__(self) -> PeakMemory:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
 def batch_rate(args: argparse.Namespace, size: int, workers: int) -> dict[str, float]:
     """One batch of `workers` x `size` runs, populations of `size`: its training
-    agent-steps per second and its wall time."""
+    agent-steps per second, its wall time and its workers' peak resident memory."""
     with tempfile.TemporaryDirectory() as tmp:
         url = f"sqlite:///{Path(tmp) / 'bench.sqlite3'}"
         study = fresh_study(url, "bench")
@@ -116,11 +154,13 @@ def batch_rate(args: argparse.Namespace, size: int, workers: int) -> dict[str, f
             checkpoint_every_episodes=args.checkpoint_every,
         )
         started = time.perf_counter()
-        result = run_batch(spec, study, url, options)
+        with PeakMemory() as memory:
+            result = run_batch(spec, study, url, options)
         wall = time.perf_counter() - started
         assert result.complete, [r.detail for r in result.runs]
         steps, seconds = training_rate(url, result.session_ids())
-    return {"rate": steps / seconds if seconds else float("nan"), "wall": wall, "steps": steps}
+    rate = steps / seconds if seconds else float("nan")
+    return {"rate": rate, "wall": wall, "steps": steps, "rss": memory.peak}
 
 
 class _Timed:
@@ -233,7 +273,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             log(
                 f"round {r + 1}, N={size}: {args.workers} x {size} runs, {result['steps']} "
                 f"training steps, {result['rate']:.1f} agent-steps/s, batch {result['wall']:.0f} s"
-                f"; {load()}"
+                f", workers' peak resident memory {result['rss'] / 2**20:.0f} MiB; {load()}"
             )
     log(
         f"\ntraining agent-steps per second, {args.workers} populations of N side by side "
@@ -244,9 +284,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         ratios = [r["rate"] / ref["rate"] for r, ref in zip(rounds[size], rounds[1], strict=True)]
         rate = statistics.median(r["rate"] for r in rounds[size])
         wall = statistics.median(r["wall"] for r in rounds[size])
+        rss = statistics.median(r["rss"] for r in rounds[size]) / 2**20
         log(
             f"  N={size:2}: {rate:7.1f} agent-steps/s  {statistics.median(ratios):5.2f}x  "
-            f"(batch of {args.workers * size} runs: {wall:.0f} s)"
+            f"(batch of {args.workers * size} runs: {wall:.0f} s; workers' peak resident "
+            f"memory {rss:.0f} MiB, {rss / (args.workers * size):.0f} MiB per agent)"
         )
     log("\na population step by part (ms per agent-step, over the whole run; one process)")
     for size in args.profile_sizes:
