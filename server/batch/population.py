@@ -115,7 +115,7 @@ def _train(
     from learner.population import Population
 
     try:
-        population = Population.of([run.trainer for run in runs])  # type: ignore[arg-type]
+        population = Population.of([run.trainer for run in runs])  # type: ignore[misc]
     except ValueError as error:  # their numerics were settled apart when claimed
         for run in runs:
             fail_session(run.factory, run.session_id, run.token, error)
