@@ -11,11 +11,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session
 
+from server.db.migrate import upgrade
 from server.db.models import Advice, Step, StudySession
 from tests.server.batch.helpers import SCALE, Place, in_process, sessions, start_ideeprl, study_id
 
@@ -174,3 +175,31 @@ def test_a_population_whose_worker_is_killed_resumes_to_the_same_records(
         assert session.status == "finished"
         assert population_of(session)["population_size"] == 3  # type: ignore[index]
         assert_same_records(engine, reference[run], session)
+
+
+def test_an_error_in_a_population_fails_its_agents_and_each_resumes(
+    place: Place, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A real fault: the second agent's checkpoint folder is a file, so its first checkpoint
+    raises; every agent still training fails with the traceback, and the same command, once
+    the fault is gone, resumes both from their last checkpoints to the end."""
+    engine = place.engine()
+    upgrade(engine)  # the tables, when this test runs first
+    with Session(engine) as db:  # the batch creates the next two sessions, in plan order
+        last = db.scalar(select(func.max(StudySession.id))) or 0
+    blocker = place.data_dir / "checkpoints" / f"session-{last + 2}"
+    blocker.parent.mkdir(parents=True, exist_ok=True)
+    blocker.write_text("not a folder")
+    failing = ["batch", "--study", "failing", "--methods", "autonomous", "--agents", "2"]
+    failing += ["--workers", "1", "--population", "2", *SCALE]
+    code, out = in_process(place, capsys, *failing)
+    assert code == 1, out
+    rows = sessions(engine, study_id(engine, "failing"))
+    assert [s.id for s in rows] == [last + 1, last + 2]
+    assert [s.status for s in rows] == ["failed", "failed"], out
+    assert all("FileExistsError" in (s.status_detail or "") for s in rows)
+    blocker.unlink()
+    code, again = in_process(place, capsys, *failing)
+    assert code == 0, again
+    assert "failed before; it resumes from its last checkpoint" in again
+    assert [s.status for s in sessions(engine, study_id(engine, "failing"))] == ["finished"] * 2
