@@ -20,7 +20,8 @@
    (the 64x64 camera image), and the rest (replay memory, records, bookkeeping).
 
 Other processes share the CPUs: compare ratios, not times. The CPU kind and the load
-average are printed with the numbers.
+average are printed with the numbers. Populations end to end, through `ideeprl batch` with
+records in SQLite and checkpoints: `benchmarks/bench_population_batch.py`.
 """
 
 from __future__ import annotations

@@ -177,6 +177,17 @@ class DQNConfig:
         return self.from_dict({**self.to_dict(), **changes})
 
 
+PER_AGENT_FIELDS = ("advice_budget", "episodes")
+"""Config fields agents computed together may differ in: they decide how long an agent
+runs and how much advice it may get, never what its network computes (an unadvised run's
+budget is 0, an advised one's is not, and they still share a population)."""
+
+
+def shared_config(config: DQNConfig) -> DQNConfig:
+    """What agents computed together must share: `config` without `PER_AGENT_FIELDS`."""
+    return config.replace(advice_budget=0, episodes=1)
+
+
 def field_docs() -> dict[str, str]:
     """Each field's docstring, for help texts and the server's API documentation."""
     return field_docstrings(DQNConfig)

@@ -41,7 +41,7 @@ import numpy as np
 import torch
 
 from learner.advisors import Advisor
-from learner.config import DQNConfig
+from learner.config import PER_AGENT_FIELDS, DQNConfig, shared_config
 from learner.records import EpisodeRecord, StepRecord
 from learner.stacked import ConvMode, StackedAgents
 from learner.strategies import AdvisingStrategy
@@ -103,12 +103,39 @@ class Population:
     ) -> None:
         if not members:
             raise ValueError("a population needs at least one member")
-        if conv not in ("loop", "grouped"):
-            raise ValueError(f"conv must be 'loop' or 'grouped', got {conv!r}")
-        self.trainers = [
+        trainers = [
             Trainer(m.env, config, m.advisor, m.strategy, m.seed, m.callbacks) for m in members
         ]
-        self.config = config
+        self._setup(trainers, layout, conv, workers)
+
+    @classmethod
+    def of(
+        cls,
+        trainers: Sequence[Trainer],
+        layout: Layout = "auto",
+        conv: ConvMode = "loop",
+        workers: int = 1,
+    ) -> Population:
+        """A population of trainers built elsewhere (a batch worker builds each agent's
+        `Trainer` from its session, with its schedule and recording callbacks). Their
+        configs may differ only in `PER_AGENT_FIELDS` (`shared_config`)."""
+        if not trainers:
+            raise ValueError("a population needs at least one member")
+        population = cls.__new__(cls)
+        population._setup(list(trainers), layout, conv, workers)
+        return population
+
+    def _setup(self, trainers: list[Trainer], layout: Layout, conv: ConvMode, workers: int) -> None:
+        if conv not in ("loop", "grouped"):
+            raise ValueError(f"conv must be 'loop' or 'grouped', got {conv!r}")
+        shared = {shared_config(t.config) for t in trainers}
+        if len(shared) > 1:
+            raise ValueError(
+                "a population's agents share one learner configuration (they may differ in "
+                f"{', '.join(PER_AGENT_FIELDS)} only)"
+            )
+        self.trainers = trainers
+        config = self.config = trainers[0].config
         self.layout = resolve_layout(layout, config, self.trainers[0].device)
         self.conv: ConvMode = conv
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:

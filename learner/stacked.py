@@ -32,6 +32,7 @@ import torch
 import torch.nn.functional as F
 
 from learner.agent import DQNAgent
+from learner.config import shared_config
 from learner.network import QNetwork
 from learner.phase_conv import PhaseConvForward, PhaseLayout, phase_max_bias_relu, space_to_depth
 from learner.replay import ReplaySample
@@ -113,7 +114,7 @@ class StackedAgents:
         if not agents:
             raise ValueError("a population needs at least one agent")
         config = agents[0].config
-        if any(agent.config != config for agent in agents):
+        if any(shared_config(agent.config) != shared_config(config) for agent in agents):
             raise ValueError("agents computed together must share one config")
         if config.update != "fast":
             raise ValueError("stacked agents compute the fast update (config update='fast')")

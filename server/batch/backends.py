@@ -1,8 +1,10 @@
 """Where a batch's runs execute: worker processes on this machine, or tasks on Ray.
 
-Either way a run is `server.worker.worker.run_session` in a process of its own, writing
-to the shared database; a backend only starts runs, says which have ended, and stops the
-rest so they can resume later.
+A backend is handed groups of runs: a group of one is `server.worker.worker.run_session`
+in a process of its own, a larger group a population (`server.batch.population`: runs
+sharing one learner configuration, trained together in one process); either way each run
+writes its own session in the shared database. A backend only starts groups, says which
+runs have ended, and stops the rest so they can resume later.
 """
 
 from __future__ import annotations
@@ -13,12 +15,13 @@ import logging
 import multiprocessing
 import os
 import signal
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import Any, Protocol
 
+from server.batch.population import NOT_RUN, run_population
 from server.worker.messages import Command
 from server.worker.worker import WorkerOptions, run_session
 
@@ -26,8 +29,6 @@ ROOT = Path(__file__).absolute().parents[2]
 STOP_WAIT_S = 60.0
 KNOWN_ENDINGS = ("finished", "failed", "stopped", "interrupted", "abandoned", "lost")
 """What `run_session` returns; anything else is a problem to report."""
-NOT_RUN = "not run: "
-"""How a worker reports a session it could not claim (another runner has it)."""
 
 
 def usable_cores() -> int:
@@ -40,10 +41,14 @@ def usable_cores() -> int:
 
 class Backend(Protocol):
     capacity: int
-    """Runs it executes at once."""
+    """Groups it executes at once (worker processes, or Ray tasks)."""
 
-    def start(self, session_id: int) -> None:
-        """Run the session to its end (it claims it: created starts, interrupted resumes)."""
+    def start(self, session_ids: tuple[int, ...]) -> None:
+        """Run the sessions to their end, together when more than one (each is claimed:
+        created starts, interrupted resumes)."""
+
+    def busy(self) -> int:
+        """Groups running."""
 
     def ended(self) -> dict[int, str]:
         """Sessions whose run has ended since the last call, with a problem ("" if none)."""
@@ -58,9 +63,10 @@ class Backend(Protocol):
 
 @dataclass(frozen=True)
 class RunRequest:
-    """Runner -> idle worker: run this session to its end."""
+    """Runner -> idle worker: run these sessions to their end (more than one: together, as a
+    population)."""
 
-    session_id: int
+    session_ids: tuple[int, ...]
 
 
 @dataclass(frozen=True)
@@ -92,23 +98,46 @@ def _worker_loop(database_url: str, options: WorkerOptions, conn: Connection) ->
         if not isinstance(message, RunRequest):
             return  # Command("shutdown") between runs
         try:
-            status = run_session(message.session_id, database_url, options, conn=conn)
-        except Exception as error:  # could not even claim it (e.g. someone else runs it)
-            status = f"{NOT_RUN}{error}"
-        gc.collect()  # the last run's memory and PyBullet world, before the next
-        try:
-            conn.send(RunEnded(message.session_id, status))
+            statuses = run_group(message.session_ids, database_url, options, conn)
         except OSError:
             return
-        if status == "interrupted":  # shut down by the runner, or the runner died
+        gc.collect()  # the last runs' memory and PyBullet worlds, before the next
+        if "interrupted" in statuses.values():  # shut down by the runner, or the runner died
             return
+
+
+def run_group(
+    session_ids: tuple[int, ...],
+    database_url: str,
+    options: WorkerOptions,
+    conn: Connection | None = None,
+) -> dict[int, str]:
+    """Run a group of sessions here (one alone, more as a population), telling `conn` as
+    each ends; their final statuses."""
+    if len(session_ids) > 1:
+
+        def tell(session_id: int, status: str) -> None:
+            if conn is not None:
+                with contextlib.suppress(OSError):  # a runner gone: the link notices it
+                    conn.send(RunEnded(session_id, status))
+
+        return run_population(session_ids, database_url, options, conn, tell)
+    (session_id,) = session_ids
+    try:
+        status = run_session(session_id, database_url, options, conn=conn)
+    except Exception as error:  # could not even claim it (e.g. someone else runs it)
+        status = f"{NOT_RUN}{error}"
+    if conn is not None:
+        conn.send(RunEnded(session_id, status))
+    return {session_id: status}
 
 
 @dataclass
 class _Worker:
     process: BaseProcess
     conn: Connection
-    session_id: int | None = None
+    session_ids: set[int] = field(default_factory=set)
+    """The runs it has not reported ended yet; empty: idle."""
 
 
 class LocalBackend:
@@ -141,11 +170,14 @@ class LocalBackend:
         self._workers.append(worker)
         return worker
 
-    def start(self, session_id: int) -> None:
-        idle = [w for w in self._workers if w.session_id is None and w.process.is_alive()]
+    def start(self, session_ids: tuple[int, ...]) -> None:
+        idle = [w for w in self._workers if not w.session_ids and w.process.is_alive()]
         worker = idle[0] if idle else self._spawn()
-        worker.conn.send(RunRequest(session_id))
-        worker.session_id = session_id
+        worker.conn.send(RunRequest(session_ids))
+        worker.session_ids = set(session_ids)
+
+    def busy(self) -> int:
+        return sum(bool(w.session_ids) for w in self._workers)
 
     def _read(self, worker: _Worker) -> None:
         """Everything the worker has said; the runner reads progress from the database, but
@@ -153,25 +185,25 @@ class LocalBackend:
         with contextlib.suppress(EOFError, OSError):
             while worker.conn.poll():
                 message = worker.conn.recv()
-                if isinstance(message, RunEnded) and message.session_id == worker.session_id:
+                if isinstance(message, RunEnded) and message.session_id in worker.session_ids:
                     problem = "" if message.status in KNOWN_ENDINGS else message.status
                     self._ended[message.session_id] = problem
-                    worker.session_id = None
+                    worker.session_ids.discard(message.session_id)
 
     def ended(self) -> dict[int, str]:
         for worker in list(self._workers):
             self._read(worker)
             if not worker.process.is_alive():
-                if worker.session_id is not None:
-                    code = worker.process.exitcode
-                    self._ended[worker.session_id] = f"its worker exited with code {code}"
+                code = worker.process.exitcode
+                for session_id in worker.session_ids:
+                    self._ended[session_id] = f"its worker exited with code {code}"
                 worker.conn.close()
                 self._workers.remove(worker)
         ended, self._ended = self._ended, {}
         return ended
 
     def running(self) -> list[int]:
-        return [w.session_id for w in self._workers if w.session_id is not None]
+        return [session_id for w in self._workers for session_id in sorted(w.session_ids)]
 
     def stop(self) -> None:
         for worker in self._workers:
@@ -193,11 +225,10 @@ class LocalBackend:
         self._workers.clear()
 
 
-def _run_on_ray(session_id: int, database_url: str, options: WorkerOptions) -> str:
-    try:
-        return run_session(session_id, database_url, options)
-    except Exception as error:  # could not even claim it
-        return f"{NOT_RUN}{error}"
+def _run_on_ray(
+    session_ids: tuple[int, ...], database_url: str, options: WorkerOptions
+) -> dict[int, str]:
+    return run_group(session_ids, database_url, options)
 
 
 class RayBackend:
@@ -205,8 +236,8 @@ class RayBackend:
 
     Every node must reach the database (PostgreSQL for a cluster; a SQLite file only on
     this machine) and the data folder (checkpoints, the advisor's), and have this package
-    installed. A stopped run's task is cancelled: its session resumes from its last
-    periodic checkpoint."""
+    installed. A group (a population) is one task. A stopped run's task is cancelled: its
+    sessions resume from their last periodic checkpoints."""
 
     def __init__(
         self,
@@ -239,11 +270,14 @@ class RayBackend:
         cluster_cpus = int(ray.cluster_resources().get("CPU", 1))
         self.capacity = workers or max(1, cluster_cpus // cpus_per_run)
         self._remote = ray.remote(num_cpus=cpus_per_run, max_retries=0)(_run_on_ray)
-        self._tasks: dict[Any, int] = {}
+        self._tasks: dict[Any, tuple[int, ...]] = {}
 
-    def start(self, session_id: int) -> None:
-        ref = self._remote.remote(session_id, self.database_url, self.options)
-        self._tasks[ref] = session_id
+    def start(self, session_ids: tuple[int, ...]) -> None:
+        ref = self._remote.remote(session_ids, self.database_url, self.options)
+        self._tasks[ref] = session_ids
+
+    def busy(self) -> int:
+        return len(self._tasks)
 
     def ended(self) -> dict[int, str]:
         if not self._tasks:
@@ -251,16 +285,17 @@ class RayBackend:
         ready, _ = self._ray.wait(list(self._tasks), num_returns=len(self._tasks), timeout=0)
         done = {}
         for ref in ready:
-            session_id = self._tasks.pop(ref)
+            session_ids = self._tasks.pop(ref)
             try:
-                status = self._ray.get(ref)
-                done[session_id] = "" if status in KNOWN_ENDINGS else status
+                statuses = self._ray.get(ref)
+                for session_id, status in statuses.items():
+                    done[session_id] = "" if status in KNOWN_ENDINGS else status
             except Exception as error:
-                done[session_id] = f"its Ray task failed: {error}"
+                done.update({s: f"its Ray task failed: {error}" for s in session_ids})
         return done
 
     def running(self) -> list[int]:
-        return list(self._tasks.values())
+        return [session_id for group in self._tasks.values() for session_id in group]
 
     def stop(self) -> None:
         for ref in self._tasks:

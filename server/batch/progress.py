@@ -1,9 +1,15 @@
 """One tqdm bar for a whole batch: runs done (running ones count by their episodes),
-which are running and how far, and the time left."""
+which are running and how far, and the time left; and, when the machine is shared (its
+load average above its cores), what that costs the batch: the share of a core each worker
+gets, measured from the workers' CPU time, and so how much slower its runs go than on a
+quiet machine."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+import time
+from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
@@ -18,6 +24,60 @@ BAR_FORMAT = (
 )
 
 
+SHARE_WINDOW_S = 10.0
+"""The workers' share of their cores is measured over at least this long."""
+
+
+def cpu_seconds(pid: int) -> float | None:
+    """CPU time (user and system) of process `pid` on this machine (Linux's /proc), or None."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+class MachineShare:
+    """Whether the machine is shared (load average above `cores`), and the share of the
+    `threads` cores it needs that each of the batch's workers gets."""
+
+    def __init__(self, cores: int, threads: int, window_s: float = SHARE_WINDOW_S) -> None:
+        self.cores = cores
+        self.threads = max(1, threads)
+        self.window_s = window_s
+        self._since: dict[int, tuple[float, float]] = {}
+        self.share: float | None = None
+        """The workers' mean share of the cores they need, over the last window."""
+
+    def sample(self, pids: Iterable[int]) -> None:
+        """Read the workers' CPU time; update `share` once a window has passed."""
+        now = time.monotonic()
+        shares = []
+        for pid in set(pids):
+            cpu = cpu_seconds(pid)
+            if cpu is None:
+                continue
+            since = self._since.setdefault(pid, (now, cpu))
+            if now - since[0] >= self.window_s:
+                shares.append((cpu - since[1]) / (now - since[0]) / self.threads)
+                self._since[pid] = (now, cpu)
+        if shares:
+            self.share = min(1.0, sum(shares) / len(shares))
+
+    def line(self) -> str | None:
+        """'machine shared: ...' while the load is above the cores, else None."""
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else 0.0
+        if load <= self.cores:
+            return None
+        text = f"machine shared: load {load:.1f} on {self.cores} cores"
+        if self.share is not None and self.share > 0:
+            text += (
+                f", workers get {self.share:.0%} of the CPU they need: runs about "
+                f"{1 / self.share:.1f}x slower than on a quiet machine"
+            )
+        return text
+
+
 def run_fraction(progress: dict[str, Any]) -> float:
     """How much of a run is done, by its training episodes (pretraining counts as none)."""
     episodes = progress.get("episodes") or 0
@@ -27,8 +87,11 @@ def run_fraction(progress: dict[str, Any]) -> float:
 
 
 class BatchProgress:
-    def __init__(self, states: Sequence[RunState], enabled: bool = True) -> None:
+    def __init__(
+        self, states: Sequence[RunState], enabled: bool = True, share: MachineShare | None = None
+    ) -> None:
         self.states = states
+        self.share = share
         done = sum(s.status == Status.finished.value for s in states)
         # smoothing=0: the time left comes from the average pace since the start, which
         # suits runs of similar length better than the last few updates.
@@ -64,9 +127,21 @@ class BatchProgress:
             postfix += f", {failed} failed"
         if running:
             postfix += ": " + ", ".join(running)
+        shared = self._shared(rows)
+        if shared:
+            postfix = f"{shared}; {postfix}"
         self.bar.n = round(done, 2)
         self.bar.set_postfix_str(postfix, refresh=False)
         self.bar.refresh()
+
+    def _shared(self, rows: dict[int, StudySession]) -> str | None:
+        if self.share is None:
+            return None
+        running = {s.session_id for s in self.states if s.status == Status.running.value}
+        self.share.sample(
+            row.worker_pid for sid, row in rows.items() if sid in running and row.worker_pid
+        )
+        return self.share.line()
 
     def write(self, message: str) -> None:
         self.bar.write(message)

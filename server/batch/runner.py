@@ -21,16 +21,18 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
+from learner import machine
 from learner.advisor_check import AdvisorCheck, checked_advisor
-from learner.run import RunSpec
+from learner.run import PROCESS_BYTES, RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
-from server.batch.progress import BatchProgress
+from server.batch.population import population_key
+from server.batch.progress import BatchProgress, MachineShare
 from server.batch.sessions import completed_sources, ensure_session, find_session
 from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, run_spec
 from server.db.engine import make_engine, make_session_factory
 from server.db.migrate import BACKUPS, upgrade
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
-from server.services import numerics
+from server.services import learning, numerics
 from server.services.errors import Invalid
 from server.services.ownership import set_status, take_back
 from server.services.schedules import write_schedule
@@ -80,6 +82,10 @@ class RunnerOptions:
     from the next seed. `record`: checked and recorded, never refused. `skip`: not checked."""
     advisor_attempts: int = 3
     """Advisors the batch trains at most (seeds advisor_seed, +1, ...) to get one that passes."""
+    population: int | None = None
+    """Runs trained together in one worker process, at most (`server.batch.population`),
+    among runs that share one learner configuration; None: `default_population`; 1: every
+    run alone, in a process of its own."""
 
 
 @dataclass
@@ -180,6 +186,7 @@ class BatchRunner:
         """Every advisor checkpoint checked by this batch, in order, with its check."""
         self.queue: list[RunState] = []
         self.elsewhere: list[RunState] = []
+        self._keys: dict[int | None, Any] = {}
         self.log: Callable[[str], None] = print
 
     # --- the runs' sessions ------------------------------------------------------------
@@ -380,6 +387,36 @@ class BatchRunner:
         """Torch threads of each run, as the runs are pinned on this machine."""
         return self.spec.template.pinned().config.torch_threads
 
+    @property
+    def population(self) -> int:
+        """Runs trained together at most (`RunnerOptions.population`, or the default rule)."""
+        if self.options.population is not None:
+            return self.options.population
+        return default_population(self.spec.template.pinned(), workers=self.options.workers)
+
+    def _key(self, db: Session, state: RunState) -> Any:
+        """The run's population key (`population_key`), from its session as stored."""
+        if state.session_id not in self._keys:
+            row = db.get(StudySession, state.session_id)
+            assert row is not None
+            self._keys[state.session_id] = population_key(learning.spec_of(row, self.spec_class))
+        return self._keys[state.session_id]
+
+    def _next_group(self, db: Session, free: int) -> list[RunState]:
+        """The first waiting run and the waiting runs that can train with it, taken off the
+        queue: at most `population`, and no more than fills the `free` workers evenly (three
+        runs on two free workers go as two and one, so no core idles)."""
+        first = self.queue[0]
+        key = self._key(db, first)
+        mates = [first]
+        if key is not None and self.population > 1:
+            mates = [s for s in self.queue if self._key(db, s) == key]
+        size = min(self.population, -(-len(mates) // max(1, free)))
+        group = mates[: max(1, size)]
+        taken = {id(s) for s in group}
+        self.queue = [s for s in self.queue if id(s) not in taken]
+        return group
+
     def make_backend(self) -> Backend:
         threads = self.threads
         worker = WorkerOptions(
@@ -453,16 +490,22 @@ class BatchRunner:
         self._announce()
         interrupted = False
         pending = bool(self.queue or self.elsewhere)
+        if pending:
+            self._announce_populations()
         backend = self.make_backend() if pending else None
-        bar = BatchProgress(self.states, enabled=self.options.progress)
+        share = (
+            MachineShare(usable_cores(), self.threads) if self.options.backend == "local" else None
+        )
+        bar = BatchProgress(self.states, self.options.progress, share)
         previous = _stop_on_sigterm()
         try:
             while backend is not None:
-                while self.queue and len(backend.running()) < backend.capacity:
-                    state = self.queue.pop(0)
-                    assert state.session_id is not None
-                    backend.start(state.session_id)
-                    state.status = Status.running.value
+                with self.factory() as db:
+                    while self.queue and backend.busy() < backend.capacity:
+                        group = self._next_group(db, backend.capacity - backend.busy())
+                        backend.start(tuple(s.session_id for s in group))  # type: ignore[misc]
+                        for state in group:
+                            state.status = Status.running.value
                 with self.factory() as db:
                     self._ended(db, backend)
                     self._watch_elsewhere(db)
@@ -490,6 +533,15 @@ class BatchRunner:
             if backend is not None:
                 backend.close()
         return BatchResult(self.study_id, self.states, time.monotonic() - started, interrupted)
+
+    def _announce_populations(self) -> None:
+        size = self.population
+        if size > 1:
+            how = "as asked" if self.options.population else "the default here"
+            self.log(
+                f"populations: up to {size} runs of one learner configuration train together "
+                f"in each worker ({how}; --population 1 runs each alone)"
+            )
 
     def _announce(self) -> None:
         counts: dict[str, int] = {}
@@ -520,6 +572,37 @@ class BatchRunner:
                     f"  {state.run.name} seed {state.run.seed}: session {state.session_id} "
                     "failed before; it resumes from its last checkpoint"
                 )
+
+
+POPULATION_CUDA = 16
+POPULATION_BF16 = 8
+POPULATION_CPU = 4
+MEMORY_SHARE = 0.8
+"""Of the machine's memory, what a batch's populations may fill with their agents."""
+
+
+def default_population(run: RunSpec, cores: int | None = None, workers: int | None = None) -> int:
+    """How many runs a worker trains together when the batch leaves it open, by a simple
+    rule: 16 on CUDA (one batched forward pass keeps the GPU busy), 8 on a CPU that runs
+    bfloat16 natively (AVX-512 BF16 or AMX: each agent's update is short, so the process
+    and the batched action choice are shared by more), 4 on other CPUs; and no more than
+    the memory holds when each of the `workers` (default: cores / torch threads) trains a
+    population of the run's size (`RunSpec.memory_needed`, `MEMORY_SHARE` of the memory).
+    benchmarks/bench_population.py measures agent-steps per second for 1, 2, 4 and 8; its
+    run on a quiet machine is what decides these numbers."""
+    config = run.config
+    if config.device.startswith("cuda"):
+        size = POPULATION_CUDA
+    elif machine.bf16_native_cpu():
+        size = POPULATION_BF16
+    else:
+        size = POPULATION_CPU
+    workers = workers or max(1, (cores or usable_cores()) // max(1, config.torch_threads))
+    total = machine.total_memory()
+    if total:  # one process's torch and simulator per worker, a replay memory per agent
+        agent = run.memory_needed() - PROCESS_BYTES
+        size = min(size, int((total * MEMORY_SHARE / workers - PROCESS_BYTES) / agent))
+    return max(1, size)
 
 
 def _stop_on_sigterm() -> Any:

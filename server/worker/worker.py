@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from sqlalchemy import select, update
+from sqlalchemy.orm import Session, sessionmaker
 
 from learner import provenance
 from learner.advisors import RecordedAdvisor
@@ -32,7 +33,7 @@ from server.services.sessions import claim, get_session, set_status
 from server.worker.advisors import HumanAdvisor, RecordingAdvisor
 from server.worker.link import ParentGone, WorkerExit, WorkerLink
 from server.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
-from server.worker.recorder import TRAINING, LeaseLost, Recorder
+from server.worker.recorder import TRAINING, Checkpointable, LeaseLost, Recorder
 from server.worker.scene import SceneBroadcast
 
 log = logging.getLogger(__name__)
@@ -172,6 +173,9 @@ class _Run:
         self.env.episode = self.recorder.episodes
         self.reporter.stage = str(getattr(self.trainer, "stage", "pretrain"))
         self.bar: Any = None
+        self.saver: Checkpointable = self.trainer
+        """What writes the run's checkpoints: its trainer, or a population's agent (whose
+        checkpoint also records the population's numerics)."""
 
     def _broadcast(self, env: Any) -> SceneBroadcast:
         """The environment as the trainer sees it: each step also goes to the live view."""
@@ -257,7 +261,7 @@ class _Run:
         self.send(StatusChanged(status.value, detail))
 
     def checkpoint(self, name: str = "") -> None:
-        self.recorder.checkpoint(self.trainer, self.advice_given, name)
+        self.recorder.checkpoint(self.saver, self.advice_given, name)
 
     def _on_pause(self, paused: bool, at_step_boundary: bool) -> None:
         if paused and at_step_boundary:
@@ -326,30 +330,38 @@ class _Run:
                 try:
                     if self.link is not None:
                         self.link.poll()
-                    self.recorder.tick()
-                    if self._needs_training_slot():
-                        self._wait_for_training_slot()
-                    if self.recorder.episodes_since_checkpoint >= (
-                        self.options.checkpoint_every_episodes
-                    ):
-                        self.checkpoint()
+                    self.between_steps()
                 except WorkerExit as exit_:
-                    return self._exit(exit_, at_step_boundary=True)
+                    return self.exit(exit_, at_step_boundary=True)
                 try:
                     self.trainer.step()
                 except WorkerExit as exit_:
-                    return self._exit(exit_, at_step_boundary=False)
-            keep = self.session.keep_replay_memory
-            keep = self.options.keep_replay_memory if keep is None else keep
-            self.recorder.checkpoint(self.trainer, self.advice_given, "final.pt", memory=keep)
-            self.set_status(Status.finished)
-            self.send_progress()
-            return Status.finished
+                    return self.exit(exit_, at_step_boundary=False)
+            return self.finish()
         finally:
             if self.bar is not None:
                 self.bar.close()
 
-    def _exit(self, exit_: WorkerExit, at_step_boundary: bool) -> Status:
+    def between_steps(self) -> None:
+        """What a run does between two learner steps: heartbeat and flush when due, wait for
+        a training slot, checkpoint every few episodes (a population's worker calls it for
+        each of its agents)."""
+        self.recorder.tick()
+        if self._needs_training_slot():
+            self._wait_for_training_slot()
+        if self.recorder.episodes_since_checkpoint >= self.options.checkpoint_every_episodes:
+            self.checkpoint()
+
+    def finish(self) -> Status:
+        """The trainer is done: the final checkpoint, then the session is finished."""
+        keep = self.session.keep_replay_memory
+        keep = self.options.keep_replay_memory if keep is None else keep
+        self.recorder.checkpoint(self.saver, self.advice_given, "final.pt", memory=keep)
+        self.set_status(Status.finished)
+        self.send_progress()
+        return Status.finished
+
+    def exit(self, exit_: WorkerExit, at_step_boundary: bool) -> Status:
         if at_step_boundary:
             self.checkpoint()
         else:
@@ -378,14 +390,7 @@ def run_session(
         os.nice(options.nice)
     factory = make_session_factory(make_engine(database_url))
     if worker_token is None:
-        with factory() as db:
-            session = get_session(db, session_id)
-            if session.method == Method.human and conn is None:
-                raise Conflict(
-                    f"session {session_id} is a human session: start it through the server"
-                )
-            numerics.settle(db, session, options.override_numerics, options.spec_class)
-            worker_token = claim(db, session_id, resume=session.status != Status.created)
+        worker_token = claim_session(factory, session_id, options, human=conn is not None)
     try:
         run = _Run(session_id, database_url, options, worker_token, conn)
         return run.run().value
@@ -393,14 +398,40 @@ def run_session(
         log.warning("%s", error)
         return "lost"
     except Exception as error:
-        detail = "".join(traceback.format_exception(error))
-        log.error("session %s failed:\n%s", session_id, detail)
-        with factory() as db:
-            set_status(db, session_id, Status.failed, detail[-4000:], token=worker_token)
-        if conn is not None:
-            with contextlib.suppress(OSError):
-                conn.send(StatusChanged(Status.failed.value, str(error)))
+        fail_session(factory, session_id, worker_token, error, conn)
         return Status.failed.value
+
+
+def claim_session(
+    factory: sessionmaker[Session], session_id: int, options: WorkerOptions, human: bool = False
+) -> str:
+    """Claim the session for this process (created sessions start, stopped or interrupted
+    ones resume), its numerics settled; returns the worker token. `human`: a channel to
+    the web process is there (a human session needs one)."""
+    with factory() as db:
+        session = get_session(db, session_id)
+        if session.method == Method.human and not human:
+            raise Conflict(f"session {session_id} is a human session: start it through the server")
+        numerics.settle(db, session, options.override_numerics, options.spec_class)
+        return claim(db, session_id, resume=session.status != Status.created)
+
+
+def fail_session(
+    factory: sessionmaker[Session],
+    session_id: int,
+    token: str,
+    error: BaseException,
+    conn: Connection | None = None,
+) -> None:
+    """The run raised `error`: the session is failed with its traceback (it resumes from its
+    last checkpoint when run again)."""
+    detail = "".join(traceback.format_exception(error))
+    log.error("session %s failed:\n%s", session_id, detail)
+    with factory() as db:
+        set_status(db, session_id, Status.failed, detail[-4000:], token=token)
+    if conn is not None:
+        with contextlib.suppress(OSError):
+            conn.send(StatusChanged(Status.failed.value, str(error)))
 
 
 def worker_main(

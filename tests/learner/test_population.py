@@ -310,6 +310,24 @@ def test_an_agent_that_finishes_leaves_and_the_others_go_on(make_env) -> None:
     assert population.numerics()["population_size"] == 2
 
 
+def test_trainers_built_elsewhere_join_if_they_share_the_learner_config(make_env) -> None:
+    """A batch builds each agent's trainer from its session: an unadvised run's budget is 0,
+    an advised one's is not, and runs may differ in length; anything else the network
+    computes with must be the same."""
+    config = small_config(episodes=1)
+    advisor = make_advisor("random", seed=3)
+    alone = Trainer(make_env(), config.replace(advice_budget=0), seed=1)
+    advised = Trainer(make_env(), config.replace(episodes=2), advisor, "early", seed=2)
+    population = Population.of([alone, advised])
+    assert population.trainers == [alone, advised] and population.size == 2
+    population.step()
+    other = Trainer(make_env(), config.replace(batch_size=32), seed=4)
+    with pytest.raises(ValueError, match="share one learner configuration"):
+        Population.of([alone, other])
+    with pytest.raises(ValueError, match="at least one member"):
+        Population.of([])
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_a_population_computes_on_cuda_when_present(make_env) -> None:
     config = small_config(device="cuda")

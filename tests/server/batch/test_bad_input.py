@@ -28,6 +28,7 @@ from tests.server.batch.helpers import in_process as run
         (["--methods", "human"], "unknown method(s) 'human' (human sessions need a participant"),
         (["--agents", "-2"], "agents must be between 1 and 10000, got -2"),
         (["--workers", "0"], "--workers must be at least 1"),
+        (["--population", "0"], "--population must be at least 1"),
         (["--error-rate", "1.5"], "argument --error-rate: error_rate must be a number from 0 to 1"),
         (["--oracle-error-rate", "1.5"], "error_rate must be a number from 0 to 1"),  # old name
         (["--strategy", "sometimes"], 'argument --strategy: strategy must be one of "early"'),

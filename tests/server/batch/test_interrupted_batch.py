@@ -28,6 +28,7 @@ pytestmark = pytest.mark.slow
 EPISODES = 10
 ADVISED = ["batch", "--study", "advised only", "--methods", "oracle,random", "--agents", "1"]
 ADVISED += ["--workers", "1", "--error-rate", "0.2", "--episodes", str(EPISODES)]
+ADVISED += ["--population", "1"]  # one run after the other (a killed population: its own test)
 ADVISED += SCALE[2:]  # the reduced scale, with more episodes: time to interrupt the second run
 assert SCALE[0] == "--episodes"
 
