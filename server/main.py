@@ -29,7 +29,16 @@ from server.live.playbacks import Playbacks
 from server.logins import Logins
 from server.openapi import install as install_openapi
 from server.openapi import operation_id, path_methods
-from server.routes import ROUTERS, dashboard, pages, playback, reports, sessions, viewing
+from server.routes import (
+    ROUTERS,
+    dashboard,
+    joining,
+    pages,
+    playback,
+    reports,
+    sessions,
+    viewing,
+)
 from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
 from server.settings import Settings
@@ -166,6 +175,7 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
     for router in (
         reports.router,
         pages.router,
+        joining.router,
         viewing.router,
         dashboard.router,
         playback.router,

@@ -33,6 +33,7 @@ from starlette.concurrency import run_in_threadpool
 
 from learner.strategies import make_strategy
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
+from server.live import visits
 from server.live.hub import Hub
 from server.services import numerics
 from server.services.errors import Conflict
@@ -153,6 +154,8 @@ class SessionManager:
         self._version: dict[int, int] = {}
         self._changed: dict[int, asyncio.Event] = {}
         self._reaper: asyncio.Task[None] | None = None
+        self._ending: set[asyncio.Task[None]] = set()
+        """Visits ending after their worker gave up waiting (kept until done)."""
         hub.on_watchers_changed(self._watch)
 
     # --- lifecycle ---------------------------------------------------------------------
@@ -419,6 +422,17 @@ class SessionManager:
             )
             await run_in_threadpool(self._kill, handle, Status.stopped, detail)
 
+    async def end(self, session_id: int, status: Status, detail: str) -> None:
+        """End a session for good now (a visit that ended early): its worker, if one runs,
+        is killed at once (nothing of it is needed again) and the status recorded."""
+        handle = self.handles.get(session_id)
+        if handle is not None and handle.status in LIVE_STATUSES:
+            await run_in_threadpool(self._kill, handle, status, detail)
+        else:
+            with self.factory() as db:
+                set_status(db, session_id, status, detail)
+        self.hub.publish(session_id, "status", StatusChanged(status.value, detail))
+
     def _live(self, session_id: int, verb: str) -> WorkerHandle:
         handle = self.handles.get(session_id)
         if handle is None or handle.status not in LIVE_STATUSES:
@@ -530,6 +544,11 @@ class SessionManager:
             return
         elif isinstance(message, StatusChanged):
             handle.status = message.status
+            if message.status == Status.abandoned:
+                assert self._loop is not None
+                task = self._loop.create_task(visits.abandoned(self, handle.session_id))
+                self._ending.add(task)
+                task.add_done_callback(self._ending.discard)
         elif isinstance(message, TrainingWanted):
             handle.queued = True
             self._train_queue.append(handle.session_id)

@@ -1,0 +1,249 @@
+"""An online study through its public link: the design stored whole, arrivals assigned by
+seeded block randomization, the same person never given a second session, full studies
+turned away with their code, early ends freeing their place, previews leaving no trace,
+and deletion by panel id."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+from urllib.parse import urlsplit
+
+import httpx
+import pytest
+
+from server.services.assignment import block_order
+from tests.server.live import LiveServer
+
+TINY_RUN = {
+    "method": "human",
+    "config": {
+        "pretraining_steps": 20,
+        "advice_budget": 5,
+        "batch_size": 8,
+        "memory_size": 300,
+        "episodes": 1,
+    },
+    "motion": "fast",
+}
+
+
+def design(target: int = 3, capacity: int = 10, **changes: Any) -> dict[str, Any]:
+    return {
+        "conditions": {
+            "early": {"run": {**TINY_RUN, "strategy": "early"}, "target": target},
+            "alternating": {"run": {**TINY_RUN, "strategy": "alternating"}, "target": target},
+        },
+        "capacity": capacity,
+        "panel": {"kind": "prolific", "codes": {"completed": "DONE1", "full": "FULL1"}},
+        **changes,
+    }
+
+
+def make_study(api: httpx.Client, name: str, **design_changes: Any) -> dict[str, Any]:
+    created = api.post("/api/studies", json={"name": name, "design": design(**design_changes)})
+    assert created.status_code == 201, created.text
+    return created.json()
+
+
+def arrive(
+    server: LiveServer, study: dict[str, Any], pid: str | None, address: str, **params: str
+) -> httpx.Response:
+    """One arrival at the study link from `address` (the test server trusts loopback's
+    X-Forwarded-For, as it trusts its reverse proxy)."""
+    query = {"STUDY_ID": "s1", "SESSION_ID": f"x-{pid}", **params}
+    if pid is not None:
+        query["PROLIFIC_PID"] = pid
+    path = urlsplit(study["join_url"]).path
+    with httpx.Client(base_url=server.url, headers={"X-Forwarded-For": address}) as client:
+        return client.get(path, params=query)
+
+
+def token_of(response: httpx.Response) -> str:
+    assert response.status_code == 303, response.text
+    return response.headers["location"].removeprefix("/p/")
+
+
+def sessions_of(api: httpx.Client, study: dict[str, Any]) -> list[dict[str, Any]]:
+    found = api.get(f"/api/studies/{study['id']}/sessions")
+    assert found.status_code == 200
+    return found.json()
+
+
+def test_design_is_stored_with_every_default_written_out(api: httpx.Client) -> None:
+    study = make_study(api, "online-defaults")
+    stored = study["design"]
+    assert stored["alpha"] == 0.05 and stored["capacity"] == 10
+    assert stored["panel"]["params"] == ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID"]
+    codes = stored["panel"]["codes"]
+    assert codes["completed"] == "DONE1" and codes["full"] == "FULL1"
+    assert len(set(codes.values())) == 5, "a code for each outcome, generated when not given"
+    assert stored["panel"]["urls"]["completed"].startswith("https://app.prolific.com/")
+    run = stored["conditions"]["early"]["run"]
+    assert run["config"]["batch_size"] == 8 and "learning_rate" in run["config"]
+    assert study["join_url"].startswith(api.base_url.__str__().rstrip("/") + "/join/")
+    again = api.get(f"/api/studies/{study['id']}").json()
+    assert again["design"] == stored, "codes are generated once, then kept"
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"conditions": {}},
+        {"conditions": {"a": {"run": {"method": "autonomous"}}}},
+        {"conditions": {"a": {"run": {"config": {"batch_size": 0}}}}},
+        {"conditions": {"a": {}}, "capacity": 0},
+        {"conditions": {"a": {}}, "panel": {"kind": "custom"}},
+        {"conditions": {"a": {}}, "panel": {"urls": {"completed": "javascript:alert(1)"}}},
+    ],
+)
+def test_a_bad_design_is_a_422(api: httpx.Client, bad: dict[str, Any]) -> None:
+    response = api.post("/api/studies", json={"name": "bad-design", "design": bad})
+    assert response.status_code == 422, response.text
+
+
+def test_arrivals_are_assigned_by_the_seeded_blocks(server: LiveServer, api: httpx.Client) -> None:
+    study = make_study(api, "online-blocks", target=3)
+    tokens = [token_of(arrive(server, study, f"P{i}", f"10.1.0.{i}")) for i in range(6)]
+    assert len(set(tokens)) == 6
+    made = sessions_of(api, study)
+    got = [s["condition"] for s in sorted(made, key=lambda s: s["id"])]
+    seed = assignment_seed(server, study["id"])
+    expected = [c for b in range(3) for c in block_order(seed, b, ["alternating", "early"])]
+    assert got == expected
+    assert got.count("early") == 3 and got.count("alternating") == 3
+    assert block_order(seed, 0, ["early", "alternating"]) == expected[:2], "same seed, same order"
+    orders = {tuple(c for b in range(3) for c in block_order(s, b, ["a", "b"])) for s in range(20)}
+    assert len(orders) > 1, "another seed, another order"
+
+    again = arrive(server, study, "P2", "10.1.0.99")
+    assert token_of(again) == tokens[2], "the same panel id gets its own session again"
+    full = arrive(server, study, "P7", "10.1.0.7")
+    assert full.status_code == 200 and "FULL1" in full.text
+    assert "cc=FULL1" in full.text, "the full code's redirect to Prolific"
+    assert len(sessions_of(api, study)) == 6
+
+    counts = api.get(f"/api/studies/{study['id']}/conditions").json()
+    assert {c["condition"]: c["in_progress"] for c in counts} == {"early": 3, "alternating": 3}
+
+
+def assignment_seed(server: LiveServer, study_id: int) -> int:
+    from sqlalchemy import create_engine, text
+
+    engine = create_engine(server.database_url)
+    try:
+        with engine.connect() as c:
+            return int(
+                c.execute(
+                    text("SELECT assignment_seed FROM studies WHERE id = :i"), {"i": study_id}
+                ).scalar_one()
+            )
+    finally:
+        engine.dispose()
+
+
+def test_without_a_panel_id_a_cookie_tells_arrivals_apart(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-cookie")
+    path = urlsplit(study["join_url"]).path
+    with httpx.Client(base_url=server.url, headers={"X-Forwarded-For": "10.2.0.1"}) as browser:
+        first = token_of(browser.get(path))
+        assert token_of(browser.get(path)) == first, "the cookie brings them back"
+    with httpx.Client(base_url=server.url, headers={"X-Forwarded-For": "10.2.0.2"}) as other:
+        assert token_of(other.get(path)) != first
+    assert len(sessions_of(api, study)) == 2
+
+
+def test_at_capacity_arrivals_see_the_full_page(server: LiveServer, api: httpx.Client) -> None:
+    study = make_study(api, "online-capacity", capacity=2)
+    token_of(arrive(server, study, "C1", "10.3.0.1"))
+    token_of(arrive(server, study, "C2", "10.3.0.2"))
+    turned = arrive(server, study, "C3", "10.3.0.3")
+    assert turned.status_code == 200 and "FULL1" in turned.text
+
+
+def test_a_decline_ends_the_visit_and_its_place_is_refilled_first(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-decline", target=1)
+    first = token_of(arrive(server, study, "D1", "10.4.0.1"))
+    second = token_of(arrive(server, study, "D2", "10.4.0.2"))
+    assert arrive(server, study, "D3", "10.4.0.3").status_code == 200, "full: one per condition"
+    with httpx.Client(base_url=server.url) as browser:
+        declined = browser.post(f"/p/{first}/consent", data={"decision": "decline"})
+        assert declined.status_code == 303 and declined.headers["location"] == f"/p/{first}/end"
+        page = browser.get(f"/p/{first}/end")
+        code = api.get(f"/api/studies/{study['id']}").json()["design"]["panel"]["codes"]
+        assert code["declined"] in page.text and f"cc={code['declined']}" in page.text
+        assert browser.get(f"/p/{first}").headers["location"] == f"/p/{first}/end"
+    by_token = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
+    gone = by_token[first]
+    assert gone["status"] == "declined" and gone["outcome"] == "declined"
+    refill = token_of(arrive(server, study, "D3", "10.4.0.3"))
+    made = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
+    assert made[refill]["condition"] == gone["condition"], "the freed place goes first"
+    assert made[second]["condition"] != gone["condition"]
+    back = arrive(server, study, "D1", "10.4.0.1")
+    assert token_of(back) == first, "after an early end: the same session, its end page"
+
+
+def test_preview_takes_no_place_and_deletes_in_one_call(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-preview", target=1)
+    made = api.post(f"/api/studies/{study['id']}/preview")
+    assert made.status_code == 201, made.text
+    assert made.json()["participant_url"].startswith(server.url + "/p/")
+    counts = api.get(f"/api/studies/{study['id']}/conditions").json()
+    assert all(c["in_progress"] == 0 for c in counts)
+    token_of(arrive(server, study, "V1", "10.5.0.1"))
+    token_of(arrive(server, study, "V2", "10.5.0.2"))
+    export = api.get(f"/api/studies/{study['id']}/export")
+    assert export.status_code == 200
+    assert len(sessions_of(api, study)) == 3
+    assert api.delete(f"/api/studies/{study['id']}/preview").status_code == 204
+    assert [s["preview"] for s in sessions_of(api, study)] == [False, False]
+
+
+def test_deletion_by_panel_id_deletes_the_person(server: LiveServer, api: httpx.Client) -> None:
+    study = make_study(api, "online-forget")
+    token_of(arrive(server, study, "F1", "10.6.0.1"))
+    kept = token_of(arrive(server, study, "F2", "10.6.0.2"))
+    gone = api.delete(f"/api/studies/{study['id']}/panel/F1")
+    assert gone.status_code == 204
+    left = sessions_of(api, study)
+    assert [s["participant_url"].rsplit("/", 1)[1] for s in left] == [kept]
+    assert api.delete(f"/api/studies/{study['id']}/panel/F1").status_code == 404
+    assert token_of(arrive(server, study, "F1", "10.6.0.1")) != kept
+
+
+def test_the_link_is_rate_limited_per_address_and_per_study(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-limit", capacity=10)
+    answers = [arrive(server, study, None, "10.7.0.1").status_code for _ in range(31)]
+    assert answers[-1] == 429 and 429 not in answers[:30], "30 a minute from one address"
+    small = make_study(api, "online-limit-small", capacity=1)
+    answers = [arrive(server, small, None, f"10.7.1.{i}").status_code for i in range(7)]
+    assert answers[-1] == 429 and 429 not in answers[:6], "6 a minute per place"
+
+
+def test_idle_past_the_limit_times_out_and_frees_the_place(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-idle", target=1, idle_limit_s=1.0)
+    token = token_of(arrive(server, study, "I1", "10.8.0.1"))
+    with httpx.Client(base_url=server.url) as browser:
+        assert browser.get(f"/p/{token}").status_code == 303  # opening it starts the worker
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline:
+            (session,) = [s for s in sessions_of(api, study) if token in s["participant_url"]]
+            if session["outcome"] is not None:
+                break
+            time.sleep(0.5)
+        assert session["outcome"] == "timed_out" and session["status"] == "timed_out"
+        assert browser.get(f"/p/{token}").headers["location"] == f"/p/{token}/end"
+    refill = token_of(arrive(server, study, "I2", "10.8.0.2"))
+    made = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
+    assert made[refill]["condition"] == session["condition"]
