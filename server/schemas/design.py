@@ -7,9 +7,16 @@ from __future__ import annotations
 import secrets
 from typing import Annotated, Any, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    model_validator,
+)
 
-from server.schemas.types import Key, Number, Text, Texts
+from server.schemas.types import Key, Number, Text, Texts, plain_text
 from server.schemas.visit import CheckSpec, QuestionnaireSpec
 
 PANEL_PARAMS: dict[str, tuple[str, ...]] = {
@@ -23,7 +30,9 @@ OutcomeName = Literal["completed", "declined", "excluded", "timed_out", "full"]
 """`server.db.models.Outcome`'s values, each with its own code and return URL."""
 OUTCOMES: tuple[str, ...] = get_args(OutcomeName)
 ParamName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
-Url = Annotated[Text, Field(max_length=2000, pattern=r"^https?://")]
+Url = Annotated[
+    str, StringConstraints(max_length=2000, pattern=r"^https?://"), AfterValidator(plain_text)
+]
 
 
 class Condition(BaseModel):

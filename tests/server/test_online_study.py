@@ -6,6 +6,7 @@ and deletion by panel id."""
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -247,3 +248,51 @@ def test_idle_past_the_limit_times_out_and_frees_the_place(
     refill = token_of(arrive(server, study, "I2", "10.8.0.2"))
     made = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
     assert made[refill]["condition"] == session["condition"]
+
+
+DESIGN_FILE = """\
+name: online-from-file
+description: early advising against alternating
+design:
+  capacity: 4
+  idle_limit_s: 300
+  conditions:
+    early:
+      target: 2
+      run: {method: human, strategy: early, config: {pretraining_steps: 20, advice_budget: 5, batch_size: 8}}
+    alternating:
+      target: 2
+      run: {method: human, strategy: alternating, config: {pretraining_steps: 20, advice_budget: 5, batch_size: 8}}
+      texts: {title: Robot study B}
+  panel:
+    kind: mturk
+    codes: {completed: C1, declined: C2, excluded: C3, timed_out: C4, full: C5}
+"""
+
+
+def test_a_study_from_a_design_file_reads_back_as_the_file(
+    server: LiveServer, api: httpx.Client, tmp_path: Path
+) -> None:
+    import yaml
+
+    from server.cli import main
+    from server.schemas.design import StudyDesign
+    from server.services.studies import stored_design
+
+    source = tmp_path / "design.yaml"
+    source.write_text(DESIGN_FILE)
+    argv = ["study", "create", "--from", str(source), "--database-url", server.database_url]
+    assert main([*argv, "--data-dir", str(tmp_path)]) == 0
+    (study,) = [s for s in api.get("/api/studies").json() if s["name"] == "online-from-file"]
+
+    def normalised(design: dict[str, Any]) -> dict[str, Any]:
+        return stored_design(StudyDesign.model_validate(design))
+
+    written = yaml.safe_load(DESIGN_FILE)
+    assert normalised(study["design"]) == normalised(written["design"])
+    assert study["design"] == normalised(written["design"]), "stored with defaults written out"
+    assert study["design"]["panel"]["params"][0] == "workerId"
+    assert study["description"] == written["description"] and study["join_url"]
+    assert main([*argv, "--data-dir", str(tmp_path)]) == 1, "the name is taken"
+    source.write_text(DESIGN_FILE.replace("capacity: 4", "capacity: 0"))
+    assert main([*argv, "--data-dir", str(tmp_path), "--name", "other"]) == 2
