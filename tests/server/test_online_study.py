@@ -259,10 +259,16 @@ design:
   conditions:
     early:
       target: 2
-      run: {method: human, strategy: early, config: {pretraining_steps: 20, advice_budget: 5, batch_size: 8}}
+      run:
+        method: human
+        strategy: early
+        config: {pretraining_steps: 20, advice_budget: 5, batch_size: 8}
     alternating:
       target: 2
-      run: {method: human, strategy: alternating, config: {pretraining_steps: 20, advice_budget: 5, batch_size: 8}}
+      run:
+        method: human
+        strategy: alternating
+        config: {pretraining_steps: 20, advice_budget: 5, batch_size: 8}
       texts: {title: Robot study B}
   panel:
     kind: mturk
