@@ -5,7 +5,11 @@ and deletion by panel id."""
 
 from __future__ import annotations
 
+import csv
+import io
+import json
 import time
+import zipfile
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -15,6 +19,7 @@ import pytest
 
 from server.services.assignment import block_order
 from tests.server.live import LiveServer
+from tests.server.test_export_types import check_frictionless
 
 TINY_RUN = {
     "method": "human",
@@ -189,8 +194,8 @@ def test_a_decline_ends_the_visit_and_its_place_is_refilled_first(
     assert token_of(back) == first, "after an early end: the same session, its end page"
 
 
-def test_preview_takes_no_place_and_deletes_in_one_call(
-    server: LiveServer, api: httpx.Client
+def test_preview_takes_no_place_stays_out_of_the_export_and_deletes_in_one_call(
+    server: LiveServer, api: httpx.Client, tmp_path: Path
 ) -> None:
     study = make_study(api, "online-preview", target=1)
     made = api.post(f"/api/studies/{study['id']}/preview")
@@ -200,11 +205,32 @@ def test_preview_takes_no_place_and_deletes_in_one_call(
     assert all(c["in_progress"] == 0 for c in counts)
     token_of(arrive(server, study, "V1", "10.5.0.1"))
     token_of(arrive(server, study, "V2", "10.5.0.2"))
-    export = api.get(f"/api/studies/{study['id']}/export")
-    assert export.status_code == 200
     assert len(sessions_of(api, study)) == 3
+    folder = exported(api, study, tmp_path / "pseudonymous")
+    check_frictionless(folder)
+    exported_ids = {int(r["session_id"]) for r in table(folder, "sessions")}
+    assert made.json()["session_id"] not in exported_ids and len(exported_ids) == 2
+    assert {r["session_id"] for r in table(folder, "assignments")} == set(map(str, exported_ids))
+    panel = table(folder, "panel_ids")
+    assert len(panel) == 2 and not {"V1", "V2"} & {r["panel_id"] for r in panel}
+    assert all(r["panel_params"] == "" for r in panel), "pseudonymous by default"
+    paid = table(exported(api, study, tmp_path / "paid", panel_ids="true"), "panel_ids")
+    assert {r["panel_id"] for r in paid} == {"V1", "V2"}
+    assert json.loads(paid[0]["panel_params"])["STUDY_ID"] == "s1"
     assert api.delete(f"/api/studies/{study['id']}/preview").status_code == 204
     assert [s["preview"] for s in sessions_of(api, study)] == [False, False]
+
+
+def exported(api: httpx.Client, study: dict[str, Any], folder: Path, **params: str) -> Path:
+    response = api.get(f"/api/studies/{study['id']}/export", params=params)
+    assert response.status_code == 200, response.text
+    zipfile.ZipFile(io.BytesIO(response.content)).extractall(folder)
+    return folder
+
+
+def table(folder: Path, name: str) -> list[dict[str, str]]:
+    with (folder / f"{name}.csv").open(newline="") as f:
+        return list(csv.DictReader(f))
 
 
 def test_deletion_by_panel_id_deletes_the_person(server: LiveServer, api: httpx.Client) -> None:
