@@ -117,8 +117,7 @@ def preview(db: DbDep, settings: SettingsDep, request: Request, study_id: StudyI
         settings.worker_threads,
         preview=True,
     )
-    if arrival.token is None:
-        raise Conflict(f"study {study_id} is full: every condition has reached its target")
+    assert arrival.token is not None, "a preview is never turned away"
     session = sessions.session_for_token(db, arrival.token)
     assert session is not None
     return Preview(

@@ -177,13 +177,11 @@ def returning(db: Session, study: Study, panel_id: str | None, cookie: str | Non
     return None
 
 
-def full_reason(
-    design: StudyDesign, tally: dict[str, ConditionCounts], preview: bool = False
-) -> str:
+def full_reason(design: StudyDesign, tally: dict[str, ConditionCounts]) -> str:
     """Why an arrival cannot get a place now ('' when it can)."""
     if not any(c.short for c in tally.values()):
         return "full"
-    if not preview and sum(c.in_progress for c in tally.values()) >= design.capacity:
+    if sum(c.in_progress for c in tally.values()) >= design.capacity:
         return "capacity"
     return ""
 
@@ -201,7 +199,8 @@ def arrive(
 ) -> Arrival:
     """Give an arrival their session: the one they have, a refilled place, or the next
     place; `Arrival(None, full_reason=...)` when the study is full or at capacity. A
-    preview takes no place and no assignment row, and is never recognised again."""
+    preview takes no place and no assignment row (a full study has one too), and is never
+    recognised again."""
     kept = {name: params[name] for name in design.panel.params if params.get(name)}
     panel_id = kept.get(design.panel.params[0])
     if not preview:
@@ -209,15 +208,15 @@ def arrive(
         if token is not None:
             return Arrival(token, params=kept)
     tally = counts(db, study, design)
-    reason = full_reason(design, tally, preview)
-    if reason:
-        return Arrival(None, full_reason=reason, params=kept)
-    if preview:
-        condition = next(name for name, c in tally.items() if c.short)
+    if preview:  # the condition the next arrival would get, or the first of a full study
+        condition = next((name for name, c in tally.items() if c.short), next(iter(tally)))
         session = _session(db, study, design, condition, 0, spec_class, data_dir, threads)
         session.preview = True
         db.commit()
         return Arrival(session.participant_token, new=True)
+    reason = full_reason(design, tally)
+    if reason:
+        return Arrival(None, full_reason=reason, params=kept)
     place = _refill(db, study, tally)
     if place is not None:
         condition, block, position = place.condition, place.block, place.position
