@@ -186,7 +186,7 @@ async def consent(request: Request, token: str) -> Response:
     visit = await _load(request, token)
     if visit is None:
         return _error(request)
-    if visit.consented:
+    if visit.consented or visit.outcome is not None:
         return _go(visit, _resume_point(visit))
     texts = visit.resolved_texts()
     version = await run_in_threadpool(_texts_version, request, visit.study_id, texts)
@@ -257,8 +257,8 @@ async def induction(request: Request, token: str, step: int) -> Response:
     visit = await _load(request, token)
     if visit is None:
         return _error(request)
-    if not visit.consented:
-        return _go(visit, "consent")
+    if not visit.consented or visit.outcome is not None:
+        return _go(visit, _resume_point(visit))
     if not 1 <= step <= 3:
         return _go(visit, "induction/1")
     return _page(
@@ -276,7 +276,7 @@ def advise(request: Request, token: str) -> Response:
     visit = _visit(request, token)
     if visit is None:
         return _error(request)
-    if not visit.started or visit.done:
+    if not visit.started or visit.done or visit.outcome is not None:
         return _go(visit, _resume_point(visit))
     return _page(
         request,
@@ -292,7 +292,7 @@ def thanks(request: Request, token: str) -> Response:
     visit = _visit(request, token)
     if visit is None:
         return _error(request)
-    if not visit.started or not visit.done:
+    if not visit.started or not visit.done or visit.outcome is not None:
         return _go(visit, _resume_point(visit))
     return _page(request, "participant/thanks.html", visit, body=visit.text("thanks"))
 

@@ -283,7 +283,7 @@
       showDesign(study, section);
       const colors = {};
       study.sessions.forEach((s, i) => (colors[s.id] = COLORS[i % COLORS.length]));
-      const tbody = section.querySelector("tbody");
+      const tbody = section.querySelector("table.sessions tbody");
       tbody.replaceChildren(...study.sessions.map((s) => sessionRow(s, colors[s.id])));
       if (!study.sessions.length) {
         tbody.innerHTML = `<tr><td colspan="6" class="muted">No session yet. “New participant link” makes a human session.</td></tr>`;
