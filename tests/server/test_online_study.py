@@ -328,3 +328,17 @@ def test_a_study_from_a_design_file_reads_back_as_the_file(
     assert main([*argv, "--data-dir", str(tmp_path)]) == 1, "the name is taken"
     source.write_text(DESIGN_FILE.replace("capacity: 4", "capacity: 0"))
     assert main([*argv, "--data-dir", str(tmp_path), "--name", "other"]) == 2
+
+
+def test_a_decline_over_the_participant_api_ends_the_visit_too(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-api-decline")
+    token = token_of(arrive(server, study, "A1", "10.9.0.1"))
+    with server.client(key=None, token=token) as participant:
+        declined = participant.post("/api/participant/consent", json={"agree": False})
+        assert declined.status_code == 200, declined.text
+        state = participant.get("/api/participant/state").json()
+        assert state["status"] == "declined" and "ended" in state["message"]
+    (session,) = sessions_of(api, study)
+    assert session["outcome"] == "declined" and session["status"] == "declined"
