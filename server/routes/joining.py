@@ -12,7 +12,7 @@ from server.db.models import Outcome
 from server.limits import WindowLimit
 from server.routes.pages import end_page
 from server.schemas.design import StudyDesign
-from server.services import assignment
+from server.services import assignment, studies
 from server.services.errors import NotFound
 
 router = APIRouter(include_in_schema=False)
@@ -70,8 +70,9 @@ def _design(request: Request, key: str) -> tuple[int, StudyDesign]:
 def _arrive(request: Request, study_id: int, params: dict[str, str]) -> assignment.Arrival:
     state = request.app.state
     with assignment.ARRIVALS, state.session_factory() as db:
-        study = assignment.get_study(db, study_id)
-        design = assignment.StudyDesign.model_validate(study.design)
+        study = studies.get_study(db, study_id)
+        design = studies.design_of(study)
+        assert design is not None, "a study with a link has a design"
         return assignment.arrive(
             db,
             study,

@@ -40,7 +40,6 @@ from server.schemas.sessions import SessionOptions
 from server.services import learning
 from server.services.errors import NotFound
 from server.services.sessions import create_session, session_for_token
-from server.services.studies import get_study as get_study
 
 ARRIVALS = threading.Lock()
 """One arrival at a time in this process: positions and places are read, then taken."""

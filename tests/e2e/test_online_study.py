@@ -11,6 +11,7 @@ The excluded-by-check and completed-with-questionnaire journeys go through the v
 
 from __future__ import annotations
 
+import json
 import re
 import time
 from collections.abc import Iterator
@@ -183,6 +184,16 @@ def test_an_online_study_runs_through_its_link(
     badge = section.locator(f"tr[data-session='{session_id}'] .badge")
     expect(badge).to_have_text("declined")
     save_screenshot(page, "online-dashboard")
+    section.locator(".design-editor summary").click()
+    editor = section.locator(".design-json")
+    shown = json.loads(editor.input_value())
+    assert shown["panel"]["codes"] == CODES and shown["capacity"] == 6
+    editor.fill(json.dumps({**shown, "capacity": 8}))
+    section.locator(".save-design").click()
+    expect(editor).to_have_value(re.compile(r'"capacity": 8'))
+    with live.api() as api:
+        stored = api.get(f"/api/studies/{study['id']}").json()["design"]
+    assert stored == {**shown, "capacity": 8}, "the design edited on the dashboard, stored"
     dashboard.close()
 
 
