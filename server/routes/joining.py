@@ -20,6 +20,8 @@ COOKIE = "ideeprl_visit"
 """Holds an arrival's participant token, on the study link's path only: someone without a
 panel id who comes back gets their own session again."""
 COOKIE_DAYS = 30
+MAX_PARAM = 200
+"""Characters of a panel parameter (`panel_ids.panel_id` holds 200; Prolific's are 24)."""
 by_address = WindowLimit()
 by_study = WindowLimit()
 
@@ -45,7 +47,15 @@ async def join(request: Request, key: str) -> Response:
         return Response("This study link is not valid.", status_code=404, media_type="text/plain")
     if not by_study.allow(key, settings.join_per_place_per_minute * design.capacity):
         return _too_many("at this study")
-    arrival = await run_in_threadpool(_arrive, request, study_id, dict(request.query_params))
+    params = dict(request.query_params)
+    if any(len(v) > MAX_PARAM or "\x00" in v for v in params.values()):
+        return Response(
+            f"A parameter of this link is longer than {MAX_PARAM} characters or holds a NUL "
+            "character; open the link as the panel gave it.",
+            status_code=400,
+            media_type="text/plain",
+        )
+    arrival = await run_in_threadpool(_arrive, request, study_id, params)
     if arrival.token is None:
         return end_page(request, None, design, Outcome.full)
     response = RedirectResponse(f"/p/{arrival.token}", status_code=303)

@@ -164,7 +164,7 @@ async def delete_panel_person(
     settings: SettingsDep,
     manager: ManagerDep,
     study_id: StudyId,
-    panel_id: str = Path(max_length=200),
+    panel_id: str = Path(max_length=200, pattern=r"^[^\x00]+$"),
 ) -> Response:
     """Everything of the person with this panel id (their sessions, records, panel ids):
     how a participant's request to be forgotten is met."""

@@ -74,7 +74,7 @@ class Arrival:
 
 
 def study_for_key(db: Session, key: str) -> tuple[Study, StudyDesign]:
-    if not key or len(key) > 64:
+    if not key or len(key) > 64 or "\x00" in key:
         raise NotFound("no study has this link")
     study = db.scalar(select(Study).where(Study.join_key == key))
     if study is None or study.design is None or not secrets.compare_digest(study.join_key, key):

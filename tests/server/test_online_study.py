@@ -342,3 +342,16 @@ def test_a_decline_over_the_participant_api_ends_the_visit_too(
         assert state["status"] == "declined" and "ended" in state["message"]
     (session,) = sessions_of(api, study)
     assert session["outcome"] == "declined" and session["status"] == "declined"
+
+
+def test_bad_panel_parameters_are_a_400_not_a_session(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-bad-params")
+    assert arrive(server, study, "x" * 201, "10.10.0.1").status_code == 400
+    assert arrive(server, study, "a\x00b", "10.10.0.2").status_code == 400
+    assert sessions_of(api, study) == []
+    assert api.delete(f"/api/studies/{study['id']}/panel/a%00b").status_code == 422
+    assert api.delete(f"/api/studies/{study['id']}/panel/{'x' * 201}").status_code == 422
+    unknown = urlsplit(study["join_url"]).path[:-3] + "zzz"
+    assert httpx.get(server.url + unknown).status_code == 404
