@@ -21,9 +21,10 @@ import random
 import secrets
 import threading
 from dataclasses import dataclass, field
+from datetime import timedelta
 from pathlib import Path
 
-from sqlalchemy import func, select
+from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from learner.run import RunSpec
@@ -32,8 +33,10 @@ from server.db.models import (
     Assignment,
     Outcome,
     PanelId,
+    Status,
     Study,
     StudySession,
+    utcnow,
 )
 from server.schemas.design import StudyDesign
 from server.schemas.sessions import SessionOptions
@@ -104,6 +107,30 @@ def counts(db: Session, study: Study, design: StudyDesign) -> dict[str, Conditio
         else:
             found.in_progress += 1
     return out
+
+
+def expire_unopened(db: Session, study: Study, design: StudyDesign) -> int:
+    """Visits whose link was never opened (no worker ever ran: a bot, a closed tab before
+    the redirect) time out after the idle limit like any other, freeing their place."""
+    cutoff = utcnow() - timedelta(seconds=design.idle_limit_s)
+    result = db.execute(
+        update(StudySession)
+        .where(
+            StudySession.study_id == study.id,
+            StudySession.condition.is_not(None),
+            StudySession.status == Status.created.value,
+            StudySession.outcome.is_(None),
+            StudySession.created_at < cutoff,
+        )
+        .values(
+            status=Status.timed_out.value,
+            status_detail="its link was never opened within the study's idle limit",
+            outcome=Outcome.timed_out.value,
+            outcome_at=utcnow(),
+        )
+    )
+    db.commit()
+    return int(result.rowcount)  # type: ignore[attr-defined]
 
 
 def block_order(seed: int, block: int, conditions: list[str]) -> list[str]:
@@ -206,6 +233,7 @@ def arrive(
         token = returning(db, study, panel_id, cookie)
         if token is not None:
             return Arrival(token, params=kept)
+    expire_unopened(db, study, design)
     tally = counts(db, study, design)
     if preview:  # the condition the next arrival would get, or the first of a full study
         condition = next((name for name, c in tally.items() if c.short), next(iter(tally)))

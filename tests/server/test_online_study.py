@@ -355,3 +355,15 @@ def test_bad_panel_parameters_are_a_400_not_a_session(
     assert api.delete(f"/api/studies/{study['id']}/panel/{'x' * 201}").status_code == 422
     unknown = urlsplit(study["join_url"]).path[:-3] + "zzz"
     assert httpx.get(server.url + unknown).status_code == 404
+
+
+def test_a_link_never_opened_times_out_and_frees_its_place(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-unopened", target=1, idle_limit_s=0.5)
+    first = token_of(arrive(server, study, "U1", "10.11.0.1"))  # the redirect not followed
+    time.sleep(0.6)
+    second = token_of(arrive(server, study, "U2", "10.11.0.2"))
+    made = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
+    assert made[first]["status"] == "timed_out" and made[first]["outcome"] == "timed_out"
+    assert made[second]["condition"] == made[first]["condition"], "its place refilled"
