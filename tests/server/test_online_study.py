@@ -38,7 +38,11 @@ def design(target: int = 3, capacity: int = 10, **changes: Any) -> dict[str, Any
     return {
         "conditions": {
             "early": {"run": {**TINY_RUN, "strategy": "early"}, "target": target},
-            "alternating": {"run": {**TINY_RUN, "strategy": "alternating"}, "target": target},
+            "alternating": {
+                "run": {**TINY_RUN, "strategy": "alternating"},
+                "target": target,
+                "texts": {"title": "Robot study B"},
+            },
         },
         "capacity": capacity,
         "panel": {"kind": "prolific", "codes": {"completed": "DONE1", "full": "FULL1"}},
@@ -185,6 +189,12 @@ def test_a_decline_ends_the_visit_and_its_place_is_refilled_first(
         assert browser.get(f"/p/{first}").headers["location"] == f"/p/{first}/end"
     by_token = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
     gone = by_token[first]
+    with httpx.Client(base_url=server.url) as browser:  # the condition's title, over the study's
+        titles = {t: browser.get(f"/p/{t}/declined").text for t in (first, second)}
+    b = next(t for t in (first, second) if by_token[t]["condition"] == "alternating")
+    assert [("· Robot study B</title>" in titles[t]) for t in (first, second)] == [
+        t == b for t in (first, second)
+    ]
     assert gone["status"] == "declined" and gone["outcome"] == "declined"
     refill = token_of(arrive(server, study, "D3", "10.4.0.3"))
     made = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
