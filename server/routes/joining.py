@@ -57,7 +57,7 @@ async def join(request: Request, key: str) -> Response:
         )
     arrival = await run_in_threadpool(_arrive, request, study_id, params)
     if arrival.token is None:
-        return end_page(request, None, design, Outcome.full)
+        return end_page(request, None, design, Outcome.full, arrival.params)
     response = RedirectResponse(f"/p/{arrival.token}", status_code=303)
     response.set_cookie(
         COOKIE,

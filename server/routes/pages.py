@@ -28,7 +28,7 @@ from sqlalchemy import func, select
 from starlette.concurrency import run_in_threadpool
 
 import sim
-from server.db.models import Advice, Outcome, Status
+from server.db.models import Advice, Outcome, PanelId, Status
 from server.live.visits import end_visit
 from server.schemas.design import StudyDesign
 from server.services import consent as consent_service
@@ -315,9 +315,14 @@ RETURN_DELAY_S = 5
 
 
 def end_page(
-    request: Request, visit: Visit | None, design: StudyDesign, outcome: Outcome
+    request: Request,
+    visit: Visit | None,
+    design: StudyDesign,
+    outcome: Outcome,
+    params: dict[str, str] | None = None,
 ) -> Response:
-    """An outcome's page: its code, and a redirect to the panel's URL for it (when set)."""
+    """An outcome's page: its code, and a redirect to the panel's URL for it (when set),
+    filled in with the arrival's panel parameters `params`."""
     heading, message = END_PAGES[outcome]
     return _page(
         request,
@@ -327,7 +332,7 @@ def end_page(
         heading=heading,
         message=message,
         code=design.code(outcome),
-        return_url=design.return_url(outcome),
+        return_url=design.return_url(outcome, params),
         delay_s=RETURN_DELAY_S,
     )
 
@@ -341,7 +346,16 @@ def end(request: Request, token: str) -> Response:
     if visit.outcome is None or visit.design is None:
         return _go(visit, _resume_point(visit))
     design = StudyDesign.model_validate(visit.design)
-    return end_page(request, visit, design, Outcome(visit.outcome))
+    return end_page(request, visit, design, Outcome(visit.outcome), _panel_params(request, token))
+
+
+def _panel_params(request: Request, token: str) -> dict[str, str]:
+    """The panel parameters the participant arrived with (none without a panel id)."""
+    with request.app.state.session_factory() as db:
+        session = session_for_token(db, token)
+        assert session is not None
+        query = select(PanelId.params).where(PanelId.participant_id == session.participant_id)
+        return dict(db.scalar(query) or {})
 
 
 def scene_src(request: Request) -> str:

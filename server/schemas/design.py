@@ -4,8 +4,11 @@ written out, in `studies.design`."""
 
 from __future__ import annotations
 
+import re
 import secrets
+from collections.abc import Mapping
 from typing import Annotated, Any, Literal, get_args
+from urllib.parse import quote
 
 from pydantic import (
     AfterValidator,
@@ -26,13 +29,22 @@ PANEL_PARAMS: dict[str, tuple[str, ...]] = {
 """The URL parameters each panel sends; the first names the person (their panel id)."""
 PROLIFIC_COMPLETE = "https://app.prolific.com/submissions/complete?cc={code}"
 """Where a Prolific participant returns to, with their code."""
+MTURK_SUBMIT = "{turkSubmitTo}/mturk/externalSubmit?assignmentId={assignmentId}&code={code}"
+"""Where an MTurk worker's HIT is submitted (an ExternalQuestion's form target)."""
+MTURK_HOSTS = ("https://www.mturk.com", "https://workersandbox.mturk.com")
+"""The `turkSubmitTo` values believed: the parameter comes with the link, so anything else
+would make the study an open redirect."""
 OutcomeName = Literal["completed", "declined", "excluded", "timed_out", "full"]
 """`server.db.models.Outcome`'s values, each with its own code and return URL."""
 OUTCOMES: tuple[str, ...] = get_args(OutcomeName)
 ParamName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
 Url = Annotated[
-    str, StringConstraints(max_length=2000, pattern=r"^https?://"), AfterValidator(plain_text)
+    str,
+    StringConstraints(max_length=2000, pattern=r"^(https?://|\{turkSubmitTo\}/)"),
+    AfterValidator(plain_text),
 ]
+"""A return URL: `{code}` is the outcome's code, `{NAME}` the arrival's panel parameter NAME
+(URL-encoded); `{turkSubmitTo}` may start it (MTurk's own hosts only)."""
 
 
 class Condition(BaseModel):
@@ -79,8 +91,9 @@ class Panel(BaseModel):
             self.params = list(PANEL_PARAMS[self.kind])
         for outcome in OUTCOMES:
             self.codes.setdefault(outcome, _code())  # type: ignore[call-overload]
-            if self.kind == "prolific":
-                self.urls.setdefault(outcome, PROLIFIC_COMPLETE)  # type: ignore[call-overload]
+            default = {"prolific": PROLIFIC_COMPLETE, "mturk": MTURK_SUBMIT}.get(self.kind)
+            if default is not None:
+                self.urls.setdefault(outcome, default)  # type: ignore[call-overload]
         return self
 
 
@@ -104,7 +117,16 @@ class StudyDesign(BaseModel):
     def code(self, outcome: str) -> str:
         return self.panel.codes[outcome]  # type: ignore[index]
 
-    def return_url(self, outcome: str) -> str | None:
-        """The panel URL this outcome sends the participant to, code filled in."""
+    def return_url(self, outcome: str, params: Mapping[str, str] | None = None) -> str | None:
+        """The panel URL this outcome sends the participant to: its code and the arrival's
+        panel parameters filled in (a missing one empty; `turkSubmitTo` only MTurk's)."""
         url = self.panel.urls.get(outcome)  # type: ignore[call-overload]
-        return None if url is None else url.replace("{code}", self.code(outcome))
+        if url is None:
+            return None
+        given = dict(params or {})
+        if given.get("turkSubmitTo", "").rstrip("/") not in MTURK_HOSTS:
+            given["turkSubmitTo"] = MTURK_HOSTS[0]
+        submit = given.pop("turkSubmitTo").rstrip("/")
+        url = url.replace("{turkSubmitTo}", submit, 1) if url.startswith("{") else url
+        values = {"code": self.code(outcome), **given}
+        return re.sub(r"\{([A-Za-z0-9_.-]+)\}", lambda m: quote(values.get(m[1], ""), safe=""), url)

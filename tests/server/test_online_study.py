@@ -377,3 +377,22 @@ def test_a_link_never_opened_times_out_and_frees_its_place(
     made = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
     assert made[first]["status"] == "timed_out" and made[first]["outcome"] == "timed_out"
     assert made[second]["condition"] == made[first]["condition"], "its place refilled"
+
+
+def test_mturk_workers_return_to_mturks_own_submit_url(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    panel = {"kind": "mturk", "codes": {"declined": "NOPE"}}
+    study = make_study(api, "online-mturk", panel=panel)
+    path = urlsplit(study["join_url"]).path
+    for worker, submit_to, expected in [
+        ("W1", "https://workersandbox.mturk.com", "https://workersandbox.mturk.com"),
+        ("W2", "https://evil.example", "https://www.mturk.com"),  # never an open redirect
+    ]:
+        query = {"workerId": worker, "assignmentId": f"A {worker}", "hitId": "H"}
+        with httpx.Client(base_url=server.url, headers={"X-Forwarded-For": "10.12.0.1"}) as b:
+            token = token_of(b.get(path, params={**query, "turkSubmitTo": submit_to}))
+            b.post(f"/p/{token}/consent", data={"decision": "decline"})
+            page = b.get(f"/p/{token}/end").text
+        url = f"{expected}/mturk/externalSubmit?assignmentId=A%20{worker}&amp;code=NOPE"
+        assert f'content="5;url={url}"' in page
