@@ -47,6 +47,8 @@ from server.services.sessions import create_session, session_for_token
 ARRIVALS = threading.Lock()
 """One arrival at a time in this process: positions and places are read, then taken."""
 EARLY = [s.value for s in ENDED_EARLY]
+SEEDS = 2**31
+"""A run's seeds (0 to 2**31 - 1): a participant's seed wraps around within them."""
 
 
 @dataclass
@@ -289,7 +291,7 @@ def _session(
     """A human session of `condition`'s run; the arrival's number added to the run's seed,
     so each participant's learner differs and every one is reproducible."""
     spec = learning.parse(design.conditions[condition].run, spec_class)
-    spec = spec.replace(seed=spec.seed + number)
+    spec = spec.replace(seed=(spec.seed + number) % SEEDS)
     options = SessionOptions(label=condition, idle_limit_s=design.idle_limit_s)
     session = create_session(db, study.id, spec, options, data_dir, threads)
     session.condition = condition
