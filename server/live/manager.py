@@ -206,15 +206,17 @@ class SessionManager:
             self.hub.publish(session_id, "status", StatusChanged(Status.interrupted.value))
         return marked
 
-    def _kill(self, handle: WorkerHandle, status: Status, detail: str) -> None:
-        """Record `status` for a worker that does not answer, then kill it (SIGKILL works
-        on a stopped process too); its last checkpoint stays, for a resume."""
+    def _kill(
+        self, handle: WorkerHandle, status: Status, detail: str, level: int = logging.WARNING
+    ) -> None:
+        """Record `status` for a worker that does not answer (or is no longer needed), then
+        kill it (SIGKILL works on a stopped process too); its last checkpoint stays."""
         self._set_status(handle.session_id, status, detail, handle.token)
         handle.status = status.value
         with contextlib.suppress(Exception):
             handle.process.kill()
         handle.process.join(5)
-        log.warning("session %s: %s", handle.session_id, detail)
+        log.log(level, "session %s: %s", handle.session_id, detail)
         self._call_soon(self.notify, handle.session_id)
 
     async def _reap_forever(self) -> None:
@@ -427,7 +429,7 @@ class SessionManager:
         is killed at once (nothing of it is needed again) and the status recorded."""
         handle = self.handles.get(session_id)
         if handle is not None and handle.status in LIVE_STATUSES:
-            await run_in_threadpool(self._kill, handle, status, detail)
+            await run_in_threadpool(self._kill, handle, status, detail, logging.INFO)
         else:
             with self.factory() as db:
                 set_status(db, session_id, status, detail)
