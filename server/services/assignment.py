@@ -70,10 +70,10 @@ class ConditionCounts:
 
 @dataclass
 class Arrival:
-    """Where an arrival goes: its session's token, or the study full (`token` None)."""
+    """Where an arrival goes: its session's token, or the study full (`token` None, and
+    why: `full` or `capacity`); with the panel parameters it brought (for the return URL)."""
 
     token: str | None
-    new: bool = False
     full_reason: str = ""
     params: dict[str, str] = field(default_factory=dict)
 
@@ -242,7 +242,7 @@ def arrive(
         session = _session(db, study, design, condition, 0, spec_class, data_dir, threads)
         session.preview = True
         db.commit()
-        return Arrival(session.participant_token, new=True)
+        return Arrival(session.participant_token)
     reason = full_reason(design, tally)
     if reason:
         return Arrival(None, full_reason=reason, params=kept)
@@ -275,7 +275,7 @@ def arrive(
             )
         )
     db.commit()
-    return Arrival(session.participant_token, new=True, params=kept)
+    return Arrival(session.participant_token, params=kept)
 
 
 def _session(
