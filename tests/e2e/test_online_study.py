@@ -194,6 +194,17 @@ def test_an_online_study_runs_through_its_link(
     with live.api() as api:
         stored = api.get(f"/api/studies/{study['id']}").json()["design"]
     assert stored == {**shown, "capacity": 8}, "the design edited on the dashboard, stored"
+
+    with dashboard.expect_page() as opened:
+        section.locator("button.preview").click()
+    preview = opened.value
+    expect(preview.locator("[data-page=consent]")).to_be_visible()
+    previewed = sessions_by_token(live, study)[token(preview)]
+    assert previewed["preview"] and len(sessions_by_token(live, study)) == 8
+    expect(row).to_have_text([declined_in, "3", "0", "3", "1", "0", "0"]), "it takes no place"
+    section.locator("button.delete-previews").click()
+    expect(section.locator(f"tr[data-session='{previewed['id']}']")).to_have_count(0)
+    assert len(sessions_by_token(live, study)) == 7
     dashboard.close()
 
 
