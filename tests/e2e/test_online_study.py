@@ -11,10 +11,13 @@ The excluded-by-check and completed-with-questionnaire journeys go through the v
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import time
+import zipfile
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode, urlsplit
 
@@ -25,6 +28,8 @@ from server.db.models import Study
 from server.services.assignment import block_order
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
 from tests.server.live import API_KEY
+from tests.server.test_export_types import check_frictionless
+from tests.server.test_online_study import table
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -118,6 +123,14 @@ def seed_of(live: Live, study: dict[str, Any]) -> int:
         return int(db.get(Study, study["id"]).assignment_seed)
 
 
+def exported(live: Live, study: dict[str, Any], folder: Path) -> Path:
+    with live.api() as api:
+        response = api.get(f"/api/studies/{study['id']}/export")
+    assert response.status_code == 200, response.text
+    zipfile.ZipFile(io.BytesIO(response.content)).extractall(folder)
+    return folder
+
+
 def assert_returned(page: Any, outcome: str) -> None:
     """The outcome page shows its code, then sends the participant to Prolific with it."""
     expect(page.locator("[data-page=end]")).to_have_attribute("data-outcome", outcome)
@@ -126,7 +139,7 @@ def assert_returned(page: Any, outcome: str) -> None:
 
 
 def test_an_online_study_runs_through_its_link(
-    live: Live, browser: Any, arrivals: Arrivals
+    live: Live, browser: Any, arrivals: Arrivals, tmp_path: Path
 ) -> None:
     study = make_study(live, "Online: early or alternating", target=3, capacity=6, idle_limit_s=600)
     pages = [arrivals.arrive(study, f"PID{i}") for i in range(6)]
@@ -206,6 +219,15 @@ def test_an_online_study_runs_through_its_link(
     expect(section.locator(f"tr[data-session='{previewed['id']}']")).to_have_count(0)
     assert len(sessions_by_token(live, study)) == 7
     dashboard.close()
+
+    folder = exported(live, study, tmp_path)
+    check_frictionless(folder)
+    rows = {name: table(folder, name) for name in ("sessions", "assignments", "panel_ids")}
+    assert len(rows["sessions"]) == len(rows["assignments"]) == len(rows["panel_ids"]) == 7
+    outcomes = {r["session_id"]: r["outcome"] for r in rows["sessions"]}
+    assert outcomes[str(session_id)] == "declined"
+    assert [r["refills_session_id"] for r in rows["assignments"]].count(str(session_id)) == 1
+    assert not {f"PID{i}" for i in range(8)} & {r["panel_id"] for r in rows["panel_ids"]}
 
 
 def test_an_idle_visit_times_out_and_its_place_is_refilled(
