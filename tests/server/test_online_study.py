@@ -138,18 +138,8 @@ def test_arrivals_are_assigned_by_the_seeded_blocks(server: LiveServer, api: htt
 
 
 def assignment_seed(server: LiveServer, study_id: int) -> int:
-    from sqlalchemy import create_engine, text
-
-    engine = create_engine(server.database_url)
-    try:
-        with engine.connect() as c:
-            return int(
-                c.execute(
-                    text("SELECT assignment_seed FROM studies WHERE id = :i"), {"i": study_id}
-                ).scalar_one()
-            )
-    finally:
-        engine.dispose()
+    (seed,) = rows(server, "SELECT assignment_seed FROM studies WHERE id = :s", {"id": study_id})
+    return int(seed)
 
 
 def test_without_a_panel_id_a_cookie_tells_arrivals_apart(
@@ -252,7 +242,23 @@ def test_deletion_by_panel_id_deletes_the_person(server: LiveServer, api: httpx.
     left = sessions_of(api, study)
     assert [s["participant_url"].rsplit("/", 1)[1] for s in left] == [kept]
     assert api.delete(f"/api/studies/{study['id']}/panel/F1").status_code == 404
+    assert rows(server, "SELECT panel_id FROM panel_ids WHERE study_id = :s", study) == ["F2"]
+    assert len(rows(server, "SELECT id FROM assignments WHERE study_id = :s", study)) == 1
     assert token_of(arrive(server, study, "F1", "10.6.0.1")) != kept
+    assert api.delete(f"/api/studies/{study['id']}").status_code == 204
+    for name in ("panel_ids", "assignments"):
+        assert rows(server, f"SELECT id FROM {name} WHERE study_id = :s", study) == []
+
+
+def rows(server: LiveServer, query: str, study: dict[str, Any]) -> list[Any]:
+    from sqlalchemy import create_engine, text
+
+    engine = create_engine(server.database_url)
+    try:
+        with engine.connect() as c:
+            return list(c.execute(text(query), {"s": study["id"]}).scalars())
+    finally:
+        engine.dispose()
 
 
 def test_the_link_is_rate_limited_per_address_and_per_study(
