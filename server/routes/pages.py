@@ -311,7 +311,6 @@ END_PAGES = {
     Outcome.full: ("The study is full", "Every place in this study is taken now."),
 }
 """Heading and message of each outcome's page."""
-RETURN_DELAY_S = 5
 
 
 def end_page(
@@ -333,7 +332,7 @@ def end_page(
         message=message,
         code=design.code(outcome),
         return_url=design.return_url(outcome, params),
-        delay_s=RETURN_DELAY_S,
+        delay_s=design.panel.return_delay_s,
     )
 
 

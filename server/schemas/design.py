@@ -82,6 +82,8 @@ class Panel(BaseModel):
     """A code per outcome; random ones are made for those not given."""
     urls: dict[OutcomeName, Url] = Field(default_factory=dict)
     """The return URL per outcome; Prolific's completion URL by default on Prolific."""
+    return_delay_s: int = Field(default=5, strict=True, ge=0, le=600)
+    """Seconds the outcome page shows the code before it sends the participant back."""
 
     @model_validator(mode="after")
     def _defaults(self) -> Panel:

@@ -64,7 +64,7 @@ def design(target: int, capacity: int, idle_limit_s: float) -> dict[str, Any]:
         },
         "capacity": capacity,
         "idle_limit_s": idle_limit_s,
-        "panel": {"kind": "prolific", "codes": CODES},
+        "panel": {"kind": "prolific", "codes": CODES, "return_delay_s": 1},
     }
 
 
