@@ -50,7 +50,10 @@ def stored_design(design: StudyDesign) -> dict[str, object]:
 
 
 def set_design(study: Study, design: StudyDesign) -> None:
-    """Give the study its design, and its link and assignment seed the first time."""
+    """Give the study its design, and its link and assignment seed the first time. A new
+    design that names no codes keeps the study's (participants may hold them already)."""
+    if study.design is not None and "codes" not in design.panel.model_fields_set:
+        design.panel.codes = StudyDesign.model_validate(study.design).panel.codes
     study.design = stored_design(design)
     study.join_key = study.join_key or secrets.token_urlsafe(24)
     if study.assignment_seed is None:

@@ -94,6 +94,13 @@ def test_design_is_stored_with_every_default_written_out(api: httpx.Client) -> N
     assert study["join_url"].startswith(api.base_url.__str__().rstrip("/") + "/join/")
     again = api.get(f"/api/studies/{study['id']}").json()
     assert again["design"] == stored, "codes are generated once, then kept"
+    changed = design(capacity=4)
+    del changed["panel"]["codes"]
+    patched = api.patch(f"/api/studies/{study['id']}", json={"design": changed})
+    assert patched.status_code == 200, patched.text
+    assert patched.json()["design"]["capacity"] == 4
+    assert patched.json()["design"]["panel"]["codes"] == codes, "a new design keeps the codes"
+    assert patched.json()["join_url"] == study["join_url"], "and the link"
 
 
 @pytest.mark.parametrize(
