@@ -223,6 +223,14 @@ def test_preview_takes_no_place_stays_out_of_the_export_and_deletes_in_one_call(
     assert all(r["panel_params"] == "" for r in panel), "pseudonymous by default"
     paid = table(exported(api, study, tmp_path / "paid", panel_ids="true"), "panel_ids")
     assert {r["panel_id"] for r in paid} == {"V1", "V2"}
+    from server.cli import main
+
+    argv = ["export", "--study", str(study["id"]), "--database-url", server.database_url]
+    assert (
+        main([*argv, "--data-dir", str(tmp_path), "--out", str(tmp_path / "cli"), "--panel-ids"])
+        == 0
+    )
+    assert {r["panel_id"] for r in table(tmp_path / "cli", "panel_ids")} == {"V1", "V2"}
     assert json.loads(paid[0]["panel_params"])["STUDY_ID"] == "s1"
     assert api.delete(f"/api/studies/{study['id']}/preview").status_code == 204
     assert [s["preview"] for s in sessions_of(api, study)] == [False, False]
