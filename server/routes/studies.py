@@ -3,12 +3,14 @@
 from fastapi import APIRouter, Path, Request, Response
 from pydantic import BaseModel
 from sqlalchemy import select
+from starlette.concurrency import run_in_threadpool
 
-from server.db.models import LIVE_STATUSES, Status, StudySession
+from server.db.models import LIVE_STATUSES, Status, Study, StudySession
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes import playback
 from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
+from server.schemas.design import StudyDesign
 from server.schemas.studies import FittedAdvisorPublic, StudyCreate, StudyPublic, StudyUpdate
 from server.services import assignment, fitting, sessions, storage, studies
 from server.services.errors import Conflict
@@ -70,6 +72,14 @@ def get_fitted_advisor(db: DbDep, study_id: StudyId, fitted_id: FittedId) -> Fit
     return fitting.public(fitting.get_model(db, study_id, fitted_id))
 
 
+def _online(db: DbDep, study_id: int) -> tuple[Study, StudyDesign]:
+    study = studies.get_study(db, study_id)
+    design = studies.design_of(study)
+    if design is None:
+        raise Conflict(f"study {study_id} has no design: it is a lab study; PATCH one first")
+    return study, design
+
+
 class ConditionCounts(BaseModel):
     condition: str
     target: int
@@ -84,10 +94,7 @@ class ConditionCounts(BaseModel):
 def condition_counts(db: DbDep, study_id: StudyId) -> list[ConditionCounts]:
     """An online study's conditions: target, completed, in progress, and the visits that
     ended early, by how (previews not counted)."""
-    study = studies.get_study(db, study_id)
-    design = studies.design_of(study)
-    if design is None:
-        raise Conflict(f"study {study_id} has no design: it is a lab study")
+    study, design = _online(db, study_id)
     tally = assignment.counts(db, study, design)
     return [ConditionCounts(condition=name, **vars(c)) for name, c in tally.items()]
 
@@ -101,10 +108,7 @@ class Preview(BaseModel):
 def preview(db: DbDep, settings: SettingsDep, request: Request, study_id: StudyId) -> Preview:
     """A preview link: the researcher walks the study as a participant would (a session
     of the next condition), taking no place, kept out of exports and the report."""
-    study = studies.get_study(db, study_id)
-    design = studies.design_of(study)
-    if design is None:
-        raise Conflict(f"study {study_id} has no design: it is a lab study")
+    study, design = _online(db, study_id)
     state = request.app.state
     arrival = assignment.arrive(
         db,
@@ -135,7 +139,7 @@ async def _delete_sessions(
         if handle is not None and handle.status in LIVE_STATUSES:
             await manager.end(session_id, Status.stopped, "deleted by the researcher")
         db.expire_all()
-        storage.delete_session(db, settings.data_dir, session_id, False)
+        await run_in_threadpool(storage.delete_session, db, settings.data_dir, session_id, False)
     request.app.state.participant_tokens.clear()
     playback.close_deleted(request, db)
 
@@ -168,6 +172,6 @@ async def delete_panel_person(
 ) -> Response:
     """Everything of the person with this panel id (their sessions, records, panel ids):
     how a participant's request to be forgotten is met."""
-    ids = assignment.delete_panel_person(db, study_id, panel_id)
+    ids = assignment.panel_person_sessions(db, study_id, panel_id)
     await _delete_sessions(request, db, settings, manager, ids)
     return Response(status_code=204)

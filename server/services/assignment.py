@@ -299,9 +299,9 @@ def _session(
     return session
 
 
-def delete_panel_person(db: Session, study_id: int, panel_id: str) -> list[int]:
-    """The sessions of the person with this panel id (the caller deletes them, which
-    deletes their participant and panel ids too)."""
+def panel_person_sessions(db: Session, study_id: int, panel_id: str) -> list[int]:
+    """The sessions of the person with this panel id (deleting them deletes their
+    participant, and with it their panel ids)."""
     participant = db.scalar(
         select(PanelId.participant_id).where(
             PanelId.study_id == study_id, PanelId.panel_id == panel_id
