@@ -23,6 +23,7 @@ from server.db.migrate import BACKUPS, upgrade
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
 from server.guard import LOGIN, Describe, RequestGuard
 from server.headers import SecurityHeaders, validation_error, without_input
+from server.limits import WindowLimit
 from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.live.playbacks import Playbacks
@@ -170,6 +171,9 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
     app.state.spec_class = spec_class
     app.state.participant_tokens = {}
     app.state.dashboard_logins = Logins(settings.dashboard_login_s)
+    app.state.arrivals_by_address = WindowLimit()
+    app.state.arrivals_by_study = WindowLimit()
+    """The study links' rate limits (`server.routes.joining`)."""
     for router in (*ROUTERS, sessions.creation_router(spec_class)):
         app.include_router(router)
     for router in (

@@ -9,7 +9,6 @@ from fastapi.responses import RedirectResponse, Response
 from starlette.concurrency import run_in_threadpool
 
 from server.db.models import Outcome
-from server.limits import WindowLimit
 from server.routes.pages import end_page
 from server.schemas.design import StudyDesign
 from server.services import assignment, studies
@@ -22,8 +21,6 @@ panel id who comes back gets their own session again."""
 COOKIE_DAYS = 30
 MAX_PARAM = 200
 """Characters of a panel parameter (`panel_ids.panel_id` holds 200; Prolific's are 24)."""
-by_address = WindowLimit()
-by_study = WindowLimit()
 
 
 def _too_many(what: str) -> Response:
@@ -39,13 +36,16 @@ def _too_many(what: str) -> Response:
 async def join(request: Request, key: str) -> Response:
     settings = request.app.state.settings
     address = request.client.host if request.client is not None else "?"
-    if not by_address.allow(address, settings.join_per_address_per_minute):
+    if not request.app.state.arrivals_by_address.allow(
+        address, settings.join_per_address_per_minute
+    ):
         return _too_many("from your address")
     try:
         study_id, design = await run_in_threadpool(_design, request, key)
     except NotFound:
         return Response("This study link is not valid.", status_code=404, media_type="text/plain")
-    if not by_study.allow(key, settings.join_per_place_per_minute * design.capacity):
+    per_study = settings.join_per_place_per_minute * design.capacity
+    if not request.app.state.arrivals_by_study.allow(key, per_study):
         return _too_many("at this study")
     params = dict(request.query_params)
     if any(len(v) > MAX_PARAM or "\x00" in v for v in params.values()):
