@@ -82,7 +82,7 @@ def participant_session(
             raise HTTPException(
                 403, "this participant token is not valid; use the link you were given"
             )
-        found = ParticipantSession(session.id, session.spec.advice_budget)
+        found = ParticipantSession(session.id, session.spec.advice_budget, session.condition)
     known[token] = found
     return found
 

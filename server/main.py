@@ -23,13 +23,23 @@ from server.db.migrate import BACKUPS, upgrade
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
 from server.guard import LOGIN, Describe, RequestGuard
 from server.headers import SecurityHeaders, validation_error, without_input
+from server.limits import WindowLimit
 from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.live.playbacks import Playbacks
 from server.logins import Logins
 from server.openapi import install as install_openapi
 from server.openapi import operation_id, path_methods
-from server.routes import ROUTERS, dashboard, pages, playback, reports, sessions, viewing
+from server.routes import (
+    ROUTERS,
+    dashboard,
+    joining,
+    pages,
+    playback,
+    reports,
+    sessions,
+    viewing,
+)
 from server.routes.docs import add_docs
 from server.services.errors import Invalid, ServiceError
 from server.settings import Settings
@@ -161,11 +171,15 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
     app.state.spec_class = spec_class
     app.state.participant_tokens = {}
     app.state.dashboard_logins = Logins(settings.dashboard_login_s)
+    app.state.arrivals_by_address = WindowLimit()
+    app.state.arrivals_by_study = WindowLimit()
+    """The study links' rate limits (`server.routes.joining`)."""
     for router in (*ROUTERS, sessions.creation_router(spec_class)):
         app.include_router(router)
     for router in (
         reports.router,
         pages.router,
+        joining.router,
         viewing.router,
         dashboard.router,
         playback.router,

@@ -96,6 +96,17 @@ class Settings(BaseSettings):
     max_request_bytes: int = Field(default=1_048_576, ge=1024)
     """Largest request body accepted (bytes); larger ones get 413 before they are read."""
 
+    forwarded_allow_ips: str = "127.0.0.1"
+    """Addresses of the reverse proxy (comma-separated, `*` for any): only requests from
+    them have their client address taken from `X-Forwarded-For` (uvicorn's rule); the
+    study links' per-address limit counts that address."""
+
+    join_per_address_per_minute: int = Field(default=30, ge=1)
+    """Arrivals at study links one client address may make in a minute (429 beyond)."""
+
+    join_per_place_per_minute: int = Field(default=6, ge=1)
+    """Arrivals at one study's link per minute, per place of its capacity (429 beyond)."""
+
     dashboard_login_s: float = Field(default=8 * 3600.0, gt=0)
     """How long a dashboard login lasts; logging out ends it at once."""
 

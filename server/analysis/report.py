@@ -575,7 +575,7 @@ def write_report(
         checked = audit(kept, baseline)
         analysis = _withhold_tests(analysis, checked, allow_mismatch)
     rescored = rescored_agents = None
-    if steps is not None and settings is not None:
+    if steps is not None and settings is not None and not steps.empty:  # none: nothing to rescore
         schemes = dict(zip(settings["session_id"], settings["reward_scheme"], strict=True))
         methods = dict(zip(settings["session_id"], settings["method"], strict=True))
         kept_steps = steps[steps["session_id"].isin(analysis.episodes["session_id"])]

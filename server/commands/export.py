@@ -31,6 +31,11 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--format", choices=("csv", "parquet"), default="csv", help="table format (default csv)"
     )
+    parser.add_argument(
+        "--panel-ids",
+        action="store_true",
+        help="an online study's panel ids as they are, for payment (default: pseudonymous)",
+    )
     add_json_option(parser, "the folder, the format and each table file's row count")
     add_database_options(parser)
     parser.set_defaults(func=export)
@@ -47,7 +52,7 @@ def export(args: argparse.Namespace) -> int:
     with make_session_factory(engine)() as db:
         study_id, _ = find_study(db, args.study)
         try:
-            counts = export_study(db, study_id, args.out, args.format)
+            counts = export_study(db, study_id, args.out, args.format, panel_ids=args.panel_ids)
         except ServiceError as error:
             raise CommandError(error.message, service_exit_code(error)) from None
     if args.json:

@@ -59,6 +59,11 @@ def serve(args: argparse.Namespace) -> int:
         flush=True,
     )
     uvicorn.run(
-        app, host=settings.host, port=settings.port, log_level=args.log_level, **UVICORN_OPTIONS
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level=args.log_level,
+        forwarded_allow_ips=settings.forwarded_allow_ips,
+        **UVICORN_OPTIONS,
     )
     return 0

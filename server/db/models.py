@@ -70,6 +70,16 @@ class Status(enum.StrEnum):
     interrupted = "interrupted"
     abandoned = "abandoned"
     failed = "failed"
+    declined = "declined"
+    """An online study's participant declined consent: their visit ended, worker freed."""
+    excluded = "excluded"
+    """An online study's participant failed the comprehension check."""
+    timed_out = "timed_out"
+    """An online study's participant gave no answer for the design's idle limit (final)."""
+
+
+ENDED_EARLY = (Status.declined, Status.excluded, Status.timed_out)
+"""Final statuses of a visit that ended before its advice: its place is refilled."""
 
 
 class Outcome(enum.StrEnum):
@@ -393,3 +403,43 @@ class FittedAdvisorModel(Base):
     """`FittedModel.to_json()`: versioned, with its rates, times and budget use."""
     session_ids: Mapped[list[Any]] = mapped_column()
     """The sessions whose advice it was fitted from."""
+
+
+class Assignment(Base):
+    """How an arrival at an online study's link was assigned: its condition, and where in
+    the block randomization (block, position in it, the study's seed). A refill takes the
+    place of a visit that ended early (`refills`: that assignment's id)."""
+
+    __tablename__ = "assignments"
+    __table_args__: ClassVar[Any] = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
+    session_id: Mapped[int] = mapped_column(
+        ForeignKey("sessions.id", ondelete="CASCADE"), unique=True
+    )
+    condition: Mapped[str] = mapped_column(String(100))
+    block: Mapped[int] = mapped_column(Integer)
+    position: Mapped[int] = mapped_column(Integer)
+    seed: Mapped[int] = mapped_column(Integer)
+    refills: Mapped[int | None] = mapped_column(Integer)
+    assigned_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+
+class PanelId(Base):
+    """A participant's ids at their panel (Prolific's, MTurk's), kept apart from the
+    sessions: only payment needs them, and deleting them by panel id deletes the person's
+    sessions too. `panel_id` names the person (the design's first panel parameter)."""
+
+    __tablename__ = "panel_ids"
+    __table_args__ = (UniqueConstraint("study_id", "panel_id"), {"sqlite_autoincrement": True})
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"))
+    participant_id: Mapped[int] = mapped_column(
+        ForeignKey("participants.id", ondelete="CASCADE"), unique=True
+    )
+    panel_id: Mapped[str] = mapped_column(String(200))
+    params: Mapped[dict[str, Any]] = mapped_column()
+    """Every panel parameter of the arrival (submission and study ids)."""
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)

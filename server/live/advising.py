@@ -38,6 +38,8 @@ class ParticipantSession:
 
     id: int
     advice_budget: int
+    condition: str | None = None
+    """The online study's condition (None: a lab session)."""
 
 
 MESSAGES = {
@@ -48,6 +50,10 @@ MESSAGES = {
     Status.interrupted: "The session was interrupted; the researcher can resume it.",
     Status.abandoned: "The session waited too long for advice; the researcher can resume it.",
     Status.failed: "The session failed; please tell the researcher.",
+    Status.declined: "You declined to take part; your visit has ended.",
+    Status.excluded: "Your visit has ended; reload the page for your code.",
+    Status.timed_out: "The study waited too long for you and has ended; reload the page for "
+    "your code.",
 }
 
 

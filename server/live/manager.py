@@ -34,6 +34,7 @@ from starlette.concurrency import run_in_threadpool
 
 from learner.strategies import make_strategy
 from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
+from server.live import visits
 from server.live.hub import Hub
 from server.services import numerics
 from server.services.errors import Conflict
@@ -172,6 +173,8 @@ class SessionManager:
         self._version: dict[int, int] = {}
         self._changed: dict[int, asyncio.Event] = {}
         self._reaper: asyncio.Task[None] | None = None
+        self._ending: set[asyncio.Task[None]] = set()
+        """Visits ending after their worker gave up waiting (kept until done)."""
         hub.on_watchers_changed(self._watch)
 
     # --- lifecycle ---------------------------------------------------------------------
@@ -225,15 +228,17 @@ class SessionManager:
             self.hub.publish(session_id, "status", StatusChanged(Status.interrupted.value))
         return marked
 
-    def _kill(self, handle: WorkerHandle, status: Status, detail: str) -> None:
-        """Record `status` for a worker that does not answer, then kill it (SIGKILL works
-        on a stopped process too); its last checkpoint stays, for a resume."""
+    def _kill(
+        self, handle: WorkerHandle, status: Status, detail: str, level: int = logging.WARNING
+    ) -> None:
+        """Record `status` for a worker that does not answer (or is no longer needed), then
+        kill it (SIGKILL works on a stopped process too); its last checkpoint stays."""
         self._set_status(handle.session_id, status, detail, handle.token)
         handle.status = status.value
         with contextlib.suppress(Exception):
             handle.process.kill()
         handle.process.join(5)
-        log.warning("session %s: %s", handle.session_id, detail)
+        log.log(level, "session %s: %s", handle.session_id, detail)
         self._call_soon(self.notify, handle.session_id)
 
     async def _reap_forever(self) -> None:
@@ -441,6 +446,17 @@ class SessionManager:
             )
             await run_in_threadpool(self._kill, handle, Status.stopped, detail)
 
+    async def end(self, session_id: int, status: Status, detail: str) -> None:
+        """End a session for good now (a visit that ended early): its worker, if one runs,
+        is killed at once (nothing of it is needed again) and the status recorded."""
+        handle = self.handles.get(session_id)
+        if handle is not None and handle.status in LIVE_STATUSES:
+            await run_in_threadpool(self._kill, handle, status, detail, logging.INFO)
+        else:
+            with self.factory() as db:
+                set_status(db, session_id, status, detail)
+        self.hub.publish(session_id, "status", StatusChanged(status.value, detail))
+
     def _live(self, session_id: int, verb: str) -> WorkerHandle:
         handle = self.handles.get(session_id)
         if handle is None or handle.status not in LIVE_STATUSES:
@@ -552,6 +568,11 @@ class SessionManager:
             return
         elif isinstance(message, StatusChanged):
             handle.status = message.status
+            if message.status == Status.abandoned:
+                assert self._loop is not None
+                task = self._loop.create_task(visits.abandoned(self, handle.session_id))
+                self._ending.add(task)
+                task.add_done_callback(self._ending.discard)
         elif isinstance(message, TrainingWanted):
             handle.queued = True
             self._train_queue.append(handle.session_id)

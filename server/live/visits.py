@@ -1,46 +1,62 @@
-"""How an online study's visit ends (`Outcome`).
+"""How an online study's visit ends: its outcome recorded once, and a visit that ended
+early (declined, excluded, timed out) freed at once, so its worker's memory and its place
+in the study go to the next arrival.
 
-PLACEHOLDER for the visit side's branch: the study side owns this module and replaces it
-(codes, redirects, refilling places). Kept to the agreed signature so the check and the
-questionnaire can end a visit now.
+The first outcome wins: a participant who declines and then times out stays declined. A
+completed visit leaves the learner training; the participant's code never waits on it.
 """
 
 from __future__ import annotations
 
-import contextlib
+from typing import TYPE_CHECKING
 
 from sqlalchemy import update
 from starlette.concurrency import run_in_threadpool
 
 from server.db.models import Outcome, Status, StudySession, utcnow
-from server.live.manager import SessionManager
-from server.services.errors import Conflict
-from server.services.ownership import set_status
+from server.services.sessions import get_session
+
+if TYPE_CHECKING:
+    from server.live.manager import SessionManager
+
+DETAILS = {
+    Outcome.declined: "the participant declined; their visit ended and its worker was stopped",
+    Outcome.excluded: "the participant failed the comprehension check; their visit ended",
+    Outcome.timed_out: "the participant gave no answer for the study's idle limit; their "
+    "visit ended",
+}
+
+
+async def end_visit(manager: SessionManager, session_id: int, outcome: Outcome) -> None:
+    """Record `outcome` for the session (unless one is recorded already); free a visit
+    that ended early: worker stopped, status `declined`, `excluded` or `timed_out`."""
+    assert outcome != Outcome.full, "an arrival turned away has no session"
+    first = await run_in_threadpool(_record, manager, session_id, outcome)
+    if first and outcome != Outcome.completed:
+        await manager.end(session_id, Status(outcome.value), DETAILS[outcome])
+    manager.notify(session_id)
 
 
 def _record(manager: SessionManager, session_id: int, outcome: Outcome) -> bool:
-    """The outcome and its time, once: a visit that already ended keeps its outcome."""
+    """The outcome, written only where none is (atomic: two ends at once, one wins)."""
     with manager.factory() as db:
-        query = (
+        result = db.execute(
             update(StudySession)
             .where(StudySession.id == session_id, StudySession.outcome.is_(None))
             .values(outcome=outcome.value, outcome_at=utcnow())
         )
-        changed = db.execute(query).rowcount == 1  # type: ignore[attr-defined]
         db.commit()
-        return changed
+        return result.rowcount == 1  # type: ignore[attr-defined]
 
 
-async def end_visit(manager: SessionManager, session_id: int, outcome: Outcome) -> None:
-    """End the participant's visit as `outcome`. A completed visit's learner trains on; any
-    other outcome stops its worker at once and leaves the session stopped."""
-    if not await run_in_threadpool(_record, manager, session_id, outcome):
-        return
-    if outcome == Outcome.completed:
-        manager.notify(session_id)
-        return
-    with contextlib.suppress(Conflict):  # nothing ran: there is nothing to stop
-        await manager.stop(session_id)
+async def abandoned(manager: SessionManager, session_id: int) -> None:
+    """A worker gave up waiting for its participant: in an online study that is the end
+    of the visit (`timed_out`, final); a lab session stays `abandoned` (resumable)."""
+    online = await run_in_threadpool(_online, manager, session_id)
+    if online:
+        await end_visit(manager, session_id, Outcome.timed_out)
+
+
+def _online(manager: SessionManager, session_id: int) -> bool:
     with manager.factory() as db:
-        set_status(db, session_id, Status.stopped, f"the participant's visit ended: {outcome}")
-    manager.notify(session_id)
+        return get_session(db, session_id).condition is not None

@@ -25,11 +25,13 @@ from server.logins import Logins
 from server.routes import exports as export_routes
 from server.routes import reports as report_routes
 from server.routes import sessions as session_routes
+from server.routes import studies as study_routes
 from server.routes.pages import templates
 from server.routes.params import SessionId, StudyId
 from server.routes.reports import FileName, ReportPublic
+from server.schemas.design import StudyDesign
 from server.schemas.sessions import SessionOptions
-from server.schemas.studies import StudyCreate
+from server.schemas.studies import StudyCreate, StudyUpdate
 from server.schemas.types import Text
 from server.services import reports, sessions, studies
 
@@ -121,6 +123,9 @@ class SessionRow(BaseModel):
     status_detail: str
     progress: dict[str, Any]
     declined: bool = False
+    condition: str | None = None
+    outcome: str | None = None
+    preview: bool = False
 
 
 class StudyRow(BaseModel):
@@ -128,6 +133,14 @@ class StudyRow(BaseModel):
     name: str
     description: str
     sessions: list[SessionRow]
+    design: dict[str, Any] | None = None
+    join_url: str | None = None
+    conditions: list[study_routes.ConditionCounts] = Field(default_factory=list)
+    """An online study's per-condition counts (`GET /api/studies/ID/conditions`)."""
+
+
+class NewDesign(BaseModel):
+    design: StudyDesign
 
 
 class NewStudy(BaseModel):
@@ -158,10 +171,41 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
                 declined=session.declined_at is not None and session.consented_at is None,
             )
             found.append(SessionRow(**fields))
+        public = studies.public(db, study, settings.base_url)
+        counts = study_routes.condition_counts(db, study.id) if study.design else []
         rows.append(
-            StudyRow(id=study.id, name=study.name, description=study.description, sessions=found)
+            StudyRow(
+                id=study.id,
+                name=study.name,
+                description=study.description,
+                sessions=found,
+                design=study.design,
+                join_url=public.join_url,
+                conditions=counts,
+            )
         )
     return rows
+
+
+@router.post("/dashboard/api/studies/{study_id}/design", dependencies=[LoginDep])
+def set_design(db: DbDep, study_id: StudyId, body: NewDesign) -> dict[str, Any]:
+    """The study's design, whole (as `PATCH /api/studies/ID` with `design`)."""
+    study = studies.update_study(db, study_id, StudyUpdate(design=body.design))
+    return {"design": study.design}
+
+
+@router.post("/dashboard/api/studies/{study_id}/preview", dependencies=[LoginDep], status_code=201)
+def preview(
+    db: DbDep, settings: SettingsDep, request: Request, study_id: StudyId
+) -> study_routes.Preview:
+    return study_routes.preview(db, settings, request, study_id)
+
+
+@router.delete("/dashboard/api/studies/{study_id}/preview", dependencies=[LoginDep])
+async def delete_previews(
+    request: Request, db: DbDep, settings: SettingsDep, manager: ManagerDep, study_id: StudyId
+) -> Response:
+    return await study_routes.delete_previews(request, db, settings, manager, study_id)
 
 
 @router.get("/dashboard/api/studies/{study_id}/curves", dependencies=[LoginDep])

@@ -28,8 +28,9 @@ from sqlalchemy import func, select
 from starlette.concurrency import run_in_threadpool
 
 import sim
-from server.db.models import Advice, Outcome, Status
+from server.db.models import Advice, Outcome, PanelId, Status
 from server.live.visits import end_visit
+from server.schemas.design import StudyDesign
 from server.schemas.instruments import PREFER_NOT_TO_SAY
 from server.schemas.participant import CheckState
 from server.schemas.visit import Section
@@ -68,13 +69,18 @@ class Visit:
     ready: bool = False
     shown_texts: dict[str, str] | None = None
     """The stored texts version this participant consented to (None before consent)."""
-    online: bool = False
-    """The study has a design (an online study): check, questionnaire, an outcome page."""
     check: CheckState = field(default_factory=lambda: CheckState(required=False))
     questionnaire_due: bool = False
     """The design asks a questionnaire and this participant has not submitted it."""
     outcome: str | None = None
     """How the visit ended (`Outcome`); None while it goes on, and always in a lab study."""
+    design: dict[str, Any] | None = None
+    """The online study's design (None in a lab study)."""
+
+    @property
+    def online(self) -> bool:
+        """The study has a design (an online study): check, questionnaire, an outcome page."""
+        return self.design is not None
 
     @property
     def check_pending(self) -> bool:
@@ -122,7 +128,7 @@ def _visit(request: Request, token: str) -> Visit | None:
             status=request.app.state.manager.status(session.id),
             advice_budget=session.spec.advice_budget,
             advice_given=int(given),
-            texts={k: str(v) for k, v in (session.study.texts or {}).items()},
+            texts=_texts(session.study.texts, session.study.design, session.condition),
             sort_rule=session.spec.sort_rule,
             consented=session.consented_at is not None,
             ready=session.induction_done_at is not None,
@@ -131,11 +137,21 @@ def _visit(request: Request, token: str) -> Visit | None:
                 if version is not None and session.consented_at is not None
                 else None
             ),
-            online=session.study.design is not None,
             check=visit_service.check_state(db, session),
             questionnaire_due=questionnaire.required and questionnaire.submitted_at is None,
             outcome=session.outcome,
+            design=session.study.design,
         )
+
+
+def _texts(
+    study: dict[str, Any] | None, design: dict[str, Any] | None, condition: str | None
+) -> dict[str, str]:
+    """The study's texts, a condition's own over them."""
+    texts = {k: str(v) for k, v in (study or {}).items()}
+    if design is not None and condition is not None:
+        texts.update(design["conditions"].get(condition, {}).get("texts", {}))
+    return texts
 
 
 visit_for_token = _visit
@@ -194,7 +210,7 @@ async def consent(request: Request, token: str) -> Response:
     visit = await _load(request, token)
     if visit is None:
         return _error(request)
-    if visit.consented:
+    if visit.consented or visit.outcome is not None:
         return _go(visit, _resume_point(visit))
     texts = visit.resolved_texts()
     version = await run_in_threadpool(_texts_version, request, visit.study_id, texts)
@@ -213,26 +229,45 @@ def _texts_version(request: Request, study_id: int, texts: dict[str, str]) -> in
 
 
 @router.post("/p/{token}/consent")
-def decide(
+async def decide(
     request: Request,
     token: str,
     decision: str = Form(default=""),
     texts_version: int | None = Form(default=None),
 ) -> Response:
-    """The consent form: 'agree' or 'decline', with the texts version the page showed."""
+    """The consent form: 'agree' or 'decline', with the texts version the page showed. In
+    an online study a decline ends the visit at once (its worker stopped, its place freed)
+    and shows the declined code."""
+    decided = await run_in_threadpool(_decide, request, token, decision, texts_version)
+    if isinstance(decided, Response):
+        return decided
+    if decision == "agree":
+        return RedirectResponse(f"/p/{token}/induction/1", status_code=303)
+    if decided is not None:
+        await end_visit(request.app.state.manager, decided, Outcome.declined)
+        return RedirectResponse(f"/p/{token}/end", status_code=303)
+    return RedirectResponse(f"/p/{token}/declined", status_code=303)
+
+
+def _decide(
+    request: Request, token: str, decision: str, texts_version: int | None
+) -> Response | int | None:
+    """Record the decision; a page to go to instead, or the session's id when it is an
+    online study's visit (None: a lab session)."""
     with request.app.state.session_factory() as db:
         session = session_for_token(db, token)
         if session is None:
             return _error(request)
         if decision not in ("agree", "decline"):
             return RedirectResponse(f"/p/{token}/consent", status_code=303)
+        if session.outcome is not None:
+            return RedirectResponse(f"/p/{token}/end", status_code=303)
         try:
             consent_service.record_decision(db, session, decision == "agree", texts_version)
         except (Conflict, Invalid):  # a stale page: consent given meanwhile, a bad version
             db.rollback()
             return RedirectResponse(f"/p/{token}", status_code=303)
-    where = "induction/1" if decision == "agree" else "declined"
-    return RedirectResponse(f"/p/{token}/{where}", status_code=303)
+        return session.id if session.condition is not None else None
 
 
 @router.get("/p/{token}/declined")
@@ -246,8 +281,8 @@ async def induction(request: Request, token: str, step: int) -> Response:
     visit = await _load(request, token)
     if visit is None:
         return _error(request)
-    if not visit.consented:
-        return _go(visit, "consent")
+    if not visit.consented or visit.outcome is not None:
+        return _go(visit, _resume_point(visit))
     if not 1 <= step <= 3:
         return _go(visit, "induction/1")
     return _page(
@@ -265,7 +300,7 @@ def advise(request: Request, token: str) -> Response:
     visit = _visit(request, token)
     if visit is None:
         return _error(request)
-    if not visit.started or visit.done:
+    if not visit.started or visit.done or visit.outcome is not None:
         return _go(visit, _resume_point(visit))
     return _page(
         request,
@@ -281,7 +316,7 @@ def thanks(request: Request, token: str) -> Response:
     visit = _visit(request, token)
     if visit is None:
         return _error(request)
-    if not visit.started or not visit.done or visit.online:  # an online visit ends at /end
+    if not visit.started or not visit.done or visit.online or visit.outcome is not None:
         return _go(visit, _resume_point(visit))
     return _page(request, "participant/thanks.html", visit, body=visit.text("thanks"))
 
@@ -326,6 +361,66 @@ def _sections(request: Request, token: str) -> list[Section]:
         session = session_for_token(db, token)
         assert session is not None, "the visit was just read"
         return visit_service.questionnaire_state(db, session).sections
+
+
+END_PAGES = {
+    Outcome.completed: ("Thank you", "You have finished the study."),
+    Outcome.declined: ("You chose not to take part", "We recorded only that you declined."),
+    Outcome.excluded: (
+        "Thank you for your time",
+        "Your answers to the questions about the task did not match, so the study ends here.",
+    ),
+    Outcome.timed_out: (
+        "Your time ran out",
+        "The study waited for you longer than it can, so it has ended.",
+    ),
+    Outcome.full: ("The study is full", "Every place in this study is taken now."),
+}
+"""Heading and message of each outcome's page."""
+
+
+def end_page(
+    request: Request,
+    visit: Visit | None,
+    design: StudyDesign,
+    outcome: Outcome,
+    params: dict[str, str] | None = None,
+) -> Response:
+    """An outcome's page: its code, and a redirect to the panel's URL for it (when set),
+    filled in with the arrival's panel parameters `params`."""
+    heading, message = END_PAGES[outcome]
+    return _page(
+        request,
+        "participant/end.html",
+        visit,
+        outcome=outcome.value,
+        heading=heading,
+        message=message,
+        code=design.code(outcome),
+        return_url=design.return_url(outcome, params),
+        delay_s=design.panel.return_delay_s,
+    )
+
+
+@router.get("/p/{token}/end")
+def end(request: Request, token: str) -> Response:
+    """Where every visit of an online study ends: the outcome's code and return link."""
+    visit = _visit(request, token)
+    if visit is None:
+        return _error(request)
+    if visit.outcome is None or visit.design is None:
+        return _go(visit, _resume_point(visit))
+    design = StudyDesign.model_validate(visit.design)
+    return end_page(request, visit, design, Outcome(visit.outcome), _panel_params(request, token))
+
+
+def _panel_params(request: Request, token: str) -> dict[str, str]:
+    """The panel parameters the participant arrived with (none without a panel id)."""
+    with request.app.state.session_factory() as db:
+        session = session_for_token(db, token)
+        assert session is not None
+        query = select(PanelId.params).where(PanelId.participant_id == session.participant_id)
+        return dict(db.scalar(query) or {})
 
 
 def scene_src(request: Request) -> str:

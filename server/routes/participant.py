@@ -83,10 +83,16 @@ def get_consent(session: ParticipantDep, request: Request) -> ConsentState:
 
 
 @router.post("/consent")
-def give_consent(session: ParticipantDep, request: Request, body: ConsentCreate) -> ConsentState:
+async def give_consent(
+    session: ParticipantDep, request: Request, manager: ManagerDep, body: ConsentCreate
+) -> ConsentState:
     """Consent (agree) or decline, recorded with the time and the texts version shown.
-    Advice is asked only after consent and the induction (`POST /start`)."""
-    return _consent_state(request, session.id, body)
+    Advice is asked only after consent and the induction (`POST /start`). In an online
+    study a decline ends the visit (`declined`: its worker stopped, its place freed)."""
+    state = await run_in_threadpool(_consent_state, request, session.id, body)
+    if not body.agree and session.condition is not None and state.consented_at is None:
+        await end_visit(manager, session.id, Outcome.declined)
+    return state
 
 
 def _finish_induction(manager: ManagerDep, session_id: int) -> None:

@@ -1,14 +1,19 @@
 """Studies (researcher key required)."""
 
-from fastapi import APIRouter, Request, Response
+from fastapi import APIRouter, Path, Request, Response
+from pydantic import BaseModel
+from sqlalchemy import select
+from starlette.concurrency import run_in_threadpool
 
-from server.db.models import LIVE_STATUSES
+from server.db.models import LIVE_STATUSES, Status, Study, StudySession
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes import playback
 from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
+from server.schemas.design import StudyDesign
 from server.schemas.studies import FittedAdvisorPublic, StudyCreate, StudyPublic, StudyUpdate
-from server.services import fitting, storage, studies
+from server.services import assignment, fitting, sessions, storage, studies
+from server.services.errors import Conflict
 
 router = APIRouter(prefix="/api/studies", tags=["studies"], dependencies=[ResearcherDep])
 
@@ -17,22 +22,24 @@ router = APIRouter(prefix="/api/studies", tags=["studies"], dependencies=[Resear
 def create_study(db: DbDep, settings: SettingsDep, body: StudyCreate) -> StudyPublic:
     study = studies.create_study(db, body)
     storage.remove_study_files(settings.data_dir, study.id)  # left by a database reusing ids
-    return studies.public(db, study)
+    return studies.public(db, study, settings.base_url)
 
 
 @router.get("")
-def list_studies(db: DbDep, page: PageDep) -> list[StudyPublic]:
-    return [studies.public(db, s) for s in page.of(studies.list_studies(db))]
+def list_studies(db: DbDep, settings: SettingsDep, page: PageDep) -> list[StudyPublic]:
+    return [studies.public(db, s, settings.base_url) for s in page.of(studies.list_studies(db))]
 
 
 @router.get("/{study_id}")
-def get_study(db: DbDep, study_id: StudyId) -> StudyPublic:
-    return studies.public(db, studies.get_study(db, study_id))
+def get_study(db: DbDep, settings: SettingsDep, study_id: StudyId) -> StudyPublic:
+    return studies.public(db, studies.get_study(db, study_id), settings.base_url)
 
 
 @router.patch("/{study_id}")
-def update_study(db: DbDep, study_id: StudyId, body: StudyUpdate) -> StudyPublic:
-    return studies.public(db, studies.update_study(db, study_id, body))
+def update_study(
+    db: DbDep, settings: SettingsDep, study_id: StudyId, body: StudyUpdate
+) -> StudyPublic:
+    return studies.public(db, studies.update_study(db, study_id, body), settings.base_url)
 
 
 @router.delete("/{study_id}", status_code=204)
@@ -63,3 +70,108 @@ def list_fitted_advisors(db: DbDep, study_id: StudyId) -> list[FittedAdvisorPubl
 @router.get("/{study_id}/fitted/{fitted_id}")
 def get_fitted_advisor(db: DbDep, study_id: StudyId, fitted_id: FittedId) -> FittedAdvisorPublic:
     return fitting.public(fitting.get_model(db, study_id, fitted_id))
+
+
+def _online(db: DbDep, study_id: int) -> tuple[Study, StudyDesign]:
+    study = studies.get_study(db, study_id)
+    design = studies.design_of(study)
+    if design is None:
+        raise Conflict(f"study {study_id} has no design: it is a lab study; PATCH one first")
+    return study, design
+
+
+class ConditionCounts(BaseModel):
+    condition: str
+    target: int
+    completed: int
+    in_progress: int
+    declined: int
+    excluded: int
+    timed_out: int
+
+
+@router.get("/{study_id}/conditions")
+def condition_counts(db: DbDep, study_id: StudyId) -> list[ConditionCounts]:
+    """An online study's conditions: target, completed, in progress, and the visits that
+    ended early, by how (previews not counted)."""
+    study, design = _online(db, study_id)
+    tally = assignment.counts(db, study, design)
+    return [ConditionCounts(condition=name, **vars(c)) for name, c in tally.items()]
+
+
+class Preview(BaseModel):
+    session_id: int
+    participant_url: str
+
+
+@router.post("/{study_id}/preview", status_code=201)
+def preview(db: DbDep, settings: SettingsDep, request: Request, study_id: StudyId) -> Preview:
+    """A preview link: the researcher walks the study as a participant would (a session
+    of the next condition), taking no place, kept out of exports and the report."""
+    study, design = _online(db, study_id)
+    state = request.app.state
+    arrival = assignment.arrive(
+        db,
+        study,
+        design,
+        {},
+        None,
+        state.spec_class,
+        settings.data_dir,
+        settings.worker_threads,
+        preview=True,
+    )
+    assert arrival.token is not None, "a preview is never turned away"
+    session = sessions.session_for_token(db, arrival.token)
+    assert session is not None
+    return Preview(
+        session_id=session.id,
+        participant_url=sessions.participant_url(settings.base_url, arrival.token),
+    )
+
+
+async def _delete_sessions(
+    request: Request, db: DbDep, settings: SettingsDep, manager: ManagerDep, ids: list[int]
+) -> None:
+    """Delete sessions, ending the live ones first (their visits are over)."""
+    for session_id in ids:
+        handle = manager.handles.get(session_id)
+        if handle is not None and handle.status in LIVE_STATUSES:
+            await manager.end(session_id, Status.stopped, "deleted by the researcher")
+        db.expire_all()
+        await run_in_threadpool(storage.delete_session, db, settings.data_dir, session_id, False)
+    request.app.state.participant_tokens.clear()
+    playback.close_deleted(request, db)
+
+
+@router.delete("/{study_id}/preview", status_code=204)
+async def delete_previews(
+    request: Request, db: DbDep, settings: SettingsDep, manager: ManagerDep, study_id: StudyId
+) -> Response:
+    """Every preview session of the study, with all they recorded."""
+    studies.get_study(db, study_id)
+    ids = list(
+        db.scalars(
+            select(StudySession.id).where(
+                StudySession.study_id == study_id, StudySession.preview.is_(True)
+            )
+        )
+    )
+    await _delete_sessions(request, db, settings, manager, ids)
+    return Response(status_code=204)
+
+
+@router.delete("/{study_id}/panel/{panel_id}", status_code=204)
+async def delete_panel_person(
+    request: Request,
+    db: DbDep,
+    settings: SettingsDep,
+    manager: ManagerDep,
+    study_id: StudyId,
+    panel_id: str = Path(max_length=200, pattern=r"^[^\x00]+$"),
+) -> Response:
+    """Everything of the person with this panel id (their sessions, records, panel ids):
+    how a participant's request to be forgotten is met."""
+    ids = assignment.panel_person_sessions(db, study_id, panel_id)
+    await _delete_sessions(request, db, settings, manager, ids)
+    return Response(status_code=204)

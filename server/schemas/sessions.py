@@ -138,6 +138,16 @@ class SessionPublic(BaseModel):
     texts_version: int | None = Field(
         default=None, description="Version of the study's texts the participant was shown."
     )
+    condition: str | None = Field(
+        default=None, description="The online study's condition it was assigned to."
+    )
+    preview: bool = Field(
+        default=False, description="A researcher's preview: no place, out of exports."
+    )
+    outcome: str | None = Field(
+        default=None,
+        description="How the online visit ended: completed, declined, excluded, timed_out.",
+    )
 
 
 class SessionCreated(SessionPublic):

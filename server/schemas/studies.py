@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.schemas.types import Key, Text
-
-MAX_TEXT = 50_000
-"""Characters of one page text (the consent form is the longest, about 3,000)."""
-Texts = dict[Key, Annotated[Text, Field(max_length=MAX_TEXT)]]
+from server.schemas.design import StudyDesign
+from server.schemas.types import Text, Texts
 
 
 class StudyBase(BaseModel):
@@ -27,6 +24,12 @@ class StudyBase(BaseModel):
 
 class StudyCreate(StudyBase):
     name: Text = Field(min_length=1, max_length=200, description="Unique name of the study.")
+    design: StudyDesign | None = Field(
+        default=None,
+        description="An online study's design (conditions, targets, capacity, panel, check, "
+        "questionnaire): the study gets a public link `/join/KEY` that assigns arrivals. "
+        "Omitted: a lab study, its sessions made by hand.",
+    )
 
 
 class StudyUpdate(BaseModel):
@@ -35,6 +38,9 @@ class StudyUpdate(BaseModel):
     name: Text | None = Field(default=None, min_length=1, max_length=200)
     description: Text | None = Field(default=None, max_length=10_000)
     texts: Texts | None = Field(default=None, max_length=32)
+    design: StudyDesign | None = Field(
+        default=None, description="A new design, whole; a lab study becomes an online one."
+    )
 
 
 class StudyPublic(StudyBase):
@@ -46,6 +52,12 @@ class StudyPublic(StudyBase):
     texts: dict[str, str] = Field(default_factory=dict)
     created_at: datetime
     session_count: int = 0
+    design: StudyDesign | None = Field(
+        default=None, description="The design as stored, every default written out."
+    )
+    join_url: str | None = Field(
+        default=None, description="The study's public link (online studies): give it to the panel."
+    )
 
 
 class FittedAdvisorPublic(BaseModel):

@@ -30,3 +30,7 @@ Text = Annotated[str, AfterValidator(plain_text)]
 """A text field of a body (a name, a description, a page text): same 422 on every database."""
 Key = Annotated[Text, StringConstraints(min_length=1, max_length=64)]
 """A key of a body's map (a config field, a text's name)."""
+MAX_TEXT = 50_000
+"""Characters of one page text (the consent form is the longest, about 3,000)."""
+Texts = dict[Key, Annotated[Text, Field(max_length=MAX_TEXT)]]
+"""Page texts by key (a study's, or a condition's over them)."""

@@ -67,6 +67,17 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
         "Where a replay's advice stream came from (JSON: study, session, export file); empty "
         "for sessions that are not replays.",
     ),
+    "condition": (
+        "string",
+        "The online study's condition the participant was assigned to (assignments has how); "
+        "empty outside an online study.",
+    ),
+    "outcome": (
+        "string",
+        "How the online visit ended: completed, declined, excluded (failed the check) or "
+        "timed_out; empty while it goes on, and outside an online study.",
+    ),
+    "outcome_at": ("datetime", "When the visit's outcome was recorded (UTC)."),
     "run_spec": (
         "string",
         "The whole run as stored (learner.run.RunSpec's JSON document, with its version): "
@@ -133,6 +144,38 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
         "Replayed advice: whether the replay showed it the image its advisor saw (equal "
         "observation hashes); empty for advice given live and for requests beyond the stream.",
     ),
+}
+ASSIGNMENT_COLUMNS: dict[str, tuple[str, str]] = {
+    "session_id": ("integer", "The session the arrival got."),
+    "condition": ("string", "The condition it was assigned to."),
+    "block": (
+        "integer",
+        "Block of the block randomization, from 0: each block holds every condition once, in "
+        "the order the seed gives.",
+    ),
+    "position": ("integer", "Position in the block, from 0."),
+    "seed": ("integer", "The study's assignment seed (the same seed gives the same order)."),
+    "refills_session_id": (
+        "integer",
+        "The session whose place this arrival refilled (a visit that ended early); empty for "
+        "a place taken in sequence.",
+    ),
+    "assigned_at": ("datetime", "When the arrival was assigned (UTC)."),
+}
+PANEL_COLUMNS: dict[str, tuple[str, str]] = {
+    "participant": ("string", "Pseudonym of the participant (as in sessions)."),
+    "panel_id": (
+        "string",
+        "The participant's id at the panel (e.g. PROLIFIC_PID, workerId); pseudonymous (a "
+        "keyed hash, the same person the same value) unless the export was asked for panel "
+        "ids for payment (panel_ids=true).",
+    ),
+    "panel_params": (
+        "string",
+        "Every panel parameter of the arrival (JSON: study, submission, assignment ids); "
+        "empty unless the export was asked for panel ids.",
+    ),
+    "created_at": ("datetime", "When the participant first arrived (UTC)."),
 }
 RECORD_EXTRA: dict[str, tuple[str, str]] = {
     "logged_at": ("datetime", "When the session's worker logged the record (UTC)."),
@@ -207,6 +250,8 @@ def table_columns(spec_class: type[RunSpec] = RunSpec) -> dict[str, list[Column]
         "steps": _record_columns("steps"),
         "advice": [column(name, *spec) for name, spec in ADVICE_COLUMNS.items()],
         "texts_versions": [column(name, *spec) for name, spec in TEXTS_COLUMNS.items()],
+        "assignments": [column(name, *spec) for name, spec in ASSIGNMENT_COLUMNS.items()],
+        "panel_ids": [column(name, *spec) for name, spec in PANEL_COLUMNS.items()],
         **{
             table: [column(name, *spec) for name, spec in specs.items()]
             for table, specs in VISIT_COLUMNS.items()

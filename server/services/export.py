@@ -10,11 +10,15 @@ actions), one stage vocabulary in steps and episodes (`stage`: `pretrain`, `trai
 pretraining step taken on advice has `action_source` advisor and `advised = true`), and
 each session's run both as
 columns (one per field of `learner.run.RunSpec`) and whole (`run_spec`, JSON: what the API
-and `ideeprl batch` accept back).
+and `ideeprl batch` accept back). An online study adds its assignments and its
+participants' panel ids (pseudonymous unless asked for, for payment); a researcher's
+previews are never exported.
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import json
 import shutil
 import tempfile
@@ -28,7 +32,17 @@ from sqlalchemy.orm import Session
 from learner.fields import leaves
 from learner.run import RunSpec
 from server.analysis.settings import where
-from server.db.models import Advice, Episode, Step, StudySession, StudyTexts
+from server.db.models import (
+    Advice,
+    Assignment,
+    Episode,
+    PanelId,
+    Participant,
+    Step,
+    Study,
+    StudySession,
+    StudyTexts,
+)
 from server.services import learning, visit_export
 from server.services.columns import TEXT_KEYS, table_columns
 from server.services.studies import get_study
@@ -37,13 +51,24 @@ from sim.actions import ACTION_NAMES
 from sim.rules import SortRule
 
 FORMATS = ("csv", "parquet")
-TABLES = ("sessions", "episodes", "steps", "advice", "texts_versions", *visit_export.KEYS)
+TABLES = (
+    "sessions",
+    "episodes",
+    "steps",
+    "advice",
+    "texts_versions",
+    "assignments",
+    "panel_ids",
+    *visit_export.KEYS,
+)
 KEYS: dict[str, dict[str, Any]] = {
     "sessions": {"primaryKey": ["session_id"]},
     "episodes": {"primaryKey": ["session_id", "stage", "episode"]},
     "steps": {"primaryKey": ["session_id", "global_step"]},
     "advice": {"primaryKey": ["session_id", "advice_index"]},
     "texts_versions": {"primaryKey": ["study_id", "texts_version"]},
+    "assignments": {"primaryKey": ["session_id"]},
+    "panel_ids": {"primaryKey": ["participant"]},
     **visit_export.KEYS,
 }
 BATCH = 5000
@@ -92,6 +117,9 @@ def _session_rows(
             "code_version": where(s.provenance, "code") if s.provenance else None,
             "provenance": json.dumps(s.provenance) if s.provenance else None,
             "replay_of": s.replay_of,
+            "condition": s.condition,
+            "outcome": s.outcome,
+            "outcome_at": s.outcome_at,
             "replay_source": json.dumps(s.replay_stream["source"], sort_keys=True)
             if s.replay_stream
             else None,
@@ -161,17 +189,62 @@ def _texts_rows(db: Session, study_id: int) -> Iterator[dict[str, Any]]:
         }
 
 
+def _assignment_rows(db: Session, study_id: int) -> Iterator[dict[str, Any]]:
+    """How each arrival at the study's link was assigned (previews take none)."""
+    query = select(Assignment).where(Assignment.study_id == study_id).order_by(Assignment.id)
+    found = list(db.scalars(query))
+    session_of = {a.id: a.session_id for a in found}
+    for a in found:
+        yield {
+            "session_id": a.session_id,
+            "condition": a.condition,
+            "block": a.block,
+            "position": a.position,
+            "seed": a.seed,
+            "refills_session_id": session_of.get(a.refills) if a.refills else None,
+            "assigned_at": a.assigned_at,
+        }
+
+
+def _panel_rows(db: Session, study: Study, identified: bool) -> Iterator[dict[str, Any]]:
+    """Each participant's panel ids: a keyed hash of the id (the study's secret link key is
+    the key, so nobody can recompute it from a panel id alone) unless `identified`."""
+    query = (
+        select(PanelId, Participant.pseudonym)
+        .join(Participant, Participant.id == PanelId.participant_id)
+        .where(PanelId.study_id == study.id)
+        .order_by(PanelId.id)
+    )
+    key = (study.join_key or "").encode()
+    for row, pseudonym in db.execute(query):
+        hashed = hmac.new(key, row.panel_id.encode(), hashlib.sha256).hexdigest()[:16]
+        yield {
+            "participant": pseudonym,
+            "panel_id": row.panel_id if identified else hashed,
+            "panel_params": json.dumps(row.params, sort_keys=True) if identified else None,
+            "created_at": row.created_at,
+        }
+
+
 def export_study(
-    db: Session, study_id: int, out: Path, fmt: str = "csv", spec_class: type[RunSpec] = RunSpec
+    db: Session,
+    study_id: int,
+    out: Path,
+    fmt: str = "csv",
+    spec_class: type[RunSpec] = RunSpec,
+    panel_ids: bool = False,
 ) -> dict[str, int]:
     """Write the study's tables (`fmt`: csv or parquet), `datapackage.json`, `columns.csv`
     and `study.json` into `out`; returns the row count of each table file. The sessions'
-    run columns are `spec_class`'s fields (the run's declaration)."""
+    run columns are `spec_class`'s fields (the run's declaration). `panel_ids`: the
+    participants' panel ids as they are (for payment), not pseudonymous."""
     if fmt not in FORMATS:
         raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     study = get_study(db, study_id)
     out.mkdir(parents=True, exist_ok=True)
-    query = select(StudySession).where(StudySession.study_id == study.id)
+    query = select(StudySession).where(
+        StudySession.study_id == study.id, StudySession.preview.is_(False)
+    )
     sessions = list(db.scalars(query.order_by(StudySession.id)))
     columns = table_columns(spec_class)
     rows = {
@@ -180,6 +253,8 @@ def export_study(
         "episodes": _records(db, Episode, sessions, Episode.first_global_step),
         "steps": _records(db, Step, sessions, Step.global_step),
         "advice": _advice_rows(db, sessions, out),
+        "assignments": _assignment_rows(db, study.id),
+        "panel_ids": _panel_rows(db, study, panel_ids),
         **visit_export.visit_rows(db, sessions),
     }
     write = write_parquet if fmt == "parquet" else write_csv
@@ -213,13 +288,15 @@ def export_study(
     return counts
 
 
-def export_zip(db: Session, study_id: int, work_dir: Path, fmt: str = "csv") -> Path:
+def export_zip(
+    db: Session, study_id: int, work_dir: Path, fmt: str = "csv", panel_ids: bool = False
+) -> Path:
     """The study's export packed as one zip in a fresh temporary folder under `work_dir`."""
     work_dir.mkdir(parents=True, exist_ok=True)
     temp = Path(tempfile.mkdtemp(prefix=f"study-{study_id}-", dir=work_dir))
     folder = temp / f"study-{study_id}"
     try:
-        export_study(db, study_id, folder, fmt)
+        export_study(db, study_id, folder, fmt, panel_ids=panel_ids)
         return Path(shutil.make_archive(str(folder), "zip", root_dir=folder))
     except BaseException:  # an unknown study, a full disk: no scratch folder left behind
         shutil.rmtree(temp, ignore_errors=True)

@@ -42,9 +42,11 @@ ENDED = (
     Status.stopped,
     Status.interrupted,
     Status.abandoned,
+    Status.timed_out,
     Status.failed,
 )
-"""Sessions whose advice is over; a running or paused one counts once its budget is spent
+"""Sessions whose advice is over (an online visit that timed out, like an abandoned one,
+may hold some); a running or paused one counts once its budget is spent
 (it trains on without its advisor), never while its advisor may still give more."""
 ADVISED = ("human", "oracle", "random", "agent", "fitted")
 
@@ -167,6 +169,7 @@ def fit_study(
     query = select(StudySession).where(
         StudySession.study_id == study_id,
         StudySession.status.in_([s.value for s in (*ENDED, *LIVE_STATUSES)]),
+        StudySession.preview.is_(False),  # a researcher's walk through is nobody's advice
     )
     sessions = [
         s

@@ -2,7 +2,10 @@
 
 `ideeprl report` and `POST /api/studies/{id}/report` both come here. By default a report
 covers the study's finished sessions, except those that served as another session's
-advisor (the agent trained for agent-IDeepRL is not one of the autonomous agents).
+advisor (the agent trained for agent-IDeepRL is not one of the autonomous agents). A
+researcher's previews are never in a report. An online study's report compares its
+conditions (the manipulation: they stand where methods stand, so the audit flags any other
+difference) at the design's alpha.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from server.services.episodes import (
 )
 from server.services.errors import Conflict, Invalid, NotFound
 from server.services.sessions import list_sessions
-from server.services.studies import get_study
+from server.services.studies import design_of, get_study
 from server.services.tables import iso_z
 from server.settings import Settings
 
@@ -87,7 +90,7 @@ def select_sessions(
     db: Session, study_id: int, request: ReportRequest
 ) -> tuple[list[StudySession], list[str]]:
     """The sessions the report covers, and sentences on what was left out and why."""
-    everything = list_sessions(db, study_id)
+    everything = [s for s in list_sessions(db, study_id) if not s.preview]
     notes: list[str] = []
     if request.sessions:
         by_id = {s.id: s for s in everything}
@@ -171,9 +174,15 @@ def build_report(
     request = request or ReportRequest()
     study = get_study(db, study_id)
     sessions, notes = select_sessions(db, study_id, request)
-    baseline, baseline_notes = choose_baseline({s.method for s in sessions}, request.baseline)
+    design = design_of(study)
+    group = {s.id: (s.condition if design and s.condition else s.method) for s in sessions}
+    baseline, baseline_notes = choose_baseline(set(group.values()), request.baseline)
     episodes = load_episodes(db, [s.id for s in sessions])
     settings = session_settings(sessions)
+    if design is not None:  # the conditions are what is compared
+        episodes["method"] = episodes["session_id"].map(group)
+        settings["method"] = settings["session_id"].map(group)
+        notes.append(f"An online study: its conditions are compared, at α = {design.alpha:g}.")
     steps = load_training_steps(db, [s.id for s in sessions])
     advice = load_advised_steps(db, [s.id for s in sessions])
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
@@ -193,8 +202,8 @@ def build_report(
                 "episodes, the length they have in common."
             )
     counts = ", ".join(
-        f"{sum(s.method == m for s in sessions)} {method_name(m)}"
-        for m in dict.fromkeys(s.method for s in sessions)
+        f"{sum(group[s.id] == m for s in sessions)} {method_name(m)}"
+        for m in dict.fromkeys(group[s.id] for s in sessions)
     )
     lines = [
         *request.notes,
@@ -216,6 +225,7 @@ def build_report(
             reference=request.reference,
             advice=advice,
             primary=request.primary,
+            **({"alpha": design.alpha} if design is not None else {}),
         )
     except EpisodeTableError as error:
         raise Conflict(f"these sessions cannot be compared as they are: {error}") from None

@@ -161,7 +161,7 @@ def session_for_token(db: Session, token: str) -> StudySession | None:
 
     Tokens are 256-bit random strings, so looking one up by equality reveals nothing an
     attacker could use; we still compare the stored value in constant time."""
-    if not token or len(token) > 100:
+    if not token or len(token) > 100 or "\x00" in token:  # PostgreSQL refuses a NUL
         return None
     session = db.scalar(select(StudySession).where(StudySession.participant_token == token))
     if session is None or not secrets.compare_digest(session.participant_token or "", token):

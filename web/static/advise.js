@@ -110,6 +110,7 @@
     }
   }
 
+  const VISIT_ENDED = ["declined", "excluded", "timed_out"];
   async function render(s) {
     const gen = ++generation;
     showCounter(s);
@@ -123,6 +124,7 @@
       beforeFirstTurn = false;
       setButtons(false);
       showArm(s, false);
+      if (VISIT_ENDED.includes(s.status)) return window.location.assign(`/p/${config.token}`); // its end page
       if (s.status !== "running") setStatus(s.message || `The session is ${s.status}.`, "paused");
       else if (s.robot_moving || sentIndex !== null) setStatus("The robot is moving…", "busy");
       else if (s.advice_given === 0) showReadiness();

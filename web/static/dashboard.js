@@ -11,7 +11,8 @@
     stopped: ["resume"],
     interrupted: ["resume", "stop"],
     abandoned: ["resume", "stop"],
-  };
+  }; // declined, excluded, timed_out, finished: over
+  const COUNTS = ["target", "completed", "in_progress", "declined", "excluded", "timed_out"];
   const $ = (id) => document.getElementById(id);
   const template = $("study-template");
   const sections = new Map();
@@ -27,11 +28,13 @@
     const p = s.progress;
     const parts = [];
     if (s.method !== "autonomous" && p.advice_budget) parts.push(`advice ${p.advice_given}/${p.advice_budget}`);
-    if (s.method === "human" && !p.consented) parts.push(s.declined ? "declined" : "not consented yet");
+    if (s.condition) parts.push(`${s.preview ? "preview of " : ""}${s.condition}`);
+    if (s.outcome === "completed") parts.push("visit completed");
+    if (s.method === "human" && !p.consented && !s.outcome) parts.push(s.declined ? "declined" : "not consented yet");
     if (p.advice_wanted) parts.push("waiting for the participant");
     if (p.queued) parts.push("advice done, queued for a trainer");
     if (p.stage === "train" || p.episode) parts.push(`episode ${p.episode}/${p.episodes}`);
-    else if (p.stage) parts.push(p.stage === "pretrain" ? "pretraining" : p.stage);
+    else if (p.stage && !p.queued && s.status === "running") parts.push(p.stage === "pretrain" ? "pretraining" : p.stage);
     if (p.last_episode_reward !== null && p.last_episode_reward !== undefined) {
       parts.push(`last ${p.last_episode_reward.toFixed(2)}`);
     }
@@ -53,7 +56,7 @@
     playback.title = "Play back a recorded episode";
     cells[1].textContent = s.method;
     cells[2].innerHTML = `<span class="badge"></span>`;
-    const shown = s.status === "running" && s.progress.queued ? "queued" : s.status;
+    const shown = s.status === "running" && s.progress.queued ? "queued" : s.status.replace("_", " ");
     cells[2].firstChild.textContent = shown;
     cells[2].firstChild.dataset.status = shown;
     if (s.status_detail) cells[2].firstChild.title = s.status_detail;
@@ -158,6 +161,41 @@
       }
       refresh();
     });
+    section.querySelector(".save-design").addEventListener("click", async () => {
+      const box = section.querySelector(".design-json");
+      try {
+        const saved = await call(`/dashboard/api/studies/${study.id}/design`, {
+          method: "POST",
+          body: JSON.stringify({ design: JSON.parse(box.value) }),
+        });
+        box.value = JSON.stringify(saved.design, null, 2); // every default written out
+        box.dataset.edited = "";
+        showError("");
+      } catch (e) {
+        showError(`Design of study ${study.id}: ${e.message}`);
+      }
+      refresh();
+    });
+    section.querySelector(".design-json").addEventListener("input", (event) => (event.target.dataset.edited = "1"));
+    section.querySelector(".preview").addEventListener("click", async () => {
+      try {
+        const made = await call(`/dashboard/api/studies/${study.id}/preview`, { method: "POST" });
+        window.open(made.participant_url, "_blank", "noopener");
+        showError("");
+      } catch (e) {
+        showError(`Preview of study ${study.id}: ${e.message}`);
+      }
+      refresh();
+    });
+    section.querySelector(".delete-previews").addEventListener("click", async () => {
+      try {
+        await call(`/dashboard/api/studies/${study.id}/preview`, { method: "DELETE" });
+        showError("");
+      } catch (e) {
+        showError(`Previews of study ${study.id}: ${e.message}`);
+      }
+      refresh();
+    });
     const buildButton = section.querySelector(".build-report");
     buildButton.addEventListener("click", async () => {
       buildButton.disabled = true;
@@ -202,6 +240,28 @@
     }
   }
 
+  function showDesign(study, section) {
+    const box = section.querySelector(".design-json");
+    if (!box.dataset.edited && document.activeElement !== box) {
+      box.value = study.design ? JSON.stringify(study.design, null, 2) : "";
+    }
+    const online = section.querySelector(".online");
+    online.hidden = !study.design;
+    if (!study.design) return;
+    const link = online.querySelector(".join-link");
+    link.href = link.textContent = study.join_url;
+    online.querySelector(".conditions tbody").replaceChildren(
+      ...study.conditions.map((c) => {
+        const tr = document.createElement("tr");
+        tr.dataset.condition = c.condition;
+        for (const text of [c.condition, ...COUNTS.map((k) => c[k])]) {
+          tr.appendChild(document.createElement("td")).textContent = text;
+        }
+        return tr;
+      })
+    );
+  }
+
   async function refresh() {
     let studies;
     try {
@@ -220,9 +280,10 @@
       const section = studySection(study);
       section.querySelector(".study-name").textContent = study.name;
       section.querySelector(".study-description").textContent = study.description;
+      showDesign(study, section);
       const colors = {};
       study.sessions.forEach((s, i) => (colors[s.id] = COLORS[i % COLORS.length]));
-      const tbody = section.querySelector("tbody");
+      const tbody = section.querySelector("table.sessions tbody");
       tbody.replaceChildren(...study.sessions.map((s) => sessionRow(s, colors[s.id])));
       if (!study.sessions.length) {
         tbody.innerHTML = `<tr><td colspan="6" class="muted">No session yet. “New participant link” makes a human session.</td></tr>`;

@@ -1,0 +1,95 @@
+"""An online study's public link, `/join/{key}`: arrivals get their session (assigned to a
+condition, `server.services.assignment`) and go to their participant link; a full study
+shows its page with the panel's "full" code. Rate-limited (`server.limits`)."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request
+from fastapi.responses import RedirectResponse, Response
+from starlette.concurrency import run_in_threadpool
+
+from server.db.models import Outcome
+from server.routes.pages import end_page
+from server.schemas.design import StudyDesign
+from server.services import assignment, studies
+from server.services.errors import NotFound
+
+router = APIRouter(include_in_schema=False)
+COOKIE = "ideeprl_visit"
+"""Holds an arrival's participant token, on the study link's path only: someone without a
+panel id who comes back gets their own session again."""
+COOKIE_DAYS = 30
+MAX_PARAM = 200
+"""Characters of a panel parameter (`panel_ids.panel_id` holds 200; Prolific's are 24)."""
+
+
+def _too_many(what: str) -> Response:
+    return Response(
+        f"Too many arrivals {what}; please try again in a minute.",
+        status_code=429,
+        headers={"Retry-After": "60"},
+        media_type="text/plain",
+    )
+
+
+@router.get("/join/{key}")
+async def join(request: Request, key: str) -> Response:
+    settings = request.app.state.settings
+    address = request.client.host if request.client is not None else "?"
+    if not request.app.state.arrivals_by_address.allow(
+        address, settings.join_per_address_per_minute
+    ):
+        return _too_many("from your address")
+    try:
+        study_id, design = await run_in_threadpool(_design, request, key)
+    except NotFound:
+        return Response("This study link is not valid.", status_code=404, media_type="text/plain")
+    per_study = settings.join_per_place_per_minute * design.capacity
+    if not request.app.state.arrivals_by_study.allow(key, per_study):
+        return _too_many("at this study")
+    params = dict(request.query_params)
+    if any(len(v) > MAX_PARAM or "\x00" in v for v in params.values()):
+        return Response(
+            f"A parameter of this link is longer than {MAX_PARAM} characters or holds a NUL "
+            "character; open the link as the panel gave it.",
+            status_code=400,
+            media_type="text/plain",
+        )
+    arrival = await run_in_threadpool(_arrive, request, study_id, params)
+    if arrival.token is None:
+        return end_page(request, None, design, Outcome.full, arrival.params)
+    response = RedirectResponse(f"/p/{arrival.token}", status_code=303)
+    response.set_cookie(
+        COOKIE,
+        arrival.token,
+        max_age=COOKIE_DAYS * 86_400,
+        httponly=True,
+        samesite="lax",
+        secure=request.url.scheme == "https" or settings.base_url.startswith("https://"),
+        path=f"/join/{key}",
+    )
+    return response
+
+
+def _design(request: Request, key: str) -> tuple[int, StudyDesign]:
+    with request.app.state.session_factory() as db:
+        study, design = assignment.study_for_key(db, key)
+        return study.id, design
+
+
+def _arrive(request: Request, study_id: int, params: dict[str, str]) -> assignment.Arrival:
+    state = request.app.state
+    with assignment.ARRIVALS, state.session_factory() as db:
+        study = studies.get_study(db, study_id)
+        design = studies.design_of(study)
+        assert design is not None, "a study with a link has a design"
+        return assignment.arrive(
+            db,
+            study,
+            design,
+            params,
+            request.cookies.get(COOKIE),
+            state.spec_class,
+            state.settings.data_dir,
+            state.settings.worker_threads,
+        )

@@ -1,0 +1,71 @@
+"""An online study's report compares its conditions at the design's alpha, with the audit
+told the condition is the manipulation, and never includes a researcher's preview."""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+from server.db.engine import make_engine, make_session_factory
+from server.db.migrate import upgrade
+from server.db.models import Episode, Status
+from server.schemas.design import StudyDesign
+from server.schemas.studies import StudyCreate
+from server.services import assignment, studies
+from server.services.reports import build_report
+
+RUN = {"method": "human", "config": {"pretraining_steps": 20, "advice_budget": 5, "batch_size": 8}}
+EPISODES = 6
+
+
+def _finish(db, session, rewards: random.Random) -> None:  # type: ignore[no-untyped-def]
+    session.status = Status.finished.value
+    for i in range(EPISODES):
+        db.add(
+            Episode(
+                session_id=session.id, stage="train", episode=i + 1,
+                collected_reward=rewards.uniform(0, 3), steps=50, placed_correct=1,
+                misplaced=0, lost=0, success=False, terminated=True, truncated=False,
+                advised_steps=0, epsilon=0.5, first_global_step=i * 50 + 1,
+                last_global_step=(i + 1) * 50, wall_time=0.0,
+            )
+        )  # fmt: skip
+    db.commit()
+
+
+def test_the_report_compares_the_conditions_without_previews(tmp_path: Path) -> None:
+    engine = make_engine(f"sqlite:///{tmp_path / 'study.sqlite3'}")
+    upgrade(engine)
+    design = StudyDesign.model_validate(
+        {
+            "conditions": {
+                "early": {"run": {**RUN, "strategy": "early"}, "target": 3},
+                "alternating": {"run": {**RUN, "strategy": "alternating"}, "target": 3},
+            },
+            "alpha": 0.01,
+        }
+    )
+    rewards = random.Random(5)
+    with make_session_factory(engine)() as db:
+        study = studies.create_study(db, StudyCreate(name="online-report", design=design))
+        design = studies.design_of(study)
+        assert design is not None
+        tokens = [
+            assignment.arrive(db, study, design, {"PROLIFIC_PID": f"R{i}"}, None).token
+            for i in range(6)
+        ]
+        preview = assignment.arrive(db, study, design, {}, None, preview=True).token
+        for token in [*tokens, preview]:
+            session = assignment.session_for_token(db, str(token))
+            assert session is not None
+            _finish(db, session, rewards)
+        preview_id = assignment.session_for_token(db, str(preview)).id  # type: ignore[union-attr]
+        built = build_report(db, study.id, tmp_path / "report")
+    analysis = built.result.analysis
+    assert set(analysis.episodes["method"]) == {"early", "alternating"}
+    assert preview_id not in set(analysis.episodes["session_id"])
+    assert analysis.episodes["session_id"].nunique() == 6
+    text = built.result.report.read_text()
+    assert "α = 0.01" in text and "conditions are compared" in text
+    assert "not comparable" not in text, "the strategy is the manipulation, not a mismatch"
+    engine.dispose()
