@@ -11,7 +11,7 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.analysis.report import REPORT_FILE
+from server.analysis.markdown import REPORT_FILE
 from server.deps import DbDep, ResearcherDep, SettingsDep
 from server.routes.params import MAX_ID, StudyId
 from server.schemas.types import Text
