@@ -6,7 +6,6 @@ same protocol: `advise` may block as long as the person takes.
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -15,19 +14,10 @@ import numpy as np
 
 from learner.config import DQNConfig
 from learner.fitted import FittedAdvisor, log_normal_time, read_model
+from learner.no_advice import NO_ADVICE as NO_ADVICE
+from learner.no_advice import NoAdvice as NoAdvice
 
 ADVISOR_KINDS = ("agent", "fitted", "oracle", "random")
-
-
-class NoAdvice(enum.Enum):
-    """What an advisor answers when it was asked and has nothing to give: a recorded stream
-    that ran out. The strategy counts the request against its budget (the run asked, as
-    the original did), and the learner takes its own action."""
-
-    NO_ADVICE = "no advice"
-
-
-NO_ADVICE = NoAdvice.NO_ADVICE
 
 
 @runtime_checkable

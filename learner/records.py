@@ -26,6 +26,8 @@ Stage = Literal["pretrain", "train"]
 """The part of a run: `pretrain` (Algorithm 1: the memory is filled, random or advised
 actions) or `train` (Algorithm 2)."""
 STAGES: tuple[Stage, ...] = ("pretrain", "train")
+TRAINING: Stage = "train"
+"""The stage whose episodes are the run's results (a report compares them)."""
 OLD_STAGES = {"pretraining": "pretrain", "training": "train", "advice": "pretrain"}
 """Older spellings of a stage (checkpoints, step rows and exports written before one word
 was kept): `advice` was an advised pretraining step."""

@@ -4,18 +4,24 @@ which are running and how far, and the time left."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from tqdm import tqdm
 
+from server.batch.spec import Run
 from server.db.models import Status, StudySession
-
-if TYPE_CHECKING:
-    from server.batch.runner import RunState
 
 BAR_FORMAT = (
     "{desc} {percentage:3.0f}%|{bar}| {n:.1f}/{total} runs [{elapsed}<{remaining}{postfix}]"
 )
+
+
+class RunState(Protocol):
+    """What the bar reads of a run (`server.batch.runner.RunState`, which uses the bar)."""
+
+    run: Run
+    session_id: int | None
+    status: str
 
 
 def run_fraction(progress: dict[str, Any]) -> float:

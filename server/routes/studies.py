@@ -4,7 +4,6 @@ from fastapi import APIRouter, Request, Response
 
 from server.db.models import LIVE_STATUSES
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
-from server.routes import playback
 from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
 from server.schemas.studies import FittedAdvisorPublic, StudyCreate, StudyPublic, StudyUpdate
@@ -44,7 +43,7 @@ def delete_study(
     live = {i for i, h in manager.handles.items() if h.status in LIVE_STATUSES}
     storage.delete_study(db, settings.data_dir, study_id, live)
     request.app.state.participant_tokens.clear()
-    playback.close_deleted(request, db)
+    request.app.state.playbacks.close_deleted(db)
     return Response(status_code=204)
 
 

@@ -11,7 +11,6 @@ command line (`ideeprl fit`), not in the web process.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,8 +32,8 @@ from server.db.models import (
 from server.schemas.studies import FittedAdvisorPublic
 from server.services import learning
 from server.services.errors import Invalid, NotFound
+from server.services.fitted_files import write_model_file
 from server.services.outcomes import ReplayMismatch
-from server.services.storage import fitted_model_path
 from server.services.studies import get_study
 
 ENDED = (
@@ -195,42 +194,6 @@ def fit_study(
     db.commit()
     path = write_model_file(data_dir, row)
     return Fitted(row.id, study_id, path, model, lost)
-
-
-def write_model_file(data_dir: Path, row: FittedAdvisorModel) -> Path:
-    path = fitted_model_path(data_dir, row.study_id, row.id)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(row.model, indent=1))
-    return path
-
-
-def resolve(db: Session, name: str, data_dir: Path | None) -> str:
-    """The model file a `fitted` run names: `fitted:ID` (a stored model; its file written
-    again if gone), or a path, which through the API must lie under `data_dir`."""
-    if name.startswith("fitted:"):
-        number = name.removeprefix("fitted:")
-        known = number.isdigit() and len(number) < 10
-        row = db.get(FittedAdvisorModel, int(number)) if known else None
-        if row is None or data_dir is None:
-            raise Invalid(
-                "run.fitted_model",
-                "run.fitted_model names no stored model; GET /api/studies/ID/fitted lists "
-                "them (fitted:ID), or give the path `ideeprl fit` printed",
-            )
-        path = fitted_model_path(data_dir, row.study_id, row.id)
-        if not path.is_file():
-            write_model_file(data_dir, row)
-        return str(path.resolve())
-    path = Path(name).resolve()
-    if data_dir is not None and not path.is_relative_to(data_dir.resolve()):
-        raise Invalid(
-            "run.fitted_model",
-            "run.fitted_model must be fitted:ID (a stored model) or a file under the "
-            "server's data folder",
-        )
-    if not path.is_file():
-        raise Invalid("run.fitted_model", "run.fitted_model: no such file")
-    return str(path)
 
 
 def list_models(db: Session, study_id: int) -> list[FittedAdvisorModel]:

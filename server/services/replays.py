@@ -80,7 +80,7 @@ class Stream:
 
 
 def _png_hash(png: bytes) -> str:
-    from server.worker.advisors import decode_png
+    from server.services.observations import decode_png
 
     return observation_hash(decode_png(png))
 

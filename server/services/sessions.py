@@ -20,6 +20,7 @@ from server.db.models import (
 from server.schemas.sessions import SessionOptions, SessionPublic
 from server.services import learning
 from server.services.errors import Invalid, NotFound
+from server.services.fitted_files import resolve
 from server.services.ownership import claim as claim
 from server.services.ownership import mark_dead_interrupted as mark_dead_interrupted
 from server.services.ownership import set_status as set_status
@@ -94,8 +95,6 @@ def create_session(
     if spec.advisor_checkpoint and spec.method == "agent":
         spec = spec.replace(advisor_checkpoint=advisor_path(db, spec.advisor_checkpoint, data_dir))
     if spec.fitted_model and spec.method == "fitted":
-        from server.services.fitting import resolve
-
         spec = spec.replace(fitted_model=resolve(db, spec.fitted_model, data_dir))
     spec = learning.checked(spec, threads)
     if options.participant and spec.method != Method.human:

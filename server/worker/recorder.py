@@ -17,14 +17,11 @@ from typing import Any, Protocol
 from sqlalchemy import bindparam, delete, insert, update
 from sqlalchemy.orm import Session, sessionmaker
 
-from learner.records import EpisodeRecord, StepRecord
+from learner.records import TRAINING, EpisodeRecord, StepRecord
 from server.db.models import Advice, Episode, Method, Step, StudySession, utcnow
 
 STEP_COLUMNS = frozenset(c.name for c in Step.__table__.columns) - {"id"}
 EPISODE_COLUMNS = frozenset(c.name for c in Episode.__table__.columns) - {"id"}
-
-
-TRAINING = "train"
 
 
 class LeaseLost(Exception):

@@ -70,7 +70,7 @@ class RerunFailed:
 
 def rerun_episode(order: RerunOrder) -> Rerun:
     """Reset with the episode's seed and take its logged actions."""
-    from server.worker.advisors import encode_png  # the rerun's process only
+    from server.services.observations import encode_png  # the rerun's process only
 
     spec = order.spec_class.from_json(order.run)
     env = spec.make_env(record_motion=True)

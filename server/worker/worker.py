@@ -23,6 +23,7 @@ from sqlalchemy import select, update
 
 from learner import provenance
 from learner.advisors import RecordedAdvisor
+from learner.records import TRAINING
 from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
 from server.db.models import Advice, Method, Status, StudySession, utcnow
@@ -32,7 +33,7 @@ from server.services.sessions import claim, get_session, set_status
 from server.worker.advisors import HumanAdvisor, RecordingAdvisor
 from server.worker.link import ParentGone, WorkerExit, WorkerLink
 from server.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
-from server.worker.recorder import TRAINING, LeaseLost, Recorder
+from server.worker.recorder import LeaseLost, Recorder
 from server.worker.scene import SceneBroadcast
 
 log = logging.getLogger(__name__)
