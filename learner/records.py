@@ -1,6 +1,7 @@
 """What the learner reports: one record per environment step and one per episode.
 
-The field docstrings are the column dictionary of the exports (`column_docs`).
+The field docstrings are the column dictionary of the exports
+(`learner.docstrings.field_docstrings`).
 
 Numbering. Global steps count every environment step of a run from 1: pretraining is
 steps 1..pretraining_steps, training follows. Episodes are numbered from 1 within their
@@ -19,8 +20,6 @@ import dataclasses
 import hashlib
 from dataclasses import dataclass
 from typing import Any, Literal
-
-from learner.docstrings import field_docstrings
 
 Stage = Literal["pretrain", "train"]
 """The part of a run: `pretrain` (Algorithm 1: the memory is filled, random or advised
@@ -151,11 +150,6 @@ def observation_hash(obs: Any) -> str:
 
     data = np.ascontiguousarray(obs, dtype=np.uint8)
     return hashlib.blake2b(data.tobytes(), digest_size=8).hexdigest()
-
-
-def column_docs(record_type: type) -> dict[str, str]:
-    """Field name -> docstring of a record class: the export's column dictionary."""
-    return field_docstrings(record_type)
 
 
 class StagedRun:

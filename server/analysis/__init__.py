@@ -45,7 +45,7 @@ _MODULE_OF = {
     "t_tests": "stats",
     "Analysis": "summary",
     "analyze": "summary",
-    "synthetic_episodes": "synthetic",
+    "demo_episodes": "demo_curves",
 }
 """Where each public name lives (its module in this package)."""
 
@@ -59,6 +59,7 @@ __all__ = [
     "analyze",
     "bootstrap_interval",
     "correlation_matrix",
+    "demo_episodes",
     "difference_intervals",
     "improvement_pct",
     "iqm",
@@ -77,13 +78,13 @@ __all__ = [
     "reward_curves",
     "save_figure",
     "student_t_test",
-    "synthetic_episodes",
     "t_tests",
     "validate_episodes",
     "write_report",
 ]
 
 if TYPE_CHECKING:
+    from server.analysis.demo_curves import demo_episodes
     from server.analysis.episodes import (
         CONTRACT,
         METHOD_NAMES,
@@ -120,7 +121,6 @@ if TYPE_CHECKING:
         t_tests,
     )
     from server.analysis.summary import Analysis, analyze
-    from server.analysis.synthetic import synthetic_episodes
 
 
 def __getattr__(name: str) -> Any:
