@@ -6,7 +6,7 @@ same protocol: `advise` may block as long as the person takes.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -175,7 +175,7 @@ def make_advisor(kind: str, **options: Any) -> Advisor:
     """`agent` (checkpoint=PATH, device=...), `fitted` (model=PATH, sort_rule=..., seed=...),
     `oracle` (sort_rule=..., error_rate=..., seed=..., decision_time_median_s=...,
     decision_time_sigma=...) or `random` (seed=...)."""
-    factories = {
+    factories: dict[str, Callable[..., Advisor]] = {
         "agent": AgentAdvisor,
         "fitted": _fitted,
         "oracle": OracleAdvisor,
@@ -191,7 +191,7 @@ def make_advisor(kind: str, **options: Any) -> Advisor:
     if kind == "agent" and "checkpoint" not in options:
         raise ValueError("the agent advisor needs checkpoint=PATH of a trained learner")
     try:
-        return factories[kind](**options)  # type: ignore[no-any-return]
+        return factories[kind](**options)
     except TypeError as error:
         raise ValueError(f"bad options for the {kind} advisor: {error}") from error
 

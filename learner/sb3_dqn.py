@@ -167,7 +167,7 @@ class SB3DQNTrainer(StagedRun):
         self._env_rng = np.random.default_rng(env_seeds)  # the Trainer's reset seeds
         model = DQN(
             h["sb3_policy"],
-            None,
+            None,  # type: ignore[arg-type]  # SB3 takes no env here (its annotation says otherwise)
             learning_rate=h["sb3_learning_rate"],
             buffer_size=h["sb3_buffer_size"],
             learning_starts=h["sb3_learning_starts"],
@@ -244,6 +244,7 @@ class SB3DQNTrainer(StagedRun):
         if pretraining and self.global_step == self.config.pretraining_steps:
             truncated = truncated or not terminated  # pretraining ends: cut its last episode
         model.num_timesteps += 1
+        assert model.replay_buffer is not None, "made by _setup_model"
         model.replay_buffer.add(
             obs,
             _channels_first(next_obs),

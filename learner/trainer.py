@@ -118,9 +118,14 @@ class Trainer(StagedRun):
         self.callbacks = list(callbacks)
         self.seed = seed
         init, env_seeds, actions, memory = run_streams(seed)
-        image_shape = env.observation_space.shape
+        assert env.observation_space.shape is not None, "checked by _check_spaces"
+        height, width, channels = env.observation_space.shape
         self.agent = DQNAgent(
-            config, self.device, N_ACTIONS, image_shape, int(init.generate_state(1)[0])
+            config,
+            self.device,
+            N_ACTIONS,
+            (height, width, channels),
+            int(init.generate_state(1)[0]),
         )
         self.memory = ReplayMemory(config.memory_size, self.agent.frame_shape, self.device)
         self.epsilon = EpsilonSchedule(
@@ -153,7 +158,7 @@ class Trainer(StagedRun):
         if self._episode is None:
             self._begin_episode()
         assert self._episode is not None
-        return self._episode.obs  # type: ignore[no-any-return]
+        return self._episode.obs
 
     def _act(self, q_values: np.ndarray) -> _Step:
         """Choose (and maybe get advised) an action on the learner's `q_values` of the

@@ -111,7 +111,7 @@ def public_report(
         for f in description["files"]  # type: ignore[attr-defined]
     ]
     return ReportPublic(
-        **{k: v for k, v in description.items() if k != "files"},  # type: ignore[arg-type]
+        **{k: v for k, v in description.items() if k != "files"},
         files=files,
         report_url=f"{base}/files/{REPORT_FILE}",
         zip_url=f"{base}.zip",

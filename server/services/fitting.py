@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -35,6 +36,9 @@ from server.services.errors import Invalid, NotFound
 from server.services.fitted_files import write_model_file
 from server.services.outcomes import ReplayMismatch
 from server.services.studies import get_study
+
+if TYPE_CHECKING:
+    import gymnasium as gym
 
 ENDED = (
     Status.finished,
@@ -107,8 +111,8 @@ def _replay(
     first_step: int,
     reset_seed: int,
     advice: dict[int, Advice],
-    env: object,
-    sort_rule: object,
+    env: gym.Env[Any, Any],
+    sort_rule: str | dict[str, str],
 ) -> list[AdviceSeen]:
     import sim
 
@@ -121,11 +125,11 @@ def _replay(
         )
         .order_by(Step.global_step)
     )
-    _, info = env.reset(seed=reset_seed)  # type: ignore[attr-defined]
+    _, info = env.reset(seed=reset_seed)
     seen = []
     for step in steps:
         given = advice.get(step.global_step)
-        if given is not None:
+        if given is not None and given.action is not None:  # a replay's unanswered request
             station, held = situation(info)
             seen.append(
                 AdviceSeen(
@@ -136,7 +140,7 @@ def _replay(
                     given.decision_time_s,
                 )
             )
-        _, reward, _, _, info = env.step(step.action)  # type: ignore[attr-defined]
+        _, reward, _, _, info = env.step(step.action)
         if abs(float(reward) - step.reward) > 1e-9:
             raise ReplayMismatch(
                 f"session {session.id}, step {step.global_step}: the replay's reward differs "

@@ -90,5 +90,6 @@ def recorded_episode(db: Session, session_id: int, stage: str, episode: int) -> 
             .where(Advice.session_id == session_id, Advice.global_step.between(*span))
             .order_by(Advice.advice_index)
         )
+        if a.action is not None  # a replay's request past its recorded stream: none given
     ]
     return RecordedEpisode(session, found, steps, advice)

@@ -13,7 +13,6 @@ from sqlalchemy.orm import Session
 from learner.run import RunSpec
 from server.db.models import (
     Episode,
-    Method,
     Participant,
     StudySession,
 )
@@ -45,7 +44,7 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
                 "run.advisor_checkpoint names no session of this installation with a "
                 "checkpoint; name a finished session, e.g. session:12",
             )
-        if found.method == Method.sb3_dqn:
+        if found.method == "sb3-dqn":
             raise Invalid(
                 "run.advisor_checkpoint",
                 "run.advisor_checkpoint names an sb3-dqn session: its checkpoint is "
@@ -85,7 +84,7 @@ def create_session(
     replayed run's source session (None: not in this database) and its recorded stream
     (`server.services.replays`, the only maker of replays)."""
     options = options or SessionOptions()
-    if (spec.method == Method.replayed) != (replay is not None):
+    if (spec.method == "replayed") != (replay is not None):
         raise Invalid(
             "run.method",
             "method replayed is made from a recorded session by `ideeprl replay`, which gives "
@@ -97,7 +96,7 @@ def create_session(
     if spec.fitted_model and spec.method == "fitted":
         spec = spec.replace(fitted_model=resolve(db, spec.fitted_model, data_dir))
     spec = learning.checked(spec, threads)
-    if options.participant and spec.method != Method.human:
+    if options.participant and spec.method != "human":
         raise Invalid("participant", "only method human has a participant")
     session = StudySession(
         study_id=study_id,
@@ -110,7 +109,7 @@ def create_session(
     )
     if replay is not None:
         session.replay_of, session.replay_stream = replay
-    if spec.method == Method.human:
+    if spec.method == "human":
         pseudonym = options.participant or f"p-{secrets.token_hex(4)}"
         participant = db.scalar(
             select(Participant).where(

@@ -44,7 +44,7 @@ def _lerp_pose(a: sim.Pose, b: sim.Pose, alpha: float) -> sim.Pose:
     q = (1.0 - alpha) * qa + alpha * qb
     q /= np.linalg.norm(q) or 1.0
     p = (1.0 - alpha) * pa + alpha * pb
-    return sim.Pose(tuple(p.tolist()), tuple(q.tolist()))  # type: ignore[arg-type]
+    return sim.Pose(tuple(p.tolist()), tuple(q.tolist()))
 
 
 def pose_at(frames: Sequence[sim.MotionFrame], t: float) -> dict[str, sim.Pose]:

@@ -150,8 +150,10 @@ class _Run:
             self.progress_dict,
             advice_written_elsewhere=s.method == Method.human,
         )
-        resume = bool(s.checkpoint_path) and Path(s.checkpoint_path or "").is_file()
-        self.start_advice = s.checkpoint_advice if resume else 0
+        checkpoint = s.checkpoint_path
+        if checkpoint and not Path(checkpoint).is_file():
+            checkpoint = None  # a fresh start, as for a session never checkpointed
+        self.start_advice = s.checkpoint_advice if checkpoint else 0
         self.advisor: Any = None
         self.queued = False
         self.waiting_for_participant = False
@@ -164,8 +166,8 @@ class _Run:
             wrap_env=self._broadcast,
             wrap_advisor=self._advisor,
         )
-        if resume:
-            self.trainer.load_checkpoint(s.checkpoint_path)
+        if checkpoint:
+            self.trainer.load_checkpoint(checkpoint)
         else:
             s.checkpoint_step = s.checkpoint_episodes = s.checkpoint_advice = 0
         self.recorder.rewind(s)
