@@ -18,7 +18,7 @@ from sqlalchemy import bindparam, delete, insert, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.records import TRAINING, EpisodeRecord, StepRecord
-from server.db.models import Advice, Episode, Method, Step, StudySession, utcnow
+from server.db.models import Advice, Episode, Step, StudySession, utcnow
 
 STEP_COLUMNS = frozenset(c.name for c in Step.__table__.columns) - {"id"}
 EPISODE_COLUMNS = frozenset(c.name for c in Episode.__table__.columns) - {"id"}
@@ -168,7 +168,7 @@ class Recorder:
                     Episode.session_id == sid, Episode.last_global_step > self.steps
                 )
             )
-            if session.method != Method.human:
+            if session.method != "human":
                 db.execute(
                     delete(Advice).where(
                         Advice.session_id == sid, Advice.advice_index >= self.advice

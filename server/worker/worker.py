@@ -26,7 +26,7 @@ from learner.advisors import RecordedAdvisor
 from learner.records import TRAINING
 from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
-from server.db.models import Advice, Method, Status, StudySession, utcnow
+from server.db.models import Advice, Status, StudySession, utcnow
 from server.services import learning, numerics
 from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, set_status
@@ -117,7 +117,7 @@ class _Run:
             self.given = {
                 a.advice_index: a.action
                 for a in db.scalars(select(Advice).where(Advice.session_id == session_id))
-                if self.session.method == Method.human
+                if self.session.method == "human"
             }
             run = learning.spec_of(self.session, options.spec_class)
             here = {  # where the run is computed from here on (the report audits it)
@@ -148,7 +148,7 @@ class _Run:
             options.flush_every_steps,
             options.heartbeat_s,
             self.progress_dict,
-            advice_written_elsewhere=s.method == Method.human,
+            advice_written_elsewhere=s.method == "human",
         )
         checkpoint = s.checkpoint_path
         if checkpoint and not Path(checkpoint).is_file():
@@ -157,7 +157,7 @@ class _Run:
         self.advisor: Any = None
         self.queued = False
         self.waiting_for_participant = False
-        if s.method == Method.human and self.link is None:
+        if s.method == "human" and self.link is None:
             raise Conflict("a human session needs the server: start it through the API")
         self.spec = learning.spec_of(s, options.spec_class)
         self.trainer, self.env = self.spec.build(
@@ -185,7 +185,7 @@ class _Run:
         """The session's advisor: a person through the web process (human), or the machine
         advisor with its advice recorded."""
         s = self.session
-        if s.method == Method.human:
+        if s.method == "human":
             assert self.link is not None
             self.advisor = HumanAdvisor(
                 self.link,
@@ -200,7 +200,7 @@ class _Run:
             self.env.after_step.append(self.advisor.after_step)
             advisor = self.advisor
             self.env.advised = lambda: advisor.carrying_out
-        elif s.method == Method.replayed:
+        elif s.method == "replayed":
             stream = s.replay_stream
             if not stream:
                 raise Conflict(
@@ -296,7 +296,7 @@ class _Run:
         """A human session whose advice is over trains only in one of the server's slots."""
         return (
             self.link is not None
-            and self.session.method == Method.human
+            and self.session.method == "human"
             and not self.link.may_train
             and self.advice_given >= self.spec.advice_budget
         )
@@ -383,7 +383,7 @@ def run_session(
     if worker_token is None:
         with factory() as db:
             session = get_session(db, session_id)
-            if session.method == Method.human and conn is None:
+            if session.method == "human" and conn is None:
                 raise Conflict(
                     f"session {session_id} is a human session: start it through the server"
                 )
