@@ -8,7 +8,6 @@ identically. Unique (session, index) constraints make any slip an error, never a
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -29,7 +28,7 @@ class LeaseLost(Exception):
 
 
 class Checkpointable(Protocol):
-    def save_checkpoint(self, path: str | os.PathLike[str], *, memory: bool = ...) -> None: ...
+    def save_checkpoint(self, path: Path, *, memory: bool = ...) -> None: ...
 
 
 def _row(

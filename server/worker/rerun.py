@@ -20,6 +20,7 @@ from typing import Any
 
 from learner.run import RunSpec
 from server.worker.messages import SceneReset, SceneStep
+from server.worker.scene import scene_of
 
 log = logging.getLogger(__name__)
 REWARD_TOLERANCE = 1e-9
@@ -76,7 +77,7 @@ def rerun_episode(order: RerunOrder) -> Rerun:
     env = spec.make_env(record_motion=True)
     try:
         obs, _ = env.reset(seed=order.reset_seed)
-        scene = env.unwrapped
+        scene = scene_of(env)
         start = SceneReset(
             bodies=list(scene.scene_bodies()), poses=dict(scene.body_poses()), episode=-1
         )
