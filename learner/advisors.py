@@ -22,9 +22,10 @@ ADVISOR_KINDS = ("agent", "fitted", "oracle", "random")
 
 @runtime_checkable
 class Advisor(Protocol):
-    """Anything that, shown what the learner sees, names an action (0..3)."""
+    """Anything that, shown what the learner sees, names an action (0..3), or `NO_ADVICE`
+    when it has none to give (a recorded stream that ran out)."""
 
-    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int | NoAdvice:
         """The advised action for the uint8 image `obs`; `info` is the environment's
         ground truth, which only simulated advisors may look at. May block."""
         ...

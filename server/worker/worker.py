@@ -114,10 +114,10 @@ class _Run:
         self.factory = make_session_factory(make_engine(database_url))
         with self.factory() as db:
             self.session = get_session(db, session_id)
-            self.given = {
+            self.given = {  # a person's advice always has its action (only replays lack one)
                 a.advice_index: a.action
                 for a in db.scalars(select(Advice).where(Advice.session_id == session_id))
-                if self.session.method == "human"
+                if self.session.method == "human" and a.action is not None
             }
             run = learning.spec_of(self.session, options.spec_class)
             here = {  # where the run is computed from here on (the report audits it)
