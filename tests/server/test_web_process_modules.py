@@ -8,6 +8,7 @@ writes the names in its `sys.modules` to a file: the test reads the process from
 
 from __future__ import annotations
 
+import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,8 +22,6 @@ from server.routes import dashboard, pages, playback
 from server.viewer import proxy
 from tests.server.live import API_KEY, LiveServer, fresh_database
 from tests.server.scale import rest_body, session_body, wait_for_status
-
-pytestmark = pytest.mark.slow  # a tiny session trains and an episode reruns first
 
 HEAVY = ("matplotlib", "scipy", "torch", "pybullet")
 """What the web process must never hold: each is hundreds of milliseconds to import and
@@ -107,6 +106,14 @@ def _study(api: httpx.Client) -> dict[str, str]:
     }
 
 
+def test_importing_the_web_app_loads_none_of_them() -> None:
+    """The quick check (`make test-fast`): what `server.main` imports at the top."""
+    code = f"import sys, server.main; print([m for m in {HEAVY!r} if m in sys.modules])"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]", done.stdout
+
+
+@pytest.mark.slow  # a tiny session trains and an episode reruns first
 def test_serving_every_route_loads_no_simulation_torch_or_plotting(
     dumping: ModuleDumpingServer,
 ) -> None:
