@@ -125,8 +125,9 @@ class RecordingAdvisor:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.count = int(state["count"])
-        if state["inner"] is not None:
-            self._inner.load_state_dict(state["inner"])
+        load = getattr(self._inner, "load_state_dict", None)  # as state_dict found it
+        if state["inner"] is not None and callable(load):
+            load(state["inner"])
 
     def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int | NoAdvice:
         started = time.perf_counter()
