@@ -244,15 +244,16 @@ def check_advisor(
             repeat = max(repeat, longest_repeat(actions))
     finally:
         env.close()
-    at_advice = tuple(_advice_from_pretraining(spec.replace(seed=s)) for s in seeds)
-    at_advice = tuple(q for q in at_advice if q is not None)
+    found = [(s, _advice_from_pretraining(spec.replace(seed=s))) for s in seeds]
+    by_seed = [(seed, quality) for seed, quality in found if quality is not None]
+    at_advice = tuple(quality for _, quality in by_seed)
     problems = []
     mean = sum(rewards) / len(rewards)
     if mean < MIN_REWARD:
         problems.append(f"its greedy policy collects {mean:.2f} on average, under {MIN_REWARD}")
     if repeat > MAX_REPEAT:
         problems.append(f"it repeats one action {repeat} times in a row in fresh episodes")
-    for seed, quality in zip(seeds, at_advice, strict=False):
+    for seed, quality in by_seed:
         if quality.longest_repeat > MAX_REPEAT:
             problems.append(
                 f"from the advice-time states of seed {seed} it repeats one action "

@@ -6,8 +6,7 @@ same protocol: `advise` may block as long as the person takes.
 
 from __future__ import annotations
 
-import enum
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -15,26 +14,18 @@ import numpy as np
 
 from learner.config import DQNConfig
 from learner.fitted import FittedAdvisor, log_normal_time, read_model
+from learner.no_advice import NO_ADVICE as NO_ADVICE
+from learner.no_advice import NoAdvice as NoAdvice
 
 ADVISOR_KINDS = ("agent", "fitted", "oracle", "random")
 
 
-class NoAdvice(enum.Enum):
-    """What an advisor answers when it was asked and has nothing to give: a recorded stream
-    that ran out. The strategy counts the request against its budget (the run asked, as
-    the original did), and the learner takes its own action."""
-
-    NO_ADVICE = "no advice"
-
-
-NO_ADVICE = NoAdvice.NO_ADVICE
-
-
 @runtime_checkable
 class Advisor(Protocol):
-    """Anything that, shown what the learner sees, names an action (0..3)."""
+    """Anything that, shown what the learner sees, names an action (0..3), or `NO_ADVICE`
+    when it has none to give (a recorded stream that ran out)."""
 
-    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int | NoAdvice:
         """The advised action for the uint8 image `obs`; `info` is the environment's
         ground truth, which only simulated advisors may look at. May block."""
         ...
@@ -185,7 +176,7 @@ def make_advisor(kind: str, **options: Any) -> Advisor:
     """`agent` (checkpoint=PATH, device=...), `fitted` (model=PATH, sort_rule=..., seed=...),
     `oracle` (sort_rule=..., error_rate=..., seed=..., decision_time_median_s=...,
     decision_time_sigma=...) or `random` (seed=...)."""
-    factories = {
+    factories: dict[str, Callable[..., Advisor]] = {
         "agent": AgentAdvisor,
         "fitted": _fitted,
         "oracle": OracleAdvisor,
@@ -201,7 +192,7 @@ def make_advisor(kind: str, **options: Any) -> Advisor:
     if kind == "agent" and "checkpoint" not in options:
         raise ValueError("the agent advisor needs checkpoint=PATH of a trained learner")
     try:
-        return factories[kind](**options)  # type: ignore[no-any-return]
+        return factories[kind](**options)
     except TypeError as error:
         raise ValueError(f"bad options for the {kind} advisor: {error}") from error
 

@@ -39,4 +39,4 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
         raise ValueError(
             f"{path} has checkpoint version {state.get('version')}; this learner reads {VERSION}"
         )
-    return state  # type: ignore[no-any-return]
+    return state

@@ -168,7 +168,7 @@ class DQNConfig:
     def from_dict(cls, values: dict[str, Any]) -> DQNConfig:
         """Build from JSON values, each checked against its declaration; an unknown or
         out-of-range field raises a `FieldError` (a `ValueError`) naming it."""
-        return build(cls, values)  # type: ignore[no-any-return]
+        return build(cls, values)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

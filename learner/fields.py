@@ -154,9 +154,13 @@ def _number(value: float | None, kind: type) -> str | None:
     return f"{value:g}"
 
 
-@cache
 def leaves(cls: type) -> tuple[Leaf, ...]:
     """Every leaf of the dataclass tree under `cls`, in field order."""
+    return _cached_leaves(cls)  # a class is hashable, which mypy cannot see of a dataclass's
+
+
+@cache
+def _cached_leaves(cls: type) -> tuple[Leaf, ...]:
     return tuple(_leaves(cls, (), ""))
 
 
@@ -170,7 +174,8 @@ def _leaves(cls: type, path: tuple[str, ...], prefix: str) -> Iterator[Leaf]:
             continue
         kind, optional, choices, also_text = _kind(hint)
         meta = f.metadata
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+        factory = f.default_factory
+        default = factory() if f.default is dataclasses.MISSING and callable(factory) else f.default
         yield Leaf(
             path=(*path, f.name),
             kind=kind,
@@ -311,7 +316,7 @@ def build(cls: type, data: Any, path: str = "", base: Any = None) -> Any:
         inner = getattr(base, name) if base is not None else None
         if dataclasses.is_dataclass(hints[name]):
             if name in data:
-                values[name] = build(hints[name], data[name], dotted, inner)  # type: ignore[arg-type]
+                values[name] = build(hints[name], data[name], dotted, inner)
             elif inner is not None:
                 values[name] = inner
             continue

@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from learner.no_advice import NO_ADVICE
+
 FITTED_VERSION = 1
 """Version of the stored model (`FittedModel.to_json`); `from_json` reads this one."""
 N_ACTIONS = 4
@@ -281,8 +283,6 @@ class FittedAdvisor:
         self.given = 0
 
     def advise(self, obs: np.ndarray, info: dict[str, Any]) -> Any:
-        from learner.advisors import NO_ADVICE
-
         if self.leaves_after is not None and self.given >= self.leaves_after:
             self.last_decision_time_s = None
             return NO_ADVICE

@@ -53,8 +53,10 @@ class QNetwork(nn.Module):
         self.dense = nn.Linear(in_channels * (height // 8) * (width // 8), DENSE_UNITS)
         self.out = nn.Linear(DENSE_UNITS, n_actions)
         if init == "glorot":  # Keras' default: Glorot-uniform weights, zero biases
-            for layer in (*convs, self.dense, self.out):
+            layers: list[nn.Conv2d | nn.Linear] = [*convs, self.dense, self.out]
+            for layer in layers:
                 nn.init.xavier_uniform_(layer.weight)
+                assert layer.bias is not None, "made with bias=True"
                 nn.init.zeros_(layer.bias)
         elif init != "torch":
             raise ValueError(f"init must be 'torch' or 'glorot', got {init!r}")

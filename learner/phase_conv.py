@@ -104,7 +104,7 @@ class _PhaseMaxBiasRelu(torch.autograd.Function):
     faster on the CPU than `where`."""
 
     @staticmethod
-    def forward(ctx, y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+    def forward(ctx, y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
         y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
         m01, m23 = torch.maximum(y0, y1), torch.maximum(y2, y3)
         out = _add_bias(torch.maximum(m01, m23), bias).relu_()
@@ -113,7 +113,7 @@ class _PhaseMaxBiasRelu(torch.autograd.Function):
         return out
 
     @staticmethod
-    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:  # type: ignore[override]
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         y, m01, m23, out = ctx.saved_tensors
         grad = torch.ops.aten.threshold_backward(grad, out, 0)
         if ctx.bias_groups:  # each group's sum as if alone: the same float order
@@ -139,7 +139,7 @@ def _greater(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 def phase_max_bias_relu(y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
     if torch.is_grad_enabled() and (y.requires_grad or bias.requires_grad):
-        return _PhaseMaxBiasRelu.apply(y, bias)  # type: ignore[no-any-return]
+        return _PhaseMaxBiasRelu.apply(y, bias)
     y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
     m = torch.maximum(torch.maximum(y0, y1), torch.maximum(y2, y3))
     return _add_bias(m, bias).relu_()
@@ -179,6 +179,7 @@ class PhaseConvForward:
             if i == 0:
                 kernel = kernel * (1.0 / 255.0)
             kernel = kernel.to(self.dtype).contiguous(memory_format=torch.channels_last)
+            assert conv.bias is not None, "the network's convolutions have biases"
             result.append((kernel, conv.bias))
         return result
 

@@ -210,7 +210,9 @@ class Population:
         for trainer in self.trainers:
             trainer.stop()
 
-    def _q_values(self, trainers: list[Trainer], images: list[np.ndarray]) -> Sequence[Any]:
+    def _q_values(
+        self, trainers: list[Trainer], images: list[np.ndarray]
+    ) -> Sequence[np.ndarray] | np.ndarray:
         if self.layout == "loop":
             return [t.agent.q_values(image) for t, image in zip(trainers, images, strict=True)]
         return StackedAgents([t.agent for t in trainers], self.conv).q_values(images)

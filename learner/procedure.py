@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from learner.advisors import Advisor
+from learner.advisors import Advisor, NoAdvice
 from learner.strategies import AdviceMoment, AdvisingStrategy
 
 SCHEDULE_VERSION = 1
@@ -117,7 +117,7 @@ class ScheduledAdvising(AdvisingStrategy):
         super().__init__(len(schedule.advised))
         self.schedule = schedule
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
         if moment.global_step not in self.schedule.advised:
             return None
         return advisor.advise(moment.obs, moment.info)

@@ -1,6 +1,7 @@
 """What the learner reports: one record per environment step and one per episode.
 
-The field docstrings are the column dictionary of the exports (`column_docs`).
+The field docstrings are the column dictionary of the exports
+(`learner.docstrings.field_docstrings`).
 
 Numbering. Global steps count every environment step of a run from 1: pretraining is
 steps 1..pretraining_steps, training follows. Episodes are numbered from 1 within their
@@ -20,12 +21,12 @@ import hashlib
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from learner.docstrings import field_docstrings
-
 Stage = Literal["pretrain", "train"]
 """The part of a run: `pretrain` (Algorithm 1: the memory is filled, random or advised
 actions) or `train` (Algorithm 2)."""
 STAGES: tuple[Stage, ...] = ("pretrain", "train")
+TRAINING: Stage = "train"
+"""The stage whose episodes are the run's results (a report compares them)."""
 OLD_STAGES = {"pretraining": "pretrain", "training": "train", "advice": "pretrain"}
 """Older spellings of a stage (checkpoints, step rows and exports written before one word
 was kept): `advice` was an advised pretraining step."""
@@ -149,52 +150,3 @@ def observation_hash(obs: Any) -> str:
 
     data = np.ascontiguousarray(obs, dtype=np.uint8)
     return hashlib.blake2b(data.tobytes(), digest_size=8).hexdigest()
-
-
-def column_docs(record_type: type) -> dict[str, str]:
-    """Field name -> docstring of a record class: the export's column dictionary."""
-    return field_docstrings(record_type)
-
-
-class StagedRun:
-    """The stage-and-episode loop a trainer offers its callers (the worker, the batch, the
-    CLI), shared by `learner.trainer.Trainer` and `learner.sb3_dqn.SB3DQNTrainer`: they set
-    `config`, `global_step`, `episodes_done`, `episode_record`, `_episode` and `_stopped`,
-    and define `step()`."""
-
-    config: Any
-    global_step: int
-    episodes_done: dict[str, int]
-    episode_record: EpisodeRecord | None
-    _episode: Any
-    _stopped: bool
-
-    def step(self) -> StepRecord:
-        raise NotImplementedError
-
-    @property
-    def stage(self) -> Stage:
-        """`pretrain` or `train`: the stage of the next step."""
-        return "pretrain" if self.global_step < self.config.pretraining_steps else "train"
-
-    @property
-    def done(self) -> bool:
-        return self._stopped or self.episodes_done["train"] >= self.config.episodes
-
-    @property
-    def observation(self) -> Any:
-        """The image the learner sees now; None between episodes."""
-        return None if self._episode is None else self._episode.obs
-
-    def stop(self) -> None:
-        """Make `done` true; `run` returns after the current step."""
-        self._stopped = True
-
-    def run(self) -> list[EpisodeRecord]:
-        """Step until done; returns the training episodes finished in this call."""
-        finished = []
-        while not self.done:
-            self.step()
-            if self.episode_record is not None and self.episode_record.stage == "train":
-                finished.append(self.episode_record)
-        return finished

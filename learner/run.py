@@ -25,7 +25,7 @@ import dataclasses
 import inspect
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 from learner import machine
 from learner.advisors import ADVISOR_KINDS, Advisor, make_advisor
@@ -259,7 +259,7 @@ class RunSpec:
             base = cls(config=DQNConfig.preset(preset))
         except ValueError:
             base = cls()  # `build` reports the bad preset by its field
-        return build(cls, data, base=base)  # type: ignore[no-any-return]
+        return build(cls, data, base=base)
 
     def to_json(self) -> dict[str, Any]:
         """The stored document: every field spelled out, with its `version`."""
@@ -547,7 +547,7 @@ def from_old_settings(settings: Mapping[str, Any], config: DQNConfig) -> RunSpec
     if budget is not None and method not in UNADVISED:
         config = config.replace(advice_budget=int(budget))
     return RunSpec(
-        method=method,
+        method=cast(Method, method),  # checked by RunSpec itself
         seed=int(settings.get("seed", 0)),
         preset=settings.get("preset", "paper"),
         config=config,

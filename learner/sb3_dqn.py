@@ -29,9 +29,9 @@ from typing import Any
 import numpy as np
 
 from learner.config import DQNConfig
-from learner.records import EpisodeRecord, StagedRun, StepRecord, observation_hash, stage_of
-from learner.seeding import draw_reset_seed, run_streams
-from sim.rewards import step_outcome
+from learner.records import EpisodeRecord, StepRecord, stage_of
+from learner.seeding import run_streams
+from learner.staged import EpisodeInProgress, StagedRun, StepTaken
 
 METHOD = "sb3-dqn"
 PREFIX = "sb3_"
@@ -167,7 +167,7 @@ class SB3DQNTrainer(StagedRun):
         self._env_rng = np.random.default_rng(env_seeds)  # the Trainer's reset seeds
         model = DQN(
             h["sb3_policy"],
-            None,
+            None,  # type: ignore[arg-type]  # SB3 takes no env here (its annotation says otherwise)
             learning_rate=h["sb3_learning_rate"],
             buffer_size=h["sb3_buffer_size"],
             learning_starts=h["sb3_learning_starts"],
@@ -197,7 +197,7 @@ class SB3DQNTrainer(StagedRun):
         self.global_step = 0
         self.episodes_done = {"pretrain": 0, "train": 0}
         self.episode_record: EpisodeRecord | None = None
-        self._episode: Any = None
+        self._episode: EpisodeInProgress | None = None
         self._stopped = False
 
     def _progress_remaining(self) -> float:
@@ -212,11 +212,9 @@ class SB3DQNTrainer(StagedRun):
         `train`, in `collect_rollouts`' and `learn`'s order."""
         import torch
 
-        if self.done:
-            raise RuntimeError("the trainer is done (all episodes run, or stopped)")
-        if self._episode is None:
-            self._begin_episode()
+        self._begin_step()
         episode = self._episode
+        assert episode is not None
         model = self.model
         pretraining = episode.stage == "pretrain"
         model.policy.set_training_mode(False)
@@ -244,6 +242,7 @@ class SB3DQNTrainer(StagedRun):
         if pretraining and self.global_step == self.config.pretraining_steps:
             truncated = truncated or not terminated  # pretraining ends: cut its last episode
         model.num_timesteps += 1
+        assert model.replay_buffer is not None, "made by _setup_model"
         model.replay_buffer.add(
             obs,
             _channels_first(next_obs),
@@ -258,81 +257,14 @@ class SB3DQNTrainer(StagedRun):
         if model.num_timesteps > model.learning_starts:
             model.train(gradient_steps=model.gradient_steps, batch_size=model.batch_size)
             loss = float(model.logger.name_to_value["train/loss"])
-            episode.loss_sum += loss
-            episode.loss_count += 1
-        episode.collected_reward += reward
-        record = StepRecord(
-            global_step=self.global_step,
-            stage=stage,  # type: ignore[arg-type]
-            episode=episode.number,
-            episode_step=len(episode.actions),
-            action=action,
-            action_source=source,  # type: ignore[arg-type]
-            greedy_action=greedy,
-            q_grab=float(q_values[0]),
-            q_move_right=float(q_values[1]),
-            q_move_left=float(q_values[2]),
-            q_drop=float(q_values[3]),
-            advised_action=None,
-            advice_remaining=0,
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            observation_hash=observation_hash(episode.obs),
-            outcome=step_outcome(episode.info, info),  # type: ignore[arg-type]
-            epsilon=epsilon,
-            loss=loss,
-        )
-        self.episode_record = None
-        if terminated or truncated:
-            self.episode_record = self._finish_episode(info, terminated, truncated)
-        else:
-            episode.obs, episode.info = next_obs, info
-        self._notify("on_step", record)
-        if self.episode_record is not None:
-            self._notify("on_episode", self.episode_record)
-        return record
+        taken = StepTaken(
+            stage, source, action, greedy, q_values, None, next_obs, reward, terminated,
+            truncated, info, epsilon, loss is not None,
+        )  # fmt: skip
+        return self._end_step(taken, loss)
 
-    def _begin_episode(self) -> None:
-        from learner.trainer import _Episode
-
-        stage = self.stage
-        reset_seed = draw_reset_seed(self._env_rng)
-        obs, info = self.env.reset(seed=reset_seed)
-        number = self.episodes_done[stage] + 1
-        self._episode = _Episode(stage, number, reset_seed, obs, info, self.global_step + 1)
-
-    def _finish_episode(
-        self, info: dict[str, Any], terminated: bool, truncated: bool
-    ) -> EpisodeRecord:
-        episode = self._episode
-        self._episode = None
-        self.episodes_done[episode.stage] += 1
-        misplaced = int(info.get("misplaced", 0))
-        return EpisodeRecord(
-            stage=episode.stage,
-            episode=episode.number,
-            collected_reward=episode.collected_reward,
-            steps=len(episode.actions),
-            placed_correct=int(info.get("placed_correct", 0)),
-            misplaced=misplaced,
-            lost=int(info.get("lost", 0)),
-            success=terminated and misplaced == 0,
-            terminated=terminated,
-            truncated=truncated,
-            advised_steps=0,
-            epsilon=float(self.model.exploration_rate),
-            mean_loss=episode.loss_sum / episode.loss_count if episode.loss_count else None,
-            first_global_step=episode.first_global_step,
-            last_global_step=self.global_step,
-            reset_seed=episode.reset_seed,
-        )
-
-    def _notify(self, method: str, record: StepRecord | EpisodeRecord) -> None:
-        for callback in self.callbacks:
-            handler = getattr(callback, method, None)
-            if handler is not None and handler(record) is False:
-                self._stopped = True
+    def _epsilon_now(self) -> float:
+        return float(self.model.exploration_rate)
 
     # --- checkpoints -----------------------------------------------------------------------
     def save_checkpoint(

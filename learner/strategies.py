@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from learner.advisors import NO_ADVICE, Advisor
+from learner.advisors import NO_ADVICE, Advisor, NoAdvice
 
 STRATEGY_NAMES = ("early", "alternating", "importance", "mistake_correcting")
 
@@ -98,7 +98,7 @@ class AdvisingStrategy:
         self.used += 1
         return int(action)
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
         raise NotImplementedError
 
     def first_advice_step(self, pretraining_steps: int) -> int:
@@ -141,7 +141,7 @@ class EarlyAdvising(AdvisingStrategy):
 
     name = "early"
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
         if moment.stage != "pretrain":
             return None
         if moment.global_step < self.first_advice_step(moment.pretraining_steps):
@@ -170,7 +170,7 @@ class AlternatingAdvising(AdvisingStrategy):
             raise ValueError(f"interval must be a whole number >= 1, got {interval!r}")
         self.interval = interval
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
         if moment.stage != "train" or (moment.training_step - 1) % self.interval:
             return None
         return advisor.advise(moment.obs, moment.info)
@@ -198,7 +198,7 @@ class ImportanceAdvising(AdvisingStrategy):
         values = np.asarray(advisor.q_values(moment.obs))  # type: ignore[attr-defined]
         return float(values.max() - values.min()) >= self.threshold
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
         if not self._important(moment, advisor):
             return None
         return advisor.advise(moment.obs, moment.info)
@@ -213,7 +213,7 @@ class MistakeCorrecting(ImportanceAdvising):
 
     name = "mistake_correcting"
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | None:
+    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
         if not self._important(moment, advisor):
             return None
         action = advisor.advise(moment.obs, moment.info)

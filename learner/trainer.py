@@ -13,9 +13,8 @@ its own work (pause, stop, progress) between steps; `run()` steps until done.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -28,53 +27,15 @@ from learner.config import DQNConfig
 from learner.device import configure_threads, resolve_device
 from learner.exploration import EpsilonSchedule
 from learner.procedure import Schedule, ScheduledAdvising
-from learner.records import EpisodeRecord, StagedRun, StepRecord, observation_hash, stage_of
+from learner.records import EpisodeRecord, StepRecord, stage_of
 from learner.replay import ReplayMemory
-from learner.seeding import draw_reset_seed, run_streams
+from learner.seeding import run_streams
+from learner.staged import EpisodeInProgress, StagedRun, StepTaken
 from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
-from sim.rewards import step_outcome
 
 N_ACTIONS = 4
 RUNTIME_FIELDS = ("device", "torch_threads", "precision", "episodes")
 """Config fields a resumed run may change: where it computes, and how long it goes on."""
-
-
-@dataclass
-class _Episode:
-    """The episode in progress, with what it takes to rebuild it: its reset seed and
-    actions (the environment is replayed from them on resume)."""
-
-    stage: str
-    number: int
-    reset_seed: int
-    obs: np.ndarray
-    info: dict[str, Any]
-    first_global_step: int
-    actions: list[int] = field(default_factory=list)
-    collected_reward: float = 0.0
-    advised_steps: int = 0
-    loss_sum: float = 0.0
-    loss_count: int = 0
-
-
-class _Step(NamedTuple):
-    """A step taken, before its update: what `Trainer._end_step` records."""
-
-    stage: str
-    source: str
-    action: int
-    greedy: int
-    q_values: np.ndarray
-    advised: int | None
-    obs: np.ndarray
-    reward: float
-    terminated: bool
-    truncated: bool
-    info: dict[str, Any]
-    epsilon: float
-    """Epsilon as the action was chosen (before this step's update decays it)."""
-    updates: bool
-    """Whether an update follows this step."""
 
 
 class Trainer(StagedRun):
@@ -118,9 +79,14 @@ class Trainer(StagedRun):
         self.callbacks = list(callbacks)
         self.seed = seed
         init, env_seeds, actions, memory = run_streams(seed)
-        image_shape = env.observation_space.shape
+        assert env.observation_space.shape is not None, "checked by _check_spaces"
+        height, width, channels = env.observation_space.shape
         self.agent = DQNAgent(
-            config, self.device, N_ACTIONS, image_shape, int(init.generate_state(1)[0])
+            config,
+            self.device,
+            N_ACTIONS,
+            (height, width, channels),
+            int(init.generate_state(1)[0]),
         )
         self.memory = ReplayMemory(config.memory_size, self.agent.frame_shape, self.device)
         self.epsilon = EpsilonSchedule(
@@ -134,7 +100,7 @@ class Trainer(StagedRun):
         self.episodes_done = {"pretrain": 0, "train": 0}
         self.episode_record: EpisodeRecord | None = None
         """The record of the episode the last step ended, else None."""
-        self._episode: _Episode | None = None
+        self._episode: EpisodeInProgress | None = None
         self._stopped = False
 
     def step(self) -> StepRecord:
@@ -146,16 +112,7 @@ class Trainer(StagedRun):
             loss = self.agent.update(batch, self._memory_rng)
         return self._end_step(step, loss)
 
-    def _begin_step(self) -> np.ndarray:
-        """The image the next action is chosen on (resetting first if needed)."""
-        if self.done:
-            raise RuntimeError("the trainer is done (all episodes run, or stopped)")
-        if self._episode is None:
-            self._begin_episode()
-        assert self._episode is not None
-        return self._episode.obs  # type: ignore[no-any-return]
-
-    def _act(self, q_values: np.ndarray) -> _Step:
+    def _act(self, q_values: np.ndarray) -> StepTaken:
         """Choose (and maybe get advised) an action on the learner's `q_values` of the
         current image, take it and remember the transition; the update, if `updates`, is
         the caller's (`step`, or a population updating its agents together)."""
@@ -207,54 +164,16 @@ class Trainer(StagedRun):
         updates = self._updates_now(
             pretraining, advised is not None, terminated or truncated, global_step
         )
-        return _Step(
+        return StepTaken(
             episode.stage, source, action, greedy, q_values, advised, obs, reward, terminated,
             truncated, info, self.epsilon.value, updates,
         )  # fmt: skip
 
-    def _end_step(self, step: _Step, loss: float | None) -> StepRecord:
-        """Account for the update's `loss` (None: no update), record the step, end the
-        episode if it ended, and tell the callbacks."""
-        episode = self._episode
-        assert episode is not None
-        if loss is not None:
-            self.epsilon.step()
-            episode.loss_sum += loss
-            episode.loss_count += 1
-        episode.collected_reward += step.reward
-        episode.advised_steps += step.advised is not None
-        q_values = step.q_values
-        record = StepRecord(
-            global_step=self.global_step,
-            stage=step.stage,  # type: ignore[arg-type]
-            episode=episode.number,
-            episode_step=len(episode.actions),
-            action=step.action,
-            action_source=step.source,  # type: ignore[arg-type]
-            greedy_action=step.greedy,
-            q_grab=float(q_values[0]),
-            q_move_right=float(q_values[1]),
-            q_move_left=float(q_values[2]),
-            q_drop=float(q_values[3]),
-            advised_action=step.advised,
-            advice_remaining=self.strategy.remaining if self.strategy else 0,
-            reward=step.reward,
-            terminated=step.terminated,
-            truncated=step.truncated,
-            observation_hash=observation_hash(episode.obs),
-            outcome=step_outcome(episode.info, step.info),  # type: ignore[arg-type]
-            epsilon=step.epsilon,
-            loss=loss,
-        )
-        self.episode_record = None
-        if step.terminated or step.truncated:
-            self.episode_record = self._finish_episode(step.info, step.terminated, step.truncated)
-        else:
-            episode.obs, episode.info = step.obs, step.info
-        self._notify("on_step", record)
-        if self.episode_record is not None:
-            self._notify("on_episode", self.episode_record)
-        return record
+    def _epsilon_now(self) -> float:
+        return self.epsilon.value
+
+    def _after_update(self) -> None:
+        self.epsilon.step()
 
     def _updates_now(self, pretraining: bool, advised: bool, final: bool, global_step: int) -> bool:
         """Whether this step is followed by an update: every training step (Algorithm 2),
@@ -268,44 +187,6 @@ class Trainer(StagedRun):
         if pretraining:
             return advised and config.update_during_advice and len(self.memory) >= config.batch_size
         return True
-
-    def _begin_episode(self) -> None:
-        stage = self.stage
-        reset_seed = draw_reset_seed(self._env_rng)
-        obs, info = self.env.reset(seed=reset_seed)
-        number = self.episodes_done[stage] + 1
-        self._episode = _Episode(stage, number, reset_seed, obs, info, self.global_step + 1)
-
-    def _finish_episode(self, info: dict[str, Any], terminated: bool, truncated: bool):
-        episode = self._episode
-        assert episode is not None
-        self._episode = None
-        self.episodes_done[episode.stage] += 1
-        misplaced = int(info.get("misplaced", 0))
-        return EpisodeRecord(
-            stage=episode.stage,  # type: ignore[arg-type]
-            episode=episode.number,
-            collected_reward=episode.collected_reward,
-            steps=len(episode.actions),
-            placed_correct=int(info.get("placed_correct", 0)),
-            misplaced=misplaced,
-            lost=int(info.get("lost", 0)),
-            success=terminated and misplaced == 0,
-            terminated=terminated,
-            truncated=truncated,
-            advised_steps=episode.advised_steps,
-            epsilon=self.epsilon.value,
-            mean_loss=episode.loss_sum / episode.loss_count if episode.loss_count else None,
-            first_global_step=episode.first_global_step,
-            last_global_step=self.global_step,
-            reset_seed=episode.reset_seed,
-        )
-
-    def _notify(self, method: str, record: StepRecord | EpisodeRecord) -> None:
-        for callback in self.callbacks:
-            handler = getattr(callback, method, None)
-            if handler is not None and handler(record) is False:
-                self._stopped = True
 
     def save_checkpoint(
         self, path: str | Path, metadata: dict[str, Any] | None = None, memory: bool = True
@@ -378,7 +259,7 @@ class Trainer(StagedRun):
         self._stopped = False
 
 
-def replay_episode(env: gym.Env, saved: dict[str, Any]) -> _Episode:
+def replay_episode(env: gym.Env, saved: dict[str, Any]) -> EpisodeInProgress:
     """The checkpointed episode in progress, rebuilt by resetting `env` with its seed and
     replaying its actions (any learner whose checkpoint keeps `_episode_state`)."""
     obs, info = env.reset(seed=int(saved["reset_seed"]))
@@ -395,7 +276,7 @@ def replay_episode(env: gym.Env, saved: dict[str, Any]) -> _Episode:
             "give the saved image: the environment is not deterministic, or not the one "
             "(or not configured as the one) the checkpoint was made with"
         )
-    return _Episode(
+    return EpisodeInProgress(
         stage=stage_of(saved["stage"]),
         number=int(saved["number"]),
         reset_seed=int(saved["reset_seed"]),
@@ -410,7 +291,7 @@ def replay_episode(env: gym.Env, saved: dict[str, Any]) -> _Episode:
     )
 
 
-def _episode_state(episode: _Episode) -> dict[str, Any]:
+def _episode_state(episode: EpisodeInProgress) -> dict[str, Any]:
     return {
         "stage": episode.stage,
         "number": episode.number,

@@ -16,10 +16,6 @@ def safe_cell(value: Any) -> Any:
     return value
 
 
-def safe_row(row: dict[str, Any]) -> dict[str, Any]:
-    return {key: safe_cell(value) for key, value in row.items()}
-
-
 def safe_frame(frame: Any) -> Any:
     """A pandas DataFrame with every text cell, column name and index label made safe."""
     safe = frame.map(safe_cell)

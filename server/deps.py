@@ -12,7 +12,6 @@ from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBea
 from sqlalchemy.orm import Session
 
 from server.live.advising import ParticipantSession
-from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.services.sessions import session_for_token
 from server.settings import Settings
@@ -35,14 +34,9 @@ def get_manager(request: Request) -> SessionManager:
     return request.app.state.manager
 
 
-def get_hub(request: Request) -> Hub:
-    return request.app.state.hub
-
-
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 DbDep = Annotated[Session, Depends(get_db)]
 ManagerDep = Annotated[SessionManager, Depends(get_manager)]
-HubDep = Annotated[Hub, Depends(get_hub)]
 
 
 def require_researcher(

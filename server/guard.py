@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from fastapi import HTTPException
@@ -117,7 +117,7 @@ def check_json(body: bytes, describe: Describe | None = None) -> None:
     _check(parsed, describe)
 
 
-def _json_error(status: int, detail: Any, headers: dict[str, str] | None = None) -> Any:
+def _json_error(status: int, detail: Any, headers: Mapping[str, str] | None = None) -> Any:
     from fastapi.responses import JSONResponse
 
     return JSONResponse({"detail": detail}, status_code=status, headers=headers)
@@ -133,7 +133,7 @@ class RequestGuard:
         self,
         app: ASGIApp,
         max_body_bytes: int,
-        guards: dict[Callable[..., Any], Callable[[Request], Any]],
+        guards: dict[str | Callable[..., Any], Callable[[Request], Any]],
         describe: Describe | None = None,
     ) -> None:
         self.app = app

@@ -57,10 +57,11 @@ class _Viewer(threading.Thread):
         import viser
         from websockets.exceptions import ConnectionClosed
         from websockets.sync.client import connect
+        from websockets.typing import Subprotocol
 
         try:
             with connect(
-                self.url, subprotocols=[f"viser-v{viser.__version__}"], open_timeout=30
+                self.url, subprotocols=[Subprotocol(f"viser-v{viser.__version__}")], open_timeout=30
             ) as socket:
                 while not self._done.is_set():
                     try:

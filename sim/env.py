@@ -1,7 +1,8 @@
 """The Gymnasium environment: thin glue between the arm, the scene, the task and the camera."""
 
 import copy
-from typing import Any, ClassVar
+from collections.abc import Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -43,7 +44,7 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
     rarely); at 0 (the default) nothing is drawn, so runs are as without the options.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 4}  # noqa: RUF012 (as gymnasium.Env declares it)
 
     def __init__(
         self,
@@ -97,7 +98,7 @@ class SortingEnv(gym.Env[np.ndarray, np.int64]):
         self._obs = np.zeros(self.observation_space.shape, np.uint8)
         self.last_motion: list[MotionFrame] = []
         """With `record_motion=True`: the moving bodies along the last step (or reset)."""
-        self._episode_start: dict[str, Any] | None = None
+        self._episode_start: Mapping[str, Any] | None = None
         self._episode_actions: list[int] = []
 
     # -- Gymnasium API ------------------------------------------------------------------

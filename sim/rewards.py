@@ -56,7 +56,7 @@ def check_reward_scheme(scheme: object) -> str:
             f"text; authors-autonomous / authors-interactive: the authors' DeepRL / IDeepRL "
             f"scripts), got {scheme!r}"
         )
-    return scheme  # type: ignore[return-value]
+    return scheme
 
 
 OUTCOMES = ("placed", "misplaced", "lost", "none")

@@ -3,45 +3,51 @@
 Pure functions over pandas DataFrames; nothing here reads the database. The table is one
 row per (session, episode) — see `server.analysis.episodes.CONTRACT` — and
 `write_report(episodes_df, out_dir)` is the entry point for the CLI and the dashboard.
+
+Importing this package loads nothing but itself: a name is imported from its module when it
+is first used, so a part that needs one module (the export's audit settings, the episode
+table's contract) does not bring matplotlib and scipy with it.
 """
 
-from server.analysis.episodes import (
-    CONTRACT,
-    METHOD_NAMES,
-    EpisodeTableError,
-    method_name,
-    order_methods,
-    reward_curves,
-    validate_episodes,
-)
-from server.analysis.figures import (
-    plot_correlation,
-    plot_cumulative_reward,
-    plot_epsilon,
-    plot_individual_agents,
-    plot_method_curves,
-    save_figure,
-)
-from server.analysis.intervals import (
-    bootstrap_interval,
-    difference_intervals,
-    iqm,
-    method_intervals,
-)
-from server.analysis.paper import paper_comparison
-from server.analysis.report import ReportResult, write_report
-from server.analysis.stats import (
-    agent_totals,
-    correlation_matrix,
-    improvement_pct,
-    method_correlations,
-    method_curves,
-    method_totals,
-    student_t_test,
-    t_tests,
-)
-from server.analysis.summary import Analysis, analyze
-from server.analysis.synthetic import synthetic_episodes
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+_MODULE_OF = {
+    "CONTRACT": "episodes",
+    "METHOD_NAMES": "episodes",
+    "EpisodeTableError": "episodes",
+    "method_name": "episodes",
+    "order_methods": "episodes",
+    "reward_curves": "episodes",
+    "validate_episodes": "episodes",
+    "plot_correlation": "figures",
+    "plot_cumulative_reward": "figures",
+    "plot_epsilon": "figures",
+    "plot_individual_agents": "figures",
+    "plot_method_curves": "figures",
+    "save_figure": "figures",
+    "bootstrap_interval": "intervals",
+    "difference_intervals": "intervals",
+    "iqm": "intervals",
+    "method_intervals": "intervals",
+    "paper_comparison": "paper",
+    "ReportResult": "report",
+    "write_report": "report",
+    "agent_totals": "stats",
+    "correlation_matrix": "stats",
+    "improvement_pct": "stats",
+    "method_correlations": "stats",
+    "method_curves": "stats",
+    "method_totals": "stats",
+    "student_t_test": "stats",
+    "t_tests": "stats",
+    "Analysis": "summary",
+    "analyze": "summary",
+    "demo_episodes": "demo_curves",
+}
+"""Where each public name lives (its module in this package)."""
 
 __all__ = [
     "CONTRACT",
@@ -53,6 +59,7 @@ __all__ = [
     "analyze",
     "bootstrap_interval",
     "correlation_matrix",
+    "demo_episodes",
     "difference_intervals",
     "improvement_pct",
     "iqm",
@@ -71,8 +78,52 @@ __all__ = [
     "reward_curves",
     "save_figure",
     "student_t_test",
-    "synthetic_episodes",
     "t_tests",
     "validate_episodes",
     "write_report",
 ]
+
+if TYPE_CHECKING:
+    from server.analysis.demo_curves import demo_episodes
+    from server.analysis.episodes import (
+        CONTRACT,
+        METHOD_NAMES,
+        EpisodeTableError,
+        method_name,
+        order_methods,
+        reward_curves,
+        validate_episodes,
+    )
+    from server.analysis.figures import (
+        plot_correlation,
+        plot_cumulative_reward,
+        plot_epsilon,
+        plot_individual_agents,
+        plot_method_curves,
+        save_figure,
+    )
+    from server.analysis.intervals import (
+        bootstrap_interval,
+        difference_intervals,
+        iqm,
+        method_intervals,
+    )
+    from server.analysis.paper import paper_comparison
+    from server.analysis.report import ReportResult, write_report
+    from server.analysis.stats import (
+        agent_totals,
+        correlation_matrix,
+        improvement_pct,
+        method_correlations,
+        method_curves,
+        method_totals,
+        student_t_test,
+        t_tests,
+    )
+    from server.analysis.summary import Analysis, analyze
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(import_module(f"{__name__}.{_MODULE_OF[name]}"), name)

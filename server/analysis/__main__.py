@@ -17,10 +17,10 @@ from typing import Any
 
 import pandas as pd
 
+from server.analysis.demo_curves import demo_episodes
 from server.analysis.episodes import CONTRACT, EpisodeTableError
 from server.analysis.exported import ExportError, read_export
 from server.analysis.report import write_report
-from server.analysis.synthetic import synthetic_episodes
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -43,8 +43,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("give an episode CSV, or --demo without one")
     extra: dict[str, Any] = {}
     if args.demo:
-        episodes = synthetic_episodes()
-        notes = ["Made-up curves (server.analysis.synthetic): a demonstration, not a result."]
+        episodes = demo_episodes()
+        notes = ["Made-up curves (server.analysis.demo_curves): a demonstration, not a result."]
     elif Path(args.episodes).is_dir() or zipfile.is_zipfile(args.episodes):
         try:
             export = read_export(Path(args.episodes))

@@ -17,6 +17,7 @@ description of the runs, not a guarantee.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -32,7 +33,7 @@ RESAMPLES = 10_000
 SEED = 0
 """Seed of the bootstrap's generator: the same table gives the same intervals."""
 
-Statistic = Callable[..., np.ndarray]
+Statistic = Callable[..., np.ndarray | float]
 METHOD_COLUMNS = [
     *("method", "name", "agents", "R_T_mean", "R_T_low", "R_T_high"),
     *("IQM", "IQM_low", "IQM_high", "confidence"),
@@ -83,7 +84,7 @@ def bootstrap_interval(
 
 
 def _difference(statistic: Statistic) -> Statistic:
-    def difference(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+    def difference(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray | float:
         return statistic(a, axis=axis) - statistic(b, axis=axis)
 
     return difference
@@ -110,12 +111,14 @@ def method_intervals(
     """
     table = validate_episodes(episodes)
     totals = _totals(table)
-    options = {"confidence": confidence, "n_resamples": n_resamples, "seed": seed}
+    interval = partial(
+        bootstrap_interval, confidence=confidence, n_resamples=n_resamples, seed=seed
+    )
     rows = []
     for method in order_methods(table["method"], baseline):
         values = totals[method]
-        low, high = bootstrap_interval([values], _mean, **options)
-        iqm_low, iqm_high = bootstrap_interval([values], iqm, **options)
+        low, high = interval([values], _mean)
+        iqm_low, iqm_high = interval([values], iqm)
         rows.append(
             {
                 "method": method,
@@ -150,12 +153,14 @@ def difference_intervals(
     """
     table = validate_episodes(episodes)
     totals = _totals(table)
-    options = {"confidence": confidence, "n_resamples": n_resamples, "seed": seed}
+    interval = partial(
+        bootstrap_interval, confidence=confidence, n_resamples=n_resamples, seed=seed
+    )
     rows = []
     for method_a, method_b in method_pairs(table["method"], baseline):
         a, b = totals[method_a], totals[method_b]
-        low, high = bootstrap_interval([a, b], _difference(_mean), **options)
-        iqm_low, iqm_high = bootstrap_interval([a, b], _difference(iqm), **options)
+        low, high = interval([a, b], _difference(_mean))
+        iqm_low, iqm_high = interval([a, b], _difference(iqm))
         rows.append(
             {
                 "method_a": method_a,

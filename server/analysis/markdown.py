@@ -8,6 +8,8 @@ from collections.abc import Callable, Mapping
 import pandas as pd
 
 Formatter = Callable[[object], str]
+REPORT_FILE = "report.md"
+"""The report's own file in its folder (the web app names it without loading the analysis)."""
 
 
 def _is_missing(value: object) -> bool:

@@ -36,6 +36,7 @@ from server.analysis.figures import (
     save_figure,
     vector_paths,
 )
+from server.analysis.markdown import REPORT_FILE
 from server.analysis.paper import PAPER_AGENTS, PAPER_EPISODES, paper_comparison
 from server.analysis.power import DEFAULT_DRAWS, MIN_AGENTS, PowerAnalysis, power_analysis
 from server.analysis.reference import REFERENCES, authors_totals, overlay_authors
@@ -45,7 +46,6 @@ from server.analysis.summary import Analysis, analyze
 from server.csvsafe import safe_frame
 from sim.rewards import REWARD_SCHEMES
 
-REPORT_FILE = "report.md"
 FIGURE_FILES: dict[str, str] = {
     "reward_per_method": "figure5_reward_per_method.png",
     "individual_agents": "figure6_individual_agents.png",

@@ -94,10 +94,10 @@ def rescoring_table(
     table = pd.DataFrame(out)
     if baseline is not None and baseline in set(table["method"]):
         base = table.set_index("method")
-        for scheme in ("logged", *REWARD_SCHEMES):
-            column = f"R_T_{scheme}"
+        for logged_or_scheme in ("logged", *REWARD_SCHEMES):
+            column = f"R_T_{logged_or_scheme}"
             reference = float(base.loc[baseline, column])
-            table[f"improvement_{scheme}"] = [
+            table[f"improvement_{logged_or_scheme}"] = [
                 100.0 * (value - reference) / abs(reference) if reference else float("nan")
                 for value in table[column]
             ]

@@ -39,11 +39,6 @@ EPISODE_MEANS = "episode_means"
 AGENT_TOTALS = "agent_totals"
 """t-test sample: the R_T of each of a method's agents (one value per agent)."""
 
-SAMPLE_DESCRIPTIONS: dict[str, str] = {
-    EPISODE_MEANS: "the method's average collected reward per episode (one value per episode)",
-    AGENT_TOTALS: "the total collected reward R_T of each agent (one value per agent)",
-}
-
 
 def _check_baseline(table: pd.DataFrame, baseline: str | None) -> None:
     if baseline is not None and baseline not in set(table["method"]):

@@ -10,14 +10,12 @@ import os
 import time
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from tqdm import tqdm
 
+from server.batch.spec import Run
 from server.db.models import Status, StudySession
-
-if TYPE_CHECKING:
-    from server.batch.runner import RunState
 
 BAR_FORMAT = (
     "{desc} {percentage:3.0f}%|{bar}| {n:.1f}/{total} runs [{elapsed}<{remaining}{postfix}]"
@@ -76,6 +74,14 @@ class MachineShare:
                 f"{1 / self.share:.1f}x slower than on a quiet machine"
             )
         return text
+
+
+class RunState(Protocol):
+    """What the bar reads of a run (`server.batch.runner.RunState`, which uses the bar)."""
+
+    run: Run
+    session_id: int | None
+    status: str
 
 
 def run_fraction(progress: dict[str, Any]) -> float:

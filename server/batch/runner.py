@@ -358,7 +358,7 @@ class BatchRunner:
                     self._advisor_ready(db, state)
             self._pair_controls(db)
             live = [s.session_id for s in self.states if s.status in LIVE and s.session_id]
-            for session_id in take_back(db, live, self.options.stale_after_s):  # type: ignore[arg-type]
+            for session_id in take_back(db, live, self.options.stale_after_s):
                 self._state(session_id).status = Status.interrupted.value
         self.queue = [s for s in self.states if s.status in TO_RUN]
         self.elsewhere = [s for s in self.states if s.status in LIVE]

@@ -71,18 +71,18 @@ def fit(args: argparse.Namespace) -> int:
             fitted = fit_study(db, settings.data_dir, study_id, args.methods, args.sessions)
         except ServiceError as error:
             raise CommandError(error.message, service_exit_code(error)) from None
+    summary = fitted.model.summary()
     result = {
         "id": fitted.id,
         "study_id": study_id,
         "path": str(fitted.path.resolve()),
         "without_situation": fitted.without_situation,
-        "summary": fitted.model.summary(),
+        "summary": summary,
         "model": fitted.model.to_json(),
     }
     if args.json:
         print_json(result)
         return 0
-    summary = result["summary"]
     print(
         f"fitted advisor {fitted.id} of {what}: {summary['advice']} advice from "
         f"{summary['sessions']} session(s); file {result['path']}"

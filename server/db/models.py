@@ -100,7 +100,7 @@ RESUMABLE_STATUSES = (Status.stopped, Status.interrupted, Status.abandoned, Stat
 
 class Study(Base):
     __tablename__ = "studies"
-    __table_args__: ClassVar[Any] = {"sqlite_autoincrement": True}  # ids never return
+    __table_args__ = {"sqlite_autoincrement": True}  # noqa: RUF012 (as SQLAlchemy declares it); ids never return
 
     id: Mapped[int] = mapped_column(primary_key=True)
     name: Mapped[str] = mapped_column(String(200), unique=True)
@@ -166,7 +166,7 @@ class StudySession(Base):
     """One learner's run: its full configuration, its status and where it can resume from."""
 
     __tablename__ = "sessions"
-    __table_args__: ClassVar[Any] = {"sqlite_autoincrement": True}
+    __table_args__ = {"sqlite_autoincrement": True}  # noqa: RUF012 (as SQLAlchemy declares it)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
@@ -394,7 +394,7 @@ class FittedAdvisorModel(Base):
     participant, or the study) deletes it (`server.services.storage`)."""
 
     __tablename__ = "fitted_advisors"
-    __table_args__: ClassVar[Any] = {"sqlite_autoincrement": True}
+    __table_args__ = {"sqlite_autoincrement": True}  # noqa: RUF012 (as SQLAlchemy declares it)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
@@ -411,7 +411,7 @@ class Assignment(Base):
     place of a visit that ended early (`refills`: that assignment's id)."""
 
     __tablename__ = "assignments"
-    __table_args__: ClassVar[Any] = {"sqlite_autoincrement": True}
+    __table_args__ = {"sqlite_autoincrement": True}  # noqa: RUF012 (as SQLAlchemy declares it)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)

@@ -119,7 +119,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
     wanted = request is not None and handle.status == Status.running
     if wanted and handle.shown_at is None:
         handle.shown_at = time.monotonic()
-    progress = handle.progress
+    shown = handle.progress
     given = len(handle.given)
     return ParticipantState(
         session_id=session.id,
@@ -137,8 +137,8 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
         advice_given=given,
         advice_left=max(0, budget - given),
         last_reward=handle.last_reward,
-        episode=progress.episode if progress else 0,
-        stage=progress.stage if progress else None,
+        episode=shown.episode if shown else 0,
+        stage=shown.stage if shown else None,
         ready=handle.ready,
         queued=handle.queued,
         history=_history(list(handle.history)),
@@ -184,6 +184,7 @@ def _insert(manager: SessionManager, row: Advice) -> bool:
 
 
 def _receipt(stored: Advice, body: AdviceCreate, version: int) -> AdviceReceipt:
+    assert stored.action is not None, "a person's advice has its action (only replays lack one)"
     if stored.action != body.action:
         raise Conflict(
             f"advice {body.advice_index} was already given as {stored.action} "

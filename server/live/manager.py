@@ -33,7 +33,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from learner.strategies import make_strategy
-from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Method, Status
+from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status
 from server.live import visits
 from server.live.hub import Hub
 from server.services import numerics
@@ -133,7 +133,9 @@ leaves about 140 MB of private memory in a process; forked from a server that ho
 the workers share those pages (copy on write) instead of each making its own."""
 
 
-def worker_context() -> multiprocessing.context.BaseContext:
+def worker_context() -> (
+    multiprocessing.context.ForkServerContext | multiprocessing.context.SpawnContext
+):
     """Session workers are forked from a fork server that has loaded `WORKER_PRELOAD`
     (a clean single-threaded process started for the purpose, never the web process with
     its threads), or spawned where the platform has no fork server. Each worker still
@@ -262,7 +264,7 @@ class SessionManager:
             ).all()
             spec = session.spec
             budget = spec.advice_budget
-            human = session.method == Method.human
+            human = session.method == "human"
             ready = human and session.ready_for_advice
             strategy = spec.make_strategy() or make_strategy("early", 0)
             first_turn = strategy.first_advice_step(spec.config.pretraining_steps) - 1

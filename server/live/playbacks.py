@@ -20,6 +20,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from sqlalchemy.orm import Session
+
+from server.db.models import StudySession
 from server.worker.rerun import Rerun, RerunFailed, RerunOrder, rerun_main
 
 State = Literal["rerunning", "ready", "failed"]
@@ -168,6 +171,10 @@ class Playbacks:
         for playback_id in chosen:
             self.close(playback_id)
         return chosen
+
+    def close_deleted(self, db: Session) -> list[str]:
+        """After a deletion: the playbacks of sessions that no longer exist end now."""
+        return self.close_sessions(lambda session_id: db.get(StudySession, session_id) is None)
 
     def open_ids(self) -> list[str]:
         with self._lock:

@@ -8,16 +8,26 @@ completed visit leaves the learner training; the participant's code never waits 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from sqlalchemy import update
+from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from server.db.models import Outcome, Status, StudySession, utcnow
 from server.services.sessions import get_session
 
-if TYPE_CHECKING:
-    from server.live.manager import SessionManager
+
+class SessionManager(Protocol):
+    """What ending a visit needs of `server.live.manager.SessionManager` (which calls this
+    module when a worker gives up waiting, so it is named here, not imported)."""
+
+    factory: sessionmaker[Session]
+
+    async def end(self, session_id: int, status: Status, detail: str) -> None: ...
+
+    def notify(self, session_id: int) -> None: ...
+
 
 DETAILS = {
     Outcome.declined: "the participant declined; their visit ended and its worker was stopped",

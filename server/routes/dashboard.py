@@ -19,7 +19,7 @@ from sqlalchemy import select
 
 from learner.fields import FieldError
 from learner.run import RunSpec
-from server.db.models import Episode, Method, StudySession
+from server.db.models import Episode, StudySession
 from server.deps import DbDep, ManagerDep, SettingsDep
 from server.logins import Logins
 from server.routes import exports as export_routes
@@ -171,7 +171,7 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
                 declined=session.declined_at is not None and session.consented_at is None,
             )
             found.append(SessionRow(**fields))
-        public = studies.public(db, study, settings.base_url)
+        study_public = studies.public(db, study, settings.base_url)
         counts = study_routes.condition_counts(db, study.id) if study.design else []
         rows.append(
             StudyRow(
@@ -180,7 +180,7 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
                 description=study.description,
                 sessions=found,
                 design=study.design,
-                join_url=public.join_url,
+                join_url=study_public.join_url,
                 conditions=counts,
             )
         )
@@ -233,7 +233,7 @@ async def command(
     command: Literal["start", "pause", "resume", "stop"],
 ) -> dict[str, str]:
     session = sessions.get_session(db, session_id)
-    if command == "start" and session.method == Method.human and session.consented_at is None:
+    if command == "start" and session.method == "human" and session.consented_at is None:
         raise HTTPException(
             409,
             f"session {session_id} waits for its participant's consent: their link shows the "

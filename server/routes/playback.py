@@ -16,10 +16,10 @@ from fastapi import APIRouter, HTTPException, Path, Request, WebSocket
 from fastapi.responses import RedirectResponse, Response
 from pydantic import BaseModel, Field
 from sqlalchemy import select
-from sqlalchemy.orm import Session
 
 import sim
-from server.db.models import Advice, Episode, StudySession
+from learner.run import RunSpec
+from server.db.models import Advice, Episode
 from server.deps import DbDep
 from server.live.playbacks import Playback, Playbacks, TooManyPlaybacks
 from server.routes.dashboard import LoginDep, _logged_in
@@ -30,6 +30,7 @@ from server.services.playback import RecordedEpisode, recorded_episode
 from server.viewer.connection import TOKEN_PATH
 from server.viewer.episodes import PlaybackViewer
 from server.viewer.proxy import relay_to, upstream_host
+from server.worker.rerun import RerunOrder
 
 router = APIRouter(include_in_schema=False)
 API = "/dashboard/api"
@@ -52,11 +53,6 @@ def _open(request: Request, playback_id: str) -> Playback:
     if playback is None:
         raise HTTPException(404, "no such playback: it was closed, or idle too long; open it again")
     return playback
-
-
-def close_deleted(request: Request, db: Session) -> None:
-    """After a deletion: the playbacks of sessions that no longer exist end now."""
-    _playbacks(request).close_sessions(lambda sid: db.get(StudySession, sid) is None)
 
 
 # --- the page ----------------------------------------------------------------------------
@@ -114,6 +110,18 @@ class PlaybackOpened(BaseModel):
     """Where the page reads the playback."""
 
 
+def rerun_order(recorded: RecordedEpisode, spec_class: type[RunSpec]) -> RerunOrder:
+    """What the rerun's process needs of the recorded episode."""
+    assert recorded.episode.reset_seed is not None, "checked by recorded_episode"
+    return RerunOrder(
+        run=dict(recorded.session.run),
+        reset_seed=recorded.episode.reset_seed,
+        actions=[s.action for s in recorded.steps],
+        rewards=[s.reward for s in recorded.steps],
+        spec_class=spec_class,
+    )
+
+
 @router.post(
     f"{API}/sessions/{{session_id}}/episodes/{{stage}}/{{episode}}/playback",
     dependencies=[LoginDep],
@@ -125,7 +133,7 @@ def open_playback(
     """Rerun the episode in a worker process; 429 when `playback_limit` are open."""
     recorded = recorded_episode(db, session_id, stage, episode)
     _viewer(request).ensure_started()
-    order = recorded.order(request.app.state.spec_class)
+    order = rerun_order(recorded, request.app.state.spec_class)
     try:
         playback = _playbacks(request).start(session_id, stage, episode, order, recorded)
     except TooManyPlaybacks as error:

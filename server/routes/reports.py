@@ -11,7 +11,7 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.analysis.report import REPORT_FILE
+from server.analysis.markdown import REPORT_FILE
 from server.deps import DbDep, ResearcherDep, SettingsDep
 from server.routes.params import MAX_ID, StudyId
 from server.schemas.types import Text
@@ -111,7 +111,7 @@ def public_report(
         for f in description["files"]  # type: ignore[attr-defined]
     ]
     return ReportPublic(
-        **{k: v for k, v in description.items() if k != "files"},  # type: ignore[arg-type]
+        **{k: v for k, v in description.items() if k != "files"},
         files=files,
         report_url=f"{base}/files/{REPORT_FILE}",
         zip_url=f"{base}.zip",

@@ -9,7 +9,6 @@ from sqlalchemy import select
 from learner.run import RunSpec
 from server.db.models import LIVE_STATUSES, Advice
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
-from server.routes import playback
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
 from server.schemas.runs import given
@@ -94,7 +93,7 @@ def delete_session(
     live = handle is not None and handle.status in LIVE_STATUSES
     storage.delete_session(db, settings.data_dir, session_id, live)
     request.app.state.participant_tokens.clear()
-    playback.close_deleted(request, db)
+    request.app.state.playbacks.close_deleted(db)
     return Response(status_code=204)
 
 

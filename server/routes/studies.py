@@ -7,7 +7,6 @@ from starlette.concurrency import run_in_threadpool
 
 from server.db.models import LIVE_STATUSES, Status, Study, StudySession
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
-from server.routes import playback
 from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
 from server.schemas.design import StudyDesign
@@ -51,7 +50,7 @@ def delete_study(
     live = {i for i, h in manager.handles.items() if h.status in LIVE_STATUSES}
     storage.delete_study(db, settings.data_dir, study_id, live)
     request.app.state.participant_tokens.clear()
-    playback.close_deleted(request, db)
+    request.app.state.playbacks.close_deleted(db)
     return Response(status_code=204)
 
 
@@ -141,7 +140,7 @@ async def _delete_sessions(
         db.expire_all()
         await run_in_threadpool(storage.delete_session, db, settings.data_dir, session_id, False)
     request.app.state.participant_tokens.clear()
-    playback.close_deleted(request, db)
+    request.app.state.playbacks.close_deleted(db)
 
 
 @router.delete("/{study_id}/preview", status_code=204)

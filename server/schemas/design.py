@@ -36,7 +36,7 @@ MTURK_HOSTS = ("https://www.mturk.com", "https://workersandbox.mturk.com")
 would make the study an open redirect."""
 OutcomeName = Literal["completed", "declined", "excluded", "timed_out", "full"]
 """`server.db.models.Outcome`'s values, each with its own code and return URL."""
-OUTCOMES: tuple[str, ...] = get_args(OutcomeName)
+OUTCOMES: tuple[OutcomeName, ...] = get_args(OutcomeName)
 ParamName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
 Url = Annotated[
     str,
@@ -92,10 +92,10 @@ class Panel(BaseModel):
                 raise ValueError("a custom panel names its URL parameters in `params`")
             self.params = list(PANEL_PARAMS[self.kind])
         for outcome in OUTCOMES:
-            self.codes.setdefault(outcome, _code())  # type: ignore[call-overload]
+            self.codes.setdefault(outcome, _code())
             default = {"prolific": PROLIFIC_COMPLETE, "mturk": MTURK_SUBMIT}.get(self.kind)
             if default is not None:
-                self.urls.setdefault(outcome, default)  # type: ignore[call-overload]
+                self.urls.setdefault(outcome, default)
         return self
 
 

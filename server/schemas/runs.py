@@ -71,19 +71,19 @@ def body_model(cls: type, name: str | None = None) -> type[BaseModel]:
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
         if dataclasses.is_dataclass(hints[f.name]):
-            inner = body_model(hints[f.name])  # type: ignore[arg-type]
+            inner = body_model(hints[f.name])
             fields[f.name] = (inner | None, Field(default=None))
             continue
         leaf = by_name[f.name]
         kind = Annotated[Any, BeforeValidator(_validator(leaf)), WithJsonSchema(leaf_schema(leaf))]
         fields[f.name] = (kind, Field(default=None))
-    model = create_model(  # type: ignore[call-overload]
+    model = create_model(
         name or cls.__name__,
         __config__=ConfigDict(extra="forbid"),
         __doc__=(cls.__doc__ or "").strip(),
         **fields,
     )
-    return model  # type: ignore[no-any-return]
+    return model
 
 
 def given(body: BaseModel) -> dict[str, Any]:

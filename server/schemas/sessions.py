@@ -59,10 +59,11 @@ def session_create_model(spec_class: type = RunSpec) -> type[BaseModel]:
     """The REST body that creates a session: `run` (the run, `spec_class`'s tree) beside the
     session's own options (`SessionOptions`)."""
     options = body_model(SessionOptions, "SessionOptions")
-    model = create_model(  # type: ignore[call-overload]
+    model = create_model(
         "SessionCreate",
         __base__=options,
-        __validators__={"flat": model_validator(mode="before")(_flat_body)},
+        # pydantic's annotation wants plain functions; its docs pass decorated ones
+        __validators__={"flat": model_validator(mode="before")(_flat_body)},  # type: ignore[dict-item]
         __doc__="A session: its run, described once, and the session's own options. Unset "
         "fields take their defaults (the learner config's: its preset's).",
         run=(
@@ -73,13 +74,13 @@ def session_create_model(spec_class: type = RunSpec) -> type[BaseModel]:
             ),
         ),
     )
-    return model  # type: ignore[no-any-return]
+    return model
 
 
 def _run_model(spec_class: type) -> type[BaseModel]:
     """The run's body: every field of `spec_class`, and the stored document's `version`
     (so a session's `run`, or an export's `run_spec`, is accepted back as it is)."""
-    return create_model(  # type: ignore[call-overload, no-any-return]
+    return create_model(
         "Run",
         __base__=body_model(spec_class, "RunFields"),
         __doc__=(spec_class.__doc__ or "").strip(),

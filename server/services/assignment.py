@@ -82,7 +82,11 @@ def study_for_key(db: Session, key: str) -> tuple[Study, StudyDesign]:
     if not key or len(key) > 64 or "\x00" in key:
         raise NotFound("no study has this link")
     study = db.scalar(select(Study).where(Study.join_key == key))
-    if study is None or study.design is None or not secrets.compare_digest(study.join_key, key):
+    if (
+        study is None
+        or study.design is None
+        or not secrets.compare_digest(study.join_key or "", key)
+    ):
         raise NotFound("no study has this link")
     return study, StudyDesign.model_validate(study.design)
 
@@ -98,7 +102,7 @@ def counts(db: Session, study: Study, design: StudyDesign) -> dict[str, Conditio
         )
     )
     for condition, outcome, status in rows:
-        found = out.get(condition)
+        found = out.get(condition or "")
         if found is None:  # a condition the design no longer has
             continue
         if outcome == Outcome.completed:

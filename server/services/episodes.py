@@ -12,6 +12,7 @@ import pandas as pd
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from learner.records import TRAINING
 from learner.run import RunSpec
 from server.analysis.advice import ADVICE_COLUMNS
 from server.analysis.episodes import EPISODE_TABLE_COLUMNS
@@ -19,7 +20,6 @@ from server.analysis.rescoring import STEP_COLUMNS
 from server.analysis.settings import settings_table
 from server.db.models import Episode, Step, StudySession
 from server.services import learning
-from server.worker.recorder import TRAINING
 
 
 def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:

@@ -11,10 +11,10 @@ command line (`ideeprl fit`), not in the web process.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -33,9 +33,12 @@ from server.db.models import (
 from server.schemas.studies import FittedAdvisorPublic
 from server.services import learning
 from server.services.errors import Invalid, NotFound
+from server.services.fitted_files import write_model_file
 from server.services.outcomes import ReplayMismatch
-from server.services.storage import fitted_model_path
 from server.services.studies import get_study
+
+if TYPE_CHECKING:
+    import gymnasium as gym
 
 ENDED = (
     Status.finished,
@@ -110,8 +113,8 @@ def _replay(
     first_step: int,
     reset_seed: int,
     advice: dict[int, Advice],
-    env: object,
-    sort_rule: object,
+    env: gym.Env[Any, Any],
+    sort_rule: str | dict[str, str],
 ) -> list[AdviceSeen]:
     import sim
 
@@ -124,11 +127,11 @@ def _replay(
         )
         .order_by(Step.global_step)
     )
-    _, info = env.reset(seed=reset_seed)  # type: ignore[attr-defined]
+    _, info = env.reset(seed=reset_seed)
     seen = []
     for step in steps:
         given = advice.get(step.global_step)
-        if given is not None:
+        if given is not None and given.action is not None:  # a replay's unanswered request
             station, held = situation(info)
             seen.append(
                 AdviceSeen(
@@ -139,7 +142,7 @@ def _replay(
                     given.decision_time_s,
                 )
             )
-        _, reward, _, _, info = env.step(step.action)  # type: ignore[attr-defined]
+        _, reward, _, _, info = env.step(step.action)
         if abs(float(reward) - step.reward) > 1e-9:
             raise ReplayMismatch(
                 f"session {session.id}, step {step.global_step}: the replay's reward differs "
@@ -198,42 +201,6 @@ def fit_study(
     db.commit()
     path = write_model_file(data_dir, row)
     return Fitted(row.id, study_id, path, model, lost)
-
-
-def write_model_file(data_dir: Path, row: FittedAdvisorModel) -> Path:
-    path = fitted_model_path(data_dir, row.study_id, row.id)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(row.model, indent=1))
-    return path
-
-
-def resolve(db: Session, name: str, data_dir: Path | None) -> str:
-    """The model file a `fitted` run names: `fitted:ID` (a stored model; its file written
-    again if gone), or a path, which through the API must lie under `data_dir`."""
-    if name.startswith("fitted:"):
-        number = name.removeprefix("fitted:")
-        known = number.isdigit() and len(number) < 10
-        row = db.get(FittedAdvisorModel, int(number)) if known else None
-        if row is None or data_dir is None:
-            raise Invalid(
-                "run.fitted_model",
-                "run.fitted_model names no stored model; GET /api/studies/ID/fitted lists "
-                "them (fitted:ID), or give the path `ideeprl fit` printed",
-            )
-        path = fitted_model_path(data_dir, row.study_id, row.id)
-        if not path.is_file():
-            write_model_file(data_dir, row)
-        return str(path.resolve())
-    path = Path(name).resolve()
-    if data_dir is not None and not path.is_relative_to(data_dir.resolve()):
-        raise Invalid(
-            "run.fitted_model",
-            "run.fitted_model must be fitted:ID (a stored model) or a file under the "
-            "server's data folder",
-        )
-    if not path.is_file():
-        raise Invalid("run.fitted_model", "run.fitted_model: no such file")
-    return str(path)
 
 
 def list_models(db: Session, study_id: int) -> list[FittedAdvisorModel]:

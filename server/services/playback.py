@@ -1,6 +1,6 @@
 """A recorded episode as the dashboard's playback shows it: its logged steps (action, who
 chose it, reward), the advice given during it (what the advisor saw, chose, and how long
-a person took), and what its rerun needs (`server.worker.rerun.RerunOrder`)."""
+a person took), and what its rerun needs (its session's run, reset seed, actions, rewards)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,9 @@ from dataclasses import dataclass
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from learner.run import RunSpec
 from server.db.models import Advice, Episode, Step, StudySession
 from server.services.errors import Conflict, NotFound
 from server.services.sessions import get_session
-from server.worker.rerun import RerunOrder
 
 
 @dataclass(frozen=True)
@@ -43,16 +41,6 @@ class RecordedEpisode:
     episode: Episode
     steps: list[LoggedStep]
     advice: list[AdviceTurn]
-
-    def order(self, spec_class: type[RunSpec] = RunSpec) -> RerunOrder:
-        assert self.episode.reset_seed is not None, "checked by recorded_episode"
-        return RerunOrder(
-            run=dict(self.session.run),
-            reset_seed=self.episode.reset_seed,
-            actions=[s.action for s in self.steps],
-            rewards=[s.reward for s in self.steps],
-            spec_class=spec_class,
-        )
 
 
 def recorded_episode(db: Session, session_id: int, stage: str, episode: int) -> RecordedEpisode:
@@ -102,5 +90,6 @@ def recorded_episode(db: Session, session_id: int, stage: str, episode: int) -> 
             .where(Advice.session_id == session_id, Advice.global_step.between(*span))
             .order_by(Advice.advice_index)
         )
+        if a.action is not None  # a replay's request past its recorded stream: none given
     ]
     return RecordedEpisode(session, found, steps, advice)

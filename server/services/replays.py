@@ -20,7 +20,7 @@ import json
 import math
 import tempfile
 import zipfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -80,7 +80,7 @@ class Stream:
 
 
 def _png_hash(png: bytes) -> str:
-    from server.worker.advisors import decode_png
+    from server.services.observations import decode_png
 
     return observation_hash(decode_png(png))
 
@@ -171,11 +171,15 @@ def _missing(value: Any) -> bool:
 
 def _typed_step(row: Mapping[str, Any]) -> dict[str, Any]:
     """An exported step row's deciding columns, typed as the database holds them."""
-    kinds = {"reward": float, "terminated": _bool, "truncated": _bool}
+    kinds: dict[str, Callable[[Any], float | bool]] = {
+        "reward": float,
+        "terminated": _bool,
+        "truncated": _bool,
+    }
     typed: dict[str, Any] = {}
     for name in DECIDING:
         value = row.get(name)
-        if _missing(value):
+        if value is None or _missing(value):
             typed[name] = None
         elif name in kinds:
             typed[name] = kinds[name](value)

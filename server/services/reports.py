@@ -17,24 +17,21 @@ import uuid
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 from sqlalchemy.orm import Session
 
-from server.analysis import EpisodeTableError, ReportResult, method_name, write_report
+from server.analysis.episodes import EpisodeTableError, method_name
 from server.db.models import Status, StudySession
-from server.services.episodes import (
-    load_advised_steps,
-    load_episodes,
-    load_training_steps,
-    session_settings,
-)
 from server.services.errors import Conflict, Invalid, NotFound
 from server.services.sessions import list_sessions
 from server.services.studies import design_of, get_study
 from server.services.tables import iso_z
 from server.settings import Settings
+
+if TYPE_CHECKING:
+    from server.analysis.report import ReportResult
 
 AUTO = "auto"
 """Baseline choice: autonomous DeepRL when the report has it, else none."""
@@ -170,7 +167,17 @@ class StudyReport:
 def build_report(
     db: Session, study_id: int, out_dir: str | Path, request: ReportRequest | None = None
 ) -> StudyReport:
-    """Write the report of the chosen sessions into `out_dir` (see `write_report`)."""
+    """Write the report of the chosen sessions into `out_dir` (see `write_report`). The
+    analysis (pandas' tables, scipy's tests, matplotlib's figures) loads here, when a report
+    is built, not with the web app."""
+    from server.analysis.report import write_report
+    from server.services.episodes import (
+        load_advised_steps,
+        load_episodes,
+        load_training_steps,
+        session_settings,
+    )
+
     request = request or ReportRequest()
     study = get_study(db, study_id)
     sessions, notes = select_sessions(db, study_id, request)
@@ -225,7 +232,7 @@ def build_report(
             reference=request.reference,
             advice=advice,
             primary=request.primary,
-            **({"alpha": design.alpha} if design is not None else {}),
+            alpha=design.alpha if design is not None else 0.05,  # write_report's default
         )
     except EpisodeTableError as error:
         raise Conflict(f"these sessions cannot be compared as they are: {error}") from None

@@ -19,11 +19,9 @@ def schedule_of(db: Session, session: StudySession) -> Schedule:
         select(Step.global_step, Step.stage, Step.action_source, Step.loss, Step.epsilon)
         .where(Step.session_id == session.id)
         .order_by(Step.global_step)
-    )
+    ).tuples()
     spec = learning.spec_of(session)
-    return Schedule.from_steps(
-        (tuple(row) for row in rows), spec.config.pretraining_steps, f"session {session.id}"
-    )
+    return Schedule.from_steps(rows, spec.config.pretraining_steps, f"session {session.id}")
 
 
 def write_schedule(db: Session, session: StudySession, directory: Path) -> Path:

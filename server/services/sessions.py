@@ -13,13 +13,13 @@ from sqlalchemy.orm import Session
 from learner.run import RunSpec
 from server.db.models import (
     Episode,
-    Method,
     Participant,
     StudySession,
 )
 from server.schemas.sessions import SessionOptions, SessionPublic
 from server.services import learning
 from server.services.errors import Invalid, NotFound
+from server.services.fitted_files import resolve
 from server.services.ownership import claim as claim
 from server.services.ownership import mark_dead_interrupted as mark_dead_interrupted
 from server.services.ownership import set_status as set_status
@@ -44,7 +44,7 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
                 "run.advisor_checkpoint names no session of this installation with a "
                 "checkpoint; name a finished session, e.g. session:12",
             )
-        if found.method == Method.sb3_dqn:
+        if found.method == "sb3-dqn":
             raise Invalid(
                 "run.advisor_checkpoint",
                 "run.advisor_checkpoint names an sb3-dqn session: its checkpoint is "
@@ -84,7 +84,7 @@ def create_session(
     replayed run's source session (None: not in this database) and its recorded stream
     (`server.services.replays`, the only maker of replays)."""
     options = options or SessionOptions()
-    if (spec.method == Method.replayed) != (replay is not None):
+    if (spec.method == "replayed") != (replay is not None):
         raise Invalid(
             "run.method",
             "method replayed is made from a recorded session by `ideeprl replay`, which gives "
@@ -94,11 +94,9 @@ def create_session(
     if spec.advisor_checkpoint and spec.method == "agent":
         spec = spec.replace(advisor_checkpoint=advisor_path(db, spec.advisor_checkpoint, data_dir))
     if spec.fitted_model and spec.method == "fitted":
-        from server.services.fitting import resolve
-
         spec = spec.replace(fitted_model=resolve(db, spec.fitted_model, data_dir))
     spec = learning.checked(spec, threads)
-    if options.participant and spec.method != Method.human:
+    if options.participant and spec.method != "human":
         raise Invalid("participant", "only method human has a participant")
     session = StudySession(
         study_id=study_id,
@@ -111,7 +109,7 @@ def create_session(
     )
     if replay is not None:
         session.replay_of, session.replay_stream = replay
-    if spec.method == Method.human:
+    if spec.method == "human":
         pseudonym = options.participant or f"p-{secrets.token_hex(4)}"
         participant = db.scalar(
             select(Participant).where(

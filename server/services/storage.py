@@ -30,6 +30,7 @@ from server.db.models import (
     StudySession,
 )
 from server.services.errors import Conflict, NotFound
+from server.services.fitted_files import fitted_model_path
 from server.services.replays import replays_of
 from server.services.studies import get_study
 
@@ -88,11 +89,6 @@ def _fitted_from(db: Session, session_ids: set[int]) -> list[tuple[int, int]]:
     for row in used:
         db.delete(row)
     return [(r.study_id, r.id) for r in used]
-
-
-def fitted_model_path(data_dir: Path, study_id: int, model_id: int) -> Path:
-    """A stored fitted advisor model's JSON file, which `fitted` runs name."""
-    return data_dir / "fitted" / f"study-{study_id}-model-{model_id}.json"
 
 
 def remove_fitted_files(data_dir: Path, models: list[tuple[int, int]]) -> None:

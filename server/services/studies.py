@@ -9,7 +9,7 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from server.db.models import Method, Study, StudySession
+from server.db.models import Study, StudySession
 from server.schemas.design import StudyDesign
 from server.schemas.studies import StudyCreate, StudyPublic, StudyUpdate
 from server.services import learning
@@ -40,7 +40,7 @@ def stored_design(design: StudyDesign) -> dict[str, object]:
     for name, condition in design.conditions.items():
         try:
             spec = learning.parse(condition.run)
-            if spec.method != Method.human:
+            if spec.method != "human":
                 raise Invalid("run.method", "a condition's run is method human: people advise")
             learning.checked(spec)
         except Invalid as error:

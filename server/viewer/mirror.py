@@ -58,7 +58,7 @@ def add_body(scene: viser.SceneApi, body: sim.BodySpec) -> Any:
         return scene.add_box(
             name,
             color=color,
-            dimensions=tuple(float(x) * 2 for x in geometry.half_extents),
+            dimensions=_sizes(geometry.half_extents),
             opacity=opacity,
             cast_shadow=SHADOWS,
             receive_shadow=SHADOWS,
@@ -180,3 +180,9 @@ class SceneMirror:
 
 def _close(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
     return max(abs(x - y) for x, y in zip(a, b, strict=True)) < POSITION_EPS
+
+
+def _sizes(half_extents: np.ndarray) -> tuple[float, float, float]:
+    """A box's full sizes from PyBullet's half extents."""
+    x, y, z = (float(h) * 2 for h in half_extents)
+    return x, y, z

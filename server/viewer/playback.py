@@ -44,7 +44,7 @@ def _lerp_pose(a: sim.Pose, b: sim.Pose, alpha: float) -> sim.Pose:
     q = (1.0 - alpha) * qa + alpha * qb
     q /= np.linalg.norm(q) or 1.0
     p = (1.0 - alpha) * pa + alpha * pb
-    return sim.Pose(tuple(p.tolist()), tuple(q.tolist()))  # type: ignore[arg-type]
+    return sim.Pose(tuple(p.tolist()), tuple(q.tolist()))
 
 
 def pose_at(frames: Sequence[sim.MotionFrame], t: float) -> dict[str, sim.Pose]:
@@ -138,9 +138,10 @@ class Player:
         with self._cond:
             now = time.monotonic()
             left = max(0.0, self._playing_until - now)
-            steps = [i for i in self._queue if i.moves]
+            steps = [i.message for i in self._queue if i.moves]
             if len(steps) < JUMP_BACKLOG:
-                left += sum(motion_duration(i.message) for i in steps) / self.speed  # type: ignore[arg-type]
+                moving = (motion_duration(s) for s in steps if isinstance(s, SceneStep))
+                left += sum(moving) / self.speed
             return left + (self.tick_s if self._queue else 0.0)
 
     def idle(self) -> bool:

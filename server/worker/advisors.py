@@ -3,7 +3,6 @@ advisors whose advice is logged like a person's."""
 
 from __future__ import annotations
 
-import io
 import logging
 import time
 from collections.abc import Callable
@@ -11,24 +10,13 @@ from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import numpy as np
-from PIL import Image
 
 from learner.advisors import NO_ADVICE, Advisor, NoAdvice
+from server.services.observations import encode_png
 from server.worker.link import WorkerLink
 from server.worker.messages import AdviceRequest, AdviceResult
 
 log = logging.getLogger(__name__)
-
-
-def encode_png(obs: np.ndarray) -> bytes:
-    """The observation exactly as the learner sees it (PNG is lossless)."""
-    buffer = io.BytesIO()
-    Image.fromarray(np.asarray(obs, dtype=np.uint8)).save(buffer, format="PNG", compress_level=1)
-    return buffer.getvalue()
-
-
-def decode_png(data: bytes) -> np.ndarray:
-    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
 
 
 class HumanAdvisor:
@@ -137,8 +125,9 @@ class RecordingAdvisor:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.count = int(state["count"])
-        if state["inner"] is not None:
-            self._inner.load_state_dict(state["inner"])
+        load = getattr(self._inner, "load_state_dict", None)  # as state_dict found it
+        if state["inner"] is not None and callable(load):
+            load(state["inner"])
 
     def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int | NoAdvice:
         started = time.perf_counter()

@@ -8,7 +8,6 @@ identically. Unique (session, index) constraints make any slip an error, never a
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -17,14 +16,11 @@ from typing import Any, Protocol
 from sqlalchemy import bindparam, delete, insert, update
 from sqlalchemy.orm import Session, sessionmaker
 
-from learner.records import EpisodeRecord, StepRecord
-from server.db.models import Advice, Episode, Method, Step, StudySession, utcnow
+from learner.records import TRAINING, EpisodeRecord, StepRecord
+from server.db.models import Advice, Episode, Step, StudySession, utcnow
 
 STEP_COLUMNS = frozenset(c.name for c in Step.__table__.columns) - {"id"}
 EPISODE_COLUMNS = frozenset(c.name for c in Episode.__table__.columns) - {"id"}
-
-
-TRAINING = "train"
 
 
 class LeaseLost(Exception):
@@ -32,7 +28,7 @@ class LeaseLost(Exception):
 
 
 class Checkpointable(Protocol):
-    def save_checkpoint(self, path: str | os.PathLike[str], *, memory: bool = ...) -> None: ...
+    def save_checkpoint(self, path: Path, *, memory: bool = ...) -> None: ...
 
 
 def _row(
@@ -171,7 +167,7 @@ class Recorder:
                     Episode.session_id == sid, Episode.last_global_step > self.steps
                 )
             )
-            if session.method != Method.human:
+            if session.method != "human":
                 db.execute(
                     delete(Advice).where(
                         Advice.session_id == sid, Advice.advice_index >= self.advice

@@ -20,6 +20,7 @@ from typing import Any
 
 from learner.run import RunSpec
 from server.worker.messages import SceneReset, SceneStep
+from server.worker.scene import scene_of
 
 log = logging.getLogger(__name__)
 REWARD_TOLERANCE = 1e-9
@@ -70,13 +71,13 @@ class RerunFailed:
 
 def rerun_episode(order: RerunOrder) -> Rerun:
     """Reset with the episode's seed and take its logged actions."""
-    from server.worker.advisors import encode_png  # the rerun's process only
+    from server.services.observations import encode_png  # the rerun's process only
 
     spec = order.spec_class.from_json(order.run)
     env = spec.make_env(record_motion=True)
     try:
         obs, _ = env.reset(seed=order.reset_seed)
-        scene = env.unwrapped
+        scene = scene_of(env)
         start = SceneReset(
             bodies=list(scene.scene_bodies()), poses=dict(scene.body_poses()), episode=-1
         )

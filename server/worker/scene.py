@@ -4,12 +4,15 @@ and keeps the current episode's collected reward for progress reports."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any, SupportsFloat, cast
 
 import gymnasium as gym
 
 from server.worker.link import WorkerLink
 from server.worker.messages import SceneReset, SceneStep
+
+if TYPE_CHECKING:
+    from sim.env import SortingEnv
 
 
 class SceneBroadcast(gym.Wrapper):
@@ -32,7 +35,7 @@ class SceneBroadcast(gym.Wrapper):
             self.announce()
         return obs, info
 
-    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         advised = self.advised()
         self.collected_reward += float(reward)
@@ -40,7 +43,7 @@ class SceneBroadcast(gym.Wrapper):
         for hook in self.after_step:
             hook(int(action), float(reward), bool(terminated or truncated))
         if self._link is not None and self._link.watching:
-            scene = self.env.unwrapped
+            scene = scene_of(self.env)
             self._link.send(
                 SceneStep(
                     action=int(action),
@@ -56,7 +59,7 @@ class SceneBroadcast(gym.Wrapper):
     def announce(self) -> None:
         """Send the whole scene (bodies and poses): on reset, and when a viewer arrives."""
         assert self._link is not None
-        scene = self.env.unwrapped
+        scene = scene_of(self.env)
         self._link.send(
             SceneReset(
                 bodies=list(scene.scene_bodies()),
@@ -64,3 +67,9 @@ class SceneBroadcast(gym.Wrapper):
                 episode=self.episode,
             )
         )
+
+
+def scene_of(env: gym.Env[Any, Any]) -> SortingEnv:
+    """The sorting scene under a run's wrappers (imported by name only: the web process
+    imports this module and loads no simulation)."""
+    return cast("SortingEnv", env.unwrapped)

@@ -24,16 +24,17 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from learner import provenance
 from learner.advisors import RecordedAdvisor
+from learner.records import TRAINING
 from learner.run import RunSpec
 from server.db.engine import make_engine, make_session_factory
-from server.db.models import Advice, Method, Status, StudySession, utcnow
+from server.db.models import Advice, Status, StudySession, utcnow
 from server.services import learning, numerics
 from server.services.errors import Conflict
 from server.services.sessions import claim, get_session, set_status
 from server.worker.advisors import HumanAdvisor, RecordingAdvisor
 from server.worker.link import ParentGone, WorkerExit, WorkerLink
 from server.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
-from server.worker.recorder import TRAINING, Checkpointable, LeaseLost, Recorder
+from server.worker.recorder import Checkpointable, LeaseLost, Recorder
 from server.worker.scene import SceneBroadcast
 
 log = logging.getLogger(__name__)
@@ -114,10 +115,10 @@ class _Run:
         self.factory = make_session_factory(make_engine(database_url))
         with self.factory() as db:
             self.session = get_session(db, session_id)
-            self.given = {
+            self.given = {  # a person's advice always has its action (only replays lack one)
                 a.advice_index: a.action
                 for a in db.scalars(select(Advice).where(Advice.session_id == session_id))
-                if self.session.method == Method.human
+                if self.session.method == "human" and a.action is not None
             }
             run = learning.spec_of(self.session, options.spec_class)
             here = {  # where the run is computed from here on (the report audits it)
@@ -148,14 +149,16 @@ class _Run:
             options.flush_every_steps,
             options.heartbeat_s,
             self.progress_dict,
-            advice_written_elsewhere=s.method == Method.human,
+            advice_written_elsewhere=s.method == "human",
         )
-        resume = bool(s.checkpoint_path) and Path(s.checkpoint_path or "").is_file()
-        self.start_advice = s.checkpoint_advice if resume else 0
+        checkpoint = s.checkpoint_path
+        if checkpoint and not Path(checkpoint).is_file():
+            checkpoint = None  # a fresh start, as for a session never checkpointed
+        self.start_advice = s.checkpoint_advice if checkpoint else 0
         self.advisor: Any = None
         self.queued = False
         self.waiting_for_participant = False
-        if s.method == Method.human and self.link is None:
+        if s.method == "human" and self.link is None:
             raise Conflict("a human session needs the server: start it through the API")
         self.spec = learning.spec_of(s, options.spec_class)
         self.trainer, self.env = self.spec.build(
@@ -164,8 +167,8 @@ class _Run:
             wrap_env=self._broadcast,
             wrap_advisor=self._advisor,
         )
-        if resume:
-            self.trainer.load_checkpoint(s.checkpoint_path)
+        if checkpoint:
+            self.trainer.load_checkpoint(checkpoint)
         else:
             s.checkpoint_step = s.checkpoint_episodes = s.checkpoint_advice = 0
         self.recorder.rewind(s)
@@ -186,7 +189,7 @@ class _Run:
         """The session's advisor: a person through the web process (human), or the machine
         advisor with its advice recorded."""
         s = self.session
-        if s.method == Method.human:
+        if s.method == "human":
             assert self.link is not None
             self.advisor = HumanAdvisor(
                 self.link,
@@ -201,7 +204,7 @@ class _Run:
             self.env.after_step.append(self.advisor.after_step)
             advisor = self.advisor
             self.env.advised = lambda: advisor.carrying_out
-        elif s.method == Method.replayed:
+        elif s.method == "replayed":
             stream = s.replay_stream
             if not stream:
                 raise Conflict(
@@ -297,7 +300,7 @@ class _Run:
         """A human session whose advice is over trains only in one of the server's slots."""
         return (
             self.link is not None
-            and self.session.method == Method.human
+            and self.session.method == "human"
             and not self.link.may_train
             and self.advice_given >= self.spec.advice_budget
         )
@@ -410,7 +413,7 @@ def claim_session(
     the web process is there (a human session needs one)."""
     with factory() as db:
         session = get_session(db, session_id)
-        if session.method == Method.human and not human:
+        if session.method == "human" and not human:
             raise Conflict(f"session {session_id} is a human session: start it through the server")
         numerics.settle(db, session, options.override_numerics, options.spec_class)
         return claim(db, session_id, resume=session.status != Status.created)

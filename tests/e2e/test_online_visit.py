@@ -15,9 +15,12 @@ from playwright.sync_api import expect
 from sqlalchemy import select, update
 
 from server.db.models import CheckAttempt, QuestionnaireAnswer, Study, StudySession
-from server.schemas.design import StudyDesign
+from server.schemas.design import Condition, StudyDesign
 from server.schemas.visit import Item, QuestionnaireSpec
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
+
+ONE_CONDITION = {"a": Condition()}
+"""A design's one condition (human advice, defaults); these sessions are made by hand."""
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -45,7 +48,9 @@ def online_session(live: Live) -> dict[str, object]:
     )
     with live.app.state.session_factory() as db:
         study_id = db.get(StudySession, session["id"]).study_id
-        design = StudyDesign(questionnaire=QuestionnaireSpec(items=CUSTOM)).model_dump(mode="json")
+        design = StudyDesign(
+            conditions=ONE_CONDITION, questionnaire=QuestionnaireSpec(items=CUSTOM)
+        ).model_dump(mode="json")
         db.execute(update(Study).where(Study.id == study_id).values(design=design))
         db.commit()
     return session

@@ -63,6 +63,11 @@ class LiveServer:
         self.log = data_dir / "server.log"
 
     @property
+    def entry(self) -> list[str]:
+        """The command that runs `ideeprl` (a test may wrap it to watch the process)."""
+        return [sys.executable, "-m", "server"]
+
+    @property
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
@@ -79,16 +84,7 @@ class LiveServer:
         env.pop("DATABASE_URL", None)
         with self.log.open("ab") as log:
             self.process = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "server",
-                    "serve",
-                    "--port",
-                    str(self.port),
-                    "--log-level",
-                    "warning",
-                ],
+                [*self.entry, "serve", "--port", str(self.port), "--log-level", "warning"],
                 cwd=ROOT,
                 env=env,
                 stdout=log,

@@ -19,7 +19,7 @@ from sqlalchemy import func, select, update
 
 from server.db.engine import make_engine, make_session_factory
 from server.db.models import CheckAttempt, QuestionnaireAnswer, Study, StudySession
-from server.schemas.design import StudyDesign
+from server.schemas.design import Condition, StudyDesign
 from server.schemas.instruments import score_nasa_tlx, score_trust
 from server.schemas.visit import CheckSpec, Item, QuestionnaireSpec
 from server.services.visit import expected_answer
@@ -28,6 +28,9 @@ from tests.server.live import LiveServer
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import export, session_body, wait_for_status
 from tests.server.test_export_types import check_frictionless
+
+ONE_CONDITION = {"a": Condition()}
+"""A design's one condition (human advice, defaults); these sessions are made by hand."""
 
 TLX = {"mental": 70, "physical": 10, "temporal": 55, "performance": 30, "effort": 65,
        "frustration": 40}  # fmt: skip
@@ -104,7 +107,7 @@ def test_a_bad_spec_says_what_is_wrong(spec: dict[str, Any], kind: Any, message:
 
 
 def test_the_default_design_asks_the_specs_check_and_questionnaire() -> None:
-    design = StudyDesign()
+    design = StudyDesign(conditions=ONE_CONDITION)
     assert design.check == CheckSpec.default() and len(design.check.questions) == 3
     sections = {s.instrument: s.items for s in QuestionnaireSpec.default().sections()}
     assert [len(sections[k]) for k in ("nasa_tlx", "trust", "demographics")] == [6, 12, 4]
@@ -148,7 +151,7 @@ def online(
 ) -> Iterator[dict[str, Any]]:
     """An online study with the default design (a study of its own per test)."""
     study = api.post("/api/studies", json={"name": request.node.name[:100]}).json()
-    set_design(server, study["id"], StudyDesign().model_dump(mode="json"))
+    set_design(server, study["id"], StudyDesign(conditions=ONE_CONDITION).model_dump(mode="json"))
     yield study
 
 
@@ -169,7 +172,11 @@ def test_the_check_is_graded_under_the_sessions_rule_and_gates_the_start(
     server: LiveServer, api: httpx.Client, online: dict[str, Any]
 ) -> None:
     """And a design without a questionnaire completes the visit with the last advice."""
-    set_design(server, online["id"], StudyDesign(questionnaire=None).model_dump(mode="json"))
+    set_design(
+        server,
+        online["id"],
+        StudyDesign(conditions=ONE_CONDITION, questionnaire=None).model_dump(mode="json"),
+    )
     created, participant = new_participant(server, api, online["id"])
     client = participant.client
     before = client.post("/api/participant/check", json={"answers": RIGHT})
@@ -239,13 +246,13 @@ def test_every_try_wrong_excludes_the_participant_and_stops_the_session(
     assert last["excluded"] and not last["passed"] and last["wrong"] == ["drop_at_centre"]
     row = stored(server, created["id"])
     assert row.outcome == "excluded" and row.outcome_at is not None
-    assert row.status == "stopped"
+    assert row.status == "excluded"
     more = client.post("/api/participant/check", json={"answers": RIGHT})
     assert more.status_code == 409 and "every try" in more.text
     assert client.post("/api/participant/start").status_code == 409
     page = httpx.get(f"{server.url}/p/{created['participant_token']}", follow_redirects=False)
     assert page.headers["location"].endswith(f"/p/{created['participant_token']}/end")
-    assert stored(server, created["id"]).status == "stopped", "the link started nothing"
+    assert stored(server, created["id"]).status == "excluded", "the link started nothing"
     participant.client.close()
 
     assert api.delete(f"/api/sessions/{created['id']}").status_code == 204
@@ -315,7 +322,9 @@ def full_answers() -> dict[str, dict[str, Any]]:
 def test_the_questionnaire_comes_once_after_the_advice_and_completes_the_visit(
     server: LiveServer, api: httpx.Client, online: dict[str, Any], tmp_path: Path
 ) -> None:
-    design = StudyDesign(questionnaire=QuestionnaireSpec.model_validate({"items": CUSTOM}))
+    design = StudyDesign(
+        conditions=ONE_CONDITION, questionnaire=QuestionnaireSpec.model_validate({"items": CUSTOM})
+    )
     set_design(server, online["id"], design.model_dump(mode="json"))
     created, participant = new_participant(server, api, online["id"])
     client = participant.client

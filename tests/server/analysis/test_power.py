@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 from scipy import stats
 
+from learner.records import TRAINING
 from learner.run import RunSpec
 from server.analysis.power import (
     normal_power,
@@ -28,7 +29,6 @@ from server.db.models import Episode, Status
 from server.schemas.studies import StudyCreate
 from server.services.sessions import create_session
 from server.services.studies import create_study
-from server.worker.recorder import TRAINING
 
 
 def exact_power(d: float, n: int, alpha: float = 0.05) -> float:

@@ -48,7 +48,7 @@ OLD_COLUMNS = (
     "max_episode_steps",
 )
 UNADVISED = ("autonomous", "sb3-dqn")
-STRATEGY_DEFAULTS = {
+STRATEGY_DEFAULTS: dict[str, dict[str, float]] = {
     "early": {},
     "alternating": {"interval": 2},
     "importance": {"threshold": 0.1},
@@ -77,7 +77,7 @@ def run_document(row: dict[str, Any]) -> dict[str, Any]:
     else:
         config["advice_budget"] = 0
     strategy = (row["strategy"] or "early") if advised else "early"
-    options = {"interval": None, "threshold": None}
+    options: dict[str, Any] = {"interval": None, "threshold": None}
     if advised:
         options.update(STRATEGY_DEFAULTS.get(strategy, {}))
         options.update(row["strategy_options"] or {})
@@ -102,7 +102,7 @@ def run_document(row: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _sessions(columns: Sequence[str]) -> sa.Table:
+def _sessions(columns: Sequence[str]) -> sa.TableClause:
     json_columns = {"config", "sort_rule", "strategy_options", "scenario", "run"}
     return sa.table(
         "sessions",

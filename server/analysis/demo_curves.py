@@ -19,7 +19,7 @@ _MIDPOINT: dict[str, float] = {"autonomous": 0.45, "agent": 0.16, "human": 0.19,
 """When an agent is half-way through learning, as a fraction of the run."""
 
 
-def synthetic_episodes(
+def demo_episodes(
     agents: Mapping[str, int] | None = None, *, n_episodes: int = 300, seed: int = 0
 ) -> pd.DataFrame:
     """An episode table with made-up but plausible curves (see the module docstring)."""
