@@ -9,22 +9,23 @@ check and the questionnaire, on a desktop and on a phone (390x844)."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
+from typing import Any
 
 import pytest
 from playwright.sync_api import expect
-from sqlalchemy import select, update
+from sqlalchemy import select
 
-from server.db.models import CheckAttempt, QuestionnaireAnswer, Study, StudySession
-from server.schemas.design import Condition, StudyDesign
-from server.schemas.visit import Item, QuestionnaireSpec
-from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
-
-ONE_CONDITION = {"a": Condition()}
-"""A design's one condition (human advice, defaults); these sessions are made by hand."""
+from server.db.models import CheckAttempt, QuestionnaireAnswer, StudySession
+from server.schemas.visit import Item
+from tests.e2e.conftest import Live, save_screenshot
+from tests.e2e.test_online_study import CODES, RUN, Arrivals, assert_returned, exported, token
+from tests.server.test_export_types import check_frictionless
+from tests.server.test_online_study import table
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-BUDGET = 3
+BUDGET = 100
 PHONE = {"width": 390, "height": 844}
 RIGHT = {"blue_cube": "right", "red_disk": "left", "drop_at_centre": "keep"}
 """Under the default sort rule by colour: blue right, red left."""
@@ -42,18 +43,22 @@ CUSTOM = [
 """The researcher's own items, after the built-ins."""
 
 
-def online_session(live: Live) -> dict[str, object]:
-    session = live.human_session(
-        "online visit", advice_budget=BUDGET, motion="fast", episodes=1, max_episode_steps=20
-    )
-    with live.app.state.session_factory() as db:
-        study_id = db.get(StudySession, session["id"]).study_id
-        design = StudyDesign(
-            conditions=ONE_CONDITION, questionnaire=QuestionnaireSpec(items=CUSTOM)
-        ).model_dump(mode="json")
-        db.execute(update(Study).where(Study.id == study_id).values(design=design))
-        db.commit()
-    return session
+def online_study(live: Live) -> dict[str, Any]:
+    """A study with one condition of 100 advice, the default check, the built-in
+    questionnaire with the researcher's own items, and Prolific's codes."""
+    run = {
+        **RUN,
+        "config": {**RUN["config"], "pretraining_steps": BUDGET + 20, "advice_budget": BUDGET},
+    }
+    design = {
+        "conditions": {"early": {"run": run, "target": 2}},
+        "questionnaire": {"items": [item.model_dump(exclude_unset=True) for item in CUSTOM]},
+        "panel": {"kind": "prolific", "codes": CODES, "return_delay_s": 1},
+    }
+    with live.api() as api:
+        made = api.post("/api/studies", json={"name": "online visit", "design": design})
+        assert made.status_code == 201, made.text
+        return made.json()
 
 
 def phone_screenshot(browser, url: str, name: str) -> None:
@@ -67,19 +72,59 @@ def phone_screenshot(browser, url: str, name: str) -> None:
     context.close()
 
 
-def test_an_online_participant_passes_the_check_advises_and_answers_the_questionnaire(
-    live: Live, browser
-) -> None:
-    session = online_session(live)
-    token = session["participant_token"]
-    context = browser.new_context(viewport=VIEWPORT)
-    page = context.new_page()
-    page.goto(session["participant_url"])
+def through_the_induction(page: Any) -> None:
     page.click("#agree")
     for step in (1, 2, 3):
         expect(page).to_have_url(re.compile(rf"/induction/{step}$"))
         expect(page.locator("#start")).to_have_count(0)
         page.click("#next")
+
+
+def test_an_online_participant_passes_the_check_advises_and_answers_the_questionnaire(
+    live: Live, browser: Any, tmp_path: Path
+) -> None:
+    """Through the study's link with Prolific's parameters: one participant fails the
+    check on both tries (excluded: its code, back to Prolific); the next passes on the
+    second try, gives all 100 advice, answers the questionnaire and is sent back to
+    Prolific with the completed code; the export holds it all and validates."""
+    study = online_study(live)
+    arrivals = Arrivals(browser)
+    try:
+        failing = arrivals.arrive(study, "PID-X")
+        through_the_induction(failing)
+        expect(failing).to_have_url(re.compile(r"/check$"))
+        for _ in range(2):
+            for question, value in {**RIGHT, "red_disk": "right"}.items():
+                failing.check(f"input[name='{question}'][value='{value}']")
+            failing.click("#submit")
+        assert_returned(failing, "excluded")
+
+        page = arrivals.arrive(study, "PID-C")
+        expect(page).to_have_url(re.compile(r"/consent$"))
+        participant = token(page)
+        complete_the_visit(live, browser, page, participant)
+        assert_returned(page, "completed")
+    finally:
+        arrivals.close()
+    with live.app.state.session_factory() as db:
+        session_id = db.scalar(
+            select(StudySession.id).where(StudySession.participant_token == participant)
+        )
+    check_the_records(live, session_id)
+    folder = exported(live, study, tmp_path)
+    check_frictionless(folder)
+    outcomes = {r["outcome"] for r in table(folder, "sessions")}
+    assert outcomes == {"excluded", "completed"}
+    assert len(table(folder, "assignments")) == len(table(folder, "panel_ids")) == 2
+    assert {r["result"] for r in table(folder, "check")} >= {"retry", "passed", "excluded"}
+    assert len(table(folder, "questionnaire")) == 6 + 12 + 4 + 3
+    scales = table(folder, "scales")
+    assert {r["scale"] for r in scales} >= {"nasa_tlx", "trust"}
+
+
+def complete_the_visit(live: Live, browser: Any, page: Any, token: str) -> None:
+    """Consent, induction, the check (wrong once), 100 advice, the questionnaire."""
+    through_the_induction(page)
 
     expect(page).to_have_url(re.compile(r"/check$"))
     expect(page.locator("h1")).to_have_text("A few questions about the task")
@@ -127,11 +172,12 @@ def test_an_online_participant_passes_the_check_advises_and_answers_the_question
     expect(page.locator("#questionnaire-error")).to_be_hidden()
     save_screenshot(page, "questionnaire", full_page=True)
     page.click("#submit")
-    expect(page).to_have_url(re.compile(rf"/p/{token}/end$"), timeout=30_000)
-    context.close()
+    expect(page).to_have_url(re.compile(rf"/p/{token}/end"), timeout=30_000)
 
+
+def check_the_records(live: Live, session_id: int) -> None:
     with live.app.state.session_factory() as db:
-        row = db.get(StudySession, session["id"])
+        row = db.get(StudySession, session_id)
         assert row.outcome == "completed" and row.outcome_at is not None
         tries = db.scalars(
             select(CheckAttempt).where(CheckAttempt.session_id == row.id).order_by("attempt")
