@@ -27,6 +27,7 @@ from server.limits import WindowLimit
 from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.live.playbacks import Playbacks
+from server.live.pool import Pools
 from server.logins import Logins
 from server.openapi import install as install_openapi
 from server.openapi import operation_id, path_methods
@@ -135,6 +136,14 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         settings.stale_after_s,
         settings.max_trainers,
     )
+    pools = Pools(
+        manager,
+        settings.pool_limit,
+        settings.pool_every_s,
+        settings.data_dir,
+        spec_class,
+        settings.worker_threads,
+    )
     viewer = viewer_from_settings(settings, hub, factory)
     playbacks, playback_viewer = episode_playback(settings)
 
@@ -144,7 +153,9 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         await manager.open()
         viewer.start()
         playbacks.open()
+        pools.open()
         yield
+        await pools.close()
         playbacks.close_all()
         playback_viewer.stop()
         viewer.stop()

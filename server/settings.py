@@ -106,6 +106,12 @@ class Settings(BaseSettings):
 
     join_per_place_per_minute: int = Field(default=6, ge=1)
     """Arrivals at one study's link per minute, per place of its capacity (429 beyond)."""
+    pool_limit: int = Field(default=8, ge=0, le=1000)
+    """Pretrained sessions waiting for arrivals, all online studies' pools together: each
+    is a worker process (about 110-130 MB proportional memory, its torch shared with the
+    others) that spent its random practice once; 0 turns the pools off."""
+    pool_every_s: float = Field(default=2.0, gt=0, le=3600)
+    """How often the pools are topped up."""
 
     dashboard_login_s: float = Field(default=8 * 3600.0, gt=0)
     """How long a dashboard login lasts; logging out ends it at once."""

@@ -113,6 +113,9 @@ class Study(Base):
     join_key: Mapped[str | None] = mapped_column(String(64), unique=True)
     """The unguessable key of the study's public link `/join/{join_key}`."""
     assignment_seed: Mapped[int | None] = mapped_column(Integer)
+    sessions_made: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    """Sessions the study's link and pools have made: the next one's number, which its run's
+    seed adds to the condition's (never reused, deletions included)."""
     """Seed of the block randomization over the design's conditions."""
 
     sessions: Mapped[list[StudySession]] = relationship(
@@ -215,6 +218,9 @@ class StudySession(Base):
     condition: Mapped[str | None] = mapped_column(String(100))
     """The design condition this session was assigned to (None outside an online study)."""
     preview: Mapped[bool] = mapped_column(default=False, server_default=false())
+    pooled: Mapped[bool] = mapped_column(default=False, server_default=false())
+    """Made ahead of arrivals, its random pretraining done, waiting in its condition's pool
+    (no participant yet: not counted, exported or reported until an arrival takes it)."""
     """A researcher's walk through the study link: takes no place, stays out of exports
     and reports."""
     outcome: Mapped[str | None] = mapped_column(String(20))

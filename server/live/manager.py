@@ -253,8 +253,14 @@ class SessionManager:
 
     # --- researcher commands -----------------------------------------------------------
     async def start(
-        self, session_id: int, resume: bool = False, override_numerics: bool = False
+        self,
+        session_id: int,
+        resume: bool = False,
+        override_numerics: bool = False,
+        pooled: bool = False,
     ) -> None:
+        """Start (or resume) the session's worker; `pooled`: it waits in its condition's
+        pool for an arrival, its idle limit off until `assign`."""
         token = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
         parent, child = self._context.Pipe(duplex=True)
         with self.factory() as db:
@@ -271,7 +277,9 @@ class SessionManager:
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
-            replace(self.options, nice=0, train_nice=self.options.nice) if human else self.options
+            replace(self.options, nice=0, train_nice=self.options.nice, pooled=pooled)
+            if human
+            else self.options
         )
         process = self._context.Process(
             target=worker_main,
@@ -300,6 +308,12 @@ class SessionManager:
             self.set_ready(session_id)
         self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
         self.notify(session_id)
+
+    def assign(self, session_id: int) -> None:
+        """A pooled session was given to an arrival: its idle limit runs from now."""
+        handle = self.handles.get(session_id)
+        if handle is not None:
+            handle.send(Command("assigned"))
 
     def set_ready(self, session_id: int) -> None:
         """The participant consented and finished the induction: advice may be asked."""

@@ -126,6 +126,7 @@ class SessionRow(BaseModel):
     condition: str | None = None
     outcome: str | None = None
     preview: bool = False
+    pooled: bool = False
 
 
 class StudyRow(BaseModel):

@@ -58,6 +58,8 @@ async def join(request: Request, key: str) -> Response:
     arrival = await run_in_threadpool(_arrive, request, study_id, params)
     if arrival.token is None:
         return end_page(request, None, design, Outcome.full, arrival.params)
+    if arrival.session_id is not None:
+        request.app.state.manager.assign(arrival.session_id)  # from a pool: its clock runs
     response = RedirectResponse(f"/p/{arrival.token}", status_code=303)
     response.set_cookie(
         COOKIE,

@@ -112,6 +112,11 @@ class StudyDesign(BaseModel):
     """The report's significance level for comparing the conditions."""
     idle_limit_s: Number = Field(default=600.0, gt=0, le=86_400)
     """Seconds without an answer before a visit ends as `timed_out` (final)."""
+    pool: int = Field(default=2, strict=True, ge=0, le=100)
+    """Sessions per condition kept made and pretrained ahead of arrivals (their seeds and
+    conditions fixed when made), so an arrival's first turn does not wait for the robot's
+    random practice; 0: each arrival's session practises when its link opens. The server
+    caps all pools together (`IDEEPRL_POOL_LIMIT`)."""
     panel: Panel = Field(default_factory=Panel)
     check: CheckSpec | None = Field(default_factory=CheckSpec.default)
     questionnaire: QuestionnaireSpec | None = Field(default_factory=QuestionnaireSpec.default)

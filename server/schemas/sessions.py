@@ -142,6 +142,11 @@ class SessionPublic(BaseModel):
     condition: str | None = Field(
         default=None, description="The online study's condition it was assigned to."
     )
+    pooled: bool = Field(
+        default=False,
+        description="Made ahead of arrivals, waiting pretrained in its condition's pool: "
+        "nobody's yet, not counted, out of exports until an arrival takes it.",
+    )
     preview: bool = Field(
         default=False, description="A researcher's preview: no place, out of exports."
     )

@@ -47,6 +47,8 @@ from server.services.sessions import create_session, session_for_token
 ARRIVALS = threading.Lock()
 """One arrival at a time in this process: positions and places are read, then taken."""
 EARLY = [s.value for s in ENDED_EARLY]
+POOL_LIVE = [Status.created.value, Status.running.value, Status.paused.value]
+"""A pooled session being made, practising, or ready."""
 SEEDS = 2**31
 """A run's seeds (0 to 2**31 - 1): a participant's seed wraps around within them."""
 
@@ -76,6 +78,9 @@ class Arrival:
     token: str | None
     full_reason: str = ""
     params: dict[str, str] = field(default_factory=dict)
+    session_id: int | None = None
+    """The session given to a new arrival (None for a returning one, a preview, a full
+    study)."""
 
 
 def study_for_key(db: Session, key: str) -> tuple[Study, StudyDesign]:
@@ -99,6 +104,7 @@ def counts(db: Session, study: Study, design: StudyDesign) -> dict[str, Conditio
             StudySession.study_id == study.id,
             StudySession.condition.is_not(None),
             StudySession.preview.is_(False),
+            StudySession.pooled.is_(False),
         )
     )
     for condition, outcome, status in rows:
@@ -125,6 +131,7 @@ def expire_unopened(db: Session, study: Study, design: StudyDesign) -> int:
             StudySession.study_id == study.id,
             StudySession.condition.is_not(None),
             StudySession.status == Status.created.value,
+            StudySession.pooled.is_(False),
             StudySession.outcome.is_(None),
             StudySession.created_at < cutoff,
         )
@@ -255,8 +262,10 @@ def arrive(
         condition, block, position = place.condition, place.block, place.position
     else:
         condition, block, position = _next_place(db, study, tally)
-    number = db.scalar(select(func.count()).where(Assignment.study_id == study.id)) or 0
-    session = _session(db, study, design, condition, number, spec_class, data_dir, threads)
+    session = _take_pooled(db, study, condition)
+    if session is None:
+        number = _next_number(study)
+        session = _session(db, study, design, condition, number, spec_class, data_dir, threads)
     db.add(
         Assignment(
             study_id=study.id,
@@ -279,7 +288,112 @@ def arrive(
             )
         )
     db.commit()
-    return Arrival(session.participant_token, params=kept)
+    return Arrival(session.participant_token, params=kept, session_id=session.id)
+
+
+def _next_number(study: Study) -> int:
+    """The number of the study's next session (its seed adds it), never given twice."""
+    number = study.sessions_made or 0
+    study.sessions_made = number + 1
+    return number
+
+
+def _take_pooled(db: Session, study: Study, condition: str) -> StudySession | None:
+    """The condition's oldest pooled session whose worker runs (practising or ready): the
+    arrival's now, its seed and condition as they were fixed when it was made."""
+    session = db.scalar(
+        select(StudySession)
+        .where(
+            StudySession.study_id == study.id,
+            StudySession.condition == condition,
+            StudySession.pooled.is_(True),
+            StudySession.status == Status.running.value,
+        )
+        .order_by(StudySession.id)
+        .limit(1)
+    )
+    if session is not None:
+        session.pooled = False
+    return session
+
+
+@dataclass
+class PoolGap:
+    """A condition of a study whose pool wants `missing` more sessions."""
+
+    study_id: int
+    condition: str
+    missing: int
+
+
+def pool_gaps(db: Session, limit: int) -> list[PoolGap]:
+    """What the online studies' pools want, within `limit` pooled sessions in all: each
+    condition still short of its target keeps up to the design's `pool` sessions (never
+    more than the places it still has), the studies' conditions served in turn."""
+    pooled = dict(
+        db.execute(
+            select(StudySession.study_id, func.count())
+            .where(StudySession.pooled.is_(True), StudySession.status.in_(POOL_LIVE))
+            .group_by(StudySession.study_id)
+        ).all()
+    )
+    room = limit - sum(pooled.values())
+    gaps: list[PoolGap] = []
+    studies = db.scalars(select(Study).where(Study.join_key.is_not(None)).order_by(Study.id))
+    for study in studies:
+        if study.design is None:
+            continue
+        design = StudyDesign.model_validate(study.design)
+        tally = counts(db, study, design)
+        have = dict(
+            db.execute(
+                select(StudySession.condition, func.count())
+                .where(
+                    StudySession.study_id == study.id,
+                    StudySession.pooled.is_(True),
+                    StudySession.status.in_(POOL_LIVE),
+                )
+                .group_by(StudySession.condition)
+            ).all()
+        )
+        for name, count in tally.items():
+            places = count.target - count.completed - count.in_progress
+            missing = min(design.pool, places) - have.get(name, 0)
+            if missing > 0 and room > 0:
+                gaps.append(PoolGap(study.id, name, min(missing, room)))
+                room -= gaps[-1].missing
+    return gaps
+
+
+def make_pooled(
+    db: Session,
+    study_id: int,
+    condition: str,
+    spec_class: type[RunSpec] = RunSpec,
+    data_dir: Path | None = None,
+    threads: int | None = None,
+) -> int:
+    """A session of `condition` made ahead of its arrival, into the pool; its id."""
+    study = db.get(Study, study_id)
+    assert study is not None and study.design is not None, "pools belong to online studies"
+    design = StudyDesign.model_validate(study.design)
+    number = _next_number(study)
+    session = _session(db, study, design, condition, number, spec_class, data_dir, threads)
+    session.pooled = True
+    db.commit()
+    return session.id
+
+
+def stale_pooled(db: Session) -> list[int]:
+    """Pooled sessions whose worker no longer runs (a server restart, a failure): nobody's
+    data, deleted and made again."""
+    return list(
+        db.scalars(
+            select(StudySession.id).where(
+                StudySession.pooled.is_(True), StudySession.status.not_in(POOL_LIVE)
+            )
+        )
+    )
 
 
 def _session(

@@ -243,7 +243,9 @@ def export_study(
     study = get_study(db, study_id)
     out.mkdir(parents=True, exist_ok=True)
     query = select(StudySession).where(
-        StudySession.study_id == study.id, StudySession.preview.is_(False)
+        StudySession.study_id == study.id,
+        StudySession.preview.is_(False),
+        StudySession.pooled.is_(False),
     )
     sessions = list(db.scalars(query.order_by(StudySession.id)))
     columns = table_columns(spec_class)

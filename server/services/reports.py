@@ -87,7 +87,7 @@ def select_sessions(
     db: Session, study_id: int, request: ReportRequest
 ) -> tuple[list[StudySession], list[str]]:
     """The sessions the report covers, and sentences on what was left out and why."""
-    everything = [s for s in list_sessions(db, study_id) if not s.preview]
+    everything = [s for s in list_sessions(db, study_id) if not s.preview and not s.pooled]
     notes: list[str] = []
     if request.sessions:
         by_id = {s.id: s for s in everything}

@@ -47,12 +47,15 @@ class WorkerLink:
         on_pause: Callable[[bool, bool], None],
         on_watch: Callable[[], None],
         on_idle: Callable[[], None] = lambda: None,
+        assigned: bool = True,
     ) -> None:
         """`on_pause(paused, at_step_boundary)` records the new status (and checkpoints);
         `on_watch()` sends the whole scene to a viewer that just arrived; `on_idle()` runs
         about once a second while the worker waits (paused, or for advice), so it can
         mark itself alive: a worker that stops beating is killed as hung."""
         self._conn = conn
+        self.assigned = assigned
+        """Someone's session: False while it waits in a pool, where no idle limit runs."""
         self._on_watch = on_watch
         self._parent = os.getppid()
         self._on_pause = on_pause
@@ -88,7 +91,7 @@ class WorkerLink:
         while not self.participant_ready or self.paused:
             started = time.monotonic()
             ready = self._ready(1.0)
-            if not self.paused:
+            if not self.paused and self.assigned:
                 waited += time.monotonic() - started
             self._on_idle()
             if ready:
@@ -147,6 +150,8 @@ class WorkerLink:
         assert isinstance(message, Command), message
         if message.name == "ready":
             self.participant_ready = True
+        elif message.name == "assigned":
+            self.assigned = True
         elif message.name == "train":
             self.may_train = True
         elif message.name == "watch":

@@ -120,7 +120,9 @@ class AdviceAnswer:
 
 @dataclass(frozen=True)
 class Command:
-    name: Literal["pause", "resume", "stop", "watch", "unwatch", "shutdown", "ready", "train"]
+    name: Literal[
+        "pause", "resume", "stop", "watch", "unwatch", "shutdown", "ready", "train", "assigned"
+    ]
     args: dict[str, Any] = field(default_factory=dict)
 
 

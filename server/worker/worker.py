@@ -68,6 +68,9 @@ class WorkerOptions:
     """Added to the process's niceness (the server lowers machine sessions' priority)."""
     keep_replay_memory: bool = False
     """Keep the replay memory in final checkpoints (a session's own choice wins)."""
+    pooled: bool = False
+    """The session waits in its condition's pool: it practises, then waits for an arrival
+    without the idle limit running until one takes it (`Command("assigned")`)."""
     train_nice: int = 0
     """Added to a human session's niceness once its advice is over and it trains alone, so
     the participants still advising keep the CPU."""
@@ -138,7 +141,11 @@ class _Run:
             db.commit()
         s = self.session
         self.link = (
-            WorkerLink(conn, self._on_pause, self._on_watch, self._on_idle) if conn else None
+            WorkerLink(
+                conn, self._on_pause, self._on_watch, self._on_idle, assigned=not options.pooled
+            )
+            if conn
+            else None
         )
         self.reporter = _Reporter(self)
         self.recorder = Recorder(

@@ -63,6 +63,7 @@ def design(target: int, capacity: int, idle_limit_s: float) -> dict[str, Any]:
             "alternating": {"run": {**RUN, "strategy": "alternating"}, "target": target},
         },
         "capacity": capacity,
+        "pool": 0,
         "idle_limit_s": idle_limit_s,
         "panel": {"kind": "prolific", "codes": CODES, "return_delay_s": 1},
     }

@@ -45,6 +45,7 @@ def design(target: int = 3, capacity: int = 10, **changes: Any) -> dict[str, Any
             },
         },
         "capacity": capacity,
+        "pool": 0,
         "panel": {"kind": "prolific", "codes": {"completed": "DONE1", "full": "FULL1"}},
         **changes,
     }

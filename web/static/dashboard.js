@@ -28,7 +28,10 @@
     const p = s.progress;
     const parts = [];
     if (s.method !== "autonomous" && p.advice_budget) parts.push(`advice ${p.advice_given}/${p.advice_budget}`);
-    if (s.condition) parts.push(`${s.preview ? "preview of " : ""}${s.condition}`);
+    if (s.condition) {
+      const kind = s.preview ? "preview of " : s.pooled ? "ready in the pool of " : "";
+      parts.push(`${kind}${s.condition}`);
+    }
     if (s.outcome === "completed") parts.push("visit completed");
     if (s.method === "human" && !p.consented && !s.outcome) parts.push(s.declined ? "declined" : "not consented yet");
     if (p.advice_wanted) parts.push("waiting for the participant");

@@ -7,7 +7,9 @@ A study may carry a design (`studies.design`: conditions, targets, capacity, alp
 setting, check, questionnaire, outcome codes; NULL for a lab study as before), the key of
 its public link (`studies.join_key`, unguessable, unique) and the seed of its block
 randomization (`studies.assignment_seed`). A session made through the link records its
-condition (`sessions.condition`), whether it is a researcher's preview (`sessions.preview`,
+condition (`sessions.condition`), whether it waits pretrained in its condition's pool for
+an arrival (`sessions.pooled`; the study counts the sessions it made, `studies.sessions_made`,
+for their seeds), whether it is a researcher's preview (`sessions.preview`,
 kept out of exports and reports) and how the visit ended (`sessions.outcome`: completed,
 declined, excluded, timed_out; with `sessions.outcome_at`). Each arrival's assignment
 (`assignments`: condition, block, position, seed, time, the early-ended place it refills)
@@ -31,11 +33,17 @@ def upgrade() -> None:
         batch.add_column(sa.Column("design", sa.JSON(), nullable=True))
         batch.add_column(sa.Column("join_key", sa.String(64), nullable=True))
         batch.add_column(sa.Column("assignment_seed", sa.Integer(), nullable=True))
+        batch.add_column(
+            sa.Column("sessions_made", sa.Integer(), nullable=False, server_default="0")
+        )
         batch.create_unique_constraint("uq_studies_join_key", ["join_key"])
     with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
         batch.add_column(sa.Column("condition", sa.String(100), nullable=True))
         batch.add_column(
             sa.Column("preview", sa.Boolean(), nullable=False, server_default=sa.false())
+        )
+        batch.add_column(
+            sa.Column("pooled", sa.Boolean(), nullable=False, server_default=sa.false())
         )
         batch.add_column(sa.Column("outcome", sa.String(20), nullable=True))
         batch.add_column(sa.Column("outcome_at", sa.DateTime(timezone=True), nullable=True))
@@ -81,10 +89,12 @@ def downgrade() -> None:
     with op.batch_alter_table("sessions", table_kwargs={"sqlite_autoincrement": True}) as batch:
         batch.drop_column("outcome_at")
         batch.drop_column("outcome")
+        batch.drop_column("pooled")
         batch.drop_column("preview")
         batch.drop_column("condition")
     with op.batch_alter_table("studies", table_kwargs={"sqlite_autoincrement": True}) as batch:
         batch.drop_constraint("uq_studies_join_key", type_="unique")
+        batch.drop_column("sessions_made")
         batch.drop_column("assignment_seed")
         batch.drop_column("join_key")
         batch.drop_column("design")

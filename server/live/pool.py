@@ -1,0 +1,103 @@
+"""Pools of pretrained sessions, so an arrival's first turn never waits for the robot's
+random practice.
+
+Each condition of an online study still short of its target keeps up to its design's `pool`
+sessions made ahead of arrivals (`server.services.assignment.pool_gaps`), all pools together
+within the server's `pool_limit`. A pooled session is made with its condition's run and the
+study's next number added to its seed (both fixed and recorded then), and started at once:
+it practises, then waits at its first turn with its idle limit off. The arrival that the
+randomization gives its condition takes the oldest ready one (`assignment.arrive`); the
+idle limit runs from then (`SessionManager.assign`), and the pool is topped up again.
+A pooled session whose worker stopped (a restart, a failure) holds nobody's data: it is
+deleted and made again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from pathlib import Path
+
+from starlette.concurrency import run_in_threadpool
+
+from learner.run import RunSpec
+from server.live.manager import SessionManager
+from server.services import assignment, storage
+from server.services.errors import Conflict, ServiceError
+
+log = logging.getLogger(__name__)
+
+
+class Pools:
+    def __init__(
+        self,
+        manager: SessionManager,
+        limit: int,
+        every_s: float,
+        data_dir: Path,
+        spec_class: type[RunSpec] = RunSpec,
+        threads: int | None = None,
+    ) -> None:
+        self.manager = manager
+        self.limit = limit
+        self.every_s = every_s
+        self.data_dir = data_dir
+        self.spec_class = spec_class
+        self.threads = threads
+        self._task: asyncio.Task[None] | None = None
+
+    def open(self) -> None:
+        if self.limit > 0:
+            self._task = asyncio.create_task(self._forever())
+
+    async def close(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+
+    async def _forever(self) -> None:
+        while True:
+            try:
+                await self.top_up()
+            except Exception:
+                log.exception("topping up the pools failed")
+            await asyncio.sleep(self.every_s)
+
+    async def top_up(self) -> list[int]:
+        """Delete pooled sessions that stopped, make and start what the pools lack; the ids
+        of the sessions started."""
+        await run_in_threadpool(self._clear_stale)
+        made = await run_in_threadpool(self._make)
+        for session_id in made:
+            with contextlib.suppress(Conflict):
+                await self.manager.start(session_id, pooled=True)
+        return made
+
+    def _clear_stale(self) -> None:
+        with self.manager.factory() as db:
+            for session_id in assignment.stale_pooled(db):
+                storage.delete_session(db, self.data_dir, session_id, live_here=False)
+
+    def _make(self) -> list[int]:
+        made: list[int] = []
+        with assignment.ARRIVALS, self.manager.factory() as db:
+            for gap in assignment.pool_gaps(db, self.limit):
+                for _ in range(gap.missing):
+                    try:
+                        made.append(
+                            assignment.make_pooled(
+                                db,
+                                gap.study_id,
+                                gap.condition,
+                                self.spec_class,
+                                self.data_dir,
+                                self.threads,
+                            )
+                        )
+                    except ServiceError as error:  # a condition's run this machine refuses
+                        log.warning("pool of study %s: %s", gap.study_id, error)
+                        db.rollback()
+                        break
+        return made
