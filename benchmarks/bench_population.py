@@ -284,10 +284,11 @@ def bench_kernel_cache(size: int, repeats: int, block: int, frames: list[np.ndar
                 PhaseConvForward.weights = weights  # type: ignore[method-assign]
                 work()  # warm-up
                 times[f"{part}, {name}"] = []
-        for _ in range(repeats):
+        for round_ in range(repeats):
             times["reference"].append(_time_block(reference.update, block))
             for part, work in parts.items():
-                for name, weights in variants.items():
+                order = list(variants.items())  # each first in every other round
+                for name, weights in order[:: 1 if round_ % 2 else -1]:
                     PhaseConvForward.weights = weights  # type: ignore[method-assign]
                     times[f"{part}, {name}"].append(_time_block(work, block))
     finally:
