@@ -22,7 +22,8 @@
    rebuilt on every forward pass (as before the cache), alternating block by block in one
    process: the update alone, action selection alone, and a whole population step in
    training, with the plain float32 reference update (`bench_learner.ReferenceDQN`) timed
-   in the same rounds; ratios per round, medians reported.
+   in the same rounds; ratios per round, medians reported. Beside it, action selection
+   with the configs' check (`learner.config.shared_config`) cached against rebuilt.
 
 Other processes share the CPUs: compare ratios, not times. The CPU kind and the load
 average are printed with the numbers. Populations end to end, through `ideeprl batch` with
@@ -310,6 +311,35 @@ def bench_kernel_cache(size: int, repeats: int, block: int, frames: list[np.ndar
     return {"seconds": {k: statistics.median(v) for k, v in times.items()}, "ratios": ratios}
 
 
+def bench_config_check(size: int, repeats: int, frames: list[np.ndarray]) -> dict:
+    """Milliseconds of action selection for `size` agents with `shared_config` cached
+    ("after") against rebuilt on every call ("before"), in alternating blocks of 20 calls;
+    the median ratio before/after per round pair."""
+    import learner.stacked
+    import sim
+    from learner.config import DQNConfig
+    from learner.population import Member, Population
+
+    cached = learner.stacked.shared_config
+    config = DQNConfig(torch_threads=torch.get_num_threads())
+    population = Population(config, [Member(sim.SortingEnv(motion="fast"), s) for s in range(size)])
+    trainers, images = population.trainers, frames[:size]
+    variants = {"before": cached.__wrapped__, "after": cached}
+    times: dict[str, list[float]] = {name: [] for name in variants}
+    try:
+        for round_ in range(2 * repeats):
+            for name, check in list(variants.items())[:: 1 if round_ % 2 else -1]:
+                learner.stacked.shared_config = check  # type: ignore[attr-defined]
+                population._q_values(trainers, images)
+                times[name].append(_time_block(lambda: population._q_values(trainers, images), 20))
+    finally:
+        learner.stacked.shared_config = cached  # type: ignore[attr-defined]
+        for trainer in trainers:
+            trainer.env.close()
+    ratio = statistics.median(a / b for a, b in zip(times["before"], times["after"], strict=True))
+    return {"ms": {k: 1000 * statistics.median(v) for k, v in times.items()}, "ratio": ratio}
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_population")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 2, 4, 8, 16])
@@ -336,6 +366,13 @@ def main(argv: Sequence[str] | None = None) -> None:
             seconds = ", ".join(f"{k} {1000 * v:.2f}" for k, v in r["seconds"].items())
             ratios = ", ".join(f"{k} {v:.3f}x" for k, v in r["ratios"].items())
             print(f"  N={size}: ms: {seconds}\n        ratios: {ratios}; {load()}", flush=True)
+        for size in args.cache_sizes:
+            r = bench_config_check(size, args.repeats, real_frames(size))
+            print(
+                f"  action selection N={size}, shared_config rebuilt {r['ms']['before']:.2f} ms, "
+                f"cached {r['ms']['after']:.2f} ms: {r['ratio']:.2f}x; {load()}",
+                flush=True,
+            )
     if args.only_cache:
         return
 
