@@ -18,6 +18,12 @@
 3. A population step split into its parts: the update, action selection (one batched
    forward pass), simulation (the environments' steps less their rendering), rendering
    (the 64x64 camera image), and the rest (replay memory, records, bookkeeping).
+4. The space-to-depth kernels cached between optimizer steps (`PhaseConvForward`) against
+   rebuilt on every forward pass (as before the cache), alternating block by block in one
+   process: the update alone, action selection alone, and a whole population step in
+   training, with the plain float32 reference update (`bench_learner.ReferenceDQN`) timed
+   in the same rounds; ratios per round, medians reported. Beside it, action selection
+   with the configs' check (`learner.config.shared_config`) cached against rebuilt.
 
 Other processes share the CPUs: compare ratios, not times. The CPU kind and the load
 average are printed with the numbers. Populations end to end, through `ideeprl batch` with
@@ -31,6 +37,7 @@ import os
 import platform
 import statistics
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -38,7 +45,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks.bench_learner import BATCH, real_frames
+from benchmarks.bench_learner import BATCH, ReferenceDQN, real_frames
 
 
 def cpu_kind() -> str:
@@ -202,7 +209,7 @@ def profile_step(size: int, steps: int, workers: int = 1) -> dict[str, float]:
     )
     members = [Member(sim.SortingEnv(motion="fast"), seed) for seed in range(size)]
     population = Population(config, members, workers=workers)
-    while any(t.stage == "pretraining" for t in population.trainers):
+    while any(t.stage == "pretrain" for t in population.trainers):
         population.step()
     population.step()  # warm-up
     totals = dict.fromkeys(("update", "action selection", "simulation", "rendering"), 0.0)
@@ -228,6 +235,111 @@ def profile_step(size: int, steps: int, workers: int = 1) -> dict[str, float]:
     }
 
 
+def _rebuilt_weights(fast: Any) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    """`PhaseConvForward.weights` as before the cache: the kernels rebuilt from the weights
+    on every call, differentiable through autograd's own graph of their construction."""
+    convs = fast.network.convs
+    return [(fast._build(conv.weight, i), conv.bias) for i, conv in enumerate(convs)]
+
+
+def _training_population(size: int) -> Any:
+    """A population of `size` paper-preset agents (64x64, batch 128) past pretraining."""
+    import sim
+    from learner.config import DQNConfig
+    from learner.population import Member, Population
+
+    config = DQNConfig(
+        torch_threads=torch.get_num_threads(), memory_size=2000, pretraining_steps=BATCH
+    )
+    members = [Member(sim.SortingEnv(motion="fast"), seed) for seed in range(size)]
+    population = Population(config, members)
+    while any(t.stage == "pretrain" for t in population.trainers):
+        population.step()
+    return population
+
+
+def bench_kernel_cache(size: int, repeats: int, block: int, frames: list[np.ndarray]) -> dict:
+    """Seconds of the update alone, action selection alone and a population step of `size`
+    agents, kernels cached ("cached") against rebuilt on every pass ("rebuilt"), and of
+    the float32 reference update, in alternating blocks; ratios rebuilt/cached and
+    reference/update per round."""
+    from learner.phase_conv import PhaseConvForward
+
+    population = _training_population(size)
+    trainers = population.trainers
+    images = frames[:size]
+    reference = ReferenceDQN()
+    for t in range(len(frames) - 1):
+        reference.remember(frames[t], t % 4, 0.0, frames[t + 1], t % 40 == 39)
+    parts: dict[str, Callable[[], Any]] = {
+        "update": lambda: population._update(trainers),
+        "action selection": lambda: population._q_values(trainers, images),
+        "population step": population.step,
+    }
+    cached = PhaseConvForward.weights
+    variants = {"rebuilt": _rebuilt_weights, "cached": cached}
+    times: dict[str, list[float]] = {"reference": []}
+    try:
+        for part, work in parts.items():
+            for name, weights in variants.items():
+                PhaseConvForward.weights = weights  # type: ignore[method-assign]
+                work()  # warm-up
+                times[f"{part}, {name}"] = []
+        for round_ in range(repeats):
+            times["reference"].append(_time_block(reference.update, block))
+            for part, work in parts.items():
+                order = list(variants.items())  # each first in every other round
+                for name, weights in order[:: 1 if round_ % 2 else -1]:
+                    PhaseConvForward.weights = weights  # type: ignore[method-assign]
+                    times[f"{part}, {name}"].append(_time_block(work, block))
+    finally:
+        PhaseConvForward.weights = cached  # type: ignore[method-assign]
+        population.close()
+        for trainer in trainers:
+            trainer.env.close()
+
+    def ratio(numerator: str, denominator: str) -> float:
+        pairs = zip(times[numerator], times[denominator], strict=True)
+        return statistics.median(a / b for a, b in pairs)
+
+    ratios = {
+        f"{part}: rebuilt / cached": ratio(f"{part}, rebuilt", f"{part}, cached") for part in parts
+    }
+    for name in variants:
+        per_agent = size * ratio("reference", f"update, {name}")
+        ratios[f"reference / agent-update, {name}"] = per_agent
+    return {"seconds": {k: statistics.median(v) for k, v in times.items()}, "ratios": ratios}
+
+
+def bench_config_check(size: int, repeats: int, frames: list[np.ndarray]) -> dict:
+    """Milliseconds of action selection for `size` agents with `shared_config` cached
+    ("after") against rebuilt on every call ("before"), in alternating blocks of 20 calls;
+    the median ratio before/after per round pair."""
+    import learner.stacked
+    import sim
+    from learner.config import DQNConfig
+    from learner.population import Member, Population
+
+    cached = learner.stacked.shared_config
+    config = DQNConfig(torch_threads=torch.get_num_threads())
+    population = Population(config, [Member(sim.SortingEnv(motion="fast"), s) for s in range(size)])
+    trainers, images = population.trainers, frames[:size]
+    variants = {"before": cached.__wrapped__, "after": cached}
+    times: dict[str, list[float]] = {name: [] for name in variants}
+    try:
+        for round_ in range(2 * repeats):
+            for name, check in list(variants.items())[:: 1 if round_ % 2 else -1]:
+                learner.stacked.shared_config = check  # type: ignore[attr-defined]
+                population._q_values(trainers, images)
+                times[name].append(_time_block(lambda: population._q_values(trainers, images), 20))
+    finally:
+        learner.stacked.shared_config = cached  # type: ignore[attr-defined]
+        for trainer in trainers:
+            trainer.env.close()
+    ratio = statistics.median(a / b for a, b in zip(times["before"], times["after"], strict=True))
+    return {"ms": {k: 1000 * statistics.median(v) for k, v in times.items()}, "ratio": ratio}
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_population")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 2, 4, 8, 16])
@@ -236,9 +348,33 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--block", type=int, default=2, help="updates per timed block")
     parser.add_argument("--profile-sizes", type=int, nargs="+", default=[1, 8])
     parser.add_argument("--profile-steps", type=int, default=20)
+    parser.add_argument("--cache-sizes", type=int, nargs="*", default=[1, 4, 8])
+    parser.add_argument("--only-cache", action="store_true", help="only part 4")
     args = parser.parse_args(argv)
+    warnings.filterwarnings("ignore", message="Using padding='same' with even kernel")
     torch.set_num_threads(args.threads)
     print(f"{cpu_kind()}; torch {torch.__version__}, {args.threads} thread(s); {load()}")
+
+    if args.cache_sizes:
+        print(
+            f"\nkernels cached against rebuilt on every pass, paper preset, batch {BATCH} "
+            f"(median of {args.repeats} rounds of {args.block}-call blocks; the reference "
+            "update times the agent-update of N=1)"
+        )
+        for size in args.cache_sizes:
+            r = bench_kernel_cache(size, args.repeats, args.block, real_frames(300))
+            seconds = ", ".join(f"{k} {1000 * v:.2f}" for k, v in r["seconds"].items())
+            ratios = ", ".join(f"{k} {v:.3f}x" for k, v in r["ratios"].items())
+            print(f"  N={size}: ms: {seconds}\n        ratios: {ratios}; {load()}", flush=True)
+        for size in args.cache_sizes:
+            r = bench_config_check(size, args.repeats, real_frames(size))
+            print(
+                f"  action selection N={size}, shared_config rebuilt {r['ms']['before']:.2f} ms, "
+                f"cached {r['ms']['after']:.2f} ms: {r['ratio']:.2f}x; {load()}",
+                flush=True,
+            )
+    if args.only_cache:
+        return
 
     cores = [args.threads] + (
         [2 * args.threads] if (os.cpu_count() or 1) >= 2 * args.threads else []

@@ -8,6 +8,7 @@ its valid values instead of failing somewhere deep in a training run.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -183,8 +184,11 @@ runs and how much advice it may get, never what its network computes (an unadvis
 budget is 0, an advised one's is not, and they still share a population)."""
 
 
+@functools.lru_cache(maxsize=256)
 def shared_config(config: DQNConfig) -> DQNConfig:
-    """What agents computed together must share: `config` without `PER_AGENT_FIELDS`."""
+    """What agents computed together must share: `config` without `PER_AGENT_FIELDS`.
+    Cached (configs are frozen): a population checks its agents' configs at every batched
+    forward pass, and building a validated config costs about a millisecond."""
     return config.replace(advice_budget=0, episodes=1)
 
 

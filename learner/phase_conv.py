@@ -155,9 +155,46 @@ def _add_bias(m: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
     return m
 
 
+class _CachedKernel(torch.autograd.Function):
+    """A space-to-depth kernel built earlier (`PhaseConvForward`'s cache) made differentiable
+    in its weight: the backward is, op for op, the one autograd derives for the kernel's
+    construction (cast back, the 1/255 scale, the scatter of `flat[index]`, the slice of
+    `cat`), so the weight's gradient is the same to the bit as if the kernel were rebuilt."""
+
+    @staticmethod
+    def forward(
+        ctx,
+        weight: torch.Tensor,
+        kernel: torch.Tensor,
+        index: torch.Tensor,
+        scale: float | None,
+    ) -> torch.Tensor:
+        ctx.save_for_backward(index)
+        ctx.weight_shape, ctx.weight_dtype, ctx.scale = weight.shape, weight.dtype, scale
+        return kernel.detach()
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor | None, None, None, None]:
+        (index,) = ctx.saved_tensors
+        grad = grad.to(ctx.weight_dtype)
+        if ctx.scale is not None:
+            grad = grad * ctx.scale
+        numel = ctx.weight_shape.numel()
+        flat = grad.new_zeros(numel + 1).index_put_((index,), grad, accumulate=True)
+        return flat[:numel].view(ctx.weight_shape), None, None, None
+
+
 class PhaseConvForward:
     """The fast forward of one `QNetwork`: `weights()` once per update, then `__call__`
-    on packed uint8 frames as many times as needed with those weights."""
+    on packed uint8 frames as many times as needed with those weights.
+
+    The space-to-depth kernels depend only on the convolutions' weights, which change only
+    at an optimizer step, a `load_state_dict` or a target-network sync; each of those writes
+    the parameters in place, which bumps their version counters. So the kernels are built
+    once per version of the weights and reused by every forward pass until then: action
+    selection, the target network's values, and the update's own forward (through
+    `_CachedKernel`, whose gradient is the rebuilt kernel's to the bit).
+    """
 
     def __init__(self, network: QNetwork, dtype: torch.dtype) -> None:
         self.network = network
@@ -169,16 +206,48 @@ class PhaseConvForward:
             layout = phase_layout(out_channels, in_channels, kernel)
             index = layout.kernel_index.to(device)
             self.layouts.append(PhaseLayout(index, layout.pad_before, layout.s2d_kernel))
+        self._kernels: list[torch.Tensor] = []
+        self._built_for: tuple[tuple[int, int], ...] | None = None
+        self.builds = 0
+        """Times the kernels were built: how a test sees that a stale cache is rebuilt."""
+
+    def _weights_version(self) -> tuple[tuple[int, int], ...]:
+        """Identifies the convolutions' weights' current values: their storage and version
+        counter (bumped by every in-place write, including under `no_grad`)."""
+        return tuple((conv.weight.data_ptr(), conv.weight._version) for conv in self.network.convs)
+
+    def kernels(self) -> list[torch.Tensor]:
+        """Space-to-depth kernels (compute dtype, channels-last), cut from autograd; built
+        only when the weights changed since the last call."""
+        version = self._weights_version()
+        if version != self._built_for:
+            # normal tensors even when built under inference mode (action selection): the
+            # update's forward saves them for its backward
+            with torch.inference_mode(False), torch.no_grad():
+                self._kernels = [
+                    self._build(conv.weight, i) for i, conv in enumerate(self.network.convs)
+                ]
+            self._built_for = version
+            self.builds += 1
+        return self._kernels
+
+    def _build(self, weight: torch.Tensor, layer: int) -> torch.Tensor:
+        flat = torch.cat((weight.reshape(-1), weight.new_zeros(1)))
+        kernel = flat[self.layouts[layer].kernel_index]
+        if layer == 0:
+            kernel = kernel * (1.0 / 255.0)
+        return kernel.to(self.dtype).contiguous(memory_format=torch.channels_last)
 
     def weights(self) -> list[tuple[torch.Tensor, torch.Tensor]]:
-        """Space-to-depth kernels (compute dtype) and float32 biases; differentiable."""
+        """Space-to-depth kernels (compute dtype) and float32 biases; differentiable in the
+        parameters where autograd records (the kernels themselves come from the cache)."""
+        kernels = self.kernels()
         result = []
-        for i, (conv, layout) in enumerate(zip(self.network.convs, self.layouts, strict=True)):
-            flat = torch.cat((conv.weight.reshape(-1), conv.weight.new_zeros(1)))
-            kernel = flat[layout.kernel_index]
-            if i == 0:
-                kernel = kernel * (1.0 / 255.0)
-            kernel = kernel.to(self.dtype).contiguous(memory_format=torch.channels_last)
+        for i, (conv, kernel) in enumerate(zip(self.network.convs, kernels, strict=True)):
+            if torch.is_grad_enabled() and conv.weight.requires_grad:
+                scale = 1.0 / 255.0 if i == 0 else None
+                index = self.layouts[i].kernel_index
+                kernel = _CachedKernel.apply(conv.weight, kernel, index, scale)
             assert conv.bias is not None, "the network's convolutions have biases"
             result.append((kernel, conv.bias))
         return result

@@ -262,10 +262,10 @@ def arrive(
         condition, block, position = place.condition, place.block, place.position
     else:
         condition, block, position = _next_place(db, study, tally)
-    session = _take_pooled(db, study, condition)
-    if session is None:
-        number = _next_number(study)
-        session = _session(db, study, design, condition, number, spec_class, data_dir, threads)
+    taken = _take_pooled(db, study, condition)
+    session = taken or _session(
+        db, study, design, condition, _next_number(study), spec_class, data_dir, threads
+    )
     db.add(
         Assignment(
             study_id=study.id,

@@ -4,7 +4,7 @@ import torch
 
 from learner.agent import DQNAgent
 from learner.config import DQNConfig
-from learner.phase_conv import unpack_frames
+from learner.phase_conv import PhaseConvForward, unpack_frames
 from learner.replay import ReplaySample
 
 CPU = torch.device("cpu")
@@ -124,3 +124,57 @@ def test_same_init_seed_same_network() -> None:
     c = DQNAgent(DQNConfig(), CPU, init_seed=10)
     assert torch.equal(a.network.conv1.weight, b.network.conv1.weight)
     assert not torch.equal(a.network.conv1.weight, c.network.conv1.weight)
+
+
+def assert_kernels_fresh(fast: PhaseConvForward) -> None:
+    """The cached space-to-depth kernels equal kernels built now from the weights."""
+    rebuilt = PhaseConvForward(fast.network, fast.dtype).kernels()
+    assert all(torch.equal(a, b) for a, b in zip(fast.kernels(), rebuilt, strict=True))
+
+
+def test_cached_kernels_are_reused_until_the_weights_change() -> None:
+    # a step, a load_state_dict and a target sync each change weights the cache was built
+    # from: a cache not rebuilt then fails assert_kernels_fresh
+    config = DQNConfig(target_network=True, target_update_interval=2)
+    agent = DQNAgent(config, CPU, init_seed=2)
+    assert agent._fast_target is not None
+    image = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    first = agent.q_values(image)
+    builds = agent._fast.builds
+    assert np.array_equal(agent.q_values(image), first) and agent._fast.builds == builds
+
+    batch = make_batch(agent)
+    agent.update(batch)
+    assert agent._fast.builds == builds  # the update reused the kernels, then stepped
+    assert_kernels_fresh(agent._fast)
+    assert agent._fast.builds == builds + 1
+    assert not np.array_equal(agent.q_values(image), first)
+
+    target_builds = agent._fast_target.builds
+    assert_kernels_fresh(agent._fast_target)
+    agent.update(batch)  # the second update syncs the target network
+    assert agent._fast_target.builds == target_builds
+    assert_kernels_fresh(agent._fast_target)
+    assert agent._fast_target.builds == target_builds + 1
+
+    other = DQNAgent(config, CPU, init_seed=5)
+    agent.load_state_dict(other.state_dict())
+    assert_kernels_fresh(agent._fast)
+    assert_kernels_fresh(agent._fast_target)
+    assert np.array_equal(agent.q_values(image), other.q_values(image))
+
+
+@pytest.mark.parametrize("precision", ["bf16", "fp32"])
+def test_the_cached_kernels_gradient_is_the_rebuilt_kernels_to_the_bit(precision: str) -> None:
+    agent = DQNAgent(DQNConfig(precision=precision), CPU, init_seed=4)
+    fast = agent._fast
+    frames = make_batch(agent, size=8).states
+    grads = []
+    # autograd's own derivative of the kernels' construction, against the cache's
+    convs = agent.network.convs
+    rebuilt = [(fast._build(conv.weight, i), conv.bias) for i, conv in enumerate(convs)]
+    for weights in (rebuilt, fast.weights()):
+        agent.optimizer.zero_grad()
+        fast(frames, weights).square().mean().backward()
+        grads.append([p.grad.clone() for p in agent.network.parameters()])  # type: ignore[union-attr]
+    assert all(torch.equal(a, b) for a, b in zip(*grads, strict=True))
