@@ -2,9 +2,11 @@
 real server on loopback at its default settings (physics motion, the 3-D view in real
 time); two scenarios.
 
-`crowd`: N participants (default 30) arrive within a minute (evenly spread), each on a
-session made as a study's link makes it (`?pretrain=true`: the robot's random practice
-starts at arrival). `--browsers` of them (default 2) are real Chromium pages with the 3-D
+`crowd`: N participants (default 30) arrive within a minute (evenly spread) at an online
+study's link (`/join/KEY` with Prolific's parameters, each from an address of its own), whose
+one condition keeps a pool of `--pool` practised sessions (the server's pool limit set to
+it; the crowd arrives once the pool is full; 0: each arrival's robot practises when its link
+opens). `--browsers` of them (default 2) are real Chromium pages with the 3-D
 view open, clicking the first action button whenever the buttons come on; the others are
 clients that speak the page's protocol: its HTTP calls (consent, Start, the long-poll of
 the state, advice with `wait`) and the viewer's websocket (`/viewer/p/TOKEN`, the camera
@@ -27,7 +29,7 @@ meanwhile and alone: p50 and p95 (the aim: p95 under 50 ms).
 
     python -m benchmarks.bench_capacity [--scenario crowd|pollers|all] [--participants 30]
         [--browsers 2] [--advice 20] [--think-s 1.5] [--reading-s 5] [--arrival-s 60]
-        [--pollers 100]
+        [--pollers 100] [--pool 8]
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ import threading
 import time
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 import httpx
 import msgspec
@@ -148,12 +151,60 @@ class Results:
             table[kind].append(value)
 
 
-def make_session(server: LiveServer, study: int, seed: int, advice: int) -> dict[str, Any]:
-    body = rest_body(method="human", seed=seed, advice_budget=advice)
-    with httpx.Client(base_url=server.url, headers=RESEARCHER) as api:
-        made = api.post(f"/api/studies/{study}/sessions?pretrain=true", json=body, timeout=120)
+def online_study(server: LiveServer, args: argparse.Namespace) -> dict[str, Any]:
+    """One condition at default settings (1,000 pretraining steps, physics motion) with
+    `--advice` advice; room for everyone; no check or questionnaire (they take no server
+    time worth measuring); its pool `--pool` sessions."""
+    run = rest_body(method="human", advice_budget=args.advice)["run"]
+    design = {
+        "conditions": {"a": {"run": run, "target": args.participants}},
+        "capacity": args.participants,
+        "pool": args.pool,
+        "check": None,
+        "questionnaire": None,
+        "panel": {"kind": "prolific"},
+    }
+    with httpx.Client(base_url=server.url, headers=RESEARCHER, timeout=120) as api:
+        made = api.post("/api/studies", json={"name": "capacity", "design": design})
         made.raise_for_status()
-        return made.json()
+        return dict(made.json())
+
+
+def arrive(server: LiveServer, study: dict[str, Any], number: int) -> dict[str, Any]:
+    """One arrival at the study's link with Prolific's parameters, from an address of its
+    own (the server trusts loopback's X-Forwarded-For, as it trusts its reverse proxy)."""
+    headers = {"X-Forwarded-For": f"10.7.{number // 250}.{number % 250 + 1}"}
+    query = {"PROLIFIC_PID": f"P{number:04d}", "STUDY_ID": "cap", "SESSION_ID": f"s{number}"}
+    path = urlsplit(study["join_url"]).path
+    with httpx.Client(base_url=server.url, headers=headers, timeout=120) as client:
+        response = client.get(path, params=query)
+    assert response.status_code == 303, f"arrival {number}: {response.status_code}"
+    location = response.headers["location"]
+    return {
+        "id": number,
+        "participant_token": location.removeprefix("/p/"),
+        "participant_url": server.url + location,
+    }
+
+
+def wait_for_pool(server: LiveServer, study: dict[str, Any], size: int) -> float:
+    """Seconds until the pool holds `size` sessions that have practised."""
+    started = time.perf_counter()
+    with httpx.Client(base_url=server.url, headers=RESEARCHER, timeout=120) as api:
+        while True:
+            rows = api.get(f"/api/studies/{study['id']}/sessions").json()
+            pooled = [r for r in rows if r["pooled"]]
+            ready = 0
+            for row in pooled:
+                token = row["participant_url"].rsplit("/", 1)[1]
+                state = api.get(
+                    "/api/participant/readiness", headers={"Authorization": f"Bearer {token}"}
+                )
+                ready += bool(state.json().get("ready"))
+            if ready >= size:
+                return time.perf_counter() - started
+            assert time.perf_counter() - started < 900, "the pool never filled"
+            time.sleep(2)
 
 
 def view(server: LiveServer, token: str, stop: threading.Event) -> None:
@@ -282,12 +333,17 @@ def health_loop(url: str, stop: threading.Event, out: list[float], every_s: floa
 def crowd(args: argparse.Namespace) -> None:
     results = Results()
     with tempfile.TemporaryDirectory() as tmp:
-        server = LiveServer(Path(tmp), f"sqlite:///{tmp}/bench.sqlite3").start()
+        server = LiveServer(
+            Path(tmp), f"sqlite:///{tmp}/bench.sqlite3", pool_limit=args.pool
+        ).start()
         assert server.process is not None
         own_cpu = cpu_s(descendants(os.getpid())) - cpu_s(descendants(server.process.pid))
         try:
-            with httpx.Client(base_url=server.url, headers=RESEARCHER) as api:
-                study = api.post("/api/studies", json={"name": "capacity"}).json()["id"]
+            online = online_study(server, args)
+            study = online["id"]
+            if args.pool:
+                filled = wait_for_pool(server, online, args.pool)
+                print(f"the pool of {args.pool} practised in {filled:.0f} s; {load()}")
             health: list[float] = []
             stop = threading.Event()
             threading.Thread(target=health_loop, args=(server.url, stop, health)).start()
@@ -298,7 +354,7 @@ def crowd(args: argparse.Namespace) -> None:
                 arrival = started + i * args.arrival_s / args.participants
                 while time.perf_counter() < arrival:
                     time.sleep(min(0.5, arrival - time.perf_counter()))
-                session = make_session(server, study, i, args.advice)
+                session = arrive(server, online, i)
                 who = browser_participant if i < args.browsers else protocol_participant
                 thread = threading.Thread(target=who, args=(server, session, args, results))
                 thread.start()
@@ -466,6 +522,7 @@ def main() -> None:
     parser.add_argument("--reading-s", type=float, default=5.0)
     parser.add_argument("--arrival-s", type=float, default=60.0)
     parser.add_argument("--pollers", type=int, default=100)
+    parser.add_argument("--pool", type=int, default=8)
     args = parser.parse_args([] if __name__ != "__main__" else None)
     random.seed(0)
     if args.scenario in ("pollers", "all"):

@@ -53,7 +53,7 @@ def online_study(live: Live) -> dict[str, Any]:
     design = {
         "conditions": {"early": {"run": run, "target": 2}},
         "questionnaire": {"items": [item.model_dump(exclude_unset=True) for item in CUSTOM]},
-        "panel": {"kind": "prolific", "codes": CODES, "return_delay_s": 1},
+        "panel": {"kind": "prolific", "codes": CODES, "return_delay_s": 4},
     }
     with live.api() as api:
         made = api.post("/api/studies", json={"name": "online visit", "design": design})
@@ -103,6 +103,8 @@ def test_an_online_participant_passes_the_check_advises_and_answers_the_question
         expect(page).to_have_url(re.compile(r"/consent$"))
         participant = token(page)
         complete_the_visit(live, browser, page, participant)
+        expect(page.locator("#outcome-code")).to_have_text(CODES["completed"])
+        save_screenshot(page, "online-completed")
         assert_returned(page, "completed")
     finally:
         arrivals.close()
