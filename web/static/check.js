@@ -5,14 +5,6 @@
   const config = JSON.parse(document.getElementById("page-config").textContent);
   const form = document.getElementById("check-form");
   const error = document.getElementById("check-error");
-  const auth = { Authorization: `Bearer ${config.token}` };
-
-  async function detail(response) {
-    const body = await response.json().catch(() => ({}));
-    if (typeof body.detail === "string") return body.detail;
-    if (Array.isArray(body.detail) && body.detail.length) return body.detail[0].msg;
-    return `error ${response.status}`;
-  }
 
   function fail(message, button, label) {
     error.textContent = message;
@@ -24,9 +16,7 @@
   async function start(button) {
     button.disabled = true;
     button.textContent = "Starting…";
-    const response = await fetch("/api/participant/start", { method: "POST", headers: auth });
-    if (!response.ok) throw new Error(await detail(response));
-    window.location.assign(`/p/${config.token}/advise`);
+    await window.participantStart(config.token);
   }
 
   function answers() {
@@ -62,13 +52,10 @@
     submit.disabled = true;
     submit.textContent = "Checking…";
     try {
-      const response = await fetch("/api/participant/check", {
+      const result = await window.participantCall(config.token, "/api/participant/check", {
         method: "POST",
-        headers: { ...auth, "Content-Type": "application/json" },
         body: JSON.stringify({ answers: chosen }),
       });
-      if (!response.ok) throw new Error(await detail(response));
-      const result = await response.json();
       if (result.excluded) {
         window.location.assign(`/p/${config.token}/end`);
       } else if (result.correct) {

@@ -41,13 +41,6 @@
     return kind === "number" ? Number(text) : text;
   }
 
-  async function detail(response) {
-    const body = await response.json().catch(() => ({}));
-    if (typeof body.detail === "string") return body.detail;
-    if (Array.isArray(body.detail) && body.detail.length) return body.detail[0].msg;
-    return `error ${response.status}`;
-  }
-
   form.addEventListener("submit", async (event) => {
     event.preventDefault();
     error.hidden = true;
@@ -70,14 +63,16 @@
     submit.disabled = true;
     submit.textContent = "Sending…";
     try {
-      const response = await fetch("/api/participant/questionnaire", {
+      await window.participantCall(config.token, "/api/participant/questionnaire", {
         method: "POST",
-        headers: { Authorization: `Bearer ${config.token}`, "Content-Type": "application/json" },
         body: JSON.stringify({ answers }),
       });
-      if (!response.ok && response.status !== 409) throw new Error(await detail(response));
       window.location.assign(`/p/${config.token}/end`);
     } catch (e) {
+      if (e.status === 409) {  // sent already (another tab): the visit is over
+        window.location.assign(`/p/${config.token}/end`);
+        return;
+      }
       error.textContent = `Your answers could not be sent (${e.message}). Please try again.`;
       error.hidden = false;
       submit.disabled = false;

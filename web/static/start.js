@@ -9,15 +9,7 @@
     button.textContent = "Starting…";
     error.hidden = true;
     try {
-      const response = await fetch("/api/participant/start", {
-        method: "POST",
-        headers: { Authorization: `Bearer ${config.token}` },
-      });
-      if (!response.ok) {
-        const body = await response.json().catch(() => ({}));
-        throw new Error(typeof body.detail === "string" ? body.detail : `error ${response.status}`);
-      }
-      window.location.assign(`/p/${config.token}/advise`);
+      await window.participantStart(config.token);
     } catch (e) {
       error.textContent = `The session could not start (${e.message}). Please try again, or tell the researcher.`;
       error.hidden = false;
