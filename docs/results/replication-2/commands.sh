@@ -1,0 +1,113 @@
+#!/usr/bin/env bash
+# The replication at 10 + 10 (docs/results/plan.md), every arm from the tag `replication-2`.
+#
+#   git worktree add /work/rep2 replication-2      # the fixed code version
+#   docs/results/replication-2/commands.sh restore # a fresh machine: the committed state back
+#   docs/results/replication-2/commands.sh all     # every arm, in the plan's order (resumable)
+#   docs/results/replication-2/commands.sh save    # the state to commit (database, advisors)
+#
+# Runs from the main checkout's venv but imports the tag's code (the worktree comes first on
+# sys.path); each session records its code version, so a run from other code shows in the
+# report's audit. Every command can be run again: finished runs are skipped, interrupted
+# ones resume from their checkpoints, and runs whose checkpoints did not survive (a new
+# machine) start again. DATA holds the database, the advisors and the checkpoints.
+set -euo pipefail
+HERE=$(cd "$(dirname "$0")" && pwd)
+REPO=$(cd "$HERE/../../.." && pwd)
+DATA=${DATA:-/work/replication-2}
+CODE=${CODE:-/work/rep2}
+PY=${PY:-$REPO/.venv/bin/python}
+STATE=$HERE/state
+mkdir -p "$DATA"
+
+batch() {  # study, label, then ideeprl batch options
+  local study=$1 label=$2; shift 2
+  (cd "$CODE" && "$PY" -m server.cli batch --study "$study" --label "$label" --seed 0 \
+    --agents "${AGENTS:-10}" --torch-threads 1 --checkpoint-every 25 --no-progress \
+    --advisor-check require --advisor-attempts 5 --data-dir "$DATA" "$@")
+}
+AUTHORS=(--preset authors --grasp-failure-rate 0.05 --knock-off-rate 0.05)
+
+# (b) the paper's learner (linear head, as SPEC decides), one rule: B-auto, B-agent, B-procedure.
+paper() { batch replication-2-paper B --methods autonomous agent procedure --preset paper --reward-scheme paper; }
+
+# (a') the authors' learner and scene under one rule: A-auto, A-agent, A-procedure. The
+# autonomous runs of label A-auto (the population equivalence arm) are the same runs.
+authors() { batch replication-2-authors A --methods autonomous agent procedure "${AUTHORS[@]}" --reward-scheme authors-interactive; }
+
+# (a) as the authors made it: their autonomous arm learned and scored under its own rule,
+# against A-agent (the report withholds a primary test: two reward rules).
+authors_own() { batch replication-2-authors A-own --methods autonomous "${AUTHORS[@]}" --reward-scheme authors-autonomous; }
+
+# The float32 control of the authors' preset, 3 + 3, advised by A-agent's checked advisor.
+fp32() {
+  local advisor
+  advisor=$(sqlite3 "$DATA/ideeprl.sqlite3" "select json_extract(s.run, '$.advisor_checkpoint') from sessions s join studies t on t.id = s.study_id where t.name = 'replication-2-authors' and json_extract(s.run, '$.method') = 'agent' and json_extract(s.run, '$.config.precision') != 'fp32' limit 1")
+  [ -n "$advisor" ] || { echo "fp32: A-agent's advisor is not trained yet: run 'authors' first"; return 1; }
+  AGENTS=3 batch replication-2-authors A-fp32 --methods autonomous agent "${AUTHORS[@]}" \
+    --reward-scheme authors-interactive --precision fp32 --advisor-checkpoint "$advisor"
+}
+
+# The population equivalence arms (issue "The paper's experiment in half an hour"): the same
+# seeds' autonomous runs alone (`--population 1`), against B's and A's (in populations).
+alone() {
+  batch equivalence-paper-alone B-alone --methods autonomous --preset paper --reward-scheme paper --population 1
+  batch equivalence-authors-alone A-auto-alone --methods autonomous "${AUTHORS[@]}" --reward-scheme authors-interactive --population 1
+}
+
+save() {  # finished runs and the advisors they used, into state/ (committed)
+  mkdir -p "$STATE/advisors"
+  "$PY" - "$DATA" "$STATE" <<'PY'
+import sqlite3, sys
+from pathlib import Path
+from learner.checkpoint import read_checkpoint, write_checkpoint
+data, state = Path(sys.argv[1]), Path(sys.argv[2])
+src = sqlite3.connect(data / "ideeprl.sqlite3")
+out = state / "ideeprl.sqlite3"
+out.unlink(missing_ok=True)
+dst = sqlite3.connect(out)
+src.backup(dst)
+# Unfinished runs' checkpoints stay behind: drop those runs, the batch makes them anew.
+gone = "select id from sessions where status != 'finished'"
+for (table,) in dst.execute("select name from sqlite_master where type = 'table'").fetchall():
+    columns = [c[1] for c in dst.execute(f"pragma table_info({table})")]
+    if "session_id" in columns:
+        dst.execute(f"delete from {table} where session_id in ({gone})")
+dst.execute(f"delete from sessions where id in ({gone})")
+dst.commit()
+dst.execute("vacuum")
+# What an agent advisor reads (config and network), at its path under DATA.
+paths = {p for (p,) in dst.execute(
+    "select distinct json_extract(run, '$.advisor_checkpoint') from sessions "
+    "where json_extract(run, '$.advisor_checkpoint') is not null")}
+dst.close()
+for path in sorted(paths):
+    relative = Path(path).relative_to(data)
+    target = state / "advisors" / relative
+    target.parent.mkdir(parents=True, exist_ok=True)
+    s = read_checkpoint(path)
+    write_checkpoint(target, {"config": s["config"], "seed": s["seed"],
+                              "metadata": s["metadata"], "agent": {"network": s["agent"]["network"]}})
+    print("advisor", relative)
+PY
+  gzip -f -9 "$STATE/ideeprl.sqlite3"
+}
+
+restore() {  # a fresh DATA from state/
+  [ -f "$DATA/ideeprl.sqlite3" ] || gunzip -c "$STATE/ideeprl.sqlite3.gz" > "$DATA/ideeprl.sqlite3"
+  (cd "$STATE/advisors" && find . -type f) | while read -r f; do
+    [ -f "$DATA/$f" ] || { mkdir -p "$(dirname "$DATA/$f")"; cp "$STATE/advisors/$f" "$DATA/$f"; }
+  done
+}
+
+case "${1:-all}" in
+  save) save ;;
+  restore) restore ;;
+  paper) paper ;;
+  authors) authors ;;
+  authors-own) authors_own ;;
+  fp32) fp32 ;;
+  alone) alone ;;
+  all) paper; authors; alone; authors_own; fp32 ;;
+  *) echo "usage: $0 [save|restore|paper|authors|authors-own|fp32|alone|all]"; exit 2 ;;
+esac
