@@ -13,7 +13,7 @@ from analysis import write_report
 from analysis.__main__ import main
 from analysis.exported import ExportError, read_export
 
-OLD_EXPORT = Path(__file__).parents[2] / "fixtures" / "export-1.x"
+OLD_EXPORT = Path(__file__).parents[1] / "fixtures" / "export-1.x"
 """`ideeprl export` of a tiny batch (2 autonomous, 2 oracle agents; oracle 10 % wrong under
 authors-interactive, knock-offs 0.1 for all), written by commit dc7b896."""
 
