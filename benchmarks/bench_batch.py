@@ -25,13 +25,13 @@ import numpy as np
 from sqlalchemy import select
 
 from learner.run import RunSpec
-from server.batch import BatchSpec, RunnerOptions, run_batch
-from server.batch.backends import usable_cores
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.db.models import Step, StudySession
-from server.schemas.studies import StudyCreate
-from server.services.studies import create_study
+from runs.batch import BatchSpec, RunnerOptions, run_batch
+from runs.batch.backends import usable_cores
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Step, StudySession
+from study.schemas.studies import StudyCreate
+from study.services.studies import create_study
 
 PRETRAINING_STEPS = 1000
 

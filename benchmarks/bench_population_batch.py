@@ -14,7 +14,7 @@
    population of N). The sizes are run in turn, `--repeats` rounds; the ratio to the reference is
    taken within each round (the same machine load) and its median reported.
 2. A population step of N agents split into its parts, in this process, through the batch's
-   own population worker (`server.batch.population.run_population`, recording to SQLite
+   own population worker (`runs.batch.population.run_population`, recording to SQLite
    and checkpointing as a batch does): the update, action selection (one batched forward
    pass), simulation (the environments' steps less their rendering), rendering (the 64x64
    camera image), recording (step and episode rows, their inserts), checkpointing (the
@@ -43,14 +43,14 @@ from sqlalchemy import select
 
 from learner import machine
 from learner.run import RunSpec
-from server.batch import BatchSpec, RunnerOptions, run_batch
-from server.batch.backends import usable_cores
-from server.batch.runner import BatchRunner
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.db.models import Step
-from server.schemas.studies import StudyCreate
-from server.services.studies import create_study
+from runs.batch import BatchSpec, RunnerOptions, run_batch
+from runs.batch.backends import usable_cores
+from runs.batch.runner import BatchRunner
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Step
+from study.schemas.studies import StudyCreate
+from study.services.studies import create_study
 
 RESULTS = Path(__file__).parent / "results"
 PARTS = (
@@ -193,9 +193,9 @@ def profile(args: argparse.Namespace, size: int) -> dict[str, float]:
     worker runs it, here (its own process: the parts are timed by wrapping their methods)."""
     import sim
     from learner.population import Population
-    from server.batch.population import AgentSaver, run_population
-    from server.worker.recorder import Recorder
-    from server.worker.worker import WorkerOptions
+    from runs.batch.population import AgentSaver, run_population
+    from runs.worker.recorder import Recorder
+    from runs.worker.worker import WorkerOptions
 
     with tempfile.TemporaryDirectory() as tmp:
         url = f"sqlite:///{Path(tmp) / 'bench.sqlite3'}"

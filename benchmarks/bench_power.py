@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from server.analysis.power import DEFAULT_DRAWS, DEFAULT_MAX_N, power_analysis
+from analysis.power import DEFAULT_DRAWS, DEFAULT_MAX_N, power_analysis
 
 EFFECTS = {"large (d = 2)": 2.0, "medium (d = 0.5)": 0.5, "none (d = 0)": 0.0}
 

@@ -9,8 +9,8 @@ Everything else is derived from the declaration, never written again:
 - `to_json(obj)`: back to JSON;
 - `add_arguments(parser, cls)`: one command-line flag per leaf (`--batch-size`), its help
   from the docstring and range; `given_arguments(args, cls)` reads back the ones given;
-- `server.schemas.runs` makes the REST body and its OpenAPI schema from the same leaves,
-  and `server.services.columns` the export's columns.
+- `study.schemas.runs` makes the REST body and its OpenAPI schema from the same leaves,
+  and `study.services.columns` the export's columns.
 
 A field's range is declared with `bounded(default, minimum, maximum)`; a field's role in a
 study (what the comparability audit does with it) with `role=`. Torch-free.

@@ -10,7 +10,7 @@ estimable from about 100 advice per person because each one's rate is pulled tow
 held colour's rate, and that toward the overall rate, by `prior_strength` pseudo-advice
 (a situation with few advice gets its parent's rate; one with many, its own).
 
-Torch-free and database-free: `server.services.fitting` reads a study's rows, replays the
+Torch-free and database-free: `study.services.fitting` reads a study's rows, replays the
 advised episodes to recover each advice's situation and correct action, and calls `fit`.
 """
 

@@ -13,8 +13,8 @@ from sqlalchemy.orm import Session
 
 from server.live.advising import ParticipantSession
 from server.live.manager import SessionManager
-from server.services.sessions import session_for_token
-from server.settings import Settings
+from study.services.sessions import session_for_token
+from study.settings import Settings
 
 API_KEY_HEADER = "X-API-Key"
 _api_key = APIKeyHeader(name=API_KEY_HEADER, auto_error=False, description="Researcher key.")

@@ -21,7 +21,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from server.schemas.types import SURROGATE_MESSAGE
+from study.schemas.types import SURROGATE_MESSAGE
 
 BODY_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
 DASHBOARD_API = "/dashboard/api/"

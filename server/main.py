@@ -18,8 +18,8 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from learner.fields import leaves
 from learner.run import RunSpec
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import BACKUPS, upgrade
+from runs.worker.rerun import Rerun
+from runs.worker.worker import WorkerOptions
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
 from server.guard import LOGIN, Describe, RequestGuard
 from server.headers import SecurityHeaders, validation_error, without_input
@@ -42,13 +42,13 @@ from server.routes import (
     viewing,
 )
 from server.routes.docs import add_docs
-from server.services.errors import Invalid, ServiceError
-from server.settings import Settings
 from server.viewer import proxy as viewer_proxy
 from server.viewer import viewer_from_settings
 from server.viewer.episodes import PlaybackViewer
-from server.worker.rerun import Rerun
-from server.worker.worker import WorkerOptions
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import BACKUPS, upgrade
+from study.services.errors import Invalid, ServiceError
+from study.settings import Settings
 
 API_VERSION = "2.0.0"
 """The REST API's version (the OpenAPI document's `info.version`): 2.0 carries a session's

@@ -25,5 +25,5 @@ def test_the_rule_catches_new_errors() -> None:
     baseline = Counter({"server/main.py": 1})
     assert mypy_baseline.problems(Counter({"server/main.py": 1}), baseline) == []
     assert mypy_baseline.problems(Counter({"server/main.py": 2}), baseline)
-    assert mypy_baseline.problems(Counter({"server/services/sessions.py": 1}), baseline)
+    assert mypy_baseline.problems(Counter({"study/services/sessions.py": 1}), baseline)
     assert mypy_baseline.problems(Counter({"learner/run.py": 1}), baseline)

@@ -17,19 +17,19 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
 
-from server.db.models import Advice, Status, StudySession
+from runs.worker.messages import AdviceAnswer
 from server.live.manager import HistoryEntry, SessionManager
-from server.schemas.participant import (
+from sim.actions import ACTION_NAMES
+from study.db.models import Advice, Status, StudySession
+from study.schemas.participant import (
     AdviceCreate,
     AdviceReceipt,
     HeldObject,
     HistoryItem,
     ParticipantState,
 )
-from server.services.consent import NOT_CONSENTED
-from server.services.errors import Conflict, NotFound
-from server.worker.messages import AdviceAnswer
-from sim.actions import ACTION_NAMES
+from study.services.consent import NOT_CONSENTED
+from study.services.errors import Conflict, NotFound
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ class HubEvent:
     kind: str
     """One of `KINDS`."""
     payload: Any
-    """The worker's message (`server.worker.messages`), or a dict for `advice_given`."""
+    """The worker's message (`runs.worker.messages`), or a dict for `advice_given`."""
     seq: int
     """Hub-wide sequence number: later events have larger numbers."""
     time: float

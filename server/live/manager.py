@@ -33,20 +33,8 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from learner.strategies import make_strategy
-from server.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status
-from server.live import visits
-from server.live.hub import Hub
-from server.services import numerics
-from server.services.errors import Conflict
-from server.services.sessions import (
-    claim,
-    get_session,
-    mark_dead_interrupted,
-    set_status,
-    silent_sessions,
-)
-from server.worker.link import WAITED_FOR_PARTICIPANT
-from server.worker.messages import (
+from runs.worker.link import WAITED_FOR_PARTICIPANT
+from runs.worker.messages import (
     AdviceRequest,
     AdviceResult,
     Command,
@@ -57,7 +45,19 @@ from server.worker.messages import (
     StatusChanged,
     TrainingWanted,
 )
-from server.worker.worker import WorkerOptions, worker_main
+from runs.worker.worker import WorkerOptions, worker_main
+from server.live import visits
+from server.live.hub import Hub
+from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status
+from study.services import numerics
+from study.services.errors import Conflict
+from study.services.sessions import (
+    claim,
+    get_session,
+    mark_dead_interrupted,
+    set_status,
+    silent_sessions,
+)
 
 log = logging.getLogger(__name__)
 HUB_KINDS: dict[type, str] = {
@@ -127,7 +127,7 @@ class WorkerHandle:
                 return False
 
 
-WORKER_PRELOAD = ("torch", "pybullet", "learner.trainer", "sim.env", "server.worker.worker")
+WORKER_PRELOAD = ("torch", "pybullet", "learner.trainer", "sim.env", "runs.worker.worker")
 """What every session worker imports, loaded once in the fork server: `import torch` alone
 leaves about 140 MB of private memory in a process; forked from a server that holds it,
 the workers share those pages (copy on write) instead of each making its own."""

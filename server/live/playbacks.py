@@ -1,6 +1,6 @@
 """The dashboard's playbacks of recorded episodes, in the web process.
 
-A playback starts a rerun process (`server.worker.rerun`), keeps what it sends back while
+A playback starts a rerun process (`runs.worker.rerun`), keeps what it sends back while
 the researcher's page is open, and is closed when the page says it is leaving or after
 `idle_s` without a request from it; closing ends the process if it still runs and the
 playback's 3-D views. At most `limit` are open at once: a rerun costs a process with
@@ -22,8 +22,8 @@ from typing import Any, Literal
 
 from sqlalchemy.orm import Session
 
-from server.db.models import StudySession
-from server.worker.rerun import Rerun, RerunFailed, RerunOrder, rerun_main
+from runs.worker.rerun import Rerun, RerunFailed, RerunOrder, rerun_main
+from study.db.models import StudySession
 
 State = Literal["rerunning", "ready", "failed"]
 JOIN_S = 5.0
@@ -46,7 +46,7 @@ class Playback:
     last_seen: float = field(default_factory=time.monotonic)
     closed: bool = False
     recorded: Any = None
-    """What the page shows beside the rerun (`server.services.playback.RecordedEpisode`)."""
+    """What the page shows beside the rerun (`study.services.playback.RecordedEpisode`)."""
 
 
 class Playbacks:

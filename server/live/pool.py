@@ -2,7 +2,7 @@
 random practice.
 
 Each condition of an online study still short of its target keeps up to its design's `pool`
-sessions made ahead of arrivals (`server.services.assignment.pool_gaps`), all pools together
+sessions made ahead of arrivals (`study.services.assignment.pool_gaps`), all pools together
 within the server's `pool_limit`. A pooled session is made with its condition's run and the
 study's next number added to its seed (both fixed and recorded then), and started at once:
 it practises, then waits at its first turn with its idle limit off. The arrival that the
@@ -23,8 +23,8 @@ from starlette.concurrency import run_in_threadpool
 
 from learner.run import RunSpec
 from server.live.manager import SessionManager
-from server.services import assignment, storage
-from server.services.errors import Conflict, ServiceError
+from study.services import assignment, storage
+from study.services.errors import Conflict, ServiceError
 
 log = logging.getLogger(__name__)
 

@@ -14,8 +14,8 @@ from sqlalchemy import update
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
-from server.db.models import Outcome, Status, StudySession, utcnow
-from server.services.sessions import get_session
+from study.db.models import Outcome, Status, StudySession, utcnow
+from study.services.sessions import get_session
 
 
 class SessionManager(Protocol):

@@ -19,7 +19,6 @@ from sqlalchemy import select
 
 from learner.fields import FieldError
 from learner.run import RunSpec
-from server.db.models import Episode, StudySession
 from server.deps import DbDep, ManagerDep, SettingsDep
 from server.logins import Logins
 from server.routes import exports as export_routes
@@ -29,11 +28,12 @@ from server.routes import studies as study_routes
 from server.routes.pages import templates
 from server.routes.params import SessionId, StudyId
 from server.routes.reports import FileName, ReportPublic
-from server.schemas.design import StudyDesign
-from server.schemas.sessions import SessionOptions
-from server.schemas.studies import StudyCreate, StudyUpdate
-from server.schemas.types import Text
-from server.services import reports, sessions, studies
+from study.db.models import Episode, StudySession
+from study.schemas.design import StudyDesign
+from study.schemas.sessions import SessionOptions
+from study.schemas.studies import StudyCreate, StudyUpdate
+from study.schemas.types import Text
+from study.services import reports, sessions, studies
 
 COOKIE = "ideeprl_dashboard"
 CSRF_HEADER = "X-Requested-With"

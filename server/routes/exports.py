@@ -8,7 +8,7 @@ from fastapi.responses import FileResponse
 
 from server.deps import DbDep, ResearcherDep, SettingsDep
 from server.routes.params import StudyId
-from server.services.export import export_zip
+from study.services.export import export_zip
 
 router = APIRouter(prefix="/api/studies", tags=["exports"], dependencies=[ResearcherDep])
 

@@ -1,5 +1,5 @@
 """An online study's public link, `/join/{key}`: arrivals get their session (assigned to a
-condition, `server.services.assignment`) and go to their participant link; a full study
+condition, `study.services.assignment`) and go to their participant link; a full study
 shows its page with the panel's "full" code. Rate-limited (`server.limits`)."""
 
 from __future__ import annotations
@@ -8,11 +8,11 @@ from fastapi import APIRouter, Request
 from fastapi.responses import RedirectResponse, Response
 from starlette.concurrency import run_in_threadpool
 
-from server.db.models import Outcome
 from server.routes.pages import end_page
-from server.schemas.design import StudyDesign
-from server.services import assignment, studies
-from server.services.errors import NotFound
+from study.db.models import Outcome
+from study.schemas.design import StudyDesign
+from study.services import assignment, studies
+from study.services.errors import NotFound
 
 router = APIRouter(include_in_schema=False)
 COOKIE = "ideeprl_visit"

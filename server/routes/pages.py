@@ -28,17 +28,17 @@ from sqlalchemy import func, select
 from starlette.concurrency import run_in_threadpool
 
 import sim
-from server.db.models import Advice, Outcome, PanelId, Status
 from server.live.visits import end_visit
-from server.schemas.design import StudyDesign
-from server.schemas.instruments import PREFER_NOT_TO_SAY
-from server.schemas.participant import CheckState
-from server.schemas.visit import Section
-from server.services import consent as consent_service
-from server.services import visit as visit_service
-from server.services.errors import Conflict, Invalid
-from server.services.sessions import session_for_token
 from server.viewer.camera import viser_camera_params
+from study.db.models import Advice, Outcome, PanelId, Status
+from study.schemas.design import StudyDesign
+from study.schemas.instruments import PREFER_NOT_TO_SAY
+from study.schemas.participant import CheckState
+from study.schemas.visit import Section
+from study.services import consent as consent_service
+from study.services import visit as visit_service
+from study.services.errors import Conflict, Invalid
+from study.services.sessions import session_for_token
 
 WEB_DIR = Path(__file__).resolve().parents[2] / "web"
 templates = Jinja2Templates(directory=WEB_DIR / "templates")

@@ -8,12 +8,12 @@ from fastapi.responses import Response
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
-from server.db.models import Outcome, StudySession
 from server.deps import ManagerDep, ParticipantDep
 from server.live import advising
 from server.live.visits import end_visit
 from server.routes.pages import visit_for_token
-from server.schemas.participant import (
+from study.db.models import Outcome, StudySession
+from study.schemas.participant import (
     AdviceCreate,
     AdviceReceipt,
     CheckCreate,
@@ -26,9 +26,9 @@ from server.schemas.participant import (
     QuestionnaireState,
     Readiness,
 )
-from server.services import consent as consent_service
-from server.services import visit as visit_service
-from server.services.errors import Conflict, NotFound
+from study.services import consent as consent_service
+from study.services import visit as visit_service
+from study.services.errors import Conflict, NotFound
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
 MAX_WAIT_S = 30.0

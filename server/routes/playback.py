@@ -19,18 +19,18 @@ from sqlalchemy import select
 
 import sim
 from learner.run import RunSpec
-from server.db.models import Advice, Episode
+from runs.worker.rerun import RerunOrder
 from server.deps import DbDep
 from server.live.playbacks import Playback, Playbacks, TooManyPlaybacks
 from server.routes.dashboard import LoginDep, _logged_in
 from server.routes.pages import scene_src, templates
 from server.routes.params import MAX_ID, AdviceIndex, SessionId
-from server.services import sessions
-from server.services.playback import RecordedEpisode, recorded_episode
 from server.viewer.connection import TOKEN_PATH
 from server.viewer.episodes import PlaybackViewer
 from server.viewer.proxy import relay_to, upstream_host
-from server.worker.rerun import RerunOrder
+from study.db.models import Advice, Episode
+from study.services import sessions
+from study.services.playback import RecordedEpisode, recorded_episode
 
 router = APIRouter(include_in_schema=False)
 API = "/dashboard/api"

@@ -11,12 +11,12 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.analysis.markdown import REPORT_FILE
+from analysis.markdown import REPORT_FILE
 from server.deps import DbDep, ResearcherDep, SettingsDep
 from server.routes.params import MAX_ID, StudyId
-from server.schemas.types import Text
-from server.services import reports
-from server.services.studies import get_study
+from study.schemas.types import Text
+from study.services import reports
+from study.services.studies import get_study
 
 router = APIRouter(prefix="/api/studies", tags=["reports"], dependencies=[ResearcherDep])
 

@@ -7,12 +7,12 @@ from fastapi.responses import Response
 from sqlalchemy import select
 
 from learner.run import RunSpec
-from server.db.models import LIVE_STATUSES, Advice
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
-from server.schemas.runs import given
-from server.schemas.sessions import (
+from study.db.models import LIVE_STATUSES, Advice
+from study.schemas.runs import given
+from study.schemas.sessions import (
     AdvicePublic,
     EpisodePublic,
     Progress,
@@ -21,8 +21,8 @@ from server.schemas.sessions import (
     SessionPublic,
     session_create_model,
 )
-from server.services import learning, sessions, storage
-from server.services.errors import NotFound
+from study.services import learning, sessions, storage
+from study.services.errors import NotFound
 
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
 

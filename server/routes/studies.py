@@ -5,14 +5,14 @@ from pydantic import BaseModel
 from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
-from server.db.models import LIVE_STATUSES, Status, Study, StudySession
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
-from server.schemas.design import StudyDesign
-from server.schemas.studies import FittedAdvisorPublic, StudyCreate, StudyPublic, StudyUpdate
-from server.services import assignment, fitting, sessions, storage, studies
-from server.services.errors import Conflict
+from study.db.models import LIVE_STATUSES, Status, Study, StudySession
+from study.schemas.design import StudyDesign
+from study.schemas.studies import FittedAdvisorPublic, StudyCreate, StudyPublic, StudyUpdate
+from study.services import assignment, fitting, sessions, storage, studies
+from study.services.errors import Conflict
 
 router = APIRouter(prefix="/api/studies", tags=["studies"], dependencies=[ResearcherDep])
 

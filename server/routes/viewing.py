@@ -5,8 +5,8 @@ from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field
 from sqlalchemy import select
 
-from server.db.models import Episode, StudySession
 from server.deps import DbDep, ManagerDep, ParticipantDep
+from study.db.models import Episode, StudySession
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
 

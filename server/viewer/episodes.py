@@ -18,11 +18,11 @@ from dataclasses import dataclass
 
 import viser
 
+from runs.worker.messages import SceneStep
+from runs.worker.rerun import Rerun
 from server.viewer import connection
 from server.viewer.mirror import SceneMirror
 from server.viewer.playback import Player
-from server.worker.messages import SceneStep
-from server.worker.rerun import Rerun
 
 
 @dataclass

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 
 import sim
+from runs.worker.messages import SceneReset, SceneStep
 from server.viewer.mirror import SceneMirror
-from server.worker.messages import SceneReset, SceneStep
 
 log = logging.getLogger(__name__)
 JUMP_BACKLOG = 3

@@ -21,11 +21,11 @@ import viser
 from sqlalchemy.orm import Session, sessionmaker
 
 from server.live.hub import Hub, HubEvent, Subscription
-from server.services.sessions import session_for_token
-from server.settings import Settings
 from server.viewer import connection
 from server.viewer.mirror import SceneMirror
 from server.viewer.playback import Player
+from study.services.sessions import session_for_token
+from study.settings import Settings
 
 log = logging.getLogger(__name__)
 SCENE_KINDS = ("scene_reset", "scene_step")

@@ -19,7 +19,7 @@ import uvicorn
 from fastapi import FastAPI
 
 from server.main import UVICORN_OPTIONS, create_app
-from server.settings import Settings
+from study.settings import Settings
 from tests.e2e.proxy import config, nginx, nginx_available
 from tests.server.live import API_KEY, free_port
 from tests.server.scale import rest_body

@@ -15,7 +15,7 @@ import pytest
 from playwright.sync_api import expect
 from sqlalchemy import select
 
-from server.db.models import Advice, StudySession
+from study.db.models import Advice, StudySession
 from tests.e2e.conftest import VIEWPORT, Live
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]

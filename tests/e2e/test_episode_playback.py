@@ -17,7 +17,7 @@ from playwright.sync_api import expect
 from sqlalchemy import select
 
 import sim
-from server.db.models import Advice, Episode, Step
+from study.db.models import Advice, Episode, Step
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
 from tests.server.live import API_KEY
 from tests.server.participant import SimulatedParticipant

@@ -17,8 +17,8 @@ import pytest
 from playwright.sync_api import expect
 from sqlalchemy import func, select
 
-from server.db.models import Advice
 from server.live.hub import HubEvent
+from study.db.models import Advice
 from tests.e2e.conftest import PLAYBACK_SPEED, VIEWPORT, Live
 from tests.e2e.scene import distances, views, wait_for_scene, wait_idle
 

@@ -24,8 +24,8 @@ from urllib.parse import urlencode, urlsplit
 import pytest
 from playwright.sync_api import expect
 
-from server.db.models import Study
-from server.services.assignment import block_order
+from study.db.models import Study
+from study.services.assignment import block_order
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
 from tests.server.live import API_KEY
 from tests.server.test_export_types import check_frictionless

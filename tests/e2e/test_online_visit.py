@@ -16,8 +16,8 @@ import pytest
 from playwright.sync_api import expect
 from sqlalchemy import select
 
-from server.db.models import CheckAttempt, QuestionnaireAnswer, StudySession
-from server.schemas.visit import Item
+from study.db.models import CheckAttempt, QuestionnaireAnswer, StudySession
+from study.schemas.visit import Item
 from tests.e2e.conftest import Live, save_screenshot
 from tests.e2e.test_online_study import CODES, RUN, Arrivals, assert_returned, exported, token
 from tests.server.test_export_types import check_frictionless

@@ -17,7 +17,7 @@ from PIL import Image
 from playwright.sync_api import expect
 from sqlalchemy import select
 
-from server.db.models import Advice
+from study.db.models import Advice
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
 from tests.e2e.scene import canvas_pixels, colored, wait_for_scene
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import sim
+from runs.worker.messages import SceneStep
 from server.viewer.playback import motion_duration, pose_at
-from server.worker.messages import SceneStep
 
 
 @pytest.fixture(scope="module")

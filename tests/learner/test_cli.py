@@ -88,7 +88,7 @@ def test_train_explains_bad_arguments(
 
 
 def test_ideeprl_lists_the_train_command() -> None:
-    from server.cli import build_parser
+    from cli.main import build_parser
 
     args = build_parser().parse_args(["train", "--episodes", "5", "--method", "random"])
     assert args.command == "train" and args.func.__module__ == "learner.cli"

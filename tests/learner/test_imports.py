@@ -30,7 +30,7 @@ def test_the_command_line_parses_without_torch() -> None:
     """`ideeprl --help`, `backup`, `export` start at once: making the parser (every run field
     a flag) loads neither torch nor the simulator."""
     code = (
-        "import sys; from server.cli import build_parser; build_parser(); "
+        "import sys; from cli.main import build_parser; build_parser(); "
         "print(any(m in sys.modules for m in ('torch', 'pybullet')))"
     )
     assert run(code) == "False"

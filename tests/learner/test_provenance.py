@@ -6,11 +6,11 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+from analysis.audit import audit
+from analysis.settings import settings_table
 from learner import provenance
 from learner.config import DQNConfig
 from learner.run import RunSpec
-from server.analysis.audit import audit
-from server.analysis.settings import settings_table
 
 
 def test_the_code_version_changes_with_a_file_under_learner_and_needs_no_git(

@@ -65,7 +65,7 @@ class LiveServer:
     @property
     def entry(self) -> list[str]:
         """The command that runs `ideeprl` (a test may wrap it to watch the process)."""
-        return [sys.executable, "-m", "server"]
+        return [sys.executable, "-m", "cli"]
 
     @property
     def url(self) -> str:

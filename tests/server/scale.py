@@ -13,7 +13,7 @@ from PIL import Image
 
 from learner.fields import leaves, nest
 from learner.run import RunSpec
-from server.schemas.sessions import NOT_THE_RUN
+from study.schemas.sessions import NOT_THE_RUN
 
 SMALL_CONFIG: dict[str, Any] = {"pretraining_steps": 60, "batch_size": 16, "memory_size": 2000}
 EPISODES = 3

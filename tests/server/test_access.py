@@ -9,7 +9,7 @@ import httpx
 import pytest
 
 from server.main import create_app
-from server.settings import Settings
+from study.settings import Settings
 from tests.server.live import LiveServer
 
 PUBLIC = {"/api/health"}

@@ -23,18 +23,18 @@ from sqlalchemy import Engine, select, text
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session
 
+from cli.main import build_parser, main
 from learner.run import RunSpec
-from server.cli import build_parser, main
-from server.db.backup import RESTORED, BackupError, backup, restore
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import alembic_config, upgrade
-from server.db.models import Episode, Status, Study, StudySession
-from server.schemas.studies import StudyCreate
-from server.services import learning
-from server.services.export import export_study
-from server.services.sessions import create_session
-from server.services.studies import create_study
-from server.worker.worker import WorkerOptions, run_session
+from runs.worker.worker import WorkerOptions, run_session
+from study.db.backup import RESTORED, BackupError, backup, restore
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import alembic_config, upgrade
+from study.db.models import Episode, Status, Study, StudySession
+from study.schemas.studies import StudyCreate
+from study.services import learning
+from study.services.export import export_study
+from study.services.sessions import create_session
+from study.services.studies import create_study
 from tests.server.live import fresh_database
 from tests.server.scale import session_body
 from tests.server.test_resume import records
@@ -140,7 +140,7 @@ def test_a_backup_follows_a_checkpoint_replaced_meanwhile(
 ) -> None:
     """A worker that records a newer checkpoint and deletes the old one between the
     snapshot and the copy: the backup snapshots again and holds the newer one."""
-    import server.db.backup as backups
+    import study.db.backup as backups
 
     engine, data_dir = installation
     _sessions_with_checkpoints(engine, data_dir)

@@ -1,6 +1,6 @@
 import pytest
 
-from server.cli import build_parser
+from cli.main import build_parser
 
 
 def test_cli_lists_train_and_rejects_unknown_commands(capsys: pytest.CaptureFixture[str]) -> None:

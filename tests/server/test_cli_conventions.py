@@ -17,13 +17,13 @@ from pathlib import Path
 
 import pytest
 
-from server.cli import main
-from server.commands.common import show_progress
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.schemas.studies import StudyCreate
-from server.services.export import TABLES
-from server.services.studies import create_study
+from cli.commands.common import show_progress
+from cli.main import main
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.schemas.studies import StudyCreate
+from study.services.export import TABLES
+from study.services.studies import create_study
 
 ROOT = Path(__file__).absolute().parents[2]
 TINY_TRAIN = [
@@ -40,7 +40,7 @@ def environment(**extra: str) -> dict[str, str]:
 
 def ideeprl(*args: str, cwd: Path, **env: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "server", *args],
+        [sys.executable, "-m", "cli", *args],
         cwd=cwd,
         env=environment(**env),
         capture_output=True,
@@ -166,7 +166,7 @@ def test_progress_bars_only_for_a_terminal() -> None:
 
 def train_output(tmp_path: Path, *, terminal: bool) -> str:
     """Everything `ideeprl train` writes on stderr, into a pipe or into a terminal (a pty)."""
-    command = [sys.executable, "-m", "server", "train", "--out", str(tmp_path), *TINY_TRAIN]
+    command = [sys.executable, "-m", "cli", "train", "--out", str(tmp_path), *TINY_TRAIN]
     if not terminal:
         done = subprocess.run(
             command, cwd=ROOT, env=environment(), capture_output=True, text=True, timeout=300

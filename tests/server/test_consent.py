@@ -14,8 +14,8 @@ import httpx
 import pytest
 from sqlalchemy import func, select
 
-from server.db.engine import make_engine, make_session_factory
-from server.db.models import Step
+from study.db.engine import make_engine, make_session_factory
+from study.db.models import Step
 from tests.server.live import API_KEY, LiveServer, serving
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import export, session_body

@@ -15,9 +15,9 @@ import pytest
 from PIL import Image
 from sqlalchemy import create_engine, select, update
 
-from server.db.models import Episode, Step
+from runs.worker.rerun import RerunOrder
 from server.live.playbacks import Playbacks, TooManyPlaybacks
-from server.worker.rerun import RerunOrder
+from study.db.models import Episode, Step
 from tests.server.live import API_KEY, LiveServer
 from tests.server.scale import rest_body, wait_for_status
 

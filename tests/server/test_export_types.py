@@ -19,7 +19,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from server.services.tables import column, resource, write_csv, write_parquet
+from study.services.tables import column, resource, write_csv, write_parquet
 
 ARROW_TYPES = {
     "integer": "int64",
@@ -164,10 +164,10 @@ def test_a_real_export_reads_back_with_its_declared_types(
 
 
 def test_a_failed_export_leaves_no_scratch_folder(tmp_path: Path) -> None:
-    from server.db.engine import make_engine, make_session_factory
-    from server.db.migrate import upgrade
-    from server.services.errors import NotFound
-    from server.services.export import export_zip
+    from study.db.engine import make_engine, make_session_factory
+    from study.db.migrate import upgrade
+    from study.services.errors import NotFound
+    from study.services.export import export_zip
 
     engine = make_engine(f"sqlite:///{tmp_path / 'db.sqlite3'}")
     upgrade(engine)

@@ -8,8 +8,8 @@ from pathlib import Path
 import httpx
 
 from learner.fitted import HELD, Count, FittedModel
-from server.db.engine import make_engine, make_session_factory
-from server.db.models import FittedAdvisorModel
+from study.db.engine import make_engine, make_session_factory
+from study.db.models import FittedAdvisorModel
 from tests.server.live import LiveServer
 from tests.server.scale import session_body
 

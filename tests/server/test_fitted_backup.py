@@ -7,14 +7,14 @@ from pathlib import Path
 
 from learner.fitted import Count, FittedModel
 from learner.run import RunSpec
-from server.db.backup import backup, restore
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.db.models import FittedAdvisorModel, StudySession
-from server.schemas.studies import StudyCreate
-from server.services.fitting import write_model_file
-from server.services.sessions import create_session
-from server.services.studies import create_study
+from study.db.backup import backup, restore
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import FittedAdvisorModel, StudySession
+from study.schemas.studies import StudyCreate
+from study.services.fitting import write_model_file
+from study.services.sessions import create_session
+from study.services.studies import create_study
 from tests.server.live import fresh_database
 
 

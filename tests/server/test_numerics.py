@@ -12,15 +12,15 @@ from sqlalchemy.orm import Session
 
 from learner import machine, provenance
 from learner.run import RunSpec
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.db.models import Status, StudySession
-from server.schemas.studies import StudyCreate
-from server.services.export import export_study
-from server.services.numerics import NumericsRefused
-from server.services.sessions import create_session, set_status
-from server.services.studies import create_study
-from server.worker.worker import WorkerOptions, run_session
+from runs.worker.worker import WorkerOptions, run_session
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Status, StudySession
+from study.schemas.studies import StudyCreate
+from study.services.export import export_study
+from study.services.numerics import NumericsRefused
+from study.services.sessions import create_session, set_status
+from study.services.studies import create_study
 from tests.server.live import fresh_database
 
 TINY = {"pretraining_steps": 30, "batch_size": 8, "memory_size": 300, "episodes": 1,
@@ -90,8 +90,8 @@ def test_a_resume_the_machine_cannot_honour_is_refused_or_overridden_and_recorde
 def test_ideeprl_train_refuses_to_resume_on_other_numerics(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    from cli.main import main
     from learner.checkpoint import read_checkpoint, write_checkpoint
-    from server.cli import main
 
     small = [f"--{k.replace('_', '-')}={v}" for k, v in TINY.items()]
     out = tmp_path / "run"

@@ -6,13 +6,13 @@ from __future__ import annotations
 import random
 from pathlib import Path
 
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.db.models import Episode, Status
-from server.schemas.design import StudyDesign
-from server.schemas.studies import StudyCreate
-from server.services import assignment, studies
-from server.services.reports import build_report
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Episode, Status
+from study.schemas.design import StudyDesign
+from study.schemas.studies import StudyCreate
+from study.services import assignment, studies
+from study.services.reports import build_report
 
 RUN = {"method": "human", "config": {"pretraining_steps": 20, "advice_budget": 5, "batch_size": 8}}
 EPISODES = 6

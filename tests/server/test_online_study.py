@@ -17,7 +17,7 @@ from urllib.parse import urlsplit
 import httpx
 import pytest
 
-from server.services.assignment import block_order
+from study.services.assignment import block_order
 from tests.server.live import LiveServer
 from tests.server.test_export_types import check_frictionless
 
@@ -224,7 +224,7 @@ def test_preview_takes_no_place_stays_out_of_the_export_and_deletes_in_one_call(
     assert all(r["panel_params"] == "" for r in panel), "pseudonymous by default"
     paid = table(exported(api, study, tmp_path / "paid", panel_ids="true"), "panel_ids")
     assert {r["panel_id"] for r in paid} == {"V1", "V2"}
-    from server.cli import main
+    from cli.main import main
 
     argv = ["export", "--study", str(study["id"]), "--database-url", server.database_url]
     assert (
@@ -339,9 +339,9 @@ def test_a_study_from_a_design_file_reads_back_as_the_file(
 ) -> None:
     import yaml
 
-    from server.cli import main
-    from server.schemas.design import StudyDesign
-    from server.services.studies import stored_design
+    from cli.main import main
+    from study.schemas.design import StudyDesign
+    from study.services.studies import stored_design
 
     source = tmp_path / "design.yaml"
     source.write_text(DESIGN_FILE)

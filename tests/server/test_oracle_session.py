@@ -109,7 +109,7 @@ def test_oracle_session_runs_to_the_end_and_exports_the_learners_records(
     assert all(files[r["observation_file"]].startswith(b"\x89PNG") for r in advice)
 
     out = tmp_path / "export"
-    command = [sys.executable, "-m", "server", "export", "--study", str(study["id"]), "--out"]
+    command = [sys.executable, "-m", "cli", "export", "--study", str(study["id"]), "--out"]
     env = {**os.environ, "IDEEPRL_DATABASE_URL": server.database_url}
     done = subprocess.run([*command, str(out)], env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
@@ -130,7 +130,7 @@ def test_oracle_session_runs_to_the_end_and_exports_the_learners_records(
     # data package declares, and a descriptor Frictionless accepts. (Frictionless reads
     # Parquet through pandas, which turns an integer column with a missing value into
     # floats, so the cells are checked with pyarrow; its CSV validation is in
-    # tests/server/batch/test_export_formats.py.)
+    # tests/runs/batch/test_export_formats.py.)
     response = api.get(f"/api/studies/{study['id']}/export", params={"format": "parquet"})
     assert response.status_code == 200, response.text
     parquet_dir = tmp_path / "parquet"

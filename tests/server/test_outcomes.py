@@ -7,17 +7,17 @@ from pathlib import Path
 
 from sqlalchemy import select, update
 
+from analysis.rescoring import rescored_totals
 from learner.run import RunSpec
-from server.analysis.rescoring import rescored_totals
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.db.models import Step, StudySession
-from server.schemas.studies import StudyCreate
-from server.services.episodes import load_training_steps
-from server.services.outcomes import fill_outcomes
-from server.services.sessions import create_session
-from server.services.studies import create_study
-from server.worker.worker import WorkerOptions, run_session
+from runs.worker.worker import WorkerOptions, run_session
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Step, StudySession
+from study.schemas.studies import StudyCreate
+from study.services.episodes import load_training_steps
+from study.services.outcomes import fill_outcomes
+from study.services.sessions import create_session
+from study.services.studies import create_study
 from tests.server.live import fresh_database
 
 TINY = {"pretraining_steps": 30, "batch_size": 8, "memory_size": 300, "episodes": 3,

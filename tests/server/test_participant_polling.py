@@ -10,7 +10,7 @@ from pathlib import Path
 from fastapi.testclient import TestClient
 
 from server.main import create_app
-from server.settings import Settings
+from study.settings import Settings
 from tests.server.live import API_KEY, fresh_database
 
 

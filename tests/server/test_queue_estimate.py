@@ -7,10 +7,10 @@ import time
 
 import pytest
 
+from runs.worker.messages import Progress
+from runs.worker.worker import WorkerOptions
 from server.live.hub import Hub
 from server.live.manager import SessionManager, WorkerHandle
-from server.worker.messages import Progress
-from server.worker.worker import WorkerOptions
 
 
 def _handle(session_id: int, episode: int, episodes: int = 20) -> WorkerHandle:

@@ -9,8 +9,8 @@ from pathlib import Path
 import httpx
 import pytest
 
+from cli.main import main
 from learner.fitted import HELD, Count, FittedModel
-from server.cli import main
 from tests.server.live import LiveServer
 from tests.server.scale import session_body, wait_for_status
 

@@ -14,16 +14,16 @@ from typing import Any
 import pytest
 from sqlalchemy import select, update
 
+from cli.main import main
 from learner.run import RunSpec
-from server.cli import main
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.db.models import Advice, Step, StudySession
-from server.schemas.sessions import SessionOptions
-from server.schemas.studies import StudyCreate
-from server.services.sessions import create_session
-from server.services.studies import create_study
-from server.worker.worker import WorkerOptions, run_session
+from runs.worker.worker import WorkerOptions, run_session
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Advice, Step, StudySession
+from study.schemas.sessions import SessionOptions
+from study.schemas.studies import StudyCreate
+from study.services.sessions import create_session
+from study.services.studies import create_study
 from tests.server.live import fresh_database
 
 SCALE = {"batch_size": 8, "memory_size": 500, "episodes": 1, "torch_threads": 1}
@@ -226,7 +226,7 @@ def test_on_another_cpu_a_difference_is_explained_and_on_the_same_one_a_fault(
 
 
 def test_steps_recorded_without_observation_hashes_compare_on_the_other_columns() -> None:
-    from server.services.replays import DECIDING, compare
+    from study.services.replays import DECIDING, compare
 
     step = {column: 1 for column in DECIDING}
     old = {**step, "observation_hash": None}
@@ -263,7 +263,7 @@ def test_strategies_that_weigh_values_and_a_replay_without_a_stream_are_refused(
     )  # fmt: skip
     assert code == 2
     with database.factory()() as db:
-        from server.services.errors import Invalid
+        from study.services.errors import Invalid
 
         spec = RunSpec.from_json({"method": "replayed", "config": SCALE})
         with pytest.raises(Invalid, match="ideeprl replay"):
@@ -278,8 +278,8 @@ def test_deleting_the_source_deletes_its_replays_and_the_export_says_which_deriv
     the replay's rows and files, and a replay of the replay, wherever they are."""
     import csv
 
-    from server.services.export import export_study
-    from server.services.storage import delete_session, session_dir
+    from study.services.export import export_study
+    from study.services.storage import delete_session, session_dir
 
     original = database.session("oracle", seed=9, motion="fast", config=EARLY)
     code, first = database.replay(original, "--study", "reuse", "--preset", "authors")
@@ -310,7 +310,7 @@ def test_a_session_of_an_export_replays_unchanged(
 ) -> None:
     import shutil
 
-    from server.services.export import export_study
+    from study.services.export import export_study
 
     with database.factory()() as db:
         export_study(db, 1, tmp_path / "export")

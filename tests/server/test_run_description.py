@@ -15,23 +15,23 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import select
 
+from analysis.audit import audit
+from cli.commands import batch as batch_command
+from cli.main import build_parser
 from learner.fields import bounded, leaves
 from learner.run import RunSpec
-from server.analysis.audit import audit
-from server.batch import BatchSpec
-from server.batch.runner import BatchRunner, RunnerOptions
-from server.cli import build_parser
-from server.commands import batch as batch_command
-from server.db.engine import make_engine, make_session_factory
-from server.db.migrate import upgrade
-from server.db.models import Study, StudySession
+from runs.batch import BatchSpec
+from runs.batch.runner import BatchRunner, RunnerOptions
+from runs.worker.worker import WorkerOptions, run_session
 from server.main import create_app
-from server.schemas.sessions import SessionOptions, session_create_model
-from server.services import learning
-from server.services.episodes import session_settings
-from server.services.export import export_study
-from server.settings import Settings
-from server.worker.worker import WorkerOptions, run_session
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Study, StudySession
+from study.schemas.sessions import SessionOptions, session_create_model
+from study.services import learning
+from study.services.episodes import session_settings
+from study.services.export import export_study
+from study.settings import Settings
 from tests.server.live import API_KEY, fresh_database
 
 TINY = [

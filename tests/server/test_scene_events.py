@@ -17,7 +17,7 @@ from fastapi import FastAPI
 
 from server.live.hub import HubEvent
 from server.main import create_app
-from server.settings import Settings
+from study.settings import Settings
 from tests.server.live import API_KEY, free_port, fresh_database
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import session_body

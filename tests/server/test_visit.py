@@ -17,13 +17,13 @@ import pytest
 from pydantic import ValidationError
 from sqlalchemy import func, select, update
 
-from server.db.engine import make_engine, make_session_factory
-from server.db.models import CheckAttempt, QuestionnaireAnswer, Study, StudySession
-from server.schemas.design import Condition, StudyDesign
-from server.schemas.instruments import score_nasa_tlx, score_trust
-from server.schemas.visit import CheckSpec, Item, QuestionnaireSpec
-from server.services.visit import expected_answer
 from sim.rules import SortRule
+from study.db.engine import make_engine, make_session_factory
+from study.db.models import CheckAttempt, QuestionnaireAnswer, Study, StudySession
+from study.schemas.design import Condition, StudyDesign
+from study.schemas.instruments import score_nasa_tlx, score_trust
+from study.schemas.visit import CheckSpec, Item, QuestionnaireSpec
+from study.services.visit import expected_answer
 from tests.server.live import LiveServer
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import export, session_body, wait_for_status

@@ -30,7 +30,7 @@ DUMP = """
 import atexit, sys
 path = sys.argv.pop(1)
 atexit.register(lambda: open(path, "w").write("\\n".join(sorted(sys.modules))))
-from server.cli import main
+from cli.main import main
 raise SystemExit(main(sys.argv[1:]))
 """
 REPORT = "report"

@@ -11,7 +11,7 @@ database; their autonomous sessions pair up by seed. For every pair of sessions 
 compares the step logs in the columns that decide an agent's course (action, its source,
 the advised action, reward, termination, truncation and the observation's hash) and the
 Q-values; it tests the R_T difference for equivalence within 3 % of the alone arm's mean
-(paired TOST, `server.analysis.equivalence`), and draws both arms' mean curves and R_T.
+(paired TOST, `analysis.equivalence`), and draws both arms' mean curves and R_T.
 Writes `README.md` (numbers), `pairs.csv` and the figure (PNG and SVG) to --out.
 """
 
@@ -31,7 +31,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from server.analysis.equivalence import paired_tost, relative_margin
+from analysis.equivalence import paired_tost, relative_margin
 
 COURSE = (
     "action",

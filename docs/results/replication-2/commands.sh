@@ -20,6 +20,7 @@ PY=${PY:-$REPO/.venv/bin/python}
 STATE=$HERE/state
 mkdir -p "$DATA"
 
+# (`server.cli`: the command line's module at the tag, before the folders were split by program.)
 batch() {  # study, label, then ideeprl batch options
   local study=$1 label=$2; shift 2
   (cd "$CODE" && "$PY" -m server.cli batch --study "$study" --label "$label" --seed 0 \

@@ -1,0 +1,162 @@
+"""A study's export read back for analysis: the runs, the episode table, the training steps
+and the settings table, from the folder (or zip) that `ideeprl export` wrote, CSV or
+Parquet, by this version or an older one.
+
+Each session's run is its `run_spec` column (the whole `learner.run.RunSpec` document)
+where the export has it; an export written before it (API 1.x) has one column per field,
+which the run's declaration names (`Leaf.column`: `config_batch_size`, `strategy_interval`,
+`oracle_error_rate`, `reward_scheme`, ...), so the run is read back from them, and fields
+the export did not carry take their defaults. Old spellings of a stage (`phase`, `advice`)
+read as today's (`stage`, `pretrain`).
+
+    python -m analysis EXPORT_FOLDER_OR_ZIP OUT
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+import zipfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from analysis.episodes import EPISODE_TABLE_COLUMNS
+from analysis.rescoring import STEP_COLUMNS
+from analysis.settings import settings_table
+from learner.fields import FieldError, leaves, nest
+from learner.records import stage_of
+from learner.run import RunSpec
+
+
+class ExportError(ValueError):
+    """Not an export this version can read; the message says what is missing."""
+
+
+@dataclass(frozen=True)
+class Exported:
+    """What an export holds for the analysis."""
+
+    runs: dict[int, RunSpec]
+    """Each session's run, by session id."""
+    episodes: pd.DataFrame
+    """Training episodes, `EPISODE_TABLE_COLUMNS`."""
+    steps: pd.DataFrame
+    """Training steps, `analysis.rescoring.STEP_COLUMNS` (and `outcome` when the
+    export has it)."""
+    settings: pd.DataFrame
+    """The audit's settings table (`analysis.settings`)."""
+
+
+def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
+    """The export at `path` (a folder, or the zip the API serves)."""
+    path = Path(path)
+    if path.is_file() and zipfile.is_zipfile(path):
+        with tempfile.TemporaryDirectory() as tmp, zipfile.ZipFile(path) as archive:
+            archive.extractall(tmp)
+            return read_export(Path(tmp), spec_class)
+    sessions = _table(path, "sessions")
+    runs = {int(row["session_id"]): run_of(row, spec_class) for row in _rows(sessions)}
+    episodes = _with_stage(_table(path, "episodes"))
+    training = episodes[episodes["stage"] == "train"].copy()
+    training["method"] = training["session_id"].map({i: r.method for i, r in runs.items()})
+    training["seed"] = training["session_id"].map({i: r.seed for i, r in runs.items()})
+    training = training.sort_values(["session_id", "episode"])
+    steps = _with_stage(_table(path, "steps"))
+    steps = steps[steps["stage"] == "train"].sort_values(["session_id", "global_step"])
+    return Exported(
+        runs=runs,
+        episodes=training[list(EPISODE_TABLE_COLUMNS)].reset_index(drop=True),
+        steps=steps[[*STEP_COLUMNS, *(["outcome"] if "outcome" in steps else [])]].reset_index(
+            drop=True
+        ),
+        settings=settings_table(sorted(runs.items()), spec_class, _provenance(sessions)),
+    )
+
+
+def run_of(row: Mapping[str, Any], spec_class: type[RunSpec] = RunSpec) -> RunSpec:
+    """A session row's run: its `run_spec` document, or its run columns (older exports)."""
+    document = row.get("run_spec")
+    try:
+        if isinstance(document, str) and document:
+            return spec_class.from_json(json.loads(document))
+        values = {}
+        for leaf in leaves(spec_class):
+            value = row.get(leaf.column)
+            if _missing(value):
+                continue
+            values[leaf.name] = _typed(leaf.kind, value)
+        if values.get("strategy") is None:
+            values.pop("strategy", None)
+        return spec_class.from_json(nest(values, spec_class))
+    except (FieldError, json.JSONDecodeError) as error:
+        raise ExportError(f"session {row.get('session_id')}: {error}") from None
+
+
+def _provenance(sessions: pd.DataFrame) -> dict[int, list[Any]] | None:
+    """Each session's provenance records (None for an export written before they were)."""
+    if "provenance" not in sessions:
+        return None
+    return {
+        int(row["session_id"]): [] if _missing(row["provenance"]) else json.loads(row["provenance"])
+        for row in _rows(sessions)
+    }
+
+
+def _table(folder: Path, name: str) -> pd.DataFrame:
+    for suffix, read in ((".csv", _read_csv), (".parquet", pd.read_parquet)):
+        file = folder / f"{name}{suffix}"
+        if file.is_file():
+            return read(file)
+    raise ExportError(f"no {name}.csv or {name}.parquet in {folder}: not a study export")
+
+
+def _read_csv(file: Path) -> pd.DataFrame:
+    return pd.read_csv(file, dtype=str, keep_default_na=False, na_values=[""])
+
+
+def _rows(table: pd.DataFrame) -> list[dict[str, Any]]:
+    return [dict(row) for _, row in table.iterrows()]
+
+
+def _with_stage(table: pd.DataFrame) -> pd.DataFrame:
+    """Today's `stage` column from an export's `stage` or older `phase`, numbers typed."""
+    table = table.rename(columns={"phase": "stage"})
+    if "stage" not in table:
+        raise ExportError("the export's steps and episodes have no stage (or phase) column")
+    table["stage"] = table["stage"].map(stage_of)
+    for column in ("session_id", "episode", "episode_step", "global_step", "steps",
+                   "placed_correct", "misplaced", "lost"):  # fmt: skip
+        if column in table:
+            table[column] = pd.to_numeric(table[column]).astype("int64")
+    for column in ("collected_reward", "epsilon", "reward"):
+        if column in table:
+            table[column] = pd.to_numeric(table[column]).astype("float64")
+    if "terminated" in table:
+        table["terminated"] = table["terminated"].map(_boolean)
+    return table
+
+
+def _missing(value: Any) -> bool:
+    return value is None or (isinstance(value, float) and math.isnan(value)) or value == ""
+
+
+def _boolean(value: Any) -> bool:
+    return value if isinstance(value, bool) else str(value).lower() == "true"
+
+
+def _typed(kind: type, value: Any) -> Any:
+    """A cell as its field's type (CSV cells are text; Parquet's are typed already)."""
+    if hasattr(value, "item"):  # a numpy scalar from Parquet
+        value = value.item()
+    if kind is bool:
+        return _boolean(value)
+    if kind is int:
+        return int(float(value)) if isinstance(value, str) else int(value)
+    if kind is float:
+        return float(value)
+    return value

@@ -1,0 +1,91 @@
+"""The settings table of the comparability audit (`analysis.audit`), from runs.
+
+One row per session: its method, its learner (the preset and the config fields that differ
+from it), one column per other setting of the run's declaration (`learner.run.RunSpec`'s
+leaves of role `setting`), and the treatment (`advice`). Made the same way from the
+database (`study.services.episodes.session_settings`) and from an export
+(`analysis.exported`), so a field added to the run is audited by itself.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import pandas as pd
+
+from analysis.audit import describe_learner
+from learner import sb3_dqn
+from learner.config import PRESETS, DQNConfig
+from learner.fields import leaves
+from learner.run import RunSpec
+
+PROVENANCE = {"code_version": "code", "cpu_kind": "cpu", "torch_version": "torch"}
+"""The provenance the audit compares (`learner.provenance.record`): its column, and the
+record's key. Arms computed by other code, on another CPU kind or torch are flagged."""
+
+
+def settings_table(
+    runs: Sequence[tuple[int, RunSpec]],
+    spec_class: type[RunSpec] = RunSpec,
+    provenance: Mapping[int, Sequence[Mapping[str, Any]]] | None = None,
+) -> pd.DataFrame:
+    """The audit's table for `(session_id, run)` pairs; with `provenance` (each session's
+    records of where it was computed) also the code version, CPU kind and torch version
+    (several joined by ' + ' when a run was resumed elsewhere)."""
+    presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
+    settings = [
+        leaf
+        for leaf in leaves(spec_class)
+        if leaf.role == "setting" and leaf.path[0] != "config" and leaf.name != "preset"
+    ]
+    rows = []
+    for session_id, run in runs:
+        spec = run.normalized()
+        config = spec.config.to_dict()
+        learner = (
+            sb3_dqn.describe(spec.sb3, config)  # another learner altogether: the audit flags it
+            if spec.learner == "sb3-dqn"
+            else describe_learner(config, presets)
+        )
+        values = spec.values()
+        rows.append(
+            {
+                "session_id": session_id,
+                "method": spec.method,
+                "learner": learner,
+                **{leaf.name: _text(values[leaf.name]) for leaf in settings},
+                **(
+                    {}
+                    if provenance is None
+                    else {
+                        column: where(provenance.get(session_id, ()), key)
+                        for column, key in PROVENANCE.items()
+                    }
+                ),
+                "advice": "none"
+                if not spec.advised
+                else f"{spec.strategy}{_options(spec.strategy_options.given())}, "
+                f"budget {spec.advice_budget}",
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def where(records: Sequence[Mapping[str, Any]], key: str) -> str:
+    """One provenance value of a run: its records' distinct values, in order, joined by
+    ' + ' ('not recorded' for a run stored before provenance was)."""
+    seen = list(dict.fromkeys(str(r.get(key)) for r in records))
+    return " + ".join(seen) if seen else "not recorded"
+
+
+def _text(value: Any) -> Any:
+    """A setting as the audit compares it (a map as sorted JSON)."""
+    return json.dumps(value, sort_keys=True) if isinstance(value, dict | list) else value
+
+
+def _options(options: dict[str, Any] | None) -> str:
+    """A strategy's options in words, e.g. " (interval 3)"; "" when it has none."""
+    given = ", ".join(f"{k} {v}" for k, v in sorted((options or {}).items()))
+    return f" ({given})" if given else ""

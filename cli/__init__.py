@@ -1,0 +1,1 @@
+"""`ideeprl`, the command line (`cli.main`), and its sub-commands."""

@@ -1,0 +1,115 @@
+"""What every `ideeprl` command shares: exit codes, finding the data folder and a study,
+and whether to draw progress bars.
+
+Commands whose result a script reads take `--json`: one JSON object on stdout and nothing
+else there (messages and warnings go to stderr), with the same exit codes.
+
+Exit codes follow the usual convention: 0 done, 1 a runtime error (no such study, nothing
+to analyse, a database that is not there), 2 a usage error (an option that makes no
+sense, or a value the database refuses as invalid; argparse's own errors are 2 too),
+130 interrupted.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import TYPE_CHECKING, Any, TextIO
+
+from sqlalchemy.engine import make_url
+
+if TYPE_CHECKING:
+    import argparse
+
+    from sqlalchemy.engine import Engine
+    from sqlalchemy.orm import Session
+
+    from study.settings import Settings
+
+EXIT_RUNTIME = 1
+EXIT_USAGE = 2
+
+
+class CommandError(Exception):
+    """An error a command reports in one line and exits with `code`."""
+
+    def __init__(self, message: str, code: int = EXIT_RUNTIME) -> None:
+        super().__init__(message)
+        self.message = message
+        self.code = code
+
+
+def service_exit_code(error: Exception) -> int:
+    """A service's `Invalid` (a value the user gave is not acceptable) is a usage error;
+    `NotFound` and `Conflict` (what the database holds) are runtime errors."""
+    from study.services.errors import Invalid
+
+    return EXIT_USAGE if isinstance(error, Invalid) else EXIT_RUNTIME
+
+
+def fail(message: str, code: int = EXIT_RUNTIME) -> int:
+    """Print `error: message` on stderr; returns the exit code."""
+    print(f"error: {message}", file=sys.stderr)
+    return code
+
+
+def add_json_option(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help=f"print {what} as one JSON object on stdout, and nothing else there "
+        "(messages go to stderr); the exit codes stay the same",
+    )
+
+
+def print_json(value: Any) -> None:
+    """The result of a command run with `--json`: its only output on stdout."""
+    print(json.dumps(value, indent=2))
+
+
+def show_progress(disabled: bool, stream: TextIO | None = None) -> bool:
+    """Progress bars only for a person at a terminal: never when the output is piped or
+    redirected to a file (logs then hold the results, not thousands of bar redraws)."""
+    stream = stream or sys.stderr
+    return not disabled and bool(getattr(stream, "isatty", lambda: False)())
+
+
+def existing_database(settings: Settings) -> Engine:
+    """An engine on the database `serve` uses with these settings, migrated, for a command
+    that only reads: a SQLite file that does not exist is an error that says where we
+    looked, never a new empty database."""
+    from study.db.engine import make_engine
+    from study.db.migrate import BACKUPS, upgrade
+
+    url = make_url(settings.db_url)
+    if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
+        from pathlib import Path
+
+        path = Path(url.database)
+        if not path.is_file():
+            raise CommandError(
+                f"no database at {path.resolve()}: run this where you run `ideeprl serve`, "
+                "or pass --data-dir (or set IDEEPRL_DATA_DIR) to the folder holding "
+                "ideeprl.sqlite3, or --database-url"
+            )
+    engine = make_engine(settings.db_url)
+    upgrade(engine, settings.data_dir / BACKUPS)
+    return engine
+
+
+def find_study(db: Session, study: str) -> tuple[int, str]:
+    """The study named by id or by name (never created); returns (id, description)."""
+    from sqlalchemy import select
+
+    from study.db.models import Study
+
+    text = study.strip()
+    found = db.get(Study, int(text)) if text.isdigit() else None
+    if found is None:
+        found = db.scalar(select(Study).where(Study.name == text))
+    if found is None:
+        names = [f"{s.id} ({s.name})" for s in db.scalars(select(Study).order_by(Study.id))]
+        known = f"; studies: {', '.join(names)}" if names else "; there are no studies yet"
+        what = "id" if text.isdigit() else "name"
+        raise CommandError(f"no study with {what} {text}{known}")
+    return found.id, f"study {found.id} ({found.name})"

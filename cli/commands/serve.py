@@ -1,0 +1,69 @@
+"""`ideeprl serve`: run the study server (API, participant pages, session workers)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "serve",
+        help="run the study server",
+        description="Run the study server. Settings come from IDEEPRL_* environment "
+        "variables or .env (see docs/api.md); these options override them.",
+    )
+    parser.add_argument("--host", help="interface to listen on (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, help="port (default 8000)")
+    parser.add_argument(
+        "--public-url",
+        help="address participants reach the server at, for their links (default http://HOST:PORT)",
+    )
+    parser.add_argument("--data-dir", type=Path, help="folder of database, checkpoints, exports")
+    parser.add_argument("--log-level", default="info", help="uvicorn log level")
+    parser.set_defaults(func=serve)
+
+
+def serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from server.main import UVICORN_OPTIONS, create_app
+    from study.settings import Settings
+
+    overrides = {
+        k: v
+        for k, v in {
+            "host": args.host,
+            "port": args.port,
+            "public_url": args.public_url,
+            "data_dir": args.data_dir,
+        }.items()
+        if v is not None
+    }
+    settings = Settings(**overrides)
+    key, new = settings.ensure_api_key()
+    app = create_app(settings)
+    base = settings.base_url
+    saved = f" (new, saved in {settings.data_dir / 'api_key'})" if new else ""
+    print(
+        f"IDeepRL study server\n"
+        f"  dashboard:       {base}/dashboard (log in with the researcher key)\n"
+        f"  API docs:        {base}/docs\n"
+        f"  API:             {base}/api\n"
+        f"  participant URL: {base}/p/TOKEN (each human session has its own link)\n"
+        f"  database:        {settings.db_url}\n"
+        f"  researcher key:  {key}{saved}\n"
+        f"  send it as the X-API-Key header, e.g.\n"
+        f"  curl -H 'X-API-Key: {key}' {base}/api/studies",
+        flush=True,
+    )
+    uvicorn.run(
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level=args.log_level,
+        forwarded_allow_ips=settings.forwarded_allow_ips,
+        **UVICORN_OPTIONS,
+    )
+    return 0

@@ -1,0 +1,83 @@
+"""`ideeprl study create --from design.yaml`: an online study from a file, as
+`POST /api/studies` makes it (the same body: name, description, texts, design), written
+into the database `serve` uses. The file is YAML (JSON is YAML too)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from cli.commands.batch import add_database_options, settings_from
+from cli.commands.common import EXIT_USAGE, CommandError, add_json_option, print_json
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "study", help="create a study (an online one from a design file)", description=__doc__
+    )
+    actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+    create = actions.add_parser("create", help="create a study from a YAML file")
+    create.add_argument(
+        "--from",
+        dest="source",
+        type=Path,
+        required=True,
+        help="YAML file: name, description, texts and design (conditions, targets, "
+        "capacity, alpha, idle_limit_s, panel, check, questionnaire)",
+    )
+    create.add_argument("--name", help="the study's name (instead of the file's)")
+    add_json_option(create, "the study as the API returns it")
+    add_database_options(create)
+    create.set_defaults(func=create_study)
+
+
+def read_body(source: Path, name: str | None) -> Any:
+    """The file as a `StudyCreate` body; a bad file is a usage error naming the field."""
+    import yaml
+    from pydantic import ValidationError
+
+    from study.schemas.studies import StudyCreate
+
+    try:
+        data = yaml.safe_load(source.read_text())
+    except (OSError, yaml.YAMLError) as error:
+        raise CommandError(f"cannot read {source}: {error}", EXIT_USAGE) from None
+    if not isinstance(data, dict):
+        raise CommandError(f"{source} must hold a mapping (name:, design:, ...)", EXIT_USAGE)
+    if name:
+        data["name"] = name
+    try:
+        return StudyCreate.model_validate(data)
+    except ValidationError as error:
+        first = error.errors()[0]
+        where = ".".join(map(str, first["loc"]))
+        raise CommandError(f"{source}: {where}: {first['msg']}", EXIT_USAGE) from None
+
+
+def create_study(args: argparse.Namespace) -> int:
+    from study.db.engine import make_engine, make_session_factory
+    from study.db.migrate import BACKUPS, upgrade
+    from study.services import studies
+    from study.services.errors import Invalid, ServiceError
+
+    body = read_body(args.source, args.name)
+    settings = settings_from(args)
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    engine = make_engine(settings.db_url)
+    upgrade(engine, settings.data_dir / BACKUPS)
+    with make_session_factory(engine)() as db:
+        try:
+            study = studies.create_study(db, body)
+        except ServiceError as error:
+            if isinstance(error, Invalid):
+                raise CommandError(f"{error.field}: {error.message}", EXIT_USAGE) from None
+            raise CommandError(error.message) from None
+        public = studies.public(db, study, settings.base_url)
+    engine.dispose()
+    if args.json:
+        print_json(public.model_dump(mode="json"))
+    else:
+        link = f"; its link: {public.join_url}" if public.join_url else ""
+        print(f"study {public.id} ({public.name}) created{link}")
+    return 0

@@ -1,0 +1,64 @@
+"""The `ideeprl` command line: one entry point, a sub-command per task.
+
+`train` comes from the learner; every module in `cli/commands/` that defines
+`register(subparsers)` adds its own sub-commands, so a new command is a new file. Exit
+codes: 0 done, 1 a runtime error, 2 a usage error, 130 interrupted
+(`cli.commands.common`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import inspect
+import pkgutil
+from collections.abc import Sequence
+from importlib import metadata
+
+from cli import commands
+from cli.commands.common import CommandError, fail
+from learner.run import RunSpec
+
+
+def version() -> str:
+    """The installed distribution's version (pyproject.toml)."""
+    try:
+        return metadata.version("ideeprl")
+    except metadata.PackageNotFoundError:  # run from a checkout that is not installed
+        return "unknown (not installed)"
+
+
+def build_parser(spec_class: type[RunSpec] = RunSpec) -> argparse.ArgumentParser:
+    """Every command's parser; the commands that take a run (`train`, `batch`) make their
+    flags from `spec_class`, the run's declaration."""
+    parser = argparse.ArgumentParser(
+        prog="ideeprl",
+        description="Human advising studies in interactive deep reinforcement learning.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    modules = ["learner.cli"] + [
+        f"{commands.__name__}.{info.name}" for info in pkgutil.iter_modules(commands.__path__)
+    ]
+    for name in modules:
+        module = importlib.import_module(name)
+        register = getattr(module, "register", None)
+        if register is None:
+            continue
+        if "spec_class" in inspect.signature(register).parameters:
+            register(subparsers, spec_class=spec_class)
+        else:
+            register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None, spec_class: type[RunSpec] = RunSpec) -> int:
+    args = build_parser(spec_class).parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except CommandError as error:
+        return fail(error.message, error.code)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""What runs sessions: the session worker process and the batch runner."""

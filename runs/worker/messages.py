@@ -1,0 +1,138 @@
+"""What travels over the duplex pipe between the web process and a session's worker.
+
+Plain frozen dataclasses, pickled by multiprocessing. Worker -> web: `Progress`,
+`AdviceRequest`, `AdviceResult`, `EpisodeDone`, `SceneReset`, `SceneStep`, `StatusChanged`,
+`TrainingWanted`. Web -> worker: `AdviceAnswer`, `Command` (`ready`: the participant
+consented and finished the induction; `train`: a trainer slot is free).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+
+@dataclass(frozen=True)
+class Progress:
+    stage: str
+    """`pretraining` or `training`."""
+    global_step: int
+    """Environment steps taken so far (pretraining included)."""
+    episode: int
+    """Training episodes finished."""
+    episodes: int
+    """Training episodes the session will run."""
+    epsilon: float
+    """Current exploration rate."""
+    collected_reward: float
+    """Reward collected in the current episode so far."""
+    last_episode_reward: float | None
+    """Collected reward of the last finished training episode."""
+    advice_given: int
+    """Advice received so far."""
+    advice_budget: int
+    """Advice the strategy may ask for in all."""
+    queued: bool = False
+    """Waiting in the server's queue for a free trainer slot (human sessions after advice)."""
+    waiting_for_participant: bool = False
+    """Ready for advice, waiting for the participant's consent and induction."""
+
+
+@dataclass(frozen=True)
+class AdviceRequest:
+    advice_index: int
+    """0-based index of this advice in the session."""
+    global_step: int
+    """The step the advice is for."""
+    observation_png: bytes
+    """The 64x64 image the learner sees, PNG (lossless)."""
+    info: dict[str, Any]
+    """The environment's ground truth at this step; participants are shown only what the arm
+    holds and where, in words (the scene shows it too)."""
+    advice_budget: int
+    """Advice the strategy may ask for in all."""
+
+
+@dataclass(frozen=True)
+class AdviceResult:
+    advice_index: int
+    """Which advice was carried out."""
+    action: int
+    """The action taken."""
+    reward: float
+    """Reward of the advised step."""
+    episode_over: bool
+    """The step ended its episode."""
+
+
+@dataclass(frozen=True)
+class EpisodeDone:
+    record: dict[str, Any]
+    """The learner's `EpisodeRecord.to_dict()`."""
+
+
+@dataclass(frozen=True)
+class SceneReset:
+    bodies: list[Any]
+    """`sim.BodySpec` of every body in the scene (static for the scene)."""
+    poses: dict[str, Any]
+    """`sim.Pose` of every body, by name."""
+    episode: int
+    """Training episode the reset starts (pretraining resets carry -1)."""
+
+
+@dataclass(frozen=True)
+class SceneStep:
+    action: int
+    """The action just taken."""
+    reward: float
+    """Its reward."""
+    frames: list[Any]
+    """`sim.MotionFrame`s along the motion (empty in fast mode without recording)."""
+    poses: dict[str, Any]
+    """`sim.Pose` of every body after the step."""
+    global_step: int
+    """The step's global step (from 1, as the learner's StepRecord)."""
+    advised: bool = False
+    """The step carried out the participant's advice: the only steps the 3-D view replays
+    as motion (the others it shows at their end, so it never makes a person wait)."""
+
+
+@dataclass(frozen=True)
+class StatusChanged:
+    status: str
+    """New status (see `study.db.models.Status`)."""
+    detail: str = ""
+    """Why, for failures and abandonment."""
+
+
+@dataclass(frozen=True)
+class TrainingWanted:
+    """A human session's advice is over: it asks for one of the server's trainer slots
+    and waits (queued) until `Command("train")` grants it."""
+
+
+@dataclass(frozen=True)
+class AdviceAnswer:
+    advice_index: int
+    action: int
+
+
+@dataclass(frozen=True)
+class Command:
+    name: Literal[
+        "pause", "resume", "stop", "watch", "unwatch", "shutdown", "ready", "train", "assigned"
+    ]
+    args: dict[str, Any] = field(default_factory=dict)
+
+
+WorkerMessage = (
+    Progress
+    | AdviceRequest
+    | AdviceResult
+    | EpisodeDone
+    | SceneReset
+    | SceneStep
+    | StatusChanged
+    | TrainingWanted
+)

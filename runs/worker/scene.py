@@ -1,0 +1,75 @@
+"""A Gymnasium wrapper that tells the web process what the scene does, for the viewer,
+and keeps the current episode's collected reward for progress reports."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, SupportsFloat, cast
+
+import gymnasium as gym
+
+from runs.worker.link import WorkerLink
+from runs.worker.messages import SceneReset, SceneStep
+
+if TYPE_CHECKING:
+    from sim.env import SortingEnv
+
+
+class SceneBroadcast(gym.Wrapper):
+    def __init__(self, env: gym.Env, link: WorkerLink | None) -> None:
+        super().__init__(env)
+        self._link = link
+        self.collected_reward = 0.0
+        self.steps = 0
+        self.episode = -1
+        self.after_step: list[Callable[[int, float, bool], None]] = []
+        """Called with (action, reward, episode_over) after every step."""
+        self.advised: Callable[[], bool] = lambda: False
+        """Whether the step being taken carries out a participant's advice (asked before
+        `after_step` runs): the view animates only those."""
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self.collected_reward = 0.0
+        if self._link is not None and self._link.watching:
+            self.announce()
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        advised = self.advised()
+        self.collected_reward += float(reward)
+        self.steps += 1
+        for hook in self.after_step:
+            hook(int(action), float(reward), bool(terminated or truncated))
+        if self._link is not None and self._link.watching:
+            scene = scene_of(self.env)
+            self._link.send(
+                SceneStep(
+                    action=int(action),
+                    reward=float(reward),
+                    frames=list(getattr(scene, "last_motion", None) or []),
+                    poses=dict(scene.body_poses()),
+                    global_step=self.steps,
+                    advised=advised,
+                )
+            )
+        return obs, reward, terminated, truncated, info
+
+    def announce(self) -> None:
+        """Send the whole scene (bodies and poses): on reset, and when a viewer arrives."""
+        assert self._link is not None
+        scene = scene_of(self.env)
+        self._link.send(
+            SceneReset(
+                bodies=list(scene.scene_bodies()),
+                poses=dict(scene.body_poses()),
+                episode=self.episode,
+            )
+        )
+
+
+def scene_of(env: gym.Env[Any, Any]) -> SortingEnv:
+    """The sorting scene under a run's wrappers (imported by name only: the web process
+    imports this module and loads no simulation)."""
+    return cast("SortingEnv", env.unwrapped)

@@ -1,0 +1,457 @@
+"""One session's run, in the process that owns its environment and learner.
+
+The web process starts `worker_main` in a spawned process per running session; the batch
+runner (issue 6) calls `run_session` directly, in its own processes or Ray tasks. Either
+way the worker claims the session, resumes from its last checkpoint when there is one,
+logs every record, checkpoints every few episodes and at pause/stop, and writes its own
+final status.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+import traceback
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session, sessionmaker
+
+from learner import provenance
+from learner.advisors import RecordedAdvisor
+from learner.records import TRAINING
+from learner.run import RunSpec
+from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
+from runs.worker.link import ParentGone, WorkerExit, WorkerLink
+from runs.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
+from runs.worker.recorder import Checkpointable, LeaseLost, Recorder
+from runs.worker.scene import SceneBroadcast
+from study.db.engine import make_engine, make_session_factory
+from study.db.models import Advice, Status, StudySession, utcnow
+from study.services import learning, numerics
+from study.services.errors import Conflict
+from study.services.sessions import claim, get_session, set_status
+
+log = logging.getLogger(__name__)
+PROGRESS_EVERY_S = 0.2
+
+
+@dataclass(frozen=True)
+class WorkerOptions:
+    """How a worker runs; the server fills it from its settings."""
+
+    data_dir: Path = Path("study_data")
+    """Checkpoints go to `data_dir/checkpoints/session-ID/`."""
+    checkpoint_every_episodes: int = 10
+    """Training episodes between periodic checkpoints."""
+    flush_every_steps: int = 500
+    """Step records buffered before a batched insert."""
+    heartbeat_s: float = 5.0
+    """Longest time between two writes that mark the worker alive."""
+    idle_limit_s: float = 1800.0
+    """Default idle limit of human sessions (a session's own limit wins)."""
+    spec_class: type[RunSpec] = RunSpec
+    """The run's declaration the session's `run` is read with (`learner.run.RunSpec`, or a
+    class that extends it; it must be importable in the worker's process)."""
+    override_numerics: bool = False
+    """Resume a run whose pinned numerics this machine cannot honour, on what it can, and
+    record the override in the session (`numerics_overrides`); without it such a resume is
+    refused (`numerics.refusal`)."""
+    progress_bar: bool = False
+    """Show a tqdm bar of training episodes (command line runs)."""
+    nice: int = 0
+    """Added to the process's niceness (the server lowers machine sessions' priority)."""
+    keep_replay_memory: bool = False
+    """Keep the replay memory in final checkpoints (a session's own choice wins)."""
+    pooled: bool = False
+    """The session waits in its condition's pool: it practises, then waits for an arrival
+    without the idle limit running until one takes it (`Command("assigned")`)."""
+    train_nice: int = 0
+    """Added to a human session's niceness once its advice is over and it trains alone, so
+    the participants still advising keep the CPU."""
+
+
+class _Reporter:
+    """Learner callback that sends live progress over the channel, a few times a second."""
+
+    def __init__(self, run: _Run) -> None:
+        self._run = run
+        self._sent = 0.0
+        self.stage = "pretrain"
+        self.epsilon = 1.0
+        self.last_episode_reward: float | None = None
+
+    def on_step(self, record: Any) -> None:
+        self.stage = record.stage
+        self.epsilon = float(record.epsilon)
+        if time.monotonic() - self._sent >= PROGRESS_EVERY_S:
+            self._run.send_progress()
+            self._sent = time.monotonic()
+
+    def on_episode(self, record: Any) -> None:
+        self._run.send(EpisodeDone(record.to_dict()))
+        if record.stage != TRAINING:
+            return
+        self.last_episode_reward = float(record.collected_reward)
+        self._run.env.episode = self._run.recorder.episodes
+        self._run.send_progress()
+        self._sent = time.monotonic()
+        if self._run.bar is not None:
+            self._run.bar.update(1)
+
+
+class _Run:
+    def __init__(
+        self,
+        session_id: int,
+        database_url: str,
+        options: WorkerOptions,
+        token: str,
+        conn: Connection | None,
+    ) -> None:
+        self.session_id, self.options, self.token = session_id, options, token
+        self.factory = make_session_factory(make_engine(database_url))
+        with self.factory() as db:
+            self.session = get_session(db, session_id)
+            self.given = {  # a person's advice always has its action (only replays lack one)
+                a.advice_index: a.action
+                for a in db.scalars(select(Advice).where(Advice.session_id == session_id))
+                if self.session.method == "human" and a.action is not None
+            }
+            run = learning.spec_of(self.session, options.spec_class)
+            here = {  # where the run is computed from here on (the report audits it)
+                **provenance.record(run.config),
+                "at": utcnow().isoformat(),
+                "from_step": self.session.checkpoint_step,
+            }
+            db.execute(
+                update(StudySession)
+                .where(StudySession.id == session_id, StudySession.worker_token == token)
+                .values(
+                    worker_pid=os.getpid(),
+                    heartbeat_at=utcnow(),
+                    provenance=[*self.session.provenance, here],
+                )
+            )
+            db.commit()
+        s = self.session
+        self.link = (
+            WorkerLink(
+                conn, self._on_pause, self._on_watch, self._on_idle, assigned=not options.pooled
+            )
+            if conn
+            else None
+        )
+        self.reporter = _Reporter(self)
+        self.recorder = Recorder(
+            self.factory,
+            session_id,
+            token,
+            options.data_dir / "checkpoints" / f"session-{session_id}",
+            options.flush_every_steps,
+            options.heartbeat_s,
+            self.progress_dict,
+            advice_written_elsewhere=s.method == "human",
+        )
+        checkpoint = s.checkpoint_path
+        if checkpoint and not Path(checkpoint).is_file():
+            checkpoint = None  # a fresh start, as for a session never checkpointed
+        self.start_advice = s.checkpoint_advice if checkpoint else 0
+        self.advisor: Any = None
+        self.queued = False
+        self.waiting_for_participant = False
+        if s.method == "human" and self.link is None:
+            raise Conflict("a human session needs the server: start it through the API")
+        self.spec = learning.spec_of(s, options.spec_class)
+        self.trainer, self.env = self.spec.build(
+            [self.recorder, self.reporter],
+            record_motion=conn is not None,
+            wrap_env=self._broadcast,
+            wrap_advisor=self._advisor,
+        )
+        if checkpoint:
+            self.trainer.load_checkpoint(checkpoint)
+        else:
+            s.checkpoint_step = s.checkpoint_episodes = s.checkpoint_advice = 0
+        self.recorder.rewind(s)
+        self.env.steps = self.recorder.steps
+        self.env.episode = self.recorder.episodes
+        self.reporter.stage = str(getattr(self.trainer, "stage", "pretrain"))
+        self.bar: Any = None
+        self.saver: Checkpointable = self.trainer
+        """What writes the run's checkpoints: its trainer, or a population's agent (whose
+        checkpoint also records the population's numerics)."""
+
+    def _broadcast(self, env: Any) -> SceneBroadcast:
+        """The environment as the trainer sees it: each step also goes to the live view."""
+        self.env = SceneBroadcast(env, self.link)
+        return self.env
+
+    def _advisor(self, machine: Any) -> Any:
+        """The session's advisor: a person through the web process (human), or the machine
+        advisor with its advice recorded."""
+        s = self.session
+        if s.method == "human":
+            assert self.link is not None
+            self.advisor = HumanAdvisor(
+                self.link,
+                self.given,
+                self.start_advice,
+                self.spec.advice_budget,
+                s.idle_limit_s or self.options.idle_limit_s,
+                lambda: self.recorder.steps + 1,
+                self._before_waiting,
+                self._until_participant_ready,
+            )
+            self.env.after_step.append(self.advisor.after_step)
+            advisor = self.advisor
+            self.env.advised = lambda: advisor.carrying_out
+        elif s.method == "replayed":
+            stream = s.replay_stream
+            if not stream:
+                raise Conflict(
+                    f"session {s.id} is a replay without its recorded stream: make replays "
+                    "with `ideeprl replay`"
+                )
+            self.advisor = RecordingAdvisor(
+                RecordedAdvisor(stream["actions"], stream["observation_hashes"]),
+                s.method,
+                self.start_advice,
+                self.recorder.add_advice,
+                lambda: self.recorder.steps + 1,
+            )
+        elif machine is not None:
+            self.advisor = RecordingAdvisor(
+                machine,
+                s.method,
+                self.start_advice,
+                self.recorder.add_advice,
+                lambda: self.recorder.steps + 1,
+            )
+        return self.advisor
+
+    @property
+    def advice_given(self) -> int:
+        return int(getattr(self.advisor, "count", 0))
+
+    def progress(self) -> Progress:
+        return Progress(
+            stage=self.reporter.stage,
+            global_step=self.recorder.steps,
+            episode=self.recorder.episodes,
+            episodes=self.spec.config.episodes,
+            epsilon=self.reporter.epsilon,
+            collected_reward=self.env.collected_reward,
+            last_episode_reward=self.reporter.last_episode_reward,
+            advice_given=self.advice_given,
+            advice_budget=self.spec.advice_budget,
+            queued=self.queued,
+            waiting_for_participant=self.waiting_for_participant,
+        )
+
+    def progress_dict(self) -> dict[str, Any]:
+        return vars(self.progress())
+
+    def send(self, message: Any) -> None:
+        if self.link is not None:
+            self.link.send(message)
+
+    def send_progress(self) -> None:
+        self.send(self.progress())
+
+    def set_status(self, status: Status, detail: str = "") -> None:
+        with self.factory() as db:
+            if not set_status(db, self.session_id, status, detail, token=self.token):
+                raise LeaseLost(f"session {self.session_id} is no longer this worker's")
+        self.send(StatusChanged(status.value, detail))
+
+    def checkpoint(self, name: str = "") -> None:
+        self.recorder.checkpoint(self.saver, self.advice_given, name)
+
+    def _on_pause(self, paused: bool, at_step_boundary: bool) -> None:
+        if paused and at_step_boundary:
+            self.checkpoint()
+        self.send_progress()
+        with self.factory() as db:
+            set_status(
+                db, self.session_id, Status.paused if paused else Status.running, token=self.token
+            )
+
+    def _on_idle(self) -> None:
+        self.recorder.tick()  # flushes and marks the worker alive every heartbeat_s
+
+    def _on_watch(self) -> None:
+        self.env.announce()
+
+    def _before_waiting(self) -> None:
+        """Before blocking on a person: the live view shows where it waits, and every step
+        taken so far is in the database."""
+        self.send_progress()
+        self.recorder.flush()
+
+    def _until_participant_ready(self) -> None:
+        assert self.link is not None
+        if self.link.participant_ready:
+            return
+        self.waiting_for_participant = True
+        self._before_waiting()
+        self.link.wait_for_participant(self.session.idle_limit_s or self.options.idle_limit_s)
+        self.waiting_for_participant = False
+
+    def _needs_training_slot(self) -> bool:
+        """A human session whose advice is over trains only in one of the server's slots."""
+        return (
+            self.link is not None
+            and self.session.method == "human"
+            and not self.link.may_train
+            and self.advice_given >= self.spec.advice_budget
+        )
+
+    def _wait_for_training_slot(self) -> None:
+        assert self.link is not None
+        self.queued = True
+        self.send(TrainingWanted())
+        self._before_waiting()
+        self.link.wait_for_training_slot()
+        self.queued = False
+        if self.options.train_nice:
+            os.nice(self.options.train_nice)
+        self.send_progress()
+
+    def run(self) -> Status:
+        self.send(StatusChanged(Status.running.value))
+        self.send_progress()
+        if self.options.progress_bar:
+            from tqdm import tqdm
+
+            self.bar = tqdm(
+                total=self.spec.config.episodes,
+                initial=self.recorder.episodes,
+                desc=f"session {self.session_id}",
+                unit="episode",
+            )
+        try:
+            while not self.trainer.done:
+                try:
+                    if self.link is not None:
+                        self.link.poll()
+                    self.between_steps()
+                except WorkerExit as exit_:
+                    return self.exit(exit_, at_step_boundary=True)
+                try:
+                    self.trainer.step()
+                except WorkerExit as exit_:
+                    return self.exit(exit_, at_step_boundary=False)
+            return self.finish()
+        finally:
+            if self.bar is not None:
+                self.bar.close()
+
+    def between_steps(self) -> None:
+        """What a run does between two learner steps: heartbeat and flush when due, wait for
+        a training slot, checkpoint every few episodes (a population's worker calls it for
+        each of its agents)."""
+        self.recorder.tick()
+        if self._needs_training_slot():
+            self._wait_for_training_slot()
+        if self.recorder.episodes_since_checkpoint >= self.options.checkpoint_every_episodes:
+            self.checkpoint()
+
+    def finish(self) -> Status:
+        """The trainer is done: the final checkpoint, then the session is finished."""
+        keep = self.session.keep_replay_memory
+        keep = self.options.keep_replay_memory if keep is None else keep
+        self.recorder.checkpoint(self.saver, self.advice_given, "final.pt", memory=keep)
+        self.set_status(Status.finished)
+        self.send_progress()
+        return Status.finished
+
+    def exit(self, exit_: WorkerExit, at_step_boundary: bool) -> Status:
+        if at_step_boundary:
+            self.checkpoint()
+        else:
+            self.recorder.flush()
+        status = Status(exit_.status)
+        if isinstance(exit_, ParentGone):
+            self.link = None  # nobody is listening any more
+        self.set_status(status, str(exit_))
+        return status
+
+
+def run_session(
+    session_id: int,
+    database_url: str,
+    options: WorkerOptions | None = None,
+    *,
+    worker_token: str | None = None,
+    conn: Connection | None = None,
+) -> str:
+    """Run one session to its end in this process; returns its final status.
+
+    Without `worker_token` the session is claimed here (created sessions start, stopped or
+    interrupted ones resume). Human sessions need `conn`, the channel to the web process."""
+    options = options or WorkerOptions()
+    if options.nice:
+        os.nice(options.nice)
+    factory = make_session_factory(make_engine(database_url))
+    if worker_token is None:
+        worker_token = claim_session(factory, session_id, options, human=conn is not None)
+    try:
+        run = _Run(session_id, database_url, options, worker_token, conn)
+        return run.run().value
+    except LeaseLost as error:
+        log.warning("%s", error)
+        return "lost"
+    except Exception as error:
+        fail_session(factory, session_id, worker_token, error, conn)
+        return Status.failed.value
+
+
+def claim_session(
+    factory: sessionmaker[Session], session_id: int, options: WorkerOptions, human: bool = False
+) -> str:
+    """Claim the session for this process (created sessions start, stopped or interrupted
+    ones resume), its numerics settled; returns the worker token. `human`: a channel to
+    the web process is there (a human session needs one)."""
+    with factory() as db:
+        session = get_session(db, session_id)
+        if session.method == "human" and not human:
+            raise Conflict(f"session {session_id} is a human session: start it through the server")
+        numerics.settle(db, session, options.override_numerics, options.spec_class)
+        return claim(db, session_id, resume=session.status != Status.created)
+
+
+def fail_session(
+    factory: sessionmaker[Session],
+    session_id: int,
+    token: str,
+    error: BaseException,
+    conn: Connection | None = None,
+) -> None:
+    """The run raised `error`: the session is failed with its traceback (it resumes from its
+    last checkpoint when run again)."""
+    detail = "".join(traceback.format_exception(error))
+    log.error("session %s failed:\n%s", session_id, detail)
+    with factory() as db:
+        set_status(db, session_id, Status.failed, detail[-4000:], token=token)
+    if conn is not None:
+        with contextlib.suppress(OSError):
+            conn.send(StatusChanged(Status.failed.value, str(error)))
+
+
+def worker_main(
+    session_id: int,
+    database_url: str,
+    options: WorkerOptions,
+    worker_token: str,
+    conn: Connection,
+) -> None:
+    """Entry point of a spawned worker process."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s worker %(process)d %(message)s")
+    run_session(session_id, database_url, options, worker_token=worker_token, conn=conn)
+    conn.close()

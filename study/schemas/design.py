@@ -1,0 +1,142 @@
+"""An online study's design: its conditions, targets, capacity, panel setting, check,
+questionnaire and outcome codes (`../shared/SPEC.md` section 5). Stored whole, defaults
+written out, in `studies.design`."""
+
+from __future__ import annotations
+
+import re
+import secrets
+from collections.abc import Mapping
+from typing import Annotated, Any, Literal, get_args
+from urllib.parse import quote
+
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    model_validator,
+)
+
+from study.schemas.types import Key, Number, Text, Texts, plain_text
+from study.schemas.visit import CheckSpec, QuestionnaireSpec
+
+PANEL_PARAMS: dict[str, tuple[str, ...]] = {
+    "prolific": ("PROLIFIC_PID", "STUDY_ID", "SESSION_ID"),
+    "mturk": ("workerId", "assignmentId", "hitId", "turkSubmitTo"),
+}
+"""The URL parameters each panel sends; the first names the person (their panel id)."""
+PROLIFIC_COMPLETE = "https://app.prolific.com/submissions/complete?cc={code}"
+"""Where a Prolific participant returns to, with their code."""
+MTURK_SUBMIT = "{turkSubmitTo}/mturk/externalSubmit?assignmentId={assignmentId}&code={code}"
+"""Where an MTurk worker's HIT is submitted (an ExternalQuestion's form target)."""
+MTURK_HOSTS = ("https://www.mturk.com", "https://workersandbox.mturk.com")
+"""The `turkSubmitTo` values believed: the parameter comes with the link, so anything else
+would make the study an open redirect."""
+OutcomeName = Literal["completed", "declined", "excluded", "timed_out", "full"]
+"""`study.db.models.Outcome`'s values, each with its own code and return URL."""
+OUTCOMES: tuple[OutcomeName, ...] = get_args(OutcomeName)
+ParamName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
+Url = Annotated[
+    str,
+    StringConstraints(max_length=2000, pattern=r"^(https?://|\{turkSubmitTo\}/)"),
+    AfterValidator(plain_text),
+]
+"""A return URL: `{code}` is the outcome's code, `{NAME}` the arrival's panel parameter NAME
+(URL-encoded); `{turkSubmitTo}` may start it (MTurk's own hosts only)."""
+
+
+class Condition(BaseModel):
+    """One arm of the study: the run each of its sessions gets (the body's `run` of
+    `POST /api/studies/ID/sessions`, a human run for people), and its page texts (over the
+    study's own)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    run: dict[str, Any] = Field(
+        default_factory=lambda: {"method": "human"},
+        description="learner.run.RunSpec's fields; unset ones take their defaults.",
+    )
+    texts: Texts = Field(default_factory=dict, max_length=32)
+    target: int = Field(default=10, strict=True, ge=1, le=100_000)
+    """Completed participants wanted in this condition."""
+
+
+def _code() -> str:
+    return secrets.token_hex(4).upper()
+
+
+class Panel(BaseModel):
+    """Where participants come from: which URL parameters carry their ids, and where each
+    outcome sends them back (a `{code}` in a URL is replaced by the outcome's code)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    kind: Literal["prolific", "mturk", "custom"] = "prolific"
+    params: list[ParamName] = Field(default_factory=list, max_length=16)
+    """The URL parameters kept (the first is the person's panel id); default: the panel's."""
+    codes: dict[OutcomeName, Annotated[Text, Field(min_length=1, max_length=64)]] = Field(
+        default_factory=dict
+    )
+    """A code per outcome; random ones are made for those not given."""
+    urls: dict[OutcomeName, Url] = Field(default_factory=dict)
+    """The return URL per outcome; Prolific's completion URL by default on Prolific."""
+    return_delay_s: int = Field(default=5, strict=True, ge=0, le=600)
+    """Seconds the outcome page shows the code before it sends the participant back."""
+
+    @model_validator(mode="after")
+    def _defaults(self) -> Panel:
+        if not self.params:
+            if self.kind == "custom":
+                raise ValueError("a custom panel names its URL parameters in `params`")
+            self.params = list(PANEL_PARAMS[self.kind])
+        for outcome in OUTCOMES:
+            self.codes.setdefault(outcome, _code())
+            default = {"prolific": PROLIFIC_COMPLETE, "mturk": MTURK_SUBMIT}.get(self.kind)
+            if default is not None:
+                self.urls.setdefault(outcome, default)
+        return self
+
+
+class StudyDesign(BaseModel):
+    """Stored with every default written out (`model_dump()` of the validated design), so
+    what a study does never changes when a default in this file does."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    conditions: dict[Key, Condition] = Field(min_length=1, max_length=32)
+    capacity: int = Field(default=8, strict=True, ge=1, le=10_000)
+    """Participants at once (started visits not ended); more arrivals see the study full.
+    The default is what this project's 2-core machine holds with the advice round trip's
+    p95 under 100 ms (8: 58 ms; 14: 741 ms; `benchmarks/bench_capacity.py`, README
+    "Speed"): measure yours and set it."""
+    alpha: Number = Field(default=0.05, gt=0, lt=1)
+    """The report's significance level for comparing the conditions."""
+    idle_limit_s: Number = Field(default=600.0, gt=0, le=86_400)
+    """Seconds without an answer before a visit ends as `timed_out` (final)."""
+    pool: int = Field(default=2, strict=True, ge=0, le=100)
+    """Sessions per condition kept made and pretrained ahead of arrivals (their seeds and
+    conditions fixed when made), so an arrival's first turn does not wait for the robot's
+    random practice; 0: each arrival's session practises when its link opens. The server
+    caps all pools together (`IDEEPRL_POOL_LIMIT`)."""
+    panel: Panel = Field(default_factory=Panel)
+    check: CheckSpec | None = Field(default_factory=CheckSpec.default)
+    questionnaire: QuestionnaireSpec | None = Field(default_factory=QuestionnaireSpec.default)
+
+    def code(self, outcome: str) -> str:
+        return self.panel.codes[outcome]  # type: ignore[index]
+
+    def return_url(self, outcome: str, params: Mapping[str, str] | None = None) -> str | None:
+        """The panel URL this outcome sends the participant to: its code and the arrival's
+        panel parameters filled in (a missing one empty; `turkSubmitTo` only MTurk's)."""
+        url = self.panel.urls.get(outcome)  # type: ignore[call-overload]
+        if url is None:
+            return None
+        given = dict(params or {})
+        if given.get("turkSubmitTo", "").rstrip("/") not in MTURK_HOSTS:
+            given["turkSubmitTo"] = MTURK_HOSTS[0]
+        submit = given.pop("turkSubmitTo").rstrip("/")
+        url = url.replace("{turkSubmitTo}", submit, 1) if url.startswith("{") else url
+        values = {"code": self.code(outcome), **given}
+        return re.sub(r"\{([A-Za-z0-9_.-]+)\}", lambda m: quote(values.get(m[1], ""), safe=""), url)

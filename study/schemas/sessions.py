@@ -1,0 +1,232 @@
+"""Bodies of the sessions resource: what a researcher sets, and what they read back."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from datetime import datetime
+from functools import cache
+from typing import Annotated, Any
+
+from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
+
+from learner.fields import bounded, check_object
+from learner.run import SPEC_VERSION, RunSpec
+from study.schemas.runs import body_model
+
+API_VERSION_NOTE = (
+    "Since API version 2.0 a session's run is one object, `run` (every field of "
+    "learner.run.RunSpec), beside the session's own fields: "
+    '{"run": {"method": "human", "seed": 3, "preset": "paper", "config": {"episodes": 300}, '
+    '"strategy": "early", "scenario": {"reward_scheme": "paper"}}, "label": "pilot", '
+    '"participant": "P01"}. See docs/api.md.'
+)
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    """What describes a session but not its run: its name, its participant, how its worker
+    treats it. Declared like the run (`learner.fields`), beside it in the REST body."""
+
+    label: str = bounded("", max_length=200)
+    """Free text, e.g. a batch name."""
+    participant: str | None = bounded(None, max_length=64, pattern=r"[A-Za-z0-9_-]+")
+    """Pseudonym of the participant (human sessions); generated when omitted."""
+    keep_replay_memory: bool | None = bounded(None)
+    """Keep the replay memory in the final checkpoint (default: the server's
+    keep_replay_memory setting). Without it the final checkpoint holds the network and what
+    an advisor needs, a few MB instead of about 250 MB at paper scale."""
+    idle_limit_s: float | None = bounded(None, 0.0, 86_400.0, exclusive_minimum=True)
+    """Seconds without advice before a human session is abandoned (default: the server's)."""
+
+    def __post_init__(self) -> None:
+        check_object(self)
+
+
+NOT_THE_RUN = tuple(f.name for f in dataclasses.fields(SessionOptions))
+
+
+def _flat_body(data: Any) -> Any:
+    """The body of API 1.x (the run's fields loose at the top) gets a 422 showing the new
+    shape, rather than a list of unknown fields."""
+    if isinstance(data, dict) and "run" not in data and set(data) - set(NOT_THE_RUN):
+        raise ValueError(API_VERSION_NOTE)
+    return data
+
+
+@cache
+def session_create_model(spec_class: type = RunSpec) -> type[BaseModel]:
+    """The REST body that creates a session: `run` (the run, `spec_class`'s tree) beside the
+    session's own options (`SessionOptions`)."""
+    options = body_model(SessionOptions, "SessionOptions")
+    model = create_model(
+        "SessionCreate",
+        __base__=options,
+        # pydantic's annotation wants plain functions; its docs pass decorated ones
+        __validators__={"flat": model_validator(mode="before")(_flat_body)},  # type: ignore[dict-item]
+        __doc__="A session: its run, described once, and the session's own options. Unset "
+        "fields take their defaults (the learner config's: its preset's).",
+        run=(
+            _run_model(spec_class),
+            Field(
+                description="The run (learner.run.RunSpec): method, seed, preset, config, "
+                "strategy and its options, advisor, motion, sort rule, scenario."
+            ),
+        ),
+    )
+    return model
+
+
+def _run_model(spec_class: type) -> type[BaseModel]:
+    """The run's body: every field of `spec_class`, and the stored document's `version`
+    (so a session's `run`, or an export's `run_spec`, is accepted back as it is)."""
+    return create_model(
+        "Run",
+        __base__=body_model(spec_class, "RunFields"),
+        __doc__=(spec_class.__doc__ or "").strip(),
+        version=(
+            Annotated[int | None, Field(strict=True, ge=1, le=SPEC_VERSION)],
+            Field(default=None, description=f"The document's version (1 to {SPEC_VERSION})."),
+        ),
+    )
+
+
+SessionCreate = session_create_model(RunSpec)
+
+
+class SessionPublic(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+    id: int
+    study_id: int
+    label: str
+    method: str = Field(description="The run's method (run.method), for lists.")
+    seed: int = Field(description="The run's seed (run.seed), for lists.")
+    run: dict[str, Any] = Field(
+        description="The run as stored: learner.run.RunSpec's document (every field spelled "
+        "out, numerics pinned), accepted back unchanged as a new session's `run`."
+    )
+    numerics_overrides: list[Any] = Field(
+        default_factory=list,
+        description="Resumes that overrode the run's pinned numerics, each recorded.",
+    )
+    provenance: list[Any] = Field(
+        default_factory=list,
+        description="Where the run was computed, one entry per start or resume: code version "
+        "(a hash of sim/ and learner/), commit, CPU kind, torch and Python versions, numerics.",
+    )
+    idle_limit_s: float | None
+    keep_replay_memory: bool | None = None
+    participant: str | None = None
+    participant_url: str | None = None
+    status: str
+    status_detail: str
+    progress: dict[str, Any]
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    worker_pid: int | None
+    checkpoint_step: int
+    consented_at: datetime | None = Field(
+        default=None, description="When the participant consented (human sessions)."
+    )
+    declined_at: datetime | None = Field(
+        default=None, description="When the participant last declined (human sessions)."
+    )
+    induction_done_at: datetime | None = Field(
+        default=None, description="When they finished the induction: advice may be asked."
+    )
+    texts_version: int | None = Field(
+        default=None, description="Version of the study's texts the participant was shown."
+    )
+    condition: str | None = Field(
+        default=None, description="The online study's condition it was assigned to."
+    )
+    pooled: bool = Field(
+        default=False,
+        description="Made ahead of arrivals, waiting pretrained in its condition's pool: "
+        "nobody's yet, not counted, out of exports until an arrival takes it.",
+    )
+    preview: bool = Field(
+        default=False, description="A researcher's preview: no place, out of exports."
+    )
+    outcome: str | None = Field(
+        default=None,
+        description="How the online visit ended: completed, declined, excluded, timed_out.",
+    )
+
+
+class SessionCreated(SessionPublic):
+    participant_token: str | None = Field(
+        default=None, description="The participant's secret; their link is participant_url."
+    )
+
+
+class Progress(BaseModel):
+    """Live progress of a session (from its worker while it runs, else the last saved)."""
+
+    session_id: int
+    status: str
+    stage: str | None = Field(
+        default=None, description="pretrain or train: the stage of the run's next step."
+    )
+    global_step: int = 0
+    episode: int = 0
+    episodes: int = 0
+    epsilon: float | None = None
+    collected_reward: float = 0.0
+    last_episode_reward: float | None = None
+    advice_given: int = 0
+    advice_budget: int = 0
+    advice_left: int = 0
+    advice_wanted: bool = False
+    queued: bool = Field(
+        default=False,
+        description="Advice over; waiting in the server's queue for a free trainer slot.",
+    )
+    consented: bool = Field(default=False, description="The participant consented (human).")
+
+
+class EpisodePublic(BaseModel):
+    """One episode (the learner's `EpisodeRecord`); the column dictionary explains each."""
+
+    model_config = ConfigDict(from_attributes=True)
+
+    stage: str
+    episode: int
+    collected_reward: float
+    steps: int
+    placed_correct: int
+    misplaced: int
+    lost: int
+    success: bool
+    advised_steps: int
+    epsilon: float
+    mean_loss: float | None
+    first_global_step: int
+    last_global_step: int
+    wall_time: float
+
+
+class AdvicePublic(BaseModel):
+    """One advice, without its image (GET .../advice/INDEX.png has it)."""
+
+    model_config = ConfigDict(from_attributes=True)
+
+    advice_index: int
+    global_step: int
+    advisor: str
+    action: int | None = Field(
+        description="The advised action; null only for a replay's request beyond its recorded "
+        "stream (asked, counted against the budget, none given)."
+    )
+    greedy_action: int | None
+    response_time_s: float
+    decision_time_s: float | None = None
+    requested_at: datetime
+    answered_at: datetime
+    same_observation: bool | None = Field(
+        default=None,
+        description="Replayed advice: whether it met the image its advisor saw; null for "
+        "advice given live and for requests beyond the stream.",
+    )

@@ -1,0 +1,85 @@
+"""The analysis package's episode table, read from the database.
+
+One row per (session, training episode): the columns `analysis.episodes` documents.
+Pretraining episodes are left out: the paper's curves and R_T count the training stage.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import pandas as pd
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from analysis.advice import ADVICE_COLUMNS
+from analysis.episodes import EPISODE_TABLE_COLUMNS
+from analysis.rescoring import STEP_COLUMNS
+from analysis.settings import settings_table
+from learner.records import TRAINING
+from learner.run import RunSpec
+from study.db.models import Episode, Step, StudySession
+from study.services import learning
+
+
+def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
+    """The training episodes of these sessions, ordered by session and episode."""
+    ids = list(session_ids)
+    runs = {
+        s.id: (s.method, s.seed)
+        for s in db.scalars(select(StudySession).where(StudySession.id.in_(ids)))
+    }
+    query = (
+        select(
+            Episode.session_id,
+            Episode.episode,
+            Episode.collected_reward,
+            Episode.steps,
+            Episode.placed_correct,
+            Episode.misplaced,
+            Episode.lost,
+            Episode.epsilon,
+        )
+        .where(Episode.session_id.in_(ids), Episode.stage == TRAINING)
+        .order_by(Episode.session_id, Episode.episode)
+    )
+    rows = [(r[0], *runs[r[0]], *r[1:]) for r in db.execute(query)]
+    return pd.DataFrame(rows, columns=list(EPISODE_TABLE_COLUMNS))
+
+
+def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
+    """The training steps of these sessions (`analysis.rescoring.STEP_COLUMNS`)."""
+    query = (
+        select(
+            Step.session_id,
+            Step.episode,
+            Step.episode_step,
+            Step.reward,
+            Step.terminated,
+            Step.outcome,
+        )
+        .where(Step.session_id.in_(list(session_ids)), Step.stage == TRAINING)
+        .order_by(Step.session_id, Step.global_step)
+    )
+    rows = [tuple(row) for row in db.execute(query)]
+    return pd.DataFrame(rows, columns=[*STEP_COLUMNS, "outcome"])
+
+
+def load_advised_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
+    """The steps whose action came from the advisor (`analysis.advice.ADVICE_COLUMNS`)."""
+    query = (
+        select(Step.session_id, Step.global_step, Step.action, Step.outcome)
+        .where(Step.session_id.in_(list(session_ids)), Step.action_source == "advisor")
+        .order_by(Step.session_id, Step.global_step)
+    )
+    rows = [tuple(row) for row in db.execute(query)]
+    return pd.DataFrame(rows, columns=ADVICE_COLUMNS)
+
+
+def session_settings(
+    sessions: Sequence[StudySession], spec_class: type[RunSpec] = RunSpec
+) -> pd.DataFrame:
+    """What each session ran under, for the report's comparability audit
+    (`analysis.settings.settings_table` of their runs)."""
+    runs = [(s.id, learning.spec_of(s, spec_class)) for s in sessions]
+    return settings_table(runs, spec_class, {s.id: s.provenance for s in sessions})

@@ -1,0 +1,305 @@
+"""A study's data, ready for analysis: sessions, episodes, steps and advice (with the
+advised images) as CSV or Parquet, described by a Frictionless `datapackage.json` (each
+column's type, unit and description) and the same dictionary as `columns.csv`; written to
+a folder or packed as one zip.
+
+Analysis-ready means: ISO 8601 UTC timestamps (`logged_at`, with `elapsed_s` since the
+session started beside it), lowercase booleans, the sort rule as plain text, the learner
+config as one column per field, each episode's reset seed (replay it with the episode's
+actions), one stage vocabulary in steps and episodes (`stage`: `pretrain`, `train`; a
+pretraining step taken on advice has `action_source` advisor and `advised = true`), and
+each session's run both as
+columns (one per field of `learner.run.RunSpec`) and whole (`run_spec`, JSON: what the API
+and `ideeprl batch` accept back). An online study adds its assignments and its
+participants' panel ids (pseudonymous unless asked for, for payment); a researcher's
+previews are never exported.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import json
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from analysis.settings import where
+from learner.fields import leaves
+from learner.run import RunSpec
+from sim.actions import ACTION_NAMES
+from sim.rules import SortRule
+from study.db.models import (
+    Advice,
+    Assignment,
+    Episode,
+    PanelId,
+    Participant,
+    Step,
+    Study,
+    StudySession,
+    StudyTexts,
+)
+from study.services import learning, visit_export
+from study.services.columns import TEXT_KEYS, table_columns
+from study.services.studies import get_study
+from study.services.tables import column, resource, write_csv, write_parquet
+
+FORMATS = ("csv", "parquet")
+TABLES = (
+    "sessions",
+    "episodes",
+    "steps",
+    "advice",
+    "texts_versions",
+    "assignments",
+    "panel_ids",
+    *visit_export.KEYS,
+)
+KEYS: dict[str, dict[str, Any]] = {
+    "sessions": {"primaryKey": ["session_id"]},
+    "episodes": {"primaryKey": ["session_id", "stage", "episode"]},
+    "steps": {"primaryKey": ["session_id", "global_step"]},
+    "advice": {"primaryKey": ["session_id", "advice_index"]},
+    "texts_versions": {"primaryKey": ["study_id", "texts_version"]},
+    "assignments": {"primaryKey": ["session_id"]},
+    "panel_ids": {"primaryKey": ["participant"]},
+    **visit_export.KEYS,
+}
+BATCH = 5000
+DICTIONARY_COLUMNS = [
+    column("file", "string", "The table."),
+    column("column", "string", "The column."),
+    column("type", "string", "Its Frictionless Table Schema type."),
+    column("unit", "string", "Its unit, for a quantity."),
+    column("description", "string", "What it means."),
+]
+
+
+def plain_sort_rule(spec: str | dict[str, str]) -> str:
+    """`color`, `shape`, or `cube/red=left;cube/blue=right;...` for an explicit map."""
+
+    rule = SortRule.parse(spec)
+    if rule.name != "map":
+        return rule.name
+    return ";".join(f"{shape}/{color}={side}" for shape, color, side in rule.sides)
+
+
+def _session_rows(
+    sessions: list[StudySession], spec_class: type[RunSpec]
+) -> Iterator[dict[str, Any]]:
+    run_leaves = leaves(spec_class)
+    for s in sessions:
+        values = learning.spec_of(s, spec_class).values()
+        values["sort_rule"] = plain_sort_rule(values["sort_rule"])
+        yield {
+            "session_id": s.id,
+            "study_id": s.study_id,
+            "label": s.label,
+            **{leaf.column: values[leaf.name] for leaf in run_leaves},
+            "participant": s.participant.pseudonym if s.participant else None,
+            "status": s.status,
+            "created_at": s.created_at,
+            "started_at": s.started_at,
+            "finished_at": s.finished_at,
+            "texts_version": s.texts_version.version if s.texts_version else None,
+            "consented_at": s.consented_at,
+            "declined_at": s.declined_at,
+            "induction_done_at": s.induction_done_at,
+            "numerics_overrides": json.dumps(s.numerics_overrides)
+            if s.numerics_overrides
+            else None,
+            "code_version": where(s.provenance, "code") if s.provenance else None,
+            "provenance": json.dumps(s.provenance) if s.provenance else None,
+            "replay_of": s.replay_of,
+            "condition": s.condition,
+            "outcome": s.outcome,
+            "outcome_at": s.outcome_at,
+            "replay_source": json.dumps(s.replay_stream["source"], sort_keys=True)
+            if s.replay_stream
+            else None,
+            "run_spec": json.dumps(s.run, sort_keys=True),
+        }
+
+
+def _records(
+    db: Session, model: Any, sessions: list[StudySession], order: Any
+) -> Iterator[dict[str, Any]]:
+    from datetime import UTC, datetime
+
+    columns = [c for c in model.__table__.columns if c.name != "id"]
+    for session in sessions:
+        started = session.started_at.timestamp() if session.started_at else None
+        query = (
+            select(*columns)
+            .where(model.session_id == session.id)
+            .order_by(order)
+            .execution_options(yield_per=BATCH)
+        )
+        for found in db.execute(query):
+            row = dict(found._mapping)
+            wall = row.pop("wall_time")
+            row["logged_at"] = datetime.fromtimestamp(wall, UTC)
+            row["elapsed_s"] = None if started is None else round(wall - started, 3)
+            if model is Step:
+                row["advised"] = row["advised_action"] is not None
+            yield row
+
+
+def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterator[dict[str, Any]]:
+    images = out / "advice"
+    images.mkdir(exist_ok=True)
+    for session in sessions:
+        query = select(Advice).where(Advice.session_id == session.id)
+        for a in db.scalars(query.order_by(Advice.advice_index).execution_options(yield_per=500)):
+            name = f"session-{session.id}-advice-{a.advice_index:05d}.png"
+            (images / name).write_bytes(a.observation_png)
+            yield {
+                "session_id": session.id,
+                "advice_index": a.advice_index,
+                "global_step": a.global_step,
+                "advisor": a.advisor,
+                "action": a.action,
+                "action_name": None if a.action is None else ACTION_NAMES[a.action],
+                "greedy_action": a.greedy_action,
+                "response_time_s": a.response_time_s,
+                "decision_time_s": a.decision_time_s,
+                "requested_at": a.requested_at,
+                "answered_at": a.answered_at,
+                "observation_file": f"advice/{name}",
+                "same_observation": a.same_observation,
+            }
+
+
+def _texts_rows(db: Session, study_id: int) -> Iterator[dict[str, Any]]:
+    """Each distinct version of the study's texts that a participant was shown."""
+    query = select(StudyTexts).where(StudyTexts.study_id == study_id).order_by(StudyTexts.version)
+    for version in db.scalars(query):
+        yield {
+            "study_id": version.study_id,
+            "texts_version": version.version,
+            "content_hash": version.content_hash,
+            "created_at": version.created_at,
+            **{key: version.texts.get(key, "") for key in TEXT_KEYS},
+        }
+
+
+def _assignment_rows(db: Session, study_id: int) -> Iterator[dict[str, Any]]:
+    """How each arrival at the study's link was assigned (previews take none)."""
+    query = select(Assignment).where(Assignment.study_id == study_id).order_by(Assignment.id)
+    found = list(db.scalars(query))
+    session_of = {a.id: a.session_id for a in found}
+    for a in found:
+        yield {
+            "session_id": a.session_id,
+            "condition": a.condition,
+            "block": a.block,
+            "position": a.position,
+            "seed": a.seed,
+            "refills_session_id": session_of.get(a.refills) if a.refills else None,
+            "assigned_at": a.assigned_at,
+        }
+
+
+def _panel_rows(db: Session, study: Study, identified: bool) -> Iterator[dict[str, Any]]:
+    """Each participant's panel ids: a keyed hash of the id (the study's secret link key is
+    the key, so nobody can recompute it from a panel id alone) unless `identified`."""
+    query = (
+        select(PanelId, Participant.pseudonym)
+        .join(Participant, Participant.id == PanelId.participant_id)
+        .where(PanelId.study_id == study.id)
+        .order_by(PanelId.id)
+    )
+    key = (study.join_key or "").encode()
+    for row, pseudonym in db.execute(query):
+        hashed = hmac.new(key, row.panel_id.encode(), hashlib.sha256).hexdigest()[:16]
+        yield {
+            "participant": pseudonym,
+            "panel_id": row.panel_id if identified else hashed,
+            "panel_params": json.dumps(row.params, sort_keys=True) if identified else None,
+            "created_at": row.created_at,
+        }
+
+
+def export_study(
+    db: Session,
+    study_id: int,
+    out: Path,
+    fmt: str = "csv",
+    spec_class: type[RunSpec] = RunSpec,
+    panel_ids: bool = False,
+) -> dict[str, int]:
+    """Write the study's tables (`fmt`: csv or parquet), `datapackage.json`, `columns.csv`
+    and `study.json` into `out`; returns the row count of each table file. The sessions'
+    run columns are `spec_class`'s fields (the run's declaration). `panel_ids`: the
+    participants' panel ids as they are (for payment), not pseudonymous."""
+    if fmt not in FORMATS:
+        raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    study = get_study(db, study_id)
+    out.mkdir(parents=True, exist_ok=True)
+    query = select(StudySession).where(
+        StudySession.study_id == study.id,
+        StudySession.preview.is_(False),
+        StudySession.pooled.is_(False),
+    )
+    sessions = list(db.scalars(query.order_by(StudySession.id)))
+    columns = table_columns(spec_class)
+    rows = {
+        "sessions": _session_rows(sessions, spec_class),
+        "texts_versions": _texts_rows(db, study.id),
+        "episodes": _records(db, Episode, sessions, Episode.first_global_step),
+        "steps": _records(db, Step, sessions, Step.global_step),
+        "advice": _advice_rows(db, sessions, out),
+        "assignments": _assignment_rows(db, study.id),
+        "panel_ids": _panel_rows(db, study, panel_ids),
+        **visit_export.visit_rows(db, sessions),
+    }
+    write = write_parquet if fmt == "parquet" else write_csv
+    counts, resources = {}, []
+    for table in TABLES:
+        name = f"{table}.{fmt}"
+        counts[name] = write(out / name, columns[table], rows[table])
+        resources.append(resource(table, name, columns[table], KEYS[table]))
+    package = {
+        "profile": "tabular-data-package",
+        "name": f"ideeprl-study-{study.id}",
+        "title": study.name,
+        "description": study.description
+        or "An IDeepRL study: sessions, their episodes, steps and advice.",
+        "resources": resources,
+    }
+    (out / "datapackage.json").write_text(json.dumps(package, indent=2) + "\n")
+    dictionary = [
+        {"file": f"{table}.{fmt}", "column": c.name, "type": c.type, "unit": c.unit,
+         "description": c.description}
+        for table in TABLES
+        for c in columns[table]
+    ]  # fmt: skip
+    write_csv(out / "columns.csv", DICTIONARY_COLUMNS, dictionary)
+    (out / "study.json").write_text(
+        json.dumps(
+            {"id": study.id, "name": study.name, "description": study.description, "rows": counts},
+            indent=2,
+        )
+    )
+    return counts
+
+
+def export_zip(
+    db: Session, study_id: int, work_dir: Path, fmt: str = "csv", panel_ids: bool = False
+) -> Path:
+    """The study's export packed as one zip in a fresh temporary folder under `work_dir`."""
+    work_dir.mkdir(parents=True, exist_ok=True)
+    temp = Path(tempfile.mkdtemp(prefix=f"study-{study_id}-", dir=work_dir))
+    folder = temp / f"study-{study_id}"
+    try:
+        export_study(db, study_id, folder, fmt, panel_ids=panel_ids)
+        return Path(shutil.make_archive(str(folder), "zip", root_dir=folder))
+    except BaseException:  # an unknown study, a full disk: no scratch folder left behind
+        shutil.rmtree(temp, ignore_errors=True)
+        raise

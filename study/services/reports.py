@@ -1,0 +1,329 @@
+"""A study's report: choose its sessions, read their episodes, write the paper's analysis.
+
+`ideeprl report` and `POST /api/studies/{id}/report` both come here. By default a report
+covers the study's finished sessions, except those that served as another session's
+advisor (the agent trained for agent-IDeepRL is not one of the autonomous agents). A
+researcher's previews are never in a report. An online study's report compares its
+conditions (the manipulation: they stand where methods stand, so the audit flags any other
+difference) at the design's alpha.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import threading
+import uuid
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import pandas as pd
+from sqlalchemy.orm import Session
+
+from analysis.episodes import EpisodeTableError, method_name
+from study.db.models import Status, StudySession
+from study.services.errors import Conflict, Invalid, NotFound
+from study.services.sessions import list_sessions
+from study.services.studies import design_of, get_study
+from study.services.tables import iso_z
+from study.settings import Settings
+
+if TYPE_CHECKING:
+    from analysis.report import ReportResult
+
+AUTO = "auto"
+"""Baseline choice: autonomous DeepRL when the report has it, else none."""
+NO_BASELINE = "none"
+_publishing = threading.Lock()
+
+
+@dataclass(frozen=True)
+class ReportRequest:
+    """Which sessions a report covers and how it compares them."""
+
+    sessions: tuple[int, ...] | None = None
+    """Session ids (any status); None: the study's finished sessions except advisors."""
+    methods: tuple[str, ...] | None = None
+    """Keep only these methods."""
+    label: str | None = None
+    """Keep only sessions with this label (a batch's name)."""
+    baseline: str = AUTO
+    """The method improvements are measured against: a method, `auto` or `none`."""
+    n_episodes: int | None = None
+    """Cut every agent to its first N episodes (to compare runs of different lengths)."""
+    common_length: bool = False
+    """Without `n_episodes`: when the sessions differ in length, cut all to the shortest
+    (and say so in the notes) instead of refusing."""
+    title: str | None = None
+    """The report's title; default: the study's name."""
+    notes: tuple[str, ...] = ()
+    """Lines under the title (the command, versions, wall time)."""
+    allow_mismatch: bool = False
+    """Give the t-tests of methods whose settings differ too (the warning stays)."""
+    reference: str | None = None
+    """`authors`: draw the authors' published curves on Figure 5."""
+    primary: str = "welch"
+    """Each comparison's primary test: `welch`, or `paired` over seeds where they pair."""
+
+
+def advisor_sessions(sessions: list[StudySession]) -> set[int]:
+    """Sessions whose checkpoint advises another of these sessions (method `agent`)."""
+    advising = {str(Path(c).resolve()) for s in sessions if (c := s.spec.advisor_checkpoint)}
+    return {
+        s.id
+        for s in sessions
+        if s.checkpoint_path and str(Path(s.checkpoint_path).resolve()) in advising
+    }
+
+
+def _ids(sessions: list[StudySession]) -> str:
+    shown = ", ".join(str(s.id) for s in sessions[:12])
+    return shown + (f" and {len(sessions) - 12} more" if len(sessions) > 12 else "")
+
+
+def select_sessions(
+    db: Session, study_id: int, request: ReportRequest
+) -> tuple[list[StudySession], list[str]]:
+    """The sessions the report covers, and sentences on what was left out and why."""
+    everything = [s for s in list_sessions(db, study_id) if not s.preview and not s.pooled]
+    notes: list[str] = []
+    if request.sessions:
+        by_id = {s.id: s for s in everything}
+        missing = [i for i in request.sessions if i not in by_id]
+        if missing:
+            raise Invalid(
+                "sessions",
+                f"session(s) {', '.join(map(str, missing))} are not in study {study_id}; "
+                f"its sessions are {_ids(everything) or 'none'}",
+            )
+        chosen = [by_id[i] for i in dict.fromkeys(request.sessions)]
+    else:
+        advisors = advisor_sessions(everything)
+        others = [s for s in everything if s.id not in advisors]
+        chosen = [s for s in others if s.status == Status.finished.value]
+        if advisors:
+            notes.append(
+                f"Left out session(s) {', '.join(map(str, sorted(advisors)))}: the trained "
+                "agent(s) advising the agent-IDeepRL sessions, not compared agents."
+            )
+        unfinished = [s for s in others if s.status != Status.finished.value]
+        if unfinished:
+            notes.append(
+                f"Left out {len(unfinished)} unfinished session(s) ({_ids(unfinished)}); "
+                "choose sessions explicitly, with a number of episodes, to include them."
+            )
+    if request.label is not None:
+        chosen = [s for s in chosen if s.label == request.label]
+        notes.append(f"Sessions labelled {request.label!r} only.")
+    if request.methods:
+        chosen = [s for s in chosen if s.method in request.methods]
+        absent = [m for m in request.methods if m not in {s.method for s in chosen}]
+        if absent:
+            notes.append(f"No sessions of method(s) {', '.join(absent)} to include.")
+    if not chosen:
+        present = sorted({s.method for s in everything})
+        raise Conflict(
+            f"study {study_id} has no finished sessions to analyse"
+            + (f" with these choices (its methods: {', '.join(present)})" if present else "")
+            + "; run sessions first (e.g. ideeprl batch --study "
+            f"{study_id}), or choose sessions explicitly"
+        )
+    return chosen, notes
+
+
+def choose_baseline(methods: set[str], baseline: str) -> tuple[str | None, list[str]]:
+    if baseline == NO_BASELINE:
+        return None, []
+    if baseline == AUTO:
+        if "autonomous" in methods:
+            return "autonomous", []
+        return None, [
+            "No autonomous DeepRL sessions in this report, so no improvement in percent: "
+            "the methods are compared with each other. Add the baseline with "
+            "`ideeprl batch --methods autonomous` in the same study, or name another "
+            "method as the baseline."
+        ]
+    if baseline not in methods:
+        raise Invalid(
+            "baseline",
+            f"baseline method {baseline!r} has no sessions in this report (methods: "
+            f"{', '.join(sorted(methods))}); name one of them, {AUTO!r} or {NO_BASELINE!r}",
+        )
+    return baseline, []
+
+
+@dataclass(frozen=True)
+class StudyReport:
+    """A written report and how its sessions were chosen."""
+
+    result: ReportResult
+    """What `write_report` wrote."""
+    notes: tuple[str, ...]
+    """What the choice of sessions and baseline left out or decided (also in the report)."""
+
+
+def build_report(
+    db: Session, study_id: int, out_dir: str | Path, request: ReportRequest | None = None
+) -> StudyReport:
+    """Write the report of the chosen sessions into `out_dir` (see `write_report`). The
+    analysis (pandas' tables, scipy's tests, matplotlib's figures) loads here, when a report
+    is built, not with the web app."""
+    from analysis.report import write_report
+    from study.services.episodes import (
+        load_advised_steps,
+        load_episodes,
+        load_training_steps,
+        session_settings,
+    )
+
+    request = request or ReportRequest()
+    study = get_study(db, study_id)
+    sessions, notes = select_sessions(db, study_id, request)
+    design = design_of(study)
+    group = {s.id: (s.condition if design and s.condition else s.method) for s in sessions}
+    baseline, baseline_notes = choose_baseline(set(group.values()), request.baseline)
+    episodes = load_episodes(db, [s.id for s in sessions])
+    settings = session_settings(sessions)
+    if design is not None:  # the conditions are what is compared
+        episodes["method"] = episodes["session_id"].map(group)
+        settings["method"] = settings["session_id"].map(group)
+        notes.append(f"An online study: its conditions are compared, at α = {design.alpha:g}.")
+    steps = load_training_steps(db, [s.id for s in sessions])
+    advice = load_advised_steps(db, [s.id for s in sessions])
+    empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
+    if empty:
+        raise Conflict(
+            f"session(s) {', '.join(map(str, empty))} have no training episodes yet; "
+            "leave them out, or wait until they have run"
+        )
+    n_episodes = request.n_episodes
+    if n_episodes is None and request.common_length:
+        lengths = episodes.groupby("session_id")["episode"].count()
+        if lengths.nunique() > 1:
+            n_episodes = int(lengths.min())
+            notes.append(
+                f"The sessions differ in length ({int(lengths.min())} to {int(lengths.max())} "
+                f"training episodes): every session is compared over its first {n_episodes} "
+                "episodes, the length they have in common."
+            )
+    counts = ", ".join(
+        f"{sum(group[s.id] == m for s in sessions)} {method_name(m)}"
+        for m in dict.fromkeys(group[s.id] for s in sessions)
+    )
+    lines = [
+        *request.notes,
+        f"Study {study.id} ({study.name}); sessions {_ids(sessions)}: {counts}.",
+        *notes,
+        *baseline_notes,
+    ]
+    try:
+        result = write_report(
+            episodes,
+            out_dir,
+            title=request.title or f"{study.name}: the paper's analysis",
+            baseline=baseline,
+            notes=lines,
+            n_episodes=n_episodes,
+            settings=settings,
+            steps=steps,
+            allow_mismatch=request.allow_mismatch,
+            reference=request.reference,
+            advice=advice,
+            primary=request.primary,
+            alpha=design.alpha if design is not None else 0.05,  # write_report's default
+        )
+    except EpisodeTableError as error:
+        raise Conflict(f"these sessions cannot be compared as they are: {error}") from None
+    return StudyReport(result, (*notes, *baseline_notes, *result.notes))
+
+
+# --- the report a researcher builds on the server ----------------------------------------
+def reports_dir(settings: Settings) -> Path:
+    """Where the server keeps each study's last report."""
+    return settings.data_dir / "reports"
+
+
+def report_dir(reports_dir: Path, study_id: int) -> Path:
+    return reports_dir / f"study-{study_id}"
+
+
+def describe_report(study_id: int, built: StudyReport) -> dict[str, Any]:
+    """What the API says about a report: its sessions, choices, files and R_T per method."""
+    result = built.result
+    files = [("report", result.report)]
+    files += [("figure", p) for p in result.figures.values()]
+    files += [("figure", p) for p in result.vector_figures]
+    files += [("table", p) for p in result.tables.values()]
+    return {
+        "study_id": study_id,
+        "created_at": iso_z(datetime.now(UTC)),
+        "sessions": sorted(int(i) for i in result.analysis.episodes["session_id"].unique()),
+        "baseline": result.analysis.baseline,
+        "n_episodes": result.analysis.n_episodes,
+        "notes": list(built.notes),
+        "files": [{"name": path.name, "kind": kind} for kind, path in files],
+        "methods": [
+            {
+                "method": str(row["method"]),
+                "name": str(row["name"]),
+                "agents": int(row["agents"]),
+                "episodes": int(row["episodes"]),
+                "R_T": float(row["R_T"]),
+                "improvement_pct": None
+                if pd.isna(row["improvement_pct"])
+                else float(row["improvement_pct"]),
+            }
+            for _, row in result.analysis.methods.iterrows()
+        ],
+    }
+
+
+def publish_report(
+    db: Session, study_id: int, reports_dir: Path, request: ReportRequest
+) -> dict[str, Any]:
+    """Build the study's report into `reports_dir/study-ID/`, replacing the previous one
+    only once the new one is complete; returns its description (also saved as JSON)."""
+    reports_dir.mkdir(parents=True, exist_ok=True)
+    building = reports_dir / f".study-{study_id}-{uuid.uuid4().hex[:8]}"
+    try:
+        description = describe_report(study_id, build_report(db, study_id, building, request))
+        with _publishing:
+            final = report_dir(reports_dir, study_id)
+            old = reports_dir / f".old-study-{study_id}-{uuid.uuid4().hex[:8]}"
+            if final.exists():
+                final.rename(old)
+            building.rename(final)
+            (reports_dir / f"study-{study_id}.json").write_text(json.dumps(description, indent=2))
+            shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(building, ignore_errors=True)
+    return description
+
+
+def published_report(reports_dir: Path, study_id: int) -> dict[str, Any]:
+    path = reports_dir / f"study-{study_id}.json"
+    if not path.is_file() or not report_dir(reports_dir, study_id).is_dir():
+        raise NotFound(
+            f"study {study_id} has no report yet; POST /api/studies/{study_id}/report builds one"
+        )
+    return json.loads(path.read_text())
+
+
+def report_file(reports_dir: Path, study_id: int, name: str) -> Path:
+    """A file of the study's report, by name (only the names the report lists)."""
+    description = published_report(reports_dir, study_id)
+    if name not in {f["name"] for f in description["files"]}:
+        names = ", ".join(f["name"] for f in description["files"])
+        raise NotFound(f"the report of study {study_id} has no file {name!r}; it has {names}")
+    return report_dir(reports_dir, study_id) / name
+
+
+def report_zip(reports_dir: Path, study_id: int, scratch: Path) -> Path:
+    """The report's folder as one zip in a fresh folder under `scratch`."""
+    published_report(reports_dir, study_id)
+    folder = scratch / uuid.uuid4().hex
+    folder.mkdir(parents=True)
+    base = folder / f"study-{study_id}-report"
+    return Path(shutil.make_archive(str(base), "zip", report_dir(reports_dir, study_id)))

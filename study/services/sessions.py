@@ -1,0 +1,175 @@
+"""Sessions: create (the run checked and pinned once, `learning.checked`) and read. Who owns a
+running one is `study.services.ownership`'s (its names are re-exported here)."""
+
+from __future__ import annotations
+
+import secrets
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from learner.run import RunSpec
+from study.db.models import (
+    Episode,
+    Participant,
+    StudySession,
+)
+from study.schemas.sessions import SessionOptions, SessionPublic
+from study.services import learning
+from study.services.errors import Invalid, NotFound
+from study.services.fitted_files import resolve
+from study.services.ownership import claim as claim
+from study.services.ownership import mark_dead_interrupted as mark_dead_interrupted
+from study.services.ownership import set_status as set_status
+from study.services.ownership import silent_sessions as silent_sessions
+from study.services.studies import get_study
+
+
+def participant_url(base_url: str, token: str) -> str:
+    return f"{base_url}/p/{token}"
+
+
+def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
+    """The checkpoint file an `agent` session's advisor names: `session:ID` (a session of
+    this installation with a checkpoint), or a path that must lie under `data_dir` (the
+    API's rule; the batch runner and the command line, run by the researcher, pass None)."""
+    if spec.startswith("session:"):
+        number = spec.removeprefix("session:")
+        found = db.get(StudySession, int(number)) if number.isdigit() and len(number) < 10 else None
+        if found is None or not found.checkpoint_path or not Path(found.checkpoint_path).is_file():
+            raise Invalid(
+                "run.advisor_checkpoint",
+                "run.advisor_checkpoint names no session of this installation with a "
+                "checkpoint; name a finished session, e.g. session:12",
+            )
+        if found.method == "sb3-dqn":
+            raise Invalid(
+                "run.advisor_checkpoint",
+                "run.advisor_checkpoint names an sb3-dqn session: its checkpoint is "
+                "Stable-Baselines3's, which cannot advise; name a session of the paper's learner",
+            )
+        return str(Path(found.checkpoint_path).resolve())
+    try:
+        path = Path(spec).resolve()
+        inside = data_dir is None or path.is_relative_to(data_dir.resolve())
+        present = inside and path.is_file()
+    except (OSError, ValueError):
+        inside = present = False
+    if not inside:
+        raise Invalid(
+            "run.advisor_checkpoint",
+            "run.advisor_checkpoint must be session:ID (a session of this installation) or a "
+            "checkpoint file under the server's data folder",
+        )
+    if not present:
+        raise Invalid("run.advisor_checkpoint", "run.advisor_checkpoint: no such file")
+    return str(path)
+
+
+def create_session(
+    db: Session,
+    study_id: int,
+    spec: RunSpec,
+    options: SessionOptions | None = None,
+    data_dir: Path | None = None,
+    threads: int | None = None,
+    replay: tuple[int | None, dict[str, Any]] | None = None,
+) -> StudySession:
+    """A new session in `created` state, its run validated and pinned on this machine and
+    stored whole; a human one gets its participant and token. `data_dir`: where an advisor's
+    checkpoint file must lie (see `advisor_path`; None: anywhere, for the researcher's own
+    command line); `threads`: torch threads of a run that leaves them open; `replay`: a
+    replayed run's source session (None: not in this database) and its recorded stream
+    (`study.services.replays`, the only maker of replays)."""
+    options = options or SessionOptions()
+    if (spec.method == "replayed") != (replay is not None):
+        raise Invalid(
+            "run.method",
+            "method replayed is made from a recorded session by `ideeprl replay`, which gives "
+            "it the session's advice stream; choose another method",
+        )
+    get_study(db, study_id)
+    if spec.advisor_checkpoint and spec.method == "agent":
+        spec = spec.replace(advisor_checkpoint=advisor_path(db, spec.advisor_checkpoint, data_dir))
+    if spec.fitted_model and spec.method == "fitted":
+        spec = spec.replace(fitted_model=resolve(db, spec.fitted_model, data_dir))
+    spec = learning.checked(spec, threads)
+    if options.participant and spec.method != "human":
+        raise Invalid("participant", "only method human has a participant")
+    session = StudySession(
+        study_id=study_id,
+        label=options.label,
+        run=spec.to_json(),
+        numerics_overrides=[],
+        provenance=[],
+        keep_replay_memory=options.keep_replay_memory,
+        idle_limit_s=options.idle_limit_s,
+    )
+    if replay is not None:
+        session.replay_of, session.replay_stream = replay
+    if spec.method == "human":
+        pseudonym = options.participant or f"p-{secrets.token_hex(4)}"
+        participant = db.scalar(
+            select(Participant).where(
+                Participant.study_id == study_id, Participant.pseudonym == pseudonym
+            )
+        )
+        if participant is None:
+            participant = Participant(study_id=study_id, pseudonym=pseudonym)
+        session.participant = participant
+        session.participant_token = secrets.token_urlsafe(32)
+    db.add(session)
+    db.commit()
+    return session
+
+
+def get_session(db: Session, session_id: int) -> StudySession:
+    session = db.get(StudySession, session_id)
+    if session is None:
+        raise NotFound(f"no session with id {session_id}; GET /api/studies/ID/sessions lists them")
+    return session
+
+
+def list_sessions(db: Session, study_id: int) -> list[StudySession]:
+    get_study(db, study_id)
+    query = select(StudySession).where(StudySession.study_id == study_id)
+    return list(db.scalars(query.order_by(StudySession.id)))
+
+
+def session_public(session: StudySession, base_url: str) -> SessionPublic:
+    data = {
+        name: getattr(session, name)
+        for name in SessionPublic.model_fields
+        if name not in ("participant", "participant_url", "texts_version")
+        and hasattr(session, name)
+    }
+    if session.texts_version is not None:
+        data["texts_version"] = session.texts_version.version
+    if session.participant is not None:
+        data["participant"] = session.participant.pseudonym
+    if session.participant_token:
+        data["participant_url"] = participant_url(base_url, session.participant_token)
+    return SessionPublic(**data)
+
+
+def session_for_token(db: Session, token: str) -> StudySession | None:
+    """The one session a participant token reaches, or None.
+
+    Tokens are 256-bit random strings, so looking one up by equality reveals nothing an
+    attacker could use; we still compare the stored value in constant time."""
+    if not token or len(token) > 100 or "\x00" in token:  # PostgreSQL refuses a NUL
+        return None
+    session = db.scalar(select(StudySession).where(StudySession.participant_token == token))
+    if session is None or not secrets.compare_digest(session.participant_token or "", token):
+        return None
+    return session
+
+
+def list_episodes(db: Session, session_id: int) -> list[Episode]:
+    get_session(db, session_id)
+    query = (
+        select(Episode).where(Episode.session_id == session_id).order_by(Episode.first_global_step)
+    )
+    return list(db.scalars(query))

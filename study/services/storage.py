@@ -1,0 +1,247 @@
+"""What a study and its sessions keep on disk (checkpoints, reports, export scratch), how
+much, and deletion that removes it all with the rows.
+
+Deleting is how a participant's data goes: their session's rows (steps, episodes, advice
+with the images they saw), its checkpoints, the study's report (built from their data),
+the advisor models fitted from their advice (`fitted_advisors`, and their files), the
+replays made from their advice (`sessions.replay_of`, in any study, with their files and
+their studies' reports), and their pseudonym once no session of theirs remains. Rows go
+first, in one transaction; files after, so a failure leaves files of a deleted session
+(removed again when the id would be used, which it never is: ids are not reused), never
+rows without their files.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+from pathlib import Path
+
+from pydantic import BaseModel, Field
+from sqlalchemy import delete, func, select
+from sqlalchemy.orm import Session
+
+from study.db.models import (
+    LIVE_STATUSES,
+    FittedAdvisorModel,
+    Participant,
+    Status,
+    Study,
+    StudySession,
+)
+from study.services.errors import Conflict, NotFound
+from study.services.fitted_files import fitted_model_path
+from study.services.replays import replays_of
+from study.services.studies import get_study
+
+log = logging.getLogger(__name__)
+LIVE = [s.value for s in LIVE_STATUSES]
+
+
+def session_dir(data_dir: Path, session_id: int) -> Path:
+    """A session's checkpoint folder (the worker's `data_dir/checkpoints/session-ID`)."""
+    return data_dir / "checkpoints" / f"session-{session_id}"
+
+
+def _report_paths(data_dir: Path, study_id: int) -> list[Path]:
+    reports = data_dir / "reports"
+    found = [reports / f"study-{study_id}", reports / f"study-{study_id}.json"]
+    found += reports.glob(f".study-{study_id}-*") if reports.is_dir() else []
+    found += reports.glob(f".old-study-{study_id}-*") if reports.is_dir() else []
+    scratch = data_dir / "exports" / "tmp"
+    found += scratch.glob(f"study-{study_id}-*") if scratch.is_dir() else []
+    return found
+
+
+def _remove(path: Path) -> None:
+    try:
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        else:
+            path.unlink(missing_ok=True)
+    except OSError as error:
+        log.error("could not remove %s: %s", path, error)
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    try:
+        return path.resolve().is_relative_to(folder.resolve())
+    except OSError:
+        return False
+
+
+def remove_session_files(data_dir: Path, session_id: int, checkpoint: str | None) -> None:
+    _remove(session_dir(data_dir, session_id))
+    if checkpoint and _inside(Path(checkpoint), data_dir):
+        _remove(Path(checkpoint))
+
+
+def remove_study_files(data_dir: Path, study_id: int) -> None:
+    for path in _report_paths(data_dir, study_id):
+        _remove(path)
+
+
+def _fitted_from(db: Session, session_ids: set[int]) -> list[tuple[int, int]]:
+    """Delete the fitted advisor models made from these sessions' advice (a participant's
+    data lives on in them); returns their (study, model) ids, for their files."""
+    rows = db.scalars(select(FittedAdvisorModel))
+    used = [r for r in rows if session_ids & {int(i) for i in r.session_ids}]
+    for row in used:
+        db.delete(row)
+    return [(r.study_id, r.id) for r in used]
+
+
+def remove_fitted_files(data_dir: Path, models: list[tuple[int, int]]) -> None:
+    for study_id, model_id in models:
+        _remove(fitted_model_path(data_dir, study_id, model_id))
+
+
+def _refuse_live(session: StudySession, live_here: bool) -> None:
+    if session.status in LIVE or live_here:
+        raise Conflict(
+            f"session {session.id} is {session.status}; stop it first "
+            f"(POST /api/sessions/{session.id}/stop)"
+        )
+
+
+def _advised_by(db: Session, sessions: list[StudySession]) -> list[int]:
+    """Unfinished sessions elsewhere whose advisor is one of these sessions' checkpoints."""
+    paths = [s.checkpoint_path for s in sessions if s.checkpoint_path]
+    if not paths:
+        return []
+    ids = {s.id for s in sessions}
+    query = select(StudySession).where(StudySession.status != Status.finished.value)
+    return [
+        s.id
+        for s in db.scalars(query)
+        if s.id not in ids and s.run.get("advisor_checkpoint") in paths
+    ]
+
+
+def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool) -> None:
+    """Delete one session: rows, checkpoints, the study's report; refused while it runs."""
+    session = db.get(StudySession, session_id)
+    if session is None:
+        raise NotFound(f"no session with id {session_id}")
+    _refuse_live(session, live_here)
+    replays = replays_of(db, [session_id])
+    for replay in replays:
+        _refuse_live(replay, False)
+    advised = _advised_by(db, [session, *replays])
+    if advised:
+        raise Conflict(
+            f"session {session_id}'s checkpoint advises unfinished session(s) "
+            f"{', '.join(map(str, advised))}; delete or finish them first"
+        )
+    study_id, checkpoint, participant_id = session.study_id, session.checkpoint_path, None
+    derived = [(r.id, r.checkpoint_path, r.study_id) for r in replays]
+    if session.participant_id is not None:
+        others = db.scalar(
+            select(func.count()).where(
+                StudySession.participant_id == session.participant_id,
+                StudySession.id != session_id,
+            )
+        )
+        participant_id = None if others else session.participant_id
+    fitted = _fitted_from(db, {session_id, *(r.id for r in replays)})
+    db.delete(session)  # the database deletes its replays (replay_of cascades)
+    if participant_id is not None:
+        participant = db.get(Participant, participant_id)
+        if participant is not None:
+            db.delete(participant)
+    db.commit()
+    remove_session_files(data_dir, session_id, checkpoint)
+    remove_fitted_files(data_dir, fitted)
+    remove_study_files(data_dir, study_id)  # its report was built from this session's data
+    for replay_id, replay_checkpoint, replay_study in derived:
+        remove_session_files(data_dir, replay_id, replay_checkpoint)
+        remove_study_files(data_dir, replay_study)
+
+
+def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> None:
+    """Delete a study with its sessions, participants, checkpoints, report and exports."""
+    study = get_study(db, study_id)
+    sessions = list(study.sessions)
+    running = [s.id for s in sessions if s.status in LIVE or s.id in live]
+    if running:
+        raise Conflict(
+            f"study {study_id} has {len(running)} running session(s) "
+            f"({', '.join(map(str, running))}); stop them first"
+        )
+    replays = [r for r in replays_of(db, [s.id for s in sessions]) if r.study_id != study_id]
+    running += [r.id for r in replays if r.status in LIVE or r.id in live]
+    if running:
+        raise Conflict(
+            f"study {study_id}'s sessions have running replay(s) in other studies "
+            f"({', '.join(map(str, running))}); stop them first"
+        )
+    advised = _advised_by(db, [*sessions, *replays])
+    if advised:
+        raise Conflict(
+            f"study {study_id}'s sessions advise unfinished session(s) "
+            f"{', '.join(map(str, advised))} of other studies; delete or finish them first"
+        )
+    files = [(s.id, s.checkpoint_path) for s in [*sessions, *replays]]
+    fitted = _fitted_from(db, {s.id for s in [*sessions, *replays]})
+    fitted += [
+        (r.study_id, r.id)
+        for r in db.scalars(
+            select(FittedAdvisorModel).where(FittedAdvisorModel.study_id == study_id)
+        )
+        if (r.study_id, r.id) not in fitted
+    ]
+    # The database deletes its sessions, and their replays anywhere (foreign keys cascade):
+    # the ORM would delete a replay of this study twice.
+    db.execute(delete(Study).where(Study.id == study_id))
+    db.commit()
+    remove_fitted_files(data_dir, fitted)
+    for session_id, checkpoint in files:
+        remove_session_files(data_dir, session_id, checkpoint)
+    for other in {study_id, *(r.study_id for r in replays)}:
+        remove_study_files(data_dir, other)
+
+
+class SessionDisk(BaseModel):
+    session_id: int
+    checkpoint_bytes: int = Field(description="The session's checkpoint folder.")
+
+
+class StudyDisk(BaseModel):
+    """What a study keeps on disk, beside its database rows."""
+
+    study_id: int
+    total_bytes: int
+    checkpoint_bytes: int
+    report_bytes: int = Field(description="Its report and any export being packed.")
+    sessions: list[SessionDisk]
+
+
+def _size(path: Path) -> int:
+    try:
+        if path.is_file():
+            return path.stat().st_size
+        if path.is_dir():
+            return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+    except OSError:
+        pass
+    return 0
+
+
+def study_disk(db: Session, data_dir: Path, study_id: int) -> StudyDisk:
+    study = get_study(db, study_id)
+    found = []
+    for session in sorted(study.sessions, key=lambda s: s.id):
+        size = _size(session_dir(data_dir, session.id))
+        checkpoint = Path(session.checkpoint_path) if session.checkpoint_path else None
+        if checkpoint is not None and not _inside(checkpoint, session_dir(data_dir, session.id)):
+            size += _size(checkpoint)
+        found.append(SessionDisk(session_id=session.id, checkpoint_bytes=size))
+    checkpoints = sum(s.checkpoint_bytes for s in found)
+    reports = sum(_size(p) for p in _report_paths(data_dir, study_id))
+    return StudyDisk(
+        study_id=study_id,
+        total_bytes=checkpoints + reports,
+        checkpoint_bytes=checkpoints,
+        report_bytes=reports,
+        sessions=found,
+    )

@@ -1,0 +1,161 @@
+"""The comparability audit and the rescoring table in a report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from analysis import write_report
+from analysis.audit import audit, describe_learner
+from analysis.rescoring import rescored_totals, rescoring_table
+from sim.rewards import REWARD_SCHEMES, step_penalty
+from tests.analysis.test_report import study_episodes
+
+
+def settings_for(episodes: pd.DataFrame, **by_method: dict[str, str]) -> pd.DataFrame:
+    """One settings row per session: the paper's everything, changed per method."""
+    rows = []
+    for session_id, method in episodes.groupby("session_id")["method"].first().items():
+        row = {
+            "session_id": session_id, "method": method, "reward_scheme": "paper",
+            "learner": "paper", "knock_off_rate": 0.0, "motion": "fast", "sort_rule": "color",
+            "advice": "none" if method == "autonomous" else "early, budget 100",
+        }  # fmt: skip
+        row.update(by_method.get(method, {}))
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def test_same_settings_compare_and_keep_every_t_test(tmp_path: Path) -> None:
+    episodes = study_episodes()
+    result = write_report(episodes, tmp_path, settings=settings_for(episodes))
+    assert result.audit is not None and result.audit.comparable
+    assert result.analysis.t_tests["p"].notna().all()
+    text = result.report.read_text()
+    assert "Comparability warning" not in text and "They do here." in text
+
+
+def test_different_schemes_are_flagged_and_their_t_tests_withheld(tmp_path: Path) -> None:
+    episodes = study_episodes()
+    settings = settings_for(
+        episodes,
+        autonomous={"reward_scheme": "authors-autonomous"},
+        agent={"reward_scheme": "authors-interactive"},
+        human={"reward_scheme": "authors-interactive"},
+    )
+    result = write_report(episodes, tmp_path / "strict", settings=settings)
+    text = result.report.read_text()
+    first = text.split("\n\n")[1]
+    assert first.startswith("> **Comparability warning.**")
+    assert "autonomous DeepRL and agent-IDeepRL" in first and "reward scheme" in first
+    tests = result.analysis.t_tests
+    against_base = tests["method_b"].eq("autonomous") | tests["method_a"].eq("autonomous")
+    assert tests.loc[against_base, "p"].isna().all()
+    assert tests.loc[against_base, ["t_welch", "p_welch", "df_welch"]].isna().all().all()
+    assert tests.loc[~against_base, "p_welch"].notna().all()
+    assert (tests.loc[against_base, "withheld"].str.contains("reward scheme")).all()
+    same_scheme = ~against_base  # agent vs human: both authors-interactive
+    assert tests.loc[same_scheme, "p"].notna().all()
+    csv = pd.read_csv(result.tables["t_tests"])
+    assert csv.loc[csv["method_a"].eq("agent") & csv["method_b"].eq("autonomous"), "t"].isna().all()
+    assert "t-test withheld" in text
+    paper = result.analysis.paper.set_index("quantity")
+    against = [q for q in paper.index if q.startswith(("|t|", "p ")) and "autonomous" in q]
+    assert against and paper.loc[against, "ours"].isna().all()
+
+    allowed = write_report(episodes, tmp_path / "allowed", settings=settings, allow_mismatch=True)
+    assert allowed.analysis.t_tests["p"].notna().all()
+    allowed_text = allowed.report.read_text()
+    assert "Comparability warning" in allowed_text and "--allow-mismatch" in allowed_text
+
+
+def test_other_settings_and_mixed_methods_are_flagged() -> None:
+    episodes = study_episodes()
+    settings = settings_for(episodes, agent={"learner": "authors", "knock_off_rate": 0.05})
+    settings.loc[settings.index[0], "motion"] = "physics"  # one autonomous session differs
+    checked = audit(settings, "autonomous")
+    assert checked.differ("autonomous", "agent") == [
+        "learner preset and options", "knock off rate", "motion mode",
+    ]  # fmt: skip
+    assert checked.mixed == {"autonomous": ["motion mode"]}
+    assert "differ among themselves" in " ".join(checked.warnings())
+    assert checked.differ("agent", "human")[:2] == [
+        "learner preset and options",
+        "knock off rate",
+    ]
+
+
+def test_describe_learner_names_the_closest_preset() -> None:
+    from learner.config import PRESETS, DQNConfig
+
+    presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
+    assert describe_learner(DQNConfig.preset("authors").to_dict(), presets) == "authors"
+    assert describe_learner(DQNConfig(gamma=0.99, torch_threads=2).to_dict(), presets) == (
+        "paper + gamma=0.99"
+    )
+
+
+def constructed_steps() -> tuple[pd.DataFrame, dict[int, str], dict[int, str]]:
+    """Two sessions of one 25-step episode each (placements at steps 3, 6, 24 and a wrong
+    one at 25, as in tests/sim/test_rewards.py), logged under two different schemes."""
+    placed = {3: 0.4, 6: 0.4, 24: 0.4, 25: -1.0}
+    rows = []
+    schemes = {1: "authors-autonomous", 2: "authors-interactive"}
+    for session_id, scheme in schemes.items():
+        for n in range(1, 26):
+            reward = placed.get(n, step_penalty(scheme, n))
+            rows.append((session_id, 1, n, reward, n == 25))
+    steps = pd.DataFrame(
+        rows, columns=["session_id", "episode", "episode_step", "reward", "terminated"]
+    )
+    return steps, schemes, {1: "autonomous", 2: "agent"}
+
+
+def test_rescored_r_t_of_a_constructed_episode() -> None:
+    steps, schemes, methods = constructed_steps()
+    totals = rescored_totals(steps, schemes).set_index("session_id")
+    # by hand (see tests/sim/test_rewards.py): paper 0.15, autonomous 0.10, interactive -0.01
+    for session_id in (1, 2):
+        assert totals.loc[session_id, "R_T_paper"] == pytest.approx(0.15)
+        assert totals.loc[session_id, "R_T_authors-autonomous"] == pytest.approx(0.10)
+        assert totals.loc[session_id, "R_T_authors-interactive"] == pytest.approx(-0.01)
+    assert totals.loc[1, "R_T_logged"] == pytest.approx(0.10)
+    assert totals.loc[2, "R_T_logged"] == pytest.approx(-0.01)
+    table = rescoring_table(totals.reset_index(), methods, "autonomous").set_index("method")
+    # as logged, the same behaviour looks 110 % worse for agent; under one rule, equal
+    assert table.loc["agent", "improvement_logged"] == pytest.approx(-110.0)
+    assert table.loc["agent", "improvement_paper"] == pytest.approx(0.0)
+
+
+def test_rescored_r_t_are_tested_under_each_scheme_with_welch() -> None:
+    rng = np.random.default_rng(3)
+    rows = []
+    for session_id in range(1, 9):
+        method = "autonomous" if session_id <= 4 else "agent"
+        shift = 0.0 if method == "autonomous" else 10.0
+        rows.append(
+            {
+                "session_id": session_id,
+                "scheme": "paper",
+                "R_T_logged": 0.0,
+                **{
+                    f"R_T_{s}": 100 + shift * k + rng.normal() for k, s in enumerate(REWARD_SCHEMES)
+                },
+            }
+        )
+    totals = pd.DataFrame(rows)
+    methods = {i: ("autonomous" if i <= 4 else "agent") for i in range(1, 9)}
+    table = rescoring_table(totals, methods, "autonomous").set_index("method")
+    for scheme in REWARD_SCHEMES:
+        column = f"R_T_{scheme}"
+        expected = stats.ttest_ind(
+            totals.loc[4:, column], totals.loc[:3, column], equal_var=False
+        ).pvalue
+        assert table.loc["agent", f"p_welch_{scheme}"] == pytest.approx(expected)
+        assert np.isnan(table.loc["autonomous", f"p_welch_{scheme}"])
+    # the first scheme has no shift, the last a large one
+    assert table.loc["agent", f"p_welch_{REWARD_SCHEMES[-1]}"] < 0.001

@@ -1,0 +1,119 @@
+"""The figures draw what the tables say, with the labels a reader needs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.collections import PolyCollection
+from PIL import Image
+
+from analysis import (
+    EpisodeTableError,
+    correlation_matrix,
+    plot_correlation,
+    plot_epsilon,
+    plot_individual_agents,
+    plot_method_curves,
+    save_figure,
+)
+from analysis.figures import epsilon_reaches, example_agents, pick_reference_agent, smooth
+from tests.analysis.helpers import HAND_CASE, episodes_from_curves
+
+
+def test_figure_5_draws_each_methods_mean_with_a_band_where_there_is_spread() -> None:
+    figure = plot_method_curves(episodes_from_curves(HAND_CASE))
+    ax = figure.axes[0]
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    assert list(lines) == [
+        "autonomous DeepRL (n=2)",
+        "agent-IDeepRL (n=2)",
+        "human-IDeepRL (n=1)",
+    ]
+    assert list(lines["agent-IDeepRL (n=2)"].get_ydata()) == [1.5, 2.5, 3.0]
+    assert lines["autonomous DeepRL (n=2)"].get_color() == "black"
+    bands = [c for c in ax.collections if isinstance(c, PolyCollection)]
+    assert len(bands) == 2  # a single human agent has no spread to shade
+    assert ax.get_xlabel() == "episode"
+    assert "collected reward" in ax.get_ylabel()
+    assert "standard deviation" in ax.get_title()
+
+
+def test_smoothing_is_a_trailing_mean_for_the_eye_only() -> None:
+    assert list(smooth([0.0, 0.0, 3.0, 3.0], 2)) == [0.0, 0.0, 1.5, 3.0]
+    assert list(smooth([1.0, 2.0], 1)) == [1.0, 2.0]
+    with pytest.raises(ValueError, match="at least 1 episode"):
+        smooth([1.0], 0)
+    figure = plot_method_curves(episodes_from_curves(HAND_CASE), smoothing=2)
+    agent = figure.axes[0].get_lines()[1]
+    assert list(agent.get_ydata()) == [1.5, 2.0, 2.75]
+    assert "moving average over 2 episodes" in figure.axes[0].get_title()
+
+
+def test_figure_6_puts_agents_against_the_median_reference_with_their_gain() -> None:
+    curves = dict(HAND_CASE) | {"DeepRL3": ("autonomous", [1.0, 1.0, 2.0])}
+    table = episodes_from_curves(curves)
+    assert pick_reference_agent(table) == "DeepRL3"  # R_T 3, 4, 5: the median is 4
+    figure = plot_individual_agents(table, method="agent")
+    labels = [line.get_label() for line in figure.axes[0].get_lines()]
+    assert labels == [
+        "agent-IDeepRL1 (R_T = 6.0, +50.0 %)",
+        "agent-IDeepRL2 (R_T = 8.0, +100.0 %)",
+        "DeepRL3, reference (R_T = 4.0)",
+    ]
+    assert figure.axes[0].get_lines()[-1].get_color() == "black"
+    chosen = plot_individual_agents(
+        table, method="agent", labels=["agent-IDeepRL2"], reference_label="DeepRL1"
+    )
+    assert [line.get_label() for line in chosen.axes[0].get_lines()] == [
+        "agent-IDeepRL2 (R_T = 8.0, +166.7 %)",
+        "DeepRL1, reference (R_T = 3.0)",
+    ]
+    with pytest.raises(EpisodeTableError, match="no agents of method 'oracle'"):
+        plot_individual_agents(table, method="oracle")
+    with pytest.raises(EpisodeTableError, match="no agent labelled 'nobody'"):
+        plot_individual_agents(table, method="agent", reference_label="nobody")
+
+
+def test_example_agents_span_lowest_median_and_highest_r_t() -> None:
+    curves = {f"h{i}": ("human", [float(r)]) for i, r in enumerate([5, 1, 9, 3, 7, 2])}
+    table = episodes_from_curves(curves)
+    # R_T order: h1=1, h5=2, h3=3, h0=5, h4=7, h2=9 -> positions 0, 2 (rounded 2.5), 5
+    assert example_agents(table, "human", 3) == ["h1", "h2", "h3"]
+    assert example_agents(table, "human", 6) == ["h0", "h1", "h2", "h3", "h4", "h5"]
+
+
+def test_figure_7_writes_every_value_in_its_cell() -> None:
+    x = np.array([0.0, 1.0, 3.0, 2.0])
+    table = episodes_from_curves(
+        {"a": ("agent", x), "b": ("agent", -x), "c": ("human", np.ones(4))}
+    )
+    matrix = correlation_matrix(table)
+    figure = plot_correlation(matrix)
+    texts = [t.get_text() for t in figure.axes[0].texts]
+    assert texts == ["1.00", "-1.00", "–", "-1.00", "1.00", "–", "–", "–", "–"]
+    assert [t.get_text() for t in figure.axes[0].get_xticklabels()] == ["a", "b", "c"]
+    assert "Pearson" in figure.axes[1].get_ylabel()  # the colour bar says what the colours mean
+    assert len(plot_correlation(matrix, annotate=False).axes[0].texts) == 0
+
+
+def test_epsilon_view_marks_when_exploration_reaches_one_percent() -> None:
+    curves = {"a": ("autonomous", [0.0] * 4), "b": ("agent", [0.0] * 4)}
+    epsilon = {"a": [0.5, 0.05, 0.01, 0.01], "b": [0.5, 0.4, 0.3, 0.2]}
+    table = episodes_from_curves(curves, epsilon=epsilon)
+    reached = epsilon_reaches(table)
+    assert reached["autonomous"] == 3 and np.isnan(reached["agent"])
+    labels = [line.get_label() for line in plot_epsilon(table).axes[0].get_lines()]
+    assert labels[:2] == ["autonomous DeepRL, 1 % at episode 3", "agent-IDeepRL"]
+    with pytest.raises(EpisodeTableError, match="no epsilon column"):
+        plot_epsilon(episodes_from_curves(curves))
+
+
+def test_save_figure_writes_a_png(tmp_path: Path) -> None:
+    path = save_figure(
+        plot_method_curves(episodes_from_curves(HAND_CASE)), tmp_path / "f.png", dpi=50
+    )
+    with Image.open(path) as image:
+        assert image.format == "PNG"
+        assert image.size == (450, 250)  # 9 x 5 inches at 50 dpi

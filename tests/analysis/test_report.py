@@ -1,0 +1,201 @@
+"""write_report: the files a researcher opens, and that their tables match the input."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+
+from analysis import EpisodeTableError, ReportResult, write_report
+from analysis.__main__ import main
+from analysis.power import normal_sample_size
+from analysis.report import FIGURE_FILES, TABLE_FILES
+from tests.analysis.helpers import HAND_CASE, episodes_from_curves
+
+N_EPISODES = 12
+
+
+def study_episodes() -> pd.DataFrame:
+    """3 autonomous, 3 agent-advised and 6 human-advised agents whose advised runs learn faster."""
+    rng = np.random.default_rng(11)
+    episode = np.arange(N_EPISODES)
+    curves, epsilon = {}, {}
+    for method, count, start in (("autonomous", 3, 8.0), ("agent", 3, 3.0), ("human", 6, 4.0)):
+        for i in range(1, count + 1):
+            learned = 1 / (1 + np.exp(-(episode - start - rng.uniform(-1, 1))))
+            label = f"{method}-{i}"
+            curves[label] = (method, -1.0 + 4.0 * learned + rng.normal(0, 0.3, N_EPISODES))
+            epsilon[label] = np.maximum(0.01, 0.6 ** (episode + 1))
+    table = episodes_from_curves(curves, epsilon=epsilon)
+    table["seed"] = table["session_id"] * 10
+    return table
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory: pytest.TempPathFactory) -> tuple[pd.DataFrame, ReportResult]:
+    episodes = study_episodes()
+    out = tmp_path_factory.mktemp("report") / "nested" / "study-1"
+    return episodes, write_report(
+        episodes, out, title="Pilot study", notes=["command: ideeprl batch --demo"]
+    )
+
+
+def test_every_file_is_written_and_listed(report: tuple[pd.DataFrame, ReportResult]) -> None:
+    _, result = report
+    assert result.report == result.out_dir / "report.md"
+    assert set(result.figures) == set(FIGURE_FILES)
+    assert set(result.tables) == {*TABLE_FILES, "comparisons", "power"}  # against a baseline
+    assert sorted(p.name for p in result.out_dir.iterdir()) == sorted(p.name for p in result.files)
+    for path in result.figures.values():
+        with Image.open(path) as image:
+            assert image.format == "PNG" and min(image.size) > 300
+        assert path.with_suffix(".svg").read_text().lstrip().startswith("<?xml")
+        assert path.with_suffix(".pdf").read_bytes().startswith(b"%PDF")
+
+
+def test_the_csv_tables_match_the_input(report: tuple[pd.DataFrame, ReportResult]) -> None:
+    episodes, result = report
+    agents = pd.read_csv(result.tables["agents"]).set_index("label")
+    by_hand = episodes.groupby("label")["collected_reward"].sum()
+    assert agents["R_T"].to_dict() == pytest.approx(by_hand.to_dict())
+    assert agents["seed"].to_dict() == episodes.groupby("label")["seed"].first().to_dict()
+
+    methods = pd.read_csv(result.tables["methods"]).set_index("method")
+    curve = episodes.groupby(["method", "episode"])["collected_reward"].mean()
+    for method in ("autonomous", "agent", "human"):
+        assert methods.loc[method, "R_T"] == pytest.approx(curve.loc[method].sum())
+    base = curve.loc["autonomous"].sum()
+    assert methods.loc["agent", "improvement_pct"] == pytest.approx(
+        (curve.loc["agent"].sum() - base) / abs(base) * 100
+    )
+
+    tests = pd.read_csv(result.tables["t_tests"])
+    row = tests[(tests.method_a == "human") & (tests["sample"] == "agent_totals")].iloc[0]
+    assert (row["method_b"], row["n_a"], row["n_b"]) == ("autonomous", 6, 3)
+    assert set(tests.loc[tests["sample"] == "episode_means", "n_a"]) == {N_EPISODES}
+
+    correlation = pd.read_csv(result.tables["correlation"], index_col="label")
+    wide = episodes.pivot(index="episode", columns="label", values="collected_reward")
+    expected = np.corrcoef(wide[correlation.columns].to_numpy().T)
+    assert np.allclose(correlation.to_numpy(), expected)
+
+    curves = pd.read_csv(result.tables["curves"]).set_index(["method", "episode"])
+    assert curves["mean"].to_dict() == pytest.approx(curve.to_dict())
+
+
+def test_the_markdown_shows_the_files_and_numbers_in_plain_words(
+    report: tuple[pd.DataFrame, ReportResult],
+) -> None:
+    _, result = report
+    text = result.report.read_text(encoding="utf-8")
+    assert text.startswith("# Pilot study\n\n- command: ideeprl batch --demo\n")
+    links = re.findall(r"\]\(([^)]+)\)", text)
+    assert set(FIGURE_FILES.values()) | set(TABLE_FILES.values()) <= set(links)
+    assert all((result.out_dir / link).is_file() for link in links)  # relative, and there
+    methods = pd.read_csv(result.tables["methods"]).set_index("method")
+    agent = methods.loc["agent"]
+    assert (
+        f"- **agent-IDeepRL** (3 agents × {N_EPISODES} episodes): R_T = {agent['R_T']:.2f}" in text
+    )
+    assert f"{agent['improvement_pct']:+.2f} %" in text
+    assert "the paper's Table 2" in text and "598 degrees of freedom" in text
+    assert "| R_T autonomous DeepRL | 369.88 |" in text
+    assert "| \\|t\\| autonomous DeepRL vs agent-IDeepRL | 7.6829 |" in text
+    assert "| p autonomous DeepRL vs agent-IDeepRL | 6.3947e-14 |" in text
+    assert f"these runs have {N_EPISODES} episodes per agent" in text
+    assert "Figure 6 draws 3 of the 6 human-IDeepRL agents" in text
+    assert "Mean epsilon reaches 1 %: autonomous DeepRL at episode 10" in text
+
+
+def test_the_power_section_plans_from_the_agents_r_t(
+    report: tuple[pd.DataFrame, ReportResult],
+) -> None:
+    """Each method against the baseline, both targets, by simulation and closed form,
+    labelled as planning; the numbers are those of the power table and the library."""
+    episodes, result = report
+    text = result.report.read_text(encoding="utf-8")
+    section = text.split("## Power: ")[1].split("\n## ")[0]
+    assert section.startswith("how many participants a study needs (planning, not a test)")
+    assert "not a test of this one" in section and "2000 studies per size (seed 0)" in section
+    table = pd.read_csv(result.tables["power"])
+    assert list(zip(table.method, table.power, strict=True)) == [
+        ("agent", 0.8), ("agent", 0.9), ("human", 0.8), ("human", 0.9)
+    ]  # fmt: skip
+    r_t = episodes.groupby("label")["collected_reward"].sum()
+    agent = r_t[[f"agent-{i}" for i in (1, 2, 3)]].to_numpy()
+    base = r_t[[f"autonomous-{i}" for i in (1, 2, 3)]].to_numpy()
+    row = table.iloc[0]
+    assert row["effect"] == pytest.approx(agent.mean() - base.mean())
+    assert (row["sd"], row["baseline_sd"]) == pytest.approx((agent.std(ddof=1), base.std(ddof=1)))
+    assert row["n_closed_form"] == normal_sample_size(
+        row["effect"], row["sd"], row["baseline_sd"], 0.8, 0.05
+    )
+    assert (
+        f"| agent-IDeepRL vs autonomous DeepRL | {row['effect']:+.2f} (d = {row['d']:.2f}) | "
+        f"{row['sd']:.2f} / {row['baseline_sd']:.2f} | 3 + 3 | 80 % | {row['n_bootstrap']} | "
+        f"{row['n_fitted']} | {row['n_closed_form']} |"
+    ) in section
+    assert "(power.png)" in section and "(power.svg)" in section
+
+
+def test_too_few_agents_leave_the_power_section_with_the_reason(tmp_path: Path) -> None:
+    result = write_report(episodes_from_curves(HAND_CASE), tmp_path / "hand")
+    section = result.report.read_text(encoding="utf-8").split("## Power: ")[1].split("\n## ")[0]
+    assert "Left out: human has 1 agent(s); power needs at least 2 per arm" in section
+    assert "| agent-IDeepRL vs autonomous DeepRL |" in section
+    assert "| human-IDeepRL vs autonomous DeepRL |" not in section
+    assert set(pd.read_csv(result.tables["power"]).method) == {"agent"}
+    alone = write_report(episodes_from_curves(HAND_CASE), tmp_path / "none", baseline=None)
+    assert "Left out: power compares each method with a baseline" in alone.report.read_text()
+    assert "power" not in alone.figures and "power" not in alone.tables
+
+
+def test_the_paper_comparison_needs_the_papers_methods(tmp_path: Path) -> None:
+    curves = {"o1": ("oracle", [1.0, 2.0, 3.0]), "r1": ("random", [0.0, 1.0, 0.0])}
+    result = write_report(episodes_from_curves(curves), tmp_path, baseline="random")
+    text = result.report.read_text(encoding="utf-8")
+    assert "None of the paper's methods" in text and "369.88" not in text
+    assert pd.read_csv(result.tables["paper"]).empty
+    # no human sessions: Figure 6 shows the first advised method against the baseline
+    assert "Figure 6 shows oracle-IDeepRL agents" in text
+    assert "Figure 6's reference is r1" in text
+
+
+def test_a_single_method_still_gets_a_report_without_figure_6(tmp_path: Path) -> None:
+    table = episodes_from_curves({"a": ("autonomous", [1.0, 2.0]), "b": ("autonomous", [2.0, 2.0])})
+    result = write_report(table, tmp_path)
+    assert "individual_agents" not in result.figures
+    assert "Figure 6 is left out" in result.report.read_text(encoding="utf-8")
+    assert result.notes[0].startswith("Figure 6 is left out")
+
+
+def test_bad_input_writes_nothing(tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    table = episodes_from_curves(HAND_CASE)
+    with pytest.raises(EpisodeTableError, match="unequal numbers of episodes"):
+        write_report(table[~((table.session_id == 1) & (table.episode == 3))], out)
+    with pytest.raises(EpisodeTableError, match="no agent labelled 'DeepRL9' for Figure 6"):
+        write_report(table, out, reference_label="DeepRL9")
+    with pytest.raises(EpisodeTableError, match="baseline method 'autonomus' has no sessions"):
+        write_report(table, out, baseline="autonomus")
+    assert not out.exists()
+
+
+def test_the_command_line_writes_a_report_from_a_csv(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    csv = tmp_path / "episodes.csv"
+    episodes_from_curves(HAND_CASE).to_csv(csv, index=False)
+    assert main([str(csv), str(tmp_path / "out"), "--title", "From CSV"]) == 0
+    printed = capsys.readouterr().out.split()
+    assert str(tmp_path / "out" / "report.md") == printed[0]
+    assert (tmp_path / "out" / "report.md").read_text(encoding="utf-8").startswith("# From CSV")
+    broken = tmp_path / "broken.csv"
+    episodes_from_curves(HAND_CASE).drop(columns=["episode"]).to_csv(broken, index=False)
+    assert main([str(broken), str(tmp_path / "none")]) == 2
+    assert "lacks column(s) episode" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()

@@ -1,0 +1,62 @@
+"""The batch runner's entry point: a session made through the service layer and run to
+its end in this process, without the web server."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from sqlalchemy import func, select
+
+from learner.run import RunSpec
+from runs.worker.worker import WorkerOptions, run_session
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Episode, Step, StudySession
+from study.schemas.studies import StudyCreate
+from study.services.errors import Conflict
+from study.services.sessions import create_session
+from study.services.studies import create_study
+from tests.server.live import fresh_database
+from tests.server.scale import EPISODES, session_body
+
+pytestmark = pytest.mark.slow
+
+
+def test_run_session_runs_a_session_to_its_end_in_this_process(tmp_path: Path) -> None:
+    with fresh_database(tmp_path) as url:
+        engine = make_engine(url)
+        upgrade(engine)
+        factory = make_session_factory(engine)
+        with factory() as db:
+            study = create_study(db, StudyCreate(name="batch"))
+            session = create_session(
+                db, study.id, RunSpec.from_json(session_body("oracle", advice_budget=10)["run"])
+            )
+            human = create_session(
+                db, study.id, RunSpec.from_json(session_body("human", advice_budget=5)["run"])
+            )
+        options = WorkerOptions(data_dir=tmp_path, checkpoint_every_episodes=1)
+
+        assert run_session(session.id, url, options) == "finished"
+        with factory() as db:
+            done = db.get(StudySession, session.id)
+            assert done is not None and done.status == "finished"
+            steps = db.scalar(select(func.count()).where(Step.session_id == session.id))
+            last = db.scalar(
+                select(func.max(Step.global_step)).where(Step.session_id == session.id)
+            )
+            trained = db.scalar(
+                select(func.count()).where(
+                    Episode.session_id == session.id, Episode.stage == "train"
+                )
+            )
+        assert steps == last == done.checkpoint_step and trained == EPISODES
+        assert Path(done.checkpoint_path or "").name == "final.pt"
+        assert Path(done.checkpoint_path or "").is_file(), "usable as an agent advisor"
+
+        with pytest.raises(Conflict, match="finished"):
+            run_session(session.id, url, options)
+        with pytest.raises(Conflict, match="human"):
+            run_session(human.id, url, options)
+        engine.dispose()
