@@ -12,10 +12,10 @@ import dataclasses
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from sqlalchemy import select
 from sqlalchemy.engine import make_url
@@ -41,6 +41,7 @@ from study.services.studies import get_study
 
 TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
 LIVE = {s.value for s in LIVE_STATUSES}
+T = TypeVar("T")
 WAITING = "waiting for the advisor"
 BLOCKED = "not run: the advisor did not finish"
 WAITING_PAIR = "waiting for its advised run"
@@ -402,17 +403,13 @@ class BatchRunner:
             self._keys[state.session_id] = population_key(learning.spec_of(row, self.spec_class))
         return self._keys[state.session_id]
 
-    def _next_group(self, db: Session, free: int) -> list[RunState]:
-        """The first waiting run and the waiting runs that can train with it, taken off the
-        queue: at most `population`, and no more than fills the `free` workers evenly (three
-        runs on two free workers go as two and one, so no core idles)."""
+    def _next_group(self, db: Session, workers: int) -> list[RunState]:
+        """The next population to start, taken off the queue (`next_group`). An advisor
+        that `agent` runs wait for trains alone: it is the batch's critical path."""
         first = self.queue[0]
-        key = self._key(db, first)
-        mates = [first]
-        if key is not None and self.population > 1:
-            mates = [s for s in self.queue if self._key(db, s) == key]
-        size = min(self.population, -(-len(mates) // max(1, free)))
-        group = mates[: max(1, size)]
+        waited_for = first.run.is_advisor and any(s.status == WAITING for s in self.states)
+        population = 1 if waited_for else self.population
+        group = next_group(self.queue, lambda s: self._key(db, s), population, workers)
         taken = {id(s) for s in group}
         self.queue = [s for s in self.queue if id(s) not in taken]
         return group
@@ -502,7 +499,7 @@ class BatchRunner:
             while backend is not None:
                 with self.factory() as db:
                     while self.queue and backend.busy() < backend.capacity:
-                        group = self._next_group(db, backend.capacity - backend.busy())
+                        group = self._next_group(db, backend.capacity)
                         backend.start(tuple(s.session_id for s in group))  # type: ignore[misc]
                         for state in group:
                             state.status = Status.running.value
@@ -575,28 +572,44 @@ class BatchRunner:
 
 
 POPULATION_CUDA = 16
-POPULATION_BF16 = 8
-POPULATION_CPU = 4
+POPULATION_CPU = 2
 MEMORY_SHARE = 0.8
 """Of the machine's memory, what a batch's populations may fill with their agents."""
 
 
+def next_group(
+    queue: Sequence[T], key: Callable[[T], Any], population: int, workers: int
+) -> list[T]:
+    """The first waiting run and the waiting runs that can train with it (the same `key`;
+    None: alone): at most `population`, and no more than spreads them evenly over the
+    batch's `workers` (ten runs on two workers go as five and five, even when only one
+    worker is free now, so the second does not idle when it frees)."""
+    first = queue[0]
+    wanted = key(first)
+    mates = [first]
+    if wanted is not None and population > 1:
+        mates = [s for s in queue if key(s) == wanted]
+    return mates[: max(1, min(population, -(-len(mates) // max(1, workers))))]
+
+
 def default_population(run: RunSpec, cores: int | None = None, workers: int | None = None) -> int:
     """How many runs a worker trains together when the batch leaves it open, by a simple
-    rule: 16 on CUDA (one batched forward pass keeps the GPU busy), 8 on a CPU that runs
-    bfloat16 natively (AVX-512 BF16 or AMX: each agent's update is short, so the process
-    and the batched action choice are shared by more), 4 on other CPUs; and no more than
-    the memory holds when each of the `workers` (default: cores / torch threads) trains a
-    population of the run's size (`RunSpec.memory_needed`, `MEMORY_SHARE` of the memory).
-    benchmarks/bench_population.py measures agent-steps per second for 1, 2, 4 and 8; its
-    run on a quiet machine is what decides these numbers."""
+    rule: 16 on CUDA (one batched forward pass keeps the GPU busy; not measured here yet),
+    2 on a CPU; and no more than the memory holds when each of the `workers` (default:
+    cores / torch threads) trains a population of the run's size (`RunSpec.memory_needed`,
+    `MEMORY_SHARE` of the memory).
+
+    On a CPU each agent's update is 88 % of its step and stays its own (the same kernels on
+    the same shapes as alone), so a population shares only the rest: measured on a quiet
+    2-core EPYC with AVX-512 BF16 (`benchmarks/bench_population_batch.py`, log
+    `benchmarks/logs/population-batch-2026-12-03-quiet.log`), two populations side by side
+    against two single runs: N=2 1.06x, N=4 1.04x, N=8 0.90x, N=16 0.93x, while the
+    resident memory per agent falls from 522 MiB to 282 (N=2) and 106 (N=8). On a loaded
+    machine larger populations looked faster (1.59x at N=8 with the load at 4): that was
+    the single runs losing more to the load, not the populations gaining. Without AVX-512
+    BF16 the update is a larger share still, so the rule is the same."""
     config = run.config
-    if config.device.startswith("cuda"):
-        size = POPULATION_CUDA
-    elif machine.bf16_native_cpu():
-        size = POPULATION_BF16
-    else:
-        size = POPULATION_CPU
+    size = POPULATION_CUDA if config.device.startswith("cuda") else POPULATION_CPU
     workers = workers or max(1, (cores or usable_cores()) // max(1, config.torch_threads))
     total = machine.total_memory()
     if total:  # one process's torch and simulator per worker, a replay memory per agent

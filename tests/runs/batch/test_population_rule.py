@@ -6,10 +6,10 @@ from __future__ import annotations
 from learner import machine
 from learner.run import FRAME_BYTES, RunSpec
 from runs.batch.runner import (
-    POPULATION_BF16,
     POPULATION_CPU,
     POPULATION_CUDA,
     default_population,
+    next_group,
 )
 
 
@@ -19,9 +19,8 @@ def run(**config: object) -> RunSpec:
 
 def test_the_device_and_the_cpu_kind_decide_the_size() -> None:
     assert default_population(run(device="cuda"), cores=2) == POPULATION_CUDA
-    cpu = POPULATION_BF16 if machine.bf16_native_cpu() else POPULATION_CPU
-    assert default_population(run(device="cpu"), cores=2) == cpu
-    assert POPULATION_CUDA > POPULATION_BF16 > POPULATION_CPU > 1
+    assert default_population(run(device="cpu"), cores=2) == POPULATION_CPU
+    assert POPULATION_CUDA > POPULATION_CPU > 1
 
 
 def test_the_memory_caps_it_and_one_always_runs() -> None:
@@ -36,3 +35,15 @@ def test_the_memory_caps_it_and_one_always_runs() -> None:
     # One agent's frames fill the machine: a population of one (the run alone).
     whole = min(frames, 10_000_000)
     assert default_population(run(device="cuda", memory_size=whole), cores=2) == 1
+
+
+def test_waiting_runs_spread_over_every_worker_and_mates_share_a_key() -> None:
+    queue = [("paper", i) for i in range(10)] + [("authors", 0)]
+    key = lambda run: run[0]  # noqa: E731
+    # Ten mates, two workers: five now, five for the other worker when it frees.
+    assert next_group(queue, key, population=8, workers=2) == queue[:5]
+    assert next_group(queue, key, population=3, workers=2) == queue[:3]
+    assert next_group(queue, key, population=8, workers=1) == queue[:8]
+    assert next_group(queue[-1:], key, population=8, workers=2) == [("authors", 0)]
+    assert next_group(queue, lambda run: None, population=8, workers=2) == queue[:1]  # alone
+    assert next_group(queue, key, population=1, workers=2) == queue[:1]
