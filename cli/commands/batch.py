@@ -172,8 +172,7 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         type=int,
         metavar="N",
         help="runs that share one learner configuration train together, up to N per worker "
-        "process (default: 16 on CUDA, 8 on a CPU with native bfloat16, 4 otherwise, as the "
-        "memory allows; 1: each run alone)",
+        "process (default: 2 on a CPU, 16 on CUDA, as the memory allows; 1: each run alone)",
     )
     how.add_argument("--nice", type=int, default=0, help="workers' added niceness (0-19)")
     how.add_argument(
