@@ -498,8 +498,10 @@ class BatchRunner:
         try:
             while backend is not None:
                 with self.factory() as db:
+                    busy = backend.busy()  # these workers will take a share when they free
                     while self.queue and backend.busy() < backend.capacity:
-                        group = self._next_group(db, backend.capacity)
+                        free = backend.capacity - backend.busy()
+                        group = self._next_group(db, free + busy)
                         backend.start(tuple(s.session_id for s in group))  # type: ignore[misc]
                         for state in group:
                             state.status = Status.running.value
@@ -581,9 +583,10 @@ def next_group(
     queue: Sequence[T], key: Callable[[T], Any], population: int, workers: int
 ) -> list[T]:
     """The first waiting run and the waiting runs that can train with it (the same `key`;
-    None: alone): at most `population`, and no more than spreads them evenly over the
-    batch's `workers` (ten runs on two workers go as five and five, even when only one
-    worker is free now, so the second does not idle when it frees)."""
+    None: alone): at most `population`, and no more than spreads them evenly over
+    `workers`: the workers free now and those that were busy when they freed (ten runs
+    when one of two workers frees go as five now and five for the other, so the other
+    does not idle when it frees; four runs on two free workers go as two and two)."""
     first = queue[0]
     wanted = key(first)
     mates = [first]
