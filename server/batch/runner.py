@@ -21,11 +21,9 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
-from learner import machine
 from learner.advisor_check import AdvisorCheck, checked_advisor
-from learner.run import PROCESS_BYTES, RunSpec
+from learner.run import RunSpec
 from server.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
-from server.batch.population import population_key
 from server.batch.progress import BatchProgress, MachineShare
 from server.batch.sessions import completed_sources, ensure_session, find_session
 from server.batch.spec import BatchError, BatchSpec, Run, plan_runs, run_spec
@@ -37,6 +35,7 @@ from server.services.errors import Invalid
 from server.services.ownership import set_status, take_back
 from server.services.schedules import write_schedule
 from server.services.studies import get_study
+from server.worker.population import default_population, next_group, population_key
 from server.worker.worker import WorkerOptions
 
 TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
@@ -83,7 +82,7 @@ class RunnerOptions:
     advisor_attempts: int = 3
     """Advisors the batch trains at most (seeds advisor_seed, +1, ...) to get one that passes."""
     population: int | None = None
-    """Runs trained together in one worker process, at most (`server.batch.population`),
+    """Runs trained together in one worker process, at most (`server.worker.population`),
     among runs that share one learner configuration; None: `default_population`; 1: every
     run alone, in a process of its own."""
 
@@ -403,16 +402,9 @@ class BatchRunner:
         return self._keys[state.session_id]
 
     def _next_group(self, db: Session, free: int) -> list[RunState]:
-        """The first waiting run and the waiting runs that can train with it, taken off the
-        queue: at most `population`, and no more than fills the `free` workers evenly (three
-        runs on two free workers go as two and one, so no core idles)."""
-        first = self.queue[0]
-        key = self._key(db, first)
-        mates = [first]
-        if key is not None and self.population > 1:
-            mates = [s for s in self.queue if self._key(db, s) == key]
-        size = min(self.population, -(-len(mates) // max(1, free)))
-        group = mates[: max(1, size)]
+        """The next group off the queue (`next_group`: the first waiting run and those that
+        can train with it, filling the `free` workers evenly)."""
+        group = next_group(self.queue, lambda state: self._key(db, state), self.population, free)
         taken = {id(s) for s in group}
         self.queue = [s for s in self.queue if id(s) not in taken]
         return group
@@ -572,37 +564,6 @@ class BatchRunner:
                     f"  {state.run.name} seed {state.run.seed}: session {state.session_id} "
                     "failed before; it resumes from its last checkpoint"
                 )
-
-
-POPULATION_CUDA = 16
-POPULATION_BF16 = 8
-POPULATION_CPU = 4
-MEMORY_SHARE = 0.8
-"""Of the machine's memory, what a batch's populations may fill with their agents."""
-
-
-def default_population(run: RunSpec, cores: int | None = None, workers: int | None = None) -> int:
-    """How many runs a worker trains together when the batch leaves it open, by a simple
-    rule: 16 on CUDA (one batched forward pass keeps the GPU busy), 8 on a CPU that runs
-    bfloat16 natively (AVX-512 BF16 or AMX: each agent's update is short, so the process
-    and the batched action choice are shared by more), 4 on other CPUs; and no more than
-    the memory holds when each of the `workers` (default: cores / torch threads) trains a
-    population of the run's size (`RunSpec.memory_needed`, `MEMORY_SHARE` of the memory).
-    benchmarks/bench_population.py measures agent-steps per second for 1, 2, 4 and 8; its
-    run on a quiet machine is what decides these numbers."""
-    config = run.config
-    if config.device.startswith("cuda"):
-        size = POPULATION_CUDA
-    elif machine.bf16_native_cpu():
-        size = POPULATION_BF16
-    else:
-        size = POPULATION_CPU
-    workers = workers or max(1, (cores or usable_cores()) // max(1, config.torch_threads))
-    total = machine.total_memory()
-    if total:  # one process's torch and simulator per worker, a replay memory per agent
-        agent = run.memory_needed() - PROCESS_BYTES
-        size = min(size, int((total * MEMORY_SHARE / workers - PROCESS_BYTES) / agent))
-    return max(1, size)
 
 
 def _stop_on_sigterm() -> Any:

@@ -1,11 +1,11 @@
 """The default population size: a stated rule of the device, the CPU kind, the cores and
-the memory (`server.batch.runner.default_population`)."""
+the memory (`server.worker.population.default_population`)."""
 
 from __future__ import annotations
 
 from learner import machine
 from learner.run import FRAME_BYTES, RunSpec
-from server.batch.runner import (
+from server.worker.population import (
     POPULATION_BF16,
     POPULATION_CPU,
     POPULATION_CUDA,
