@@ -31,6 +31,7 @@ number. The lines also go to a log (`--log`, by default benchmarks/logs/training
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -99,6 +100,11 @@ def main(argv: Sequence[str] | None = None) -> None:
             f"{verdict} {ARRIVALS_PER_HOUR} an hour"
         )
     log(f"{machine.cpu_kind()}; {load()}")
+    if os.getloadavg()[1] > usable_cores():
+        log(
+            f"the machine was shared (5-minute load above its {usable_cores()} cores): the "
+            "slots got part of the cores; on a quiet machine the rates are higher"
+        )
     log(f"\nlog: {args.log}")
 
 

@@ -395,7 +395,13 @@ class SessionManager:
 
     @staticmethod
     def _next_group(waiting: list[WorkerHandle], free: int) -> list[WorkerHandle]:
-        return next_group(waiting, lambda h: h.population_key, waiting[0].population_size, free)
+        """`next_group` of the queued sessions; a paused one takes a slot alone (it is
+        granted as before, and resumes where it waits)."""
+
+        def key(handle: WorkerHandle) -> Any:
+            return handle.population_key if handle.status == Status.running else None
+
+        return next_group(waiting, key, waiting[0].population_size, free)
 
     def _busy_slots(self) -> int:
         """Trainer slots taken: a session training alone, or a population."""
