@@ -103,8 +103,9 @@ def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveSe
 def test_queued_sessions_of_one_configuration_train_together(
     one_slot_for_populations: LiveServer,
 ) -> None:
-    """Two finished sessions queued for the one slot take it together: one worker process
-    trains both, each with its own records, progress and status to its end."""
+    """Three finished sessions queued for the one slot take it together: one worker process
+    trains them, each with its own records, progress and status; one stopped stops alone,
+    the others train to their end."""
     live = one_slot_for_populations
     with live.client() as api:
         study = api.post("/api/studies", json={"name": "populations"}).json()
@@ -113,24 +114,34 @@ def test_queued_sessions_of_one_configuration_train_together(
         first = first.json()
         short = [session_body("human", advice_budget=1, seed=seed) for seed in (21, 22)]
         second, third = (api.post(sessions, json=body).json() for body in short)
-        a, b, c = (
-            SimulatedParticipant(live.url, s["participant_token"]) for s in (first, second, third)
+        body = session_body("human", advice_budget=1, seed=23, episodes=500)
+        fourth = api.post(sessions, json=body).json()
+        a, b, c, d = (
+            SimulatedParticipant(live.url, s["participant_token"])
+            for s in (first, second, third, fourth)
         )
         _advise_all(a, 1)
         _until(lambda: _progress(api, first["id"])["stage"] == "train")
-        for participant, session in ((b, second), (c, third)):
+        for participant, session in ((b, second), (c, third), (d, fourth)):
             _advise_all(participant, 1)
             _until(lambda s=session: _progress(api, s["id"])["queued"])
-        assert [_curve(p)["queue_place"] for p in (b, c)] == [1, 1], "both take the next slot"
+        assert [_curve(p)["queue_place"] for p in (b, c, d)] == [1, 1, 1], "the next slot's"
         alone = api.get(f"/api/sessions/{first['id']}").json()["worker_pid"]
 
         api.post(f"/api/sessions/{first['id']}/stop")
+        _until(lambda: _progress(api, fourth["id"])["episode"] >= 1)
+        assert not _progress(api, fourth["id"])["queued"]
+        stopped = api.post(f"/api/sessions/{fourth['id']}/stop")
+        assert stopped.status_code == 200 and stopped.json()["status"] == "stopped", stopped.text
         rows = [wait_for_status(api, s["id"], {"finished"}) for s in (second, third)]
-        assert rows[0]["worker_pid"] == rows[1]["worker_pid"] != alone, "one process for both"
+        rows.append(api.get(f"/api/sessions/{fourth['id']}").json())
+        assert rows[2]["status"] == "stopped", "the one stopped stays stopped"
+        pids = {row["worker_pid"] for row in rows}
+        assert len(pids) == 1 and alone not in pids, "one process for the three"
         together = [row["provenance"][-1]["population"] for row in rows]
-        assert [p["population_size"] for p in together] == [2, 2]
-        assert sorted(p["population_index"] for p in together) == [0, 1]
-        assert [p["seed"] for p in together] == [21, 22], "each agent its own session's"
+        assert [p["population_size"] for p in together] == [3, 3, 3]
+        assert sorted(p["population_index"] for p in together) == [0, 1, 2]
+        assert [p["seed"] for p in together] == [21, 22, 23], "each agent its own session's"
         for participant, session in ((b, second), (c, third)):
             progress = _progress(api, session["id"])
             assert progress["status"] == "finished" and not progress["queued"]
@@ -138,7 +149,7 @@ def test_queued_sessions_of_one_configuration_train_together(
             curve = _curve(participant)
             assert curve["status"] == "finished"
             assert len(curve["curve"]) == EPISODES, "its own episodes only"
-        for participant in (a, b, c):
+        for participant in (a, b, c, d):
             participant.close()
 
 
