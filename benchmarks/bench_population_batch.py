@@ -14,7 +14,7 @@
    population of N). The sizes are run in turn, `--repeats` rounds; the ratio to the reference is
    taken within each round (the same machine load) and its median reported.
 2. A population step of N agents split into its parts, in this process, through the batch's
-   own population worker (`runs.batch.population.run_population`, recording to SQLite
+   own population worker (`runs.worker.population.run_population`, recording to SQLite
    and checkpointing as a batch does): the update, action selection (one batched forward
    pass), simulation (the environments' steps less their rendering), rendering (the 64x64
    camera image), recording (step and episode rows, their inserts), checkpointing (the
@@ -193,7 +193,7 @@ def profile(args: argparse.Namespace, size: int) -> dict[str, float]:
     worker runs it, here (its own process: the parts are timed by wrapping their methods)."""
     import sim
     from learner.population import Population
-    from runs.batch.population import AgentSaver, run_population
+    from runs.worker.population import AgentSaver, run_population
     from runs.worker.recorder import Recorder
     from runs.worker.worker import WorkerOptions
 

@@ -135,6 +135,7 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         replace(worker_options(settings), spec_class=spec_class),
         settings.stale_after_s,
         settings.max_trainers,
+        settings.training_population,
     )
     pools = Pools(
         manager,

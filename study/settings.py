@@ -70,6 +70,11 @@ class Settings(BaseSettings):
     """Human sessions that train at once after their advice; the others wait in a queue
     (status `running`, `queued: true`). 0: the number of cores."""
 
+    training_population: int = Field(default=0, ge=0)
+    """Finished human sessions of one learner configuration that train together in one
+    trainer slot, as a population (one worker process; `runs.worker.population`), at
+    most. 0: the batch's default rule (`default_population`); 1: each alone."""
+
     viser_host: str = "127.0.0.1"
     """Interface viser (the 3-D view's server) listens on. Browsers never reach it directly:
     the app relays it under `/viewer/` on its own port, so keep it on loopback."""

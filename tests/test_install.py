@@ -161,7 +161,8 @@ def test_the_installed_server_serves_the_pages(installed: Path) -> None:
             login = api.get("/dashboard/login")
             assert login.status_code == 200 and "<form" in login.text, login.text
             study = api.post("/api/studies", json={"name": "installed"}).json()["id"]
-            made = api.post(f"/api/studies/{study}/sessions", json=session_body("human", advice_budget=3))
+            body = session_body("human", advice_budget=3)
+            made = api.post(f"/api/studies/{study}/sessions", json=body)
             assert made.status_code == 201, made.text
             token = made.json()["participant_token"]
             consent = api.get(f"/p/{token}/consent")

@@ -1,7 +1,7 @@
 """Where a batch's runs execute: worker processes on this machine, or tasks on Ray.
 
 A backend is handed groups of runs: a group of one is `runs.worker.worker.run_session`
-in a process of its own, a larger group a population (`runs.batch.population`: runs
+in a process of its own, a larger group a population (`runs.worker.population`: runs
 sharing one learner configuration, trained together in one process); either way each run
 writes its own session in the shared database. A backend only starts groups, says which
 runs have ended, and stops the rest so they can resume later.
@@ -21,8 +21,8 @@ from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import Any, Protocol
 
-from runs.batch.population import NOT_RUN, run_population
 from runs.worker.messages import Command
+from runs.worker.population import NOT_RUN, run_population
 from runs.worker.worker import WorkerOptions, run_session
 
 ROOT = Path(__file__).absolute().parents[2]

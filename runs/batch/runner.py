@@ -12,23 +12,22 @@ import dataclasses
 import signal
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
-from learner import machine
 from learner.advisor_check import AdvisorCheck, checked_advisor
-from learner.run import PROCESS_BYTES, RunSpec
+from learner.run import RunSpec
 from runs.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
-from runs.batch.population import population_key
 from runs.batch.progress import BatchProgress, MachineShare
 from runs.batch.sessions import completed_sources, ensure_session, find_session
 from runs.batch.spec import BatchError, BatchSpec, Run, plan_runs, run_spec
+from runs.worker.population import default_population, next_group, population_key
 from runs.worker.worker import WorkerOptions
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import BACKUPS, upgrade
@@ -41,7 +40,6 @@ from study.services.studies import get_study
 
 TO_RUN = {Status.created.value, *(s.value for s in RESUMABLE_STATUSES)}
 LIVE = {s.value for s in LIVE_STATUSES}
-T = TypeVar("T")
 WAITING = "waiting for the advisor"
 BLOCKED = "not run: the advisor did not finish"
 WAITING_PAIR = "waiting for its advised run"
@@ -84,7 +82,7 @@ class RunnerOptions:
     advisor_attempts: int = 3
     """Advisors the batch trains at most (seeds advisor_seed, +1, ...) to get one that passes."""
     population: int | None = None
-    """Runs trained together in one worker process, at most (`runs.batch.population`),
+    """Runs trained together in one worker process, at most (`runs.worker.population`),
     among runs that share one learner configuration; None: `default_population`; 1: every
     run alone, in a process of its own."""
 
@@ -571,54 +569,6 @@ class BatchRunner:
                     f"  {state.run.name} seed {state.run.seed}: session {state.session_id} "
                     "failed before; it resumes from its last checkpoint"
                 )
-
-
-POPULATION_CUDA = 16
-POPULATION_CPU = 2
-MEMORY_SHARE = 0.8
-"""Of the machine's memory, what a batch's populations may fill with their agents."""
-
-
-def next_group(
-    queue: Sequence[T], key: Callable[[T], Any], population: int, workers: int
-) -> list[T]:
-    """The first waiting run and the waiting runs that can train with it (the same `key`;
-    None: alone): at most `population`, and no more than spreads them evenly over
-    `workers`: the workers free now and those that were busy when they freed (ten runs
-    when one of two workers frees go as five now and five for the other, so the other
-    does not idle when it frees; four runs on two free workers go as two and two)."""
-    first = queue[0]
-    wanted = key(first)
-    mates = [first]
-    if wanted is not None and population > 1:
-        mates = [s for s in queue if key(s) == wanted]
-    return mates[: max(1, min(population, -(-len(mates) // max(1, workers))))]
-
-
-def default_population(run: RunSpec, cores: int | None = None, workers: int | None = None) -> int:
-    """How many runs a worker trains together when the batch leaves it open, by a simple
-    rule: 16 on CUDA (one batched forward pass keeps the GPU busy; not measured here yet),
-    2 on a CPU; and no more than the memory holds when each of the `workers` (default:
-    cores / torch threads) trains a population of the run's size (`RunSpec.memory_needed`,
-    `MEMORY_SHARE` of the memory).
-
-    On a CPU each agent's update is 88 % of its step and stays its own (the same kernels on
-    the same shapes as alone), so a population shares only the rest: measured on a quiet
-    2-core EPYC with AVX-512 BF16 (`benchmarks/bench_population_batch.py`, log
-    `benchmarks/logs/population-batch-2026-12-03-quiet.log`), two populations side by side
-    against two single runs: N=2 1.06x, N=4 1.04x, N=8 0.90x, N=16 0.93x, while the
-    resident memory per agent falls from 522 MiB to 282 (N=2) and 106 (N=8). On a loaded
-    machine larger populations looked faster (1.59x at N=8 with the load at 4): that was
-    the single runs losing more to the load, not the populations gaining. Without AVX-512
-    BF16 the update is a larger share still, so the rule is the same."""
-    config = run.config
-    size = POPULATION_CUDA if config.device.startswith("cuda") else POPULATION_CPU
-    workers = workers or max(1, (cores or usable_cores()) // max(1, config.torch_threads))
-    total = machine.total_memory()
-    if total:  # one process's torch and simulator per worker, a replay memory per agent
-        agent = run.memory_needed() - PROCESS_BYTES
-        size = min(size, int((total * MEMORY_SHARE / workers - PROCESS_BYTES) / agent))
-    return max(1, size)
 
 
 def _stop_on_sigterm() -> Any:

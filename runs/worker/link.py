@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 
-from runs.worker.messages import AdviceAnswer, Command, StatusChanged, WorkerMessage
+from runs.worker.messages import AdviceAnswer, Command, StatusChanged, Tagged, WorkerMessage
 
 
 class WorkerExit(Exception):
@@ -23,6 +23,8 @@ class WorkerExit(Exception):
 
 class StopRequested(WorkerExit):
     status = "stopped"
+    session_id: int | None = None
+    """Which of a population's sessions is to stop (None: the worker's every session)."""
 
 
 class SessionAbandoned(WorkerExit):
@@ -34,6 +36,15 @@ WAITED_FOR_PARTICIPANT = "the participant did not consent and start"
 a session by itself when the participant comes back)."""
 
 
+class HandOver(WorkerExit):
+    """A trainer slot is free for this session in a population (`Command("handover")`):
+    the worker checkpoints and exits, the session still `running` under its token, and a
+    population's worker (`runs.worker.population.population_main`) goes on from that
+    checkpoint."""
+
+    status = "running"
+
+
 class ParentGone(WorkerExit):
     """The web process died or closed the pipe: nobody can advise or watch any more."""
 
@@ -43,7 +54,7 @@ class ParentGone(WorkerExit):
 class WorkerLink:
     def __init__(
         self,
-        conn: Connection,
+        conn: Connection | TaggedChannel,
         on_pause: Callable[[bool, bool], None],
         on_watch: Callable[[], None],
         on_idle: Callable[[], None] = lambda: None,
@@ -166,7 +177,30 @@ class WorkerLink:
                 # A checkpoint needs a step boundary; while waiting for advice we are inside one.
                 self._on_pause(pausing, not waiting_for_advice)
                 self.send(StatusChanged("paused" if pausing else "running"))
+        elif message.name == "handover":
+            raise HandOver("handed over to a population")
         elif message.name == "stop":
-            raise StopRequested(str(message.args.get("reason", "stopped by the researcher")))
+            stop = StopRequested(str(message.args.get("reason", "stopped by the researcher")))
+            stop.session_id = message.args.get("session_id")
+            raise stop
         elif message.name == "shutdown":
             raise ParentGone("the server is shutting down")
+
+
+class TaggedChannel:
+    """One session's end of a population's shared channel (a `Connection` as far as its
+    `WorkerLink` is concerned): what the session sends goes out `Tagged` with it; commands
+    are read by the population's own link, never here."""
+
+    def __init__(self, conn: Connection, session_id: int) -> None:
+        self._conn = conn
+        self.session_id = session_id
+
+    def send(self, message: object) -> None:
+        self._conn.send(Tagged(self.session_id, message))
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        return False
+
+    def recv(self) -> object:
+        raise EOFError("a population's commands are read by its own link")

@@ -3,7 +3,9 @@
 Plain frozen dataclasses, pickled by multiprocessing. Worker -> web: `Progress`,
 `AdviceRequest`, `AdviceResult`, `EpisodeDone`, `SceneReset`, `SceneStep`, `StatusChanged`,
 `TrainingWanted`. Web -> worker: `AdviceAnswer`, `Command` (`ready`: the participant
-consented and finished the induction; `train`: a trainer slot is free).
+consented and finished the induction; `train`: a trainer slot is free; `handover`: a
+trainer slot is free for a population, see `runs.worker.population`). A population's
+worker sends its sessions' messages `Tagged` with their session over its one channel.
 """
 
 from __future__ import annotations
@@ -113,6 +115,14 @@ class TrainingWanted:
 
 
 @dataclass(frozen=True)
+class Tagged:
+    """A message of one of a population's sessions, on the population's one channel."""
+
+    session_id: int
+    message: Any
+
+
+@dataclass(frozen=True)
 class AdviceAnswer:
     advice_index: int
     action: int
@@ -121,7 +131,16 @@ class AdviceAnswer:
 @dataclass(frozen=True)
 class Command:
     name: Literal[
-        "pause", "resume", "stop", "watch", "unwatch", "shutdown", "ready", "train", "assigned"
+        "pause",
+        "resume",
+        "stop",
+        "watch",
+        "unwatch",
+        "shutdown",
+        "ready",
+        "train",
+        "assigned",
+        "handover",
     ]
     args: dict[str, Any] = field(default_factory=dict)
 

@@ -27,7 +27,7 @@ from learner.advisors import RecordedAdvisor
 from learner.records import TRAINING
 from learner.run import RunSpec
 from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
-from runs.worker.link import ParentGone, WorkerExit, WorkerLink
+from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
 from runs.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
 from runs.worker.recorder import Checkpointable, LeaseLost, Recorder
 from runs.worker.scene import SceneBroadcast
@@ -112,8 +112,10 @@ class _Run:
         database_url: str,
         options: WorkerOptions,
         token: str,
-        conn: Connection | None,
+        conn: Connection | TaggedChannel | None,
     ) -> None:
+        """`conn`: the channel to the web process (a `TaggedChannel` for a session in a
+        population, whose commands its population's link reads)."""
         self.session_id, self.options, self.token = session_id, options, token
         self.factory = make_session_factory(make_engine(database_url))
         with self.factory() as db:
@@ -170,7 +172,7 @@ class _Run:
         self.spec = learning.spec_of(s, options.spec_class)
         self.trainer, self.env = self.spec.build(
             [self.recorder, self.reporter],
-            record_motion=conn is not None,
+            record_motion=isinstance(conn, Connection),  # a live view can watch it
             wrap_env=self._broadcast,
             wrap_advisor=self._advisor,
         )
@@ -377,6 +379,8 @@ class _Run:
         else:
             self.recorder.flush()
         status = Status(exit_.status)
+        if isinstance(exit_, HandOver):  # still running, under its token: nothing to record
+            return status
         if isinstance(exit_, ParentGone):
             self.link = None  # nobody is listening any more
         self.set_status(status, str(exit_))
@@ -431,7 +435,7 @@ def fail_session(
     session_id: int,
     token: str,
     error: BaseException,
-    conn: Connection | None = None,
+    conn: Connection | TaggedChannel | None = None,
 ) -> None:
     """The run raised `error`: the session is failed with its traceback (it resumes from its
     last checkpoint when run again)."""

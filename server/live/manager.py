@@ -8,7 +8,14 @@ thread; each pipe has a reader thread that publishes to the hub and hands messag
 A human session asks for advice only once its participant is ready (consent and induction
 recorded; the manager then sends `Command("ready")`), and trains after its advice only in
 one of `max_trainers` slots: the others wait in a queue (`queued`), so the people still
-advising never share the cores with more trainers than there are cores.
+advising never share the cores with more trainers than there are cores. A slot that frees
+takes the session queued longest together with the queued sessions that can train with it
+(one learner configuration, up to `training_population`), by the batch's rule
+(`runs.worker.population.next_group`): one alone trains on in its own worker; several
+are handed over (`Command("handover")`: each worker checkpoints and exits, the session
+still `running` under its token) to one population worker (`population_main`), which
+sends each session's messages `Tagged` with it, so each keeps its own handle, progress,
+records, checkpoints and status.
 """
 
 from __future__ import annotations
@@ -43,13 +50,20 @@ from runs.worker.messages import (
     SceneReset,
     SceneStep,
     StatusChanged,
+    Tagged,
     TrainingWanted,
+)
+from runs.worker.population import (
+    default_population,
+    next_group,
+    population_key,
+    population_main,
 )
 from runs.worker.worker import WorkerOptions, worker_main
 from server.live import visits
 from server.live.hub import Hub
 from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status
-from study.services import numerics
+from study.services import learning, numerics
 from study.services.errors import Conflict
 from study.services.sessions import (
     claim,
@@ -106,6 +120,19 @@ class WorkerHandle:
     """`time.monotonic()` when it took its slot, and the episodes done then: how fast it
     trains, for the queue's time estimate."""
     episodes_at_slot: int = 0
+    population_key: Any = None
+    """What it must share with other sessions to train with them in one population once its
+    advice is over (`population_key`); None: it trains alone."""
+    population_size: int = 1
+    """How many sessions its population may hold at most."""
+    slot: object | None = None
+    """The trainer slot it shares with the rest of its population (None: a slot of its
+    own, or none)."""
+    handing_over: bool = False
+    """Its worker checkpoints and exits, for its population's worker to go on (this handle
+    is then replaced by one on the population's worker)."""
+    in_population: bool = False
+    """It trains in a population's worker (`process` and `conn` are the population's)."""
     steps_before_first_turn: int = 0
     """Random pretraining steps before the first advice (what the page's progress counts)."""
     last_reward: float | None = None
@@ -156,10 +183,15 @@ class SessionManager:
         options: WorkerOptions,
         stale_after_s: float,
         max_trainers: int = 0,
+        training_population: int = 0,
     ) -> None:
-        """`max_trainers`: human sessions training at once after their advice (0: the
-        cores this process may use)."""
+        """`max_trainers`: trainer slots for human sessions after their advice (0: the
+        cores this process may use); `training_population`: sessions trained together in
+        one slot at most (0: `default_population`, 1: each alone)."""
         self.max_trainers = max_trainers or len(os.sched_getaffinity(0))
+        self.training_population = training_population
+        self._handovers: set[asyncio.Task[None]] = set()
+        self._closing = False
         self._train_queue: deque[int] = deque()
         self.factory = factory
         self.database_url = database_url
@@ -190,6 +222,7 @@ class SessionManager:
 
     async def close(self) -> None:
         """Server shutdown: workers checkpoint and become `interrupted` (resumable)."""
+        self._closing = True
         if self._reaper is not None:
             self._reaper.cancel()
         handles = list(self.handles.values())
@@ -274,6 +307,9 @@ class SessionManager:
             ready = human and session.ready_for_advice
             strategy = spec.make_strategy() or make_strategy("early", 0)
             first_turn = strategy.first_advice_step(spec.config.pretraining_steps) - 1
+            run = learning.spec_of(session, self.options.spec_class)
+            key = population_key(run, advice_over=True) if human else None
+            size = self.training_population or default_population(run, workers=self.max_trainers)
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
@@ -292,6 +328,7 @@ class SessionManager:
         )
         handle.history.extend(HistoryEntry(a.advice_index, a.action) for a in advice)
         handle.steps_before_first_turn = first_turn
+        handle.population_key, handle.population_size = key, size
         try:
             process.start()
         except Exception as error:
@@ -324,19 +361,141 @@ class SessionManager:
             self.notify(session_id)
 
     def _grant_training(self) -> None:
-        """Hand free trainer slots to the sessions queued longest."""
-        busy = sum(1 for h in self.handles.values() if h.training)
-        while busy < self.max_trainers and self._train_queue:
-            handle = self.handles.get(self._train_queue.popleft())
-            if handle is None or not handle.queued:
+        """Hand free trainer slots to the sessions queued longest, each with the queued
+        sessions that can train with it in one population (`next_group`, as the batch)."""
+        while True:
+            free = self.max_trainers - self._busy_slots()
+            waiting = self._waiting()
+            self._train_queue = deque(h.session_id for h in waiting)
+            if free <= 0 or not waiting:
+                return
+            group = self._next_group(waiting, free)
+            taken = {h.session_id for h in group}
+            self._train_queue = deque(sid for sid in self._train_queue if sid not in taken)
+            slot = object() if len(group) > 1 else None
+            for handle in group:
+                handle.queued = False
+                handle.training = True
+                handle.training_since = time.monotonic()
+                handle.episodes_at_slot = handle.progress.episode if handle.progress else 0
+                handle.slot = slot
+                handle.handing_over = slot is not None
+                handle.send(Command("handover" if slot is not None else "train"))
+                self.notify(handle.session_id)
+            if slot is not None:
+                assert self._loop is not None
+                task = self._loop.create_task(self._start_population(group, slot))
+                self._handovers.add(task)
+                task.add_done_callback(self._handovers.discard)
+
+    def _waiting(self) -> list[WorkerHandle]:
+        """The queued sessions, longest queued first."""
+        handles = (self.handles.get(sid) for sid in dict.fromkeys(self._train_queue))
+        return [h for h in handles if h is not None and h.queued]
+
+    @staticmethod
+    def _next_group(waiting: list[WorkerHandle], free: int) -> list[WorkerHandle]:
+        """`next_group` of the queued sessions; a paused one takes a slot alone (it is
+        granted as before, and resumes where it waits)."""
+
+        def key(handle: WorkerHandle) -> Any:
+            return handle.population_key if handle.status == Status.running else None
+
+        return next_group(waiting, key, waiting[0].population_size, free)
+
+    def _busy_slots(self) -> int:
+        """Trainer slots taken: a session training alone, or a population."""
+        return len({id(h.slot or h) for h in self.handles.values() if h.training})
+
+    async def _start_population(self, group: list[WorkerHandle], slot: object) -> None:
+        """Once the group's workers have handed their sessions over (checkpointed and
+        exited), train the sessions still running under their tokens in one population
+        worker; each gets a handle of its own on that worker."""
+        for handle in group:
+            await run_in_threadpool(handle.process.join, self.command_timeout_s)
+            if handle.process.is_alive():  # it resumes from its last checkpoint
+                log.warning("session %s: its worker did not hand over; killed", handle.session_id)
+                await run_in_threadpool(self._terminate, handle)
+        tokens = await run_in_threadpool(self._still_ours, group)
+        members = [h for h in group if h.session_id in tokens]
+        if members and self._closing:
+            detail = "the server shut down as it started training; resume it"
+            for handle in members:
+                await run_in_threadpool(
+                    self._set_status, handle.session_id, Status.interrupted, detail, handle.token
+                )
+            members = []
+        process = None
+        if members:
+            ids = [h.session_id for h in members]
+            parent, child = self._context.Pipe(duplex=True)
+            options = replace(self.options, pooled=False, train_nice=0)
+            process = self._context.Process(
+                target=population_main,
+                args=(ids, tokens, self.database_url, options, child),
+                name=f"ideeprl-population-{'-'.join(map(str, ids))}",
+                daemon=True,
+            )
+            try:
+                process.start()
+            except Exception as error:
+                for handle in members:
+                    await run_in_threadpool(
+                        self._set_status, handle.session_id, Status.failed, str(error), handle.token
+                    )
+                members, process = [], None
+            else:
+                child.close()
+        joined: dict[int, WorkerHandle] = {}
+        sending = threading.Lock()  # one pipe for all of them
+        for old in group:
+            if self.handles.get(old.session_id) is old:
+                del self.handles[old.session_id]
+            old.training = False  # `handing_over` stays: its worker's exit is no death
+            if not any(h is old for h in members):
+                self.notify(old.session_id)
                 continue
-            handle.queued = False
-            handle.training = True
+            assert process is not None and old.progress is not None
+            handle = WorkerHandle(
+                old.session_id, old.token, process, parent, old.advice_budget, old.given
+            )
+            handle.progress = replace(old.progress, queued=False)
+            handle.history = old.history
+            handle.last_reward, handle.ready = old.last_reward, old.ready
+            handle.steps_before_first_turn = old.steps_before_first_turn
+            handle.population_key, handle.population_size = old.population_key, len(members)
+            handle.training, handle.slot, handle.in_population = True, slot, True
+            handle.send_lock = sending
             handle.training_since = time.monotonic()
-            handle.episodes_at_slot = handle.progress.episode if handle.progress else 0
-            busy += 1
-            handle.send(Command("train"))
-            self.notify(handle.session_id)
+            handle.episodes_at_slot = handle.progress.episode
+            self.handles[old.session_id] = handle
+            joined[old.session_id] = handle
+            self.notify(old.session_id)
+        if joined:
+            threading.Thread(
+                target=self._read_population,
+                args=(parent, process, joined),
+                name=f"population-{'-'.join(map(str, joined))}-reader",
+                daemon=True,
+            ).start()
+        self._grant_training()  # a slot of sessions that did not come is free again
+
+    def _still_ours(self, group: list[WorkerHandle]) -> dict[int, str]:
+        """Of the group, the sessions still `running` under their worker's token (not
+        stopped, failed or taken back meanwhile): their tokens."""
+        with self.factory() as db:
+            tokens = {}
+            for handle in group:
+                session = get_session(db, handle.session_id)
+                if session.status == Status.running and session.worker_token == handle.token:
+                    tokens[handle.session_id] = handle.token
+            return tokens
+
+    @staticmethod
+    def _terminate(handle: WorkerHandle) -> None:
+        with contextlib.suppress(Exception):
+            handle.process.kill()
+        handle.process.join(5)
 
     def set_trainer_slots(self, slots: int) -> None:
         """Change how many human sessions may train at once (0: none); freed slots go to
@@ -345,53 +504,81 @@ class SessionManager:
         self.max_trainers = slots
         self._grant_training()
 
+    def _queue_plan(self) -> list[list[WorkerHandle]]:
+        """The queued sessions in the groups they will take trainer slots in, in order: as
+        `_grant_training` takes them when a slot frees (`next_group` with one free slot)."""
+        waiting, plan = self._waiting(), []
+        while waiting:
+            group = self._next_group(waiting, 1)
+            plan.append(group)
+            taken = {h.session_id for h in group}
+            waiting = [h for h in waiting if h.session_id not in taken]
+        return plan
+
     def queue_place(self, session_id: int) -> int | None:
-        """1 for the queued session next in line for a trainer slot, 2 for the one after,
-        ...; None when the session is not queued."""
+        """1 for the queued sessions that take the next trainer slot to free (several
+        together, as a population), 2 for those after, ...; None when the session is not
+        queued."""
         handle = self.handles.get(session_id)
         if handle is None or not handle.queued:
             return None
-        waiting = [sid for sid in dict.fromkeys(self._train_queue) if self._is_queued(sid)]
-        return waiting.index(session_id) + 1 if session_id in waiting else None
-
-    def _is_queued(self, session_id: int) -> bool:
-        handle = self.handles.get(session_id)
-        return handle is not None and handle.queued
+        for place, group in enumerate(self._queue_plan(), 1):
+            if any(h.session_id == session_id for h in group):
+                return place
+        return None
 
     def queue_wait_s(self, session_id: int) -> float | None:
         """Seconds until a queued session gets a slot, estimated from how fast the sessions
-        in the slots train now: a slot frees when its session has run its remaining
-        episodes, and each session ahead in the queue then holds the earliest free slot for
-        its own episodes. None while no session in a slot has finished an episode there
-        (nothing to estimate from)."""
+        in the slots train now. Speed is counted per agent-episode: a slot whose n sessions
+        (a population, or one alone) each take r seconds an episode runs one agent-episode
+        every r / n seconds. A slot frees when its slowest session has run its remaining
+        episodes; each group ahead in the queue (`_queue_plan`) then holds the earliest
+        free slot while its m sessions run theirs, m side by side at the typical speed. None
+        while no session in a slot has finished an episode there (nothing to estimate
+        from)."""
         place = self.queue_place(session_id)
         if place is None or self.max_trainers <= 0:
             return None
         now = time.monotonic()
-        training = [h for h in self.handles.values() if h.training and h.progress is not None]
-        rates = {
-            h.session_id: (now - h.training_since) / (h.progress.episode - h.episodes_at_slot)
-            for h in training
-            if h.training_since is not None and h.progress.episode > h.episodes_at_slot  # type: ignore[union-attr]
-        }
-        if not rates:
+        slots: dict[int, list[WorkerHandle]] = {}
+        for h in self.handles.values():
+            if h.training and h.progress is not None:
+                slots.setdefault(id(h.slot or h), []).append(h)
+        rates: dict[int, float] = {}  # seconds an episode, each session in its slot
+        costs: list[float] = []  # seconds an agent-episode, per measured session
+        for members in slots.values():
+            live = max(1, sum(1 for h in members if self._episodes_left(h)))
+            for h in members:
+                assert h.progress is not None
+                done = h.progress.episode - h.episodes_at_slot
+                if h.training_since is not None and done > 0:
+                    rates[h.session_id] = (now - h.training_since) / done
+                    costs.append(rates[h.session_id] / live)
+        if not costs:
             return None
-        typical = sum(rates.values()) / len(rates)
-
-        def left(handle: WorkerHandle) -> float:
-            assert handle.progress is not None
-            episodes = max(0, handle.progress.episodes - handle.progress.episode)
-            return episodes * rates.get(handle.session_id, typical)
-
-        idle = max(0, self.max_trainers - len(training))
-        frees = sorted([left(h) for h in training] + [0.0] * idle)
-        ahead = [sid for sid in dict.fromkeys(self._train_queue) if self._is_queued(sid)]
-        for sid in ahead[: place - 1]:
-            handle = self.handles[sid]
-            if handle.progress is not None:
-                frees[0] += left(handle)
+        typical = sum(costs) / len(costs)
+        frees = [0.0] * max(0, self.max_trainers - len(slots))
+        for members in slots.values():
+            live = max(1, sum(1 for h in members if self._episodes_left(h)))
+            frees.append(
+                max(
+                    self._episodes_left(h) * rates.get(h.session_id, typical * live)
+                    for h in members
+                )
+            )
+        frees.sort()
+        for group in self._queue_plan()[: place - 1]:
+            longest = max(self._episodes_left(h) for h in group)
+            frees[0] += longest * typical * len(group)
             frees.sort()
         return frees[0]
+
+    @staticmethod
+    def _episodes_left(handle: WorkerHandle) -> int:
+        """Training episodes the session has yet to run (none once it has ended)."""
+        if handle.progress is None or handle.status not in LIVE_STATUSES:
+            return 0
+        return max(0, handle.progress.episodes - handle.progress.episode)
 
     def _claim(self, session_id: int, resume: bool, override_numerics: bool = False) -> str:
         with self.factory() as db:
@@ -424,6 +611,11 @@ class SessionManager:
 
     async def pause(self, session_id: int) -> None:
         handle = self._live(session_id, "pause")
+        if handle.in_population or handle.handing_over:
+            raise Conflict(
+                f"session {session_id} trains together with other sessions in one process "
+                "and cannot pause alone; stop it instead (it resumes from its last checkpoint)"
+            )
         if handle.status != Status.paused:
             handle.send(Command("pause"))
             await self._until(session_id, lambda h: h.status != Status.running)
@@ -451,7 +643,14 @@ class SessionManager:
                     self.notify(session_id)
                     return
             raise Conflict(f"session {session_id} is {session.status}; there is nothing to stop")
+        if handle.handing_over:  # stop it where it goes on
+            await self._until(session_id, lambda h: not h.handing_over)
+            return await self.stop(session_id)
         handle.stopping = True
+        if handle.in_population:  # the others go on
+            handle.send(Command("stop", {"session_id": session_id}))
+            await self._until(session_id, lambda h: h.status not in LIVE_STATUSES)
+            return
         handle.send(Command("stop"))
         await run_in_threadpool(handle.process.join, self.command_timeout_s)
         if handle.process.is_alive():
@@ -544,7 +743,32 @@ class SessionManager:
                 self.hub.publish(handle.session_id, kind, message)
             self._call_soon(self._apply, handle, message)
         handle.process.join(10)
-        code = handle.process.exitcode
+        self._exited(handle, handle.process.exitcode)
+
+    def _read_population(
+        self, conn: Connection, process: Any, members: dict[int, WorkerHandle]
+    ) -> None:
+        """Reader thread of a population's worker: each message to its session's handle."""
+        while True:
+            try:
+                message = conn.recv()
+            except (EOFError, OSError):
+                break
+            handle = members.get(message.session_id) if isinstance(message, Tagged) else None
+            if handle is None:
+                continue
+            kind = HUB_KINDS.get(type(message.message))
+            if kind is not None:
+                self.hub.publish(handle.session_id, kind, message.message)
+            self._call_soon(self._apply, handle, message.message)
+        process.join(10)
+        for handle in members.values():
+            self._exited(handle, process.exitcode)
+
+    def _exited(self, handle: WorkerHandle, code: int | None) -> None:
+        """The session's worker is gone: if it left the session live, it died."""
+        if handle.handing_over:  # the session goes on in its population's worker
+            return
         with self.factory() as db:
             session = get_session(db, handle.session_id)
             died = session.status in LIVE_STATUSES and session.worker_token == handle.token
@@ -598,6 +822,8 @@ class SessionManager:
         self.notify(handle.session_id)
 
     def _drop(self, handle: WorkerHandle) -> None:
+        if handle.handing_over:  # `_start_population` replaces it
+            return
         if self.handles.get(handle.session_id) is handle:
             del self.handles[handle.session_id]
         if handle.training or handle.queued:

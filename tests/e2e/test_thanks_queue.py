@@ -23,7 +23,10 @@ PHONE = {"width": 390, "height": 844}
 
 @pytest.fixture(scope="module")
 def one_slot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    with serving(tmp_path_factory.mktemp("queue"), max_trainers=1, heartbeat_s=1) as live:
+    # Each alone (training_population=1): one slot, one session after another.
+    with serving(
+        tmp_path_factory.mktemp("queue"), max_trainers=1, training_population=1, heartbeat_s=1
+    ) as live:
         yield live
 
 

@@ -1,6 +1,8 @@
 """Many participants on a small server: a human session trains after its advice only in
 one of the server's trainer slots; the others wait, shown as queued, and take a slot as
-one frees. Also the dashboard's report over sessions of different lengths."""
+one frees: alone (`training_population=1`), or those of one learner configuration
+together, as a population in one worker process. Also the dashboard's report over
+sessions of different lengths."""
 
 from __future__ import annotations
 
@@ -14,14 +16,20 @@ import pytest
 
 from tests.server.live import API_KEY, LiveServer, serving
 from tests.server.participant import SimulatedParticipant
-from tests.server.scale import session_body, wait_for_status
+from tests.server.scale import EPISODES, session_body, wait_for_status
 
 pytestmark = pytest.mark.slow
 
 
 @pytest.fixture
 def one_trainer(tmp_path: Path) -> Iterator[LiveServer]:
-    with serving(tmp_path, max_trainers=1, heartbeat_s=1) as live:
+    with serving(tmp_path, max_trainers=1, training_population=1, heartbeat_s=1) as live:
+        yield live
+
+
+@pytest.fixture
+def one_slot_for_populations(tmp_path: Path) -> Iterator[LiveServer]:
+    with serving(tmp_path, max_trainers=1, heartbeat_s=1) as live:  # the default size
         yield live
 
 
@@ -44,19 +52,27 @@ def _until(check, timeout: float = 120) -> None:
         time.sleep(0.2)
 
 
+def _curve(participant: SimulatedParticipant) -> dict:
+    return participant.client.get("/api/participant/learning-curve").json()
+
+
 def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveServer) -> None:
     with one_trainer.client() as api:
         study = api.post("/api/studies", json={"name": "queue"}).json()
         body = session_body("human", advice_budget=2, episodes=500)
-        first, second = (
-            api.post(f"/api/studies/{study['id']}/sessions", json=body).json() for _ in range(2)
+        first, second, third = (
+            api.post(f"/api/studies/{study['id']}/sessions", json=body).json() for _ in range(3)
         )
         a = SimulatedParticipant(one_trainer.url, first["participant_token"])
         b = SimulatedParticipant(one_trainer.url, second["participant_token"])
+        c = SimulatedParticipant(one_trainer.url, third["participant_token"])
         _advise_all(a, 2)
         _until(lambda: _progress(api, first["id"])["stage"] == "train")
         _advise_all(b, 2)
         _until(lambda: _progress(api, second["id"])["queued"])
+        _advise_all(c, 2)
+        _until(lambda: _progress(api, third["id"])["queued"])
+        assert [_curve(p)["queue_place"] for p in (b, c)] == [1, 2], "each alone: one by one"
         waiting = _progress(api, second["id"])
         assert waiting["status"] == "running" and waiting["advice_left"] == 0
         assert b.client.get("/api/participant/learning-curve").json()["queued"] is True
@@ -73,9 +89,68 @@ def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveSe
         _until(lambda: not _progress(api, second["id"])["queued"])
         moved = _progress(api, second["id"])["global_step"]
         _until(lambda: _progress(api, second["id"])["global_step"] > moved + 5)
+        assert _progress(api, third["id"])["queued"], "training_population=1: one after another"
+        assert _curve(c)["queue_place"] == 1
         api.post(f"/api/sessions/{second['id']}/stop")
-        a.close()
-        b.close()
+        _until(lambda: not _progress(api, third["id"])["queued"])
+        pids = [api.get(f"/api/sessions/{s['id']}").json()["worker_pid"] for s in (second, third)]
+        assert pids[0] != pids[1], "each trained in its own worker"
+        api.post(f"/api/sessions/{third['id']}/stop")
+        for participant in (a, b, c):
+            participant.close()
+
+
+def test_queued_sessions_of_one_configuration_train_together(
+    one_slot_for_populations: LiveServer,
+) -> None:
+    """Three finished sessions queued for the one slot take it together: one worker process
+    trains them, each with its own records, progress and status; one stopped stops alone,
+    the others train to their end."""
+    live = one_slot_for_populations
+    with live.client() as api:
+        study = api.post("/api/studies", json={"name": "populations"}).json()
+        sessions = f"/api/studies/{study['id']}/sessions"
+        first = api.post(sessions, json=session_body("human", advice_budget=1, episodes=500))
+        first = first.json()
+        short = [session_body("human", advice_budget=1, seed=seed) for seed in (21, 22)]
+        second, third = (api.post(sessions, json=body).json() for body in short)
+        body = session_body("human", advice_budget=1, seed=23, episodes=500)
+        fourth = api.post(sessions, json=body).json()
+        a, b, c, d = (
+            SimulatedParticipant(live.url, s["participant_token"])
+            for s in (first, second, third, fourth)
+        )
+        _advise_all(a, 1)
+        _until(lambda: _progress(api, first["id"])["stage"] == "train")
+        for participant, session in ((b, second), (c, third), (d, fourth)):
+            _advise_all(participant, 1)
+            _until(lambda s=session: _progress(api, s["id"])["queued"])
+        assert [_curve(p)["queue_place"] for p in (b, c, d)] == [1, 1, 1], "the next slot's"
+        alone = api.get(f"/api/sessions/{first['id']}").json()["worker_pid"]
+
+        api.post(f"/api/sessions/{first['id']}/stop")
+        _until(lambda: _progress(api, fourth["id"])["episode"] >= 1)
+        assert not _progress(api, fourth["id"])["queued"]
+        stopped = api.post(f"/api/sessions/{fourth['id']}/stop")
+        assert stopped.status_code == 200 and stopped.json()["status"] == "stopped", stopped.text
+        rows = [wait_for_status(api, s["id"], {"finished"}) for s in (second, third)]
+        rows.append(api.get(f"/api/sessions/{fourth['id']}").json())
+        assert rows[2]["status"] == "stopped", "the one stopped stays stopped"
+        pids = {row["worker_pid"] for row in rows}
+        assert len(pids) == 1 and alone not in pids, "one process for the three"
+        together = [row["provenance"][-1]["population"] for row in rows]
+        assert [p["population_size"] for p in together] == [3, 3, 3]
+        assert sorted(p["population_index"] for p in together) == [0, 1, 2]
+        assert [p["seed"] for p in together] == [21, 22, 23], "each agent its own session's"
+        for participant, session in ((b, second), (c, third)):
+            progress = _progress(api, session["id"])
+            assert progress["status"] == "finished" and not progress["queued"]
+            assert progress["episode"] == EPISODES and progress["advice_given"] == 1
+            curve = _curve(participant)
+            assert curve["status"] == "finished"
+            assert len(curve["curve"]) == EPISODES, "its own episodes only"
+        for participant in (a, b, c, d):
+            participant.close()
 
 
 def test_the_dashboard_report_compares_sessions_of_different_lengths(

@@ -1,11 +1,11 @@
 """The default population size: a stated rule of the device, the CPU kind, the cores and
-the memory (`runs.batch.runner.default_population`)."""
+the memory (`runs.worker.population.default_population`)."""
 
 from __future__ import annotations
 
 from learner import machine
 from learner.run import FRAME_BYTES, RunSpec
-from runs.batch.runner import (
+from runs.worker.population import (
     POPULATION_CPU,
     POPULATION_CUDA,
     default_population,
