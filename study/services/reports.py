@@ -24,6 +24,7 @@ from sqlalchemy.orm import Session
 
 from analysis.episodes import EpisodeTableError, method_name
 from study.db.models import Status, StudySession
+from study.schemas.reports import AUTO
 from study.services.errors import Conflict, Invalid, NotFound
 from study.services.sessions import list_sessions
 from study.services.studies import design_of, get_study
@@ -33,8 +34,6 @@ from study.settings import Settings
 if TYPE_CHECKING:
     from analysis.report import ReportResult
 
-AUTO = "auto"
-"""Baseline choice: autonomous DeepRL when the report has it, else none."""
 NO_BASELINE = "none"
 _publishing = threading.Lock()
 
