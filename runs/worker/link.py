@@ -167,6 +167,6 @@ class WorkerLink:
                 self._on_pause(pausing, not waiting_for_advice)
                 self.send(StatusChanged("paused" if pausing else "running"))
         elif message.name == "stop":
-            raise StopRequested(str(message.args.get("reason", "stopped by the researcher")))
+            raise StopRequested(message.reason or "stopped by the researcher")
         elif message.name == "shutdown":
             raise ParentGone("the server is shutting down")

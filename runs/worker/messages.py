@@ -8,8 +8,11 @@ consented and finished the induction; `train`: a trainer slot is free).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Literal
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:  # the web process reads these without loading the simulator
+    from sim.bodies import BodySpec, MotionFrame, Pose
 
 
 @dataclass(frozen=True)
@@ -73,9 +76,9 @@ class EpisodeDone:
 
 @dataclass(frozen=True)
 class SceneReset:
-    bodies: list[Any]
+    bodies: list[BodySpec]
     """`sim.BodySpec` of every body in the scene (static for the scene)."""
-    poses: dict[str, Any]
+    poses: dict[str, Pose]
     """`sim.Pose` of every body, by name."""
     episode: int
     """Training episode the reset starts (pretraining resets carry -1)."""
@@ -87,9 +90,9 @@ class SceneStep:
     """The action just taken."""
     reward: float
     """Its reward."""
-    frames: list[Any]
+    frames: list[MotionFrame]
     """`sim.MotionFrame`s along the motion (empty in fast mode without recording)."""
-    poses: dict[str, Any]
+    poses: dict[str, Pose]
     """`sim.Pose` of every body after the step."""
     global_step: int
     """The step's global step (from 1, as the learner's StepRecord)."""
@@ -123,7 +126,8 @@ class Command:
     name: Literal[
         "pause", "resume", "stop", "watch", "unwatch", "shutdown", "ready", "train", "assigned"
     ]
-    args: dict[str, Any] = field(default_factory=dict)
+    reason: str = ""
+    """Why (`stop`), for the session's status detail."""
 
 
 WorkerMessage = (

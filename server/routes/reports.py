@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse
 from analysis.markdown import REPORT_FILE
 from server.deps import DbDep, ResearcherDep, SettingsDep
 from server.routes.params import StudyId
-from study.schemas.reports import ReportCreate, ReportFile, ReportPublic
+from study.schemas.reports import ReportCreate, ReportFile, ReportMethod, ReportPublic
 from study.services import reports
 from study.services.studies import get_study
 
@@ -31,17 +31,23 @@ FileName = Annotated[
 
 
 def public_report(
-    description: dict[str, object], study_id: int, prefix: str = "/api/studies"
+    description: reports.ReportDescription, study_id: int, prefix: str = "/api/studies"
 ) -> ReportPublic:
     """The report's description with its files' URLs under `prefix` (the dashboard serves
     the same files behind its cookie)."""
     base = f"{prefix}/{study_id}/report"
     files = [
         ReportFile(name=f["name"], kind=f["kind"], url=f"{base}/files/{f['name']}")
-        for f in description["files"]  # type: ignore[attr-defined]
+        for f in description["files"]
     ]
     return ReportPublic(
-        **{k: v for k, v in description.items() if k != "files"},
+        study_id=description["study_id"],
+        created_at=description["created_at"],  # pydantic parses the ISO text
+        sessions=description["sessions"],
+        baseline=description["baseline"],
+        n_episodes=description["n_episodes"],
+        notes=description["notes"],
+        methods=[ReportMethod(**m) for m in description["methods"]],
         files=files,
         report_url=f"{base}/files/{REPORT_FILE}",
         zip_url=f"{base}.zip",
