@@ -370,9 +370,11 @@ class SessionManager:
         now = time.monotonic()
         training = [h for h in self.handles.values() if h.training and h.progress is not None]
         rates = {
-            h.session_id: (now - h.training_since) / (h.progress.episode - h.episodes_at_slot)
+            h.session_id: (now - since) / (progress.episode - h.episodes_at_slot)
             for h in training
-            if h.training_since is not None and h.progress.episode > h.episodes_at_slot  # type: ignore[union-attr]
+            if (since := h.training_since) is not None
+            and (progress := h.progress) is not None
+            and progress.episode > h.episodes_at_slot
         }
         if not rates:
             return None
