@@ -16,7 +16,7 @@ from pathlib import Path
 ROOT = Path(__file__).absolute().parents[1]
 PACKAGES = ("sim", "learner", "study", "runs", "server", "analysis", "cli")
 SCHEMAS = "study.schemas."
-PYDANTIC_BASES = {"BaseModel", "BaseSettings", "RootModel"}
+PYDANTIC_BASES = {"pydantic.BaseModel", "pydantic.RootModel", "pydantic_settings.BaseSettings"}
 
 MODELS_ELSEWHERE = {
     "study.settings.Settings": "pydantic-settings reads the environment into a BaseSettings "
@@ -53,21 +53,38 @@ def _base_name(node: ast.expr) -> str:
     return node.attr if isinstance(node, ast.Attribute) else getattr(node, "id", "")
 
 
+def _qualified(module: str, tree: ast.Module, base: ast.expr) -> str:
+    """A base class's dotted name, through the module's imports (`BaseModel` after
+    `from pydantic import BaseModel`: `pydantic.BaseModel`; a class of the module: its own)."""
+    while isinstance(base, ast.Subscript):  # RootModel[list[int]]
+        base = base.value
+    head, _, rest = ast.unparse(base).partition(".")
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            for alias in node.names:
+                if (alias.asname or alias.name) == head:
+                    head = f"{node.module}.{alias.name}"
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.asname == head:
+                    head = alias.name
+        elif isinstance(node, ast.ClassDef) and node.name == head:
+            head = f"{module}.{head}"
+    return f"{head}.{rest}" if rest else head
+
+
 def defined_models(trees: dict[str, ast.Module]) -> set[str]:
-    """`module.Class` of every class whose bases lead to a pydantic model (by name)."""
+    """`module.Class` of every class whose bases lead to a pydantic model."""
     classes = {
-        (module, node.name): {_base_name(b) for b in node.bases}
+        f"{module}.{node.name}": {_qualified(module, tree, b) for b in node.bases}
         for module, tree in trees.items()
         for node in tree.body
         if isinstance(node, ast.ClassDef)
     }
     models = set(PYDANTIC_BASES)
-    while True:
-        more = {name for (_, name), bases in classes.items() if bases & models} - models
-        if not more:
-            break
+    while more := {name for name, bases in classes.items() if bases & models} - models:
         models |= more
-    return {f"{module}.{name}" for (module, name), bases in classes.items() if bases & models}
+    return models - PYDANTIC_BASES
 
 
 def test_every_pydantic_model_is_in_the_schemas_package() -> None:
@@ -83,14 +100,20 @@ def test_every_pydantic_model_is_in_the_schemas_package() -> None:
 def test_the_model_check_sees_a_model_in_a_route() -> None:
     route = ast.parse(
         "from pydantic import BaseModel\nfrom study.schemas.studies import StudyPublic\n"
+        "from server.live.playbacks import Preview\n"  # a namesake of a model, not one
         "class Body(BaseModel): pass\nclass More(StudyPublic): pass\nclass Plain: pass\n"
+        "class Namesake(Preview): pass\n"
     )
-    schemas = ast.parse("import pydantic\nclass StudyPublic(pydantic.BaseModel): pass\n")
+    schemas = ast.parse(
+        "import pydantic as p\nclass StudyPublic(p.BaseModel): pass\n"
+        "class Preview(p.BaseModel): pass\n"
+    )
     found = defined_models({"server.routes.x": route, "study.schemas.studies": schemas})
     assert found == {
         "server.routes.x.Body",
         "server.routes.x.More",
         "study.schemas.studies.StudyPublic",
+        "study.schemas.studies.Preview",
     }
 
 
