@@ -22,9 +22,12 @@ import subprocess
 from functools import cache
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 from learner import machine
+
+if TYPE_CHECKING:
+    from learner.config import DQNConfig, Precision
 
 PACKAGES = ("sim", "learner")
 """The packages whose files decide a run's course."""
@@ -76,17 +79,33 @@ def torch_version() -> str | None:
         return None
 
 
-def record(config: Any) -> dict[str, Any]:
+class Numerics(TypedDict):
+    device: str
+    precision: Precision
+    torch_threads: int
+
+
+class Provenance(TypedDict):
+    """Where a run is computed (`sessions.provenance` keeps one per start, as-is, with the
+    time and step it started at)."""
+
+    code: str
+    commit: str | None
+    cpu: str
+    torch: str | None
+    python: str
+    numerics: Numerics
+
+
+def record(config: DQNConfig) -> Provenance:
     """What a worker stores when a run starts here (`config`: the run's pinned config)."""
-    return {
-        "code": _cached_code_version(),
-        "commit": commit(),
-        "cpu": machine.cpu_kind(),
-        "torch": torch_version(),
-        "python": platform.python_version(),
-        "numerics": {
-            "device": config.device,
-            "precision": config.precision,
-            "torch_threads": config.torch_threads,
-        },
-    }
+    return Provenance(
+        code=_cached_code_version(),
+        commit=commit(),
+        cpu=machine.cpu_kind(),
+        torch=torch_version(),
+        python=platform.python_version(),
+        numerics=Numerics(
+            device=config.device, precision=config.precision, torch_threads=config.torch_threads
+        ),
+    )

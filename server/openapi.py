@@ -32,28 +32,9 @@ from typing import Any
 from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from fastapi.routing import APIRoute
-from pydantic import BaseModel, ConfigDict, Field
 
 from server.guard import BODY_METHODS
-
-
-class ErrorItem(BaseModel):
-    """One problem with the request (422), as FastAPI and pydantic report it."""
-
-    model_config = ConfigDict(extra="allow")
-
-    loc: list[str | int] = Field(description='Where: e.g. ["body", "name"] or ["path", "id"].')
-    msg: str = Field(description="What is wrong, in words.")
-    type: str = Field(description="pydantic's error type, e.g. missing, value_error.")
-
-
-class ErrorBody(BaseModel):
-    """Every error response: a sentence that says what to do, or (422) the problems."""
-
-    detail: str | list[ErrorItem] = Field(
-        description="A message (401, 403, 404, 409, 413, ...) or, for 422, one item per problem."
-    )
-
+from study.schemas.errors import ErrorBody
 
 ERROR_DESCRIPTIONS: dict[int, str] = {
     401: "No credentials: the researcher key (X-API-Key) or the participant token is missing.",

@@ -63,7 +63,7 @@ def run_restore(args: argparse.Namespace) -> int:
     except BackupError as error:
         raise CommandError(str(error)) from None
     print(
-        f"restored {args.backup} (taken {done['created_at']}) into {settings.data_dir}: "
-        f"{len(done['files'])} files, {done['moved']} sessions' paths moved"
+        f"restored {args.backup} (taken {done.created_at}) into {settings.data_dir}: "
+        f"{len(done.files)} files, {done.moved} sessions' paths moved"
     )
     return 0

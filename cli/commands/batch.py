@@ -4,6 +4,7 @@ N agents per method, as sessions of a study; run it again to finish an interrupt
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shlex
 import sys
@@ -371,7 +372,7 @@ def _dry_run(args: argparse.Namespace, spec: BatchSpec, settings: Settings) -> i
     created, no migration is run."""
     from sqlalchemy import inspect
 
-    from runs.batch.runner import BatchRunner
+    from runs.batch.runner import BatchRunner, PreviewRow
     from runs.batch.spec import plan_runs
     from study.db.engine import make_engine, make_session_factory
 
@@ -385,22 +386,19 @@ def _dry_run(args: argparse.Namespace, spec: BatchSpec, settings: Settings) -> i
     except LookupError as error:
         return _fail(str(error), 1)
     if study_id is None:
-        rows = [
-            {"run": run.name, "method": run.method, "seed": run.seed, "session": None,
-             "status": "new"}
-            for run in plan_runs(spec)
-        ]  # fmt: skip
+        rows = [PreviewRow(run.name, run.method, run.seed) for run in plan_runs(spec)]
     else:
         options = _options(args, settings)
         runner = BatchRunner(spec, study_id, url, options, args.spec_class, migrate=False)
         rows = runner.preview_rows()
     if args.json:
-        print(json.dumps({"study": study_id, "database": url, "runs": rows}, indent=2))
+        runs = [dataclasses.asdict(row) for row in rows]
+        print(json.dumps({"study": study_id, "database": url, "runs": runs}, indent=2))
         return 0
     print(f"{what}, database {url}")
     for row in rows:
-        head = f"  {row['run']:<18} seed {row['seed']:<8}"
-        state = f"session {row['session']}: {row['status']}" if row["session"] else row["status"]
+        head = f"  {row.run:<18} seed {row.seed:<8}"
+        state = f"session {row.session}: {row.status}" if row.session else row.status
         print(f"{head} {state}")
     return 0
 

@@ -47,6 +47,19 @@ BLOCKED_PAIR = "not run: its advised run did not finish"
 REFUSED = "not resumed: its pinned numerics"
 
 
+@dataclass
+class PreviewRow:
+    """A run of a dry run (`ideeprl batch --dry-run`) and the session it has."""
+
+    run: str
+    method: str
+    seed: int
+    session: int | None = None
+    """Its session's id; None: it has none yet."""
+    status: str = "new"
+    """Its session's status, or why it has none yet (`new`: it would be created)."""
+
+
 @dataclass(frozen=True)
 class RunnerOptions:
     """How a batch executes (what it runs is the `BatchSpec`)."""
@@ -301,7 +314,7 @@ class BatchRunner:
             self._ensure(db, state)
         return waiting
 
-    def preview_rows(self) -> list[dict[str, Any]]:
+    def preview_rows(self) -> list[PreviewRow]:
         """Each run and the session it has (nothing is created or run)."""
         rows = []
         checkpoint = self.advisor_checkpoint
@@ -309,19 +322,13 @@ class BatchRunner:
             get_study(db, self.study_id)
             for state in self.states:
                 run = state.run
-                row: dict[str, Any] = {
-                    "run": run.name,
-                    "method": run.method,
-                    "seed": run.seed,
-                    "session": None,
-                    "status": "new",
-                }
+                row = PreviewRow(run.name, run.method, run.seed)
                 rows.append(row)
                 if run.method == "agent" and checkpoint is None:
-                    row["status"] = "waits for the advisor"
+                    row.status = "waits for the advisor"
                     continue
                 if run.method == "procedure":
-                    row["status"] = f"follows {self.spec.control_of} #{run.index + 1} once it ran"
+                    row.status = f"follows {self.spec.control_of} #{run.index + 1} once it ran"
                     continue
                 found = find_session(
                     db, self.study_id, self._run_spec(state, checkpoint), self.spec_class,
@@ -330,7 +337,7 @@ class BatchRunner:
                 if run.is_advisor and found is not None and found.status == Status.finished:
                     checkpoint = found.checkpoint_path
                 if found is not None:
-                    row["session"], row["status"] = found.id, found.status
+                    row.session, row.status = found.id, found.status
         return rows
 
     def prepare(self) -> None:

@@ -180,8 +180,8 @@ class WorkerLink:
         elif message.name == "handover":
             raise HandOver("handed over to a population")
         elif message.name == "stop":
-            stop = StopRequested(str(message.args.get("reason", "stopped by the researcher")))
-            stop.session_id = message.args.get("session_id")
+            stop = StopRequested(message.reason or "stopped by the researcher")
+            stop.session_id = message.session_id
             raise stop
         elif message.name == "shutdown":
             raise ParentGone("the server is shutting down")

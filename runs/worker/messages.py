@@ -10,8 +10,11 @@ worker sends its sessions' messages `Tagged` with their session over its one cha
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Literal
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:  # the web process reads these without loading the simulator
+    from sim.bodies import BodySpec, MotionFrame, Pose
 
 
 @dataclass(frozen=True)
@@ -75,9 +78,9 @@ class EpisodeDone:
 
 @dataclass(frozen=True)
 class SceneReset:
-    bodies: list[Any]
+    bodies: list[BodySpec]
     """`sim.BodySpec` of every body in the scene (static for the scene)."""
-    poses: dict[str, Any]
+    poses: dict[str, Pose]
     """`sim.Pose` of every body, by name."""
     episode: int
     """Training episode the reset starts (pretraining resets carry -1)."""
@@ -89,9 +92,9 @@ class SceneStep:
     """The action just taken."""
     reward: float
     """Its reward."""
-    frames: list[Any]
+    frames: list[MotionFrame]
     """`sim.MotionFrame`s along the motion (empty in fast mode without recording)."""
-    poses: dict[str, Any]
+    poses: dict[str, Pose]
     """`sim.Pose` of every body after the step."""
     global_step: int
     """The step's global step (from 1, as the learner's StepRecord)."""
@@ -142,7 +145,10 @@ class Command:
         "assigned",
         "handover",
     ]
-    args: dict[str, Any] = field(default_factory=dict)
+    reason: str = ""
+    """Why (`stop`), for the session's status detail."""
+    session_id: int | None = None
+    """The session a `stop` is for, in a population's shared channel (None: every one)."""
 
 
 WorkerMessage = (

@@ -15,7 +15,7 @@ provenance entry for this start (`population`) and in its checkpoints' metadata.
 
 The channel to the runner is one `WorkerLink` for the whole population: a shutdown (or a
 runner that died) checkpoints every agent at the step boundary and leaves each session
-`interrupted`; a stop naming one session (`Command("stop", {"session_id": ...})`) stops
+`interrupted`; a stop naming one session (`Command("stop", session_id=...)`) stops
 that agent alone, the others go on.
 
 The web process trains finished human sessions this way too (`population_main`): their

@@ -49,7 +49,8 @@ class HubEvent:
     """`time.monotonic()` when published."""
 
 
-Callback = Callable[[HubEvent], None]
+Callback = Callable[[HubEvent], object]
+"""Called with each event; what it returns is ignored."""
 
 
 class Subscription:

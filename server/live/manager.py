@@ -648,7 +648,7 @@ class SessionManager:
             return await self.stop(session_id)
         handle.stopping = True
         if handle.in_population:  # the others go on
-            handle.send(Command("stop", {"session_id": session_id}))
+            handle.send(Command("stop", session_id=session_id))
             await self._until(session_id, lambda h: h.status not in LIVE_STATUSES)
             return
         handle.send(Command("stop"))

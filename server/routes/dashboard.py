@@ -14,7 +14,6 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Depends, Form, HTTPException, Request
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
-from pydantic import BaseModel, Field
 from sqlalchemy import select
 
 from learner.fields import FieldError
@@ -27,12 +26,19 @@ from server.routes import sessions as session_routes
 from server.routes import studies as study_routes
 from server.routes.pages import templates
 from server.routes.params import SessionId, StudyId
-from server.routes.reports import FileName, ReportPublic
+from server.routes.reports import FileName
 from study.db.models import Episode, StudySession
-from study.schemas.design import StudyDesign
+from study.schemas.dashboard import (
+    DashboardReport,
+    NewDesign,
+    NewParticipant,
+    NewStudy,
+    SessionRow,
+    StudyRow,
+)
+from study.schemas.reports import ReportPublic
 from study.schemas.sessions import SessionOptions
-from study.schemas.studies import StudyCreate, StudyUpdate
-from study.schemas.types import Text
+from study.schemas.studies import Preview, StudyCreate, StudyUpdate
 from study.services import reports, sessions, studies
 
 COOKIE = "ideeprl_dashboard"
@@ -112,51 +118,6 @@ def dashboard(request: Request) -> Response:
 
 
 # --- what the page polls and sends ------------------------------------------------------
-class SessionRow(BaseModel):
-    id: int
-    label: str
-    method: str
-    seed: int
-    participant: str | None
-    participant_url: str | None
-    status: str
-    status_detail: str
-    progress: dict[str, Any]
-    declined: bool = False
-    condition: str | None = None
-    outcome: str | None = None
-    preview: bool = False
-    pooled: bool = False
-
-
-class StudyRow(BaseModel):
-    id: int
-    name: str
-    description: str
-    sessions: list[SessionRow]
-    design: dict[str, Any] | None = None
-    join_url: str | None = None
-    conditions: list[study_routes.ConditionCounts] = Field(default_factory=list)
-    """An online study's per-condition counts (`GET /api/studies/ID/conditions`)."""
-
-
-class NewDesign(BaseModel):
-    design: StudyDesign
-
-
-class NewStudy(BaseModel):
-    name: Text = Field(min_length=1, max_length=200)
-
-
-class NewParticipant(BaseModel):
-    participant: Text | None = Field(default=None, max_length=64)
-    """Pseudonym; generated when empty."""
-    pretrain: bool = False
-    """Start the session's random pretraining now (as `?pretrain=true` of the REST API), so
-    the robot is ready when the participant's induction ends; otherwise it starts when the
-    participant opens the link."""
-
-
 @router.get("/dashboard/api/overview", dependencies=[LoginDep])
 def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[StudyRow]:
     rows = []
@@ -196,9 +157,7 @@ def set_design(db: DbDep, study_id: StudyId, body: NewDesign) -> dict[str, Any]:
 
 
 @router.post("/dashboard/api/studies/{study_id}/preview", dependencies=[LoginDep], status_code=201)
-def preview(
-    db: DbDep, settings: SettingsDep, request: Request, study_id: StudyId
-) -> study_routes.Preview:
+def preview(db: DbDep, settings: SettingsDep, request: Request, study_id: StudyId) -> Preview:
     return study_routes.preview(db, settings, request, study_id)
 
 
@@ -284,11 +243,6 @@ def export(
 
 # --- the study's report (the paper's analysis), as `POST /api/studies/ID/report` -------
 DASHBOARD_STUDIES = "/dashboard/api/studies"
-
-
-class DashboardReport(BaseModel):
-    n_episodes: int | None = Field(default=None, ge=1, le=100_000)
-    """First N episodes of every session; default: the length they have in common."""
 
 
 @router.post(f"{DASHBOARD_STUDIES}/{{study_id}}/report", dependencies=[LoginDep])

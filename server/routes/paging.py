@@ -6,7 +6,7 @@ from typing import Annotated, TypeVar
 
 from fastapi import Depends, Query
 
-from server.routes.params import MAX_ID
+from study.schemas.types import MAX_ID
 
 DEFAULT_LIMIT = 1000
 """Enough for a whole 300-episode learning curve in one call."""

@@ -4,7 +4,8 @@ from typing import Annotated
 
 from fastapi import Path
 
-MAX_ID = 2**31 - 1
+from study.schemas.types import MAX_ID
+
 StudyId = Annotated[int, Path(ge=1, le=MAX_ID, description="Study id.")]
 SessionId = Annotated[int, Path(ge=1, le=MAX_ID, description="Session id.")]
 AdviceIndex = Annotated[int, Path(ge=0, le=MAX_ID, description="Advice index (0-based).")]

@@ -14,7 +14,6 @@ from typing import Annotated, Literal
 
 from fastapi import APIRouter, HTTPException, Path, Request, WebSocket
 from fastapi.responses import RedirectResponse, Response
-from pydantic import BaseModel, Field
 from sqlalchemy import select
 
 import sim
@@ -29,6 +28,14 @@ from server.viewer.connection import TOKEN_PATH
 from server.viewer.episodes import PlaybackViewer
 from server.viewer.proxy import relay_to, upstream_host
 from study.db.models import Advice, Episode
+from study.schemas.playback import (
+    AdviceShown,
+    EpisodeRow,
+    PlaybackOpened,
+    PlaybackState,
+    Show,
+    StepShown,
+)
 from study.services import sessions
 from study.services.playback import RecordedEpisode, recorded_episode
 
@@ -74,16 +81,6 @@ def playback_page(request: Request, db: DbDep, session_id: SessionId) -> Respons
 
 
 # --- episodes, and opening one -----------------------------------------------------------
-class EpisodeRow(BaseModel):
-    stage: str
-    episode: int
-    steps: int
-    collected_reward: float
-    advised_steps: int
-    playable: bool
-    """It has a reset seed: it can be rerun."""
-
-
 @router.get(f"{API}/sessions/{{session_id}}/episodes", dependencies=[LoginDep])
 def episodes(db: DbDep, session_id: SessionId) -> list[EpisodeRow]:
     """The session's episodes, pretraining first, as the page's list offers them."""
@@ -102,12 +99,6 @@ def episodes(db: DbDep, session_id: SessionId) -> list[EpisodeRow]:
         )
         for e in found
     ]
-
-
-class PlaybackOpened(BaseModel):
-    id: str
-    url: str
-    """Where the page reads the playback."""
 
 
 def rerun_order(recorded: RecordedEpisode, spec_class: type[RunSpec]) -> RerunOrder:
@@ -142,51 +133,6 @@ def open_playback(
 
 
 # --- an open playback ----------------------------------------------------------------------
-class StepShown(BaseModel):
-    index: int
-    """0-based position in the episode."""
-    step: int
-    """The episode's step number (from 1)."""
-    global_step: int
-    action: int
-    action_name: str
-    action_source: str
-    reward: float
-    image_url: str
-    """The 64x64 image the learner saw when the action was chosen (the rerun's)."""
-
-
-class AdviceShown(BaseModel):
-    advice_index: int
-    global_step: int
-    index: int
-    """The 0-based position of its step in the episode."""
-    action: int
-    action_name: str
-    advisor: str
-    decision_time_s: float | None
-    response_time_s: float
-    image_url: str
-    """The image the advisor was shown, as stored with the advice."""
-
-
-class PlaybackState(BaseModel):
-    id: str
-    session_id: int
-    method: str
-    stage: str
-    episode: int
-    state: Literal["rerunning", "ready", "failed"]
-    detail: str
-    """Why it failed; or where the rerun's rewards differ from the logged ones."""
-    collected_reward: float
-    steps: list[StepShown] = Field(default_factory=list)
-    """Filled when the rerun is ready."""
-    end_image_url: str = ""
-    """The image after the last step (when ready): `steps/N.png`, N the number of steps."""
-    advice: list[AdviceShown] = Field(default_factory=list)
-
-
 def _state(playback: Playback) -> PlaybackState:
     recorded: RecordedEpisode = playback.recorded
     base = f"{API}/playbacks/{playback.id}"
@@ -254,11 +200,6 @@ def step_image(request: Request, playback_id: PlaybackId, index: StepIndex) -> R
         )
     png = rerun.final_png if index == len(rerun.steps) else rerun.steps[index].observation_png
     return Response(png, media_type="image/png")
-
-
-class Show(BaseModel):
-    index: int = Field(ge=0, le=MAX_ID)
-    """0-based step whose decision the 3-D view draws; the number of steps: the end."""
 
 
 @router.post(f"{API}/playbacks/{{playback_id}}/show", dependencies=[LoginDep])

@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import shutil
-from datetime import datetime
-from typing import Annotated, Literal
+from typing import Annotated
 
 from fastapi import APIRouter, BackgroundTasks, Body
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse
-from pydantic import BaseModel, ConfigDict, Field
 
 from analysis.markdown import REPORT_FILE
 from server.deps import DbDep, ResearcherDep, SettingsDep
-from server.routes.params import MAX_ID, StudyId
-from study.schemas.types import Text
+from server.routes.params import StudyId
+from study.schemas.reports import ReportCreate, ReportFile, ReportMethod, ReportPublic
 from study.services import reports
 from study.services.studies import get_study
 
@@ -32,86 +30,24 @@ FileName = Annotated[
 ]
 
 
-class ReportCreate(BaseModel):
-    """Which sessions the report covers; by default the study's finished sessions except
-    advisors, with autonomous DeepRL as the baseline when present."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    sessions: list[Annotated[int, Field(strict=True, ge=1, le=MAX_ID)]] | None = Field(
-        default=None,
-        min_length=1,
-        max_length=10_000,
-        description="These sessions only (any status).",
-    )
-    methods: list[Annotated[Text, Field(max_length=40)]] | None = Field(
-        default=None, min_length=1, max_length=20, description="These methods."
-    )
-    label: Text | None = Field(default=None, max_length=200, description="This label only.")
-    baseline: Text = Field(
-        default=reports.AUTO,
-        max_length=40,
-        description="auto (autonomous when present), none, or a method.",
-    )
-    n_episodes: Annotated[int, Field(strict=True)] | None = Field(
-        default=None, ge=1, le=100_000, description="First N episodes of every agent."
-    )
-    title: Text | None = Field(default=None, max_length=200, description="Report title.")
-    allow_mismatch: bool = Field(
-        default=False,
-        description="Also give the t-tests of methods that ran under different settings "
-        "(reward scheme, learner, scenario); the report's warning stays.",
-    )
-    reference: Literal["authors"] | None = Field(
-        default=None, description="authors: draw the authors' published curves on Figure 5."
-    )
-    primary: Literal["welch", "paired"] = Field(
-        default="welch",
-        description="Each comparison's primary test on the agents' R_T: welch, or paired "
-        "(the paired t-test over seeds, where every agent has a baseline agent of its seed).",
-    )
-
-
-class ReportFile(BaseModel):
-    name: str
-    kind: str = Field(description="report (Markdown), figure (PNG, SVG, PDF) or table (CSV).")
-    url: str
-
-
-class ReportMethod(BaseModel):
-    method: str
-    name: str
-    agents: int
-    episodes: int
-    R_T: float = Field(description="Total collected reward of the method's average curve.")
-    improvement_pct: float | None = Field(description="Over the baseline; None without one.")
-
-
-class ReportPublic(BaseModel):
-    study_id: int
-    created_at: datetime
-    sessions: list[int]
-    baseline: str | None
-    n_episodes: int
-    notes: list[str] = Field(description="What the report left out or chose, and why.")
-    methods: list[ReportMethod]
-    files: list[ReportFile]
-    report_url: str = Field(description="report.md, which links its figures and tables.")
-    zip_url: str = Field(description="Every file in one zip.")
-
-
 def public_report(
-    description: dict[str, object], study_id: int, prefix: str = "/api/studies"
+    description: reports.ReportDescription, study_id: int, prefix: str = "/api/studies"
 ) -> ReportPublic:
     """The report's description with its files' URLs under `prefix` (the dashboard serves
     the same files behind its cookie)."""
     base = f"{prefix}/{study_id}/report"
     files = [
         ReportFile(name=f["name"], kind=f["kind"], url=f"{base}/files/{f['name']}")
-        for f in description["files"]  # type: ignore[attr-defined]
+        for f in description["files"]
     ]
     return ReportPublic(
-        **{k: v for k, v in description.items() if k != "files"},
+        study_id=description["study_id"],
+        created_at=description["created_at"],  # pydantic parses the ISO text
+        sessions=description["sessions"],
+        baseline=description["baseline"],
+        n_episodes=description["n_episodes"],
+        notes=description["notes"],
+        methods=[ReportMethod(**m) for m in description["methods"]],
         files=files,
         report_url=f"{base}/files/{REPORT_FILE}",
         zip_url=f"{base}.zip",

@@ -1,7 +1,6 @@
 """Studies (researcher key required)."""
 
 from fastapi import APIRouter, Path, Request, Response
-from pydantic import BaseModel
 from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
@@ -10,7 +9,15 @@ from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
 from study.db.models import LIVE_STATUSES, Status, Study, StudySession
 from study.schemas.design import StudyDesign
-from study.schemas.studies import FittedAdvisorPublic, StudyCreate, StudyPublic, StudyUpdate
+from study.schemas.studies import (
+    ConditionCounts,
+    FittedAdvisorPublic,
+    Preview,
+    StudyCreate,
+    StudyDisk,
+    StudyPublic,
+    StudyUpdate,
+)
 from study.services import assignment, fitting, sessions, storage, studies
 from study.services.errors import Conflict
 
@@ -55,7 +62,7 @@ def delete_study(
 
 
 @router.get("/{study_id}/disk")
-def study_disk(db: DbDep, settings: SettingsDep, study_id: StudyId) -> storage.StudyDisk:
+def study_disk(db: DbDep, settings: SettingsDep, study_id: StudyId) -> StudyDisk:
     """Bytes the study keeps on disk (checkpoints per session, report), beside its rows."""
     return storage.study_disk(db, settings.data_dir, study_id)
 
@@ -79,16 +86,6 @@ def _online(db: DbDep, study_id: int) -> tuple[Study, StudyDesign]:
     return study, design
 
 
-class ConditionCounts(BaseModel):
-    condition: str
-    target: int
-    completed: int
-    in_progress: int
-    declined: int
-    excluded: int
-    timed_out: int
-
-
 @router.get("/{study_id}/conditions")
 def condition_counts(db: DbDep, study_id: StudyId) -> list[ConditionCounts]:
     """An online study's conditions: target, completed, in progress, and the visits that
@@ -96,11 +93,6 @@ def condition_counts(db: DbDep, study_id: StudyId) -> list[ConditionCounts]:
     study, design = _online(db, study_id)
     tally = assignment.counts(db, study, design)
     return [ConditionCounts(condition=name, **vars(c)) for name, c in tally.items()]
-
-
-class Preview(BaseModel):
-    session_id: int
-    participant_url: str
 
 
 @router.post("/{study_id}/preview", status_code=201)

@@ -2,42 +2,13 @@
 is still playing the last move, and the learner's curve for the thank-you page."""
 
 from fastapi import APIRouter, Request
-from pydantic import BaseModel, Field
 from sqlalchemy import select
 
 from server.deps import DbDep, ManagerDep, ParticipantDep
 from study.db.models import Episode, StudySession
+from study.schemas.participant import CurvePoint, LearningCurve, Playback
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
-
-
-class Playback(BaseModel):
-    remaining_s: float = Field(description="Seconds until the 3-D view has shown the last move.")
-    viewers: int = Field(description="Open 3-D views of this session.")
-
-
-class CurvePoint(BaseModel):
-    episode: int
-    collected_reward: float
-
-
-class LearningCurve(BaseModel):
-    status: str
-    queued: bool = Field(
-        default=False, description="Waiting in the server's queue for a free trainer slot."
-    )
-    queue_place: int | None = Field(
-        default=None,
-        description="While queued: 1 for the session next in line for a trainer slot, 2 for "
-        "the one after, ...",
-    )
-    wait_s: float | None = Field(
-        default=None,
-        description="While queued: the estimated seconds until it starts training, from how "
-        "fast the sessions in the slots train now (null until one has finished an episode).",
-    )
-    episodes: int = Field(description="Training episodes the session will run.")
-    curve: list[CurvePoint] = Field(description="Collected reward per finished episode.")
 
 
 @router.get("/playback")

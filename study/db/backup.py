@@ -61,6 +61,18 @@ class Backup:
     """Paths the database refers to that were not there (outside the data folder or gone)."""
 
 
+@dataclass(frozen=True)
+class Restored:
+    """A backup restored."""
+
+    created_at: str
+    """When the backup was taken (ISO 8601)."""
+    files: list[str]
+    """The files it put back, relative to the data folder."""
+    moved: int
+    """Sessions whose paths were moved from the backup's data folder to the new one."""
+
+
 def _is_sqlite(url: URL) -> bool:
     return url.get_backend_name() == "sqlite"
 
@@ -257,7 +269,7 @@ def read_manifest(folder: Path) -> dict[str, Any]:
     return dict(manifest)
 
 
-def restore(folder: Path, database_url: str, data_dir: Path) -> dict[str, Any]:
+def restore(folder: Path, database_url: str, data_dir: Path) -> Restored:
     """The backup in `folder` into an empty database and the data folder `data_dir`."""
     manifest = read_manifest(folder)
     url = make_url(database_url)
@@ -296,7 +308,7 @@ def restore(folder: Path, database_url: str, data_dir: Path) -> dict[str, Any]:
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(folder / FILES / name, target)
     moved = _move_paths(url, manifest, data_dir)
-    return {**manifest, "moved": moved}
+    return Restored(created_at=manifest["created_at"], files=list(manifest["files"]), moved=moved)
 
 
 def _move_paths(url: URL, manifest: dict[str, Any], data_dir: Path) -> int:

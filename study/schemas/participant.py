@@ -183,3 +183,33 @@ class QuestionnaireState(BaseModel):
     sections: list[Section] = Field(default_factory=list)
     available: bool = Field(default=False, description="The advice is done: it may be answered.")
     submitted_at: datetime | None = None
+
+
+# --- what the participant's pages read beside it (`server.routes.viewing`) ---------------
+class Playback(BaseModel):
+    remaining_s: float = Field(description="Seconds until the 3-D view has shown the last move.")
+    viewers: int = Field(description="Open 3-D views of this session.")
+
+
+class CurvePoint(BaseModel):
+    episode: int
+    collected_reward: float
+
+
+class LearningCurve(BaseModel):
+    status: str
+    queued: bool = Field(
+        default=False, description="Waiting in the server's queue for a free trainer slot."
+    )
+    queue_place: int | None = Field(
+        default=None,
+        description="While queued: 1 for the session next in line for a trainer slot, 2 for "
+        "the one after, ...",
+    )
+    wait_s: float | None = Field(
+        default=None,
+        description="While queued: the estimated seconds until it starts training, from how "
+        "fast the sessions in the slots train now (null until one has finished an episode).",
+    )
+    episodes: int = Field(description="Training episodes the session will run.")
+    curve: list[CurvePoint] = Field(description="Collected reward per finished episode.")

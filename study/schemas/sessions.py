@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from datetime import datetime
-from functools import cache
 from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
@@ -54,10 +53,19 @@ def _flat_body(data: Any) -> Any:
     return data
 
 
-@cache
-def session_create_model(spec_class: type = RunSpec) -> type[BaseModel]:
+_CREATE_MODELS: dict[type, type[BaseModel]] = {}
+
+
+def session_create_model(spec_class: type[RunSpec] = RunSpec) -> type[BaseModel]:
     """The REST body that creates a session: `run` (the run, `spec_class`'s tree) beside the
-    session's own options (`SessionOptions`)."""
+    session's own options (`SessionOptions`); one model per class (a dict, not
+    `functools.cache`, whose arguments mypy wants `Hashable`: a dataclass type is not)."""
+    if spec_class not in _CREATE_MODELS:
+        _CREATE_MODELS[spec_class] = _session_create_model(spec_class)
+    return _CREATE_MODELS[spec_class]
+
+
+def _session_create_model(spec_class: type[RunSpec]) -> type[BaseModel]:
     options = body_model(SessionOptions, "SessionOptions")
     model = create_model(
         "SessionCreate",

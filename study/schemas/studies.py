@@ -75,3 +75,33 @@ class FittedAdvisorPublic(BaseModel):
     model: dict[str, Any] = Field(
         description="The whole model (`learner.fitted.FittedModel`, versioned JSON)."
     )
+
+
+class ConditionCounts(BaseModel):
+    condition: str
+    target: int
+    completed: int
+    in_progress: int
+    declined: int
+    excluded: int
+    timed_out: int
+
+
+class Preview(BaseModel):
+    session_id: int
+    participant_url: str
+
+
+class SessionDisk(BaseModel):
+    session_id: int
+    checkpoint_bytes: int = Field(description="The session's checkpoint folder.")
+
+
+class StudyDisk(BaseModel):
+    """What a study keeps on disk, beside its database rows."""
+
+    study_id: int
+    total_bytes: int
+    checkpoint_bytes: int
+    report_bytes: int = Field(description="Its report and any export being packed.")
+    sessions: list[SessionDisk]

@@ -7,6 +7,8 @@ from typing import Annotated
 from pydantic import AfterValidator, Field, StringConstraints
 from pydantic_core import PydanticCustomError
 
+MAX_ID = 2**31 - 1
+"""The largest id or index a body or path may name: a database's 32-bit int."""
 NUL_MESSAGE = "holds the NUL character (\\u0000), which text cannot hold; remove it"
 SURROGATE_MESSAGE = (
     "is not valid Unicode (it holds a lone surrogate such as \\ud800); send UTF-8 text"

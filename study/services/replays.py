@@ -23,7 +23,7 @@ import zipfile
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict, cast
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -36,7 +36,7 @@ from learner.run import RunSpec
 from study.db.models import LIVE_STATUSES, Advice, Status, Step, StudySession
 from study.schemas.sessions import SessionOptions
 from study.services.errors import Conflict, Invalid, NotFound
-from study.services.sessions import create_session
+from study.services.sessions import Replay, ReplayStream, StreamSource, create_session
 
 LIVE = {s.value for s in LIVE_STATUSES}
 DECIDING = (
@@ -46,6 +46,23 @@ DECIDING = (
 )  # fmt: skip
 """The step columns that decide a run's course (not its wall times, Q-values or losses):
 what an unchanged replay must reproduce exactly."""
+
+
+class StepRow(TypedDict):
+    """A step's `DECIDING` columns, typed as the database holds them."""
+
+    global_step: int
+    stage: str
+    episode: int
+    episode_step: int
+    action: int
+    action_source: str
+    advised_action: int | None
+    advice_remaining: int | None
+    reward: float
+    terminated: bool
+    truncated: bool
+    observation_hash: str | None
 
 
 @dataclass(frozen=True)
@@ -59,24 +76,24 @@ class Stream:
     """Its advice, in advice order."""
     observation_hashes: tuple[str, ...]
     """The hash of the image each advice's advisor saw (`observation_hash`)."""
-    source: dict[str, Any]
+    source: StreamSource
     """Where it comes from: `study` (name), `session` (id there), `export` (file, or None)."""
     provenance: list[Any] = field(default_factory=list)
     """The source's `sessions.provenance`: the machines and numerics that computed it."""
-    steps: list[dict[str, Any]] = field(default_factory=list, repr=False)
+    steps: list[StepRow] = field(default_factory=list, repr=False)
     """The source's step records (the `DECIDING` columns), for `compare`."""
     session_id: int | None = None
     """The source's id in this database (None: from an export)."""
     finished: bool = True
     """The source ran to its end (else its steps are a prefix of its run's)."""
 
-    def stored(self) -> dict[str, Any]:
+    def stored(self) -> ReplayStream:
         """What the replay's session keeps (`sessions.replay_stream`)."""
-        return {
-            "source": self.source,
-            "actions": list(self.actions),
-            "observation_hashes": list(self.observation_hashes),
-        }
+        return ReplayStream(
+            source=self.source,
+            actions=list(self.actions),
+            observation_hashes=list(self.observation_hashes),
+        )
 
 
 def _png_hash(png: bytes) -> str:
@@ -111,9 +128,9 @@ def stream_of_session(db: Session, session_id: int) -> Stream:
         run=session.spec,
         actions=tuple(int(a.action) for a in advice),  # type: ignore[arg-type]
         observation_hashes=tuple(_png_hash(a.observation_png) for a in advice),
-        source={"study": session.study.name, "session": session_id, "export": None},
+        source=StreamSource(study=session.study.name, session=session_id, export=None),
         provenance=list(session.provenance),
-        steps=[dict(row._mapping) for row in steps],
+        steps=[cast(StepRow, dict(row._mapping)) for row in steps],
         session_id=session_id,
         finished=session.status == Status.finished.value,
     )
@@ -154,7 +171,7 @@ def stream_of_export(path: Path, session_id: int) -> Stream:
         run=run,
         actions=tuple(int(r["action"]) for r in advice),
         observation_hashes=hashes,
-        source={"study": study.get("name"), "session": session_id, "export": str(path)},
+        source=StreamSource(study=study.get("name"), session=session_id, export=str(path)),
         provenance=recorded,
         steps=[_typed_step(r) for r in sorted(steps, key=lambda r: int(r["global_step"]))],
     )
@@ -169,7 +186,7 @@ def _missing(value: Any) -> bool:
     return value is None or (isinstance(value, float) and math.isnan(value)) or value == ""
 
 
-def _typed_step(row: Mapping[str, Any]) -> dict[str, Any]:
+def _typed_step(row: Mapping[str, Any]) -> StepRow:
     """An exported step row's deciding columns, typed as the database holds them."""
     kinds: dict[str, Callable[[Any], float | bool]] = {
         "reward": float,
@@ -187,7 +204,7 @@ def _typed_step(row: Mapping[str, Any]) -> dict[str, Any]:
             typed[name] = str(value)
         else:
             typed[name] = int(value)
-    return typed
+    return cast(StepRow, typed)
 
 
 def _bool(value: Any) -> bool:
@@ -235,7 +252,7 @@ def create_replay(
         study_id,
         run,
         SessionOptions(label=label or f"replay of session {stream.source['session']}"),
-        replay=(stream.session_id, stream.stored()),
+        replay=Replay(stream.session_id, stream.stored()),
     )
 
 
@@ -251,7 +268,7 @@ def why_records_may_differ(stream: Stream, run: RunSpec) -> str | None:
             "the original recorded no provenance (computed before sessions kept it): its CPU "
             "kind and numerics are unknown"
         )
-    here = provenance_.record(run.config)
+    here: Mapping[str, object] = provenance_.record(run.config)  # read by key
     reasons = []
     for entry in stream.provenance:
         for key, what in (("cpu", "CPU"), ("torch", "torch"), ("code", "code version")):
@@ -282,43 +299,44 @@ class Comparison:
         return self.difference is None
 
 
-def replay_steps(db: Session, session_id: int) -> list[dict[str, Any]]:
+def replay_steps(db: Session, session_id: int) -> list[StepRow]:
     query = (
         select(*(getattr(Step, c) for c in DECIDING))
         .where(Step.session_id == session_id)
         .order_by(Step.global_step)
     )
-    return [dict(row._mapping) for row in db.execute(query)]
+    return [cast(StepRow, dict(row._mapping)) for row in db.execute(query)]
 
 
 def compare(
-    original: Iterable[Mapping[str, Any]],
-    replay: Iterable[Mapping[str, Any]],
+    original: Iterable[StepRow],
+    replay: Iterable[StepRow],
     complete: bool = True,
 ) -> Comparison:
     """The first step and column where the replay differs from the original (`DECIDING`);
     an original that did not run to its end (not `complete`) is compared as the prefix it
     is, and one recorded before steps kept their observation hash without it."""
-    original, replay = list(original), list(replay)
+    before: list[Mapping[str, object]] = list(original)  # read column by column
+    after: list[Mapping[str, object]] = list(replay)
     if not complete:
-        replay = replay[: len(original)]
-    for mine, theirs in zip(original, replay, strict=False):
+        after = after[: len(before)]
+    for mine, theirs in zip(before, after, strict=False):
         for column in DECIDING:
             if column == "observation_hash" and mine[column] is None:
                 continue  # recorded before steps kept it (0012): compared without it
             if mine[column] != theirs[column]:
                 return Comparison(
-                    len(original),
+                    len(before),
                     {"global_step": mine["global_step"], "column": column,
                      "original": mine[column], "replay": theirs[column]},
                 )  # fmt: skip
-    if len(original) != len(replay):
+    if len(before) != len(after):
         return Comparison(
-            len(original),
-            {"global_step": min(len(original), len(replay)) + 1, "column": "steps",
-             "original": len(original), "replay": len(replay)},
+            len(before),
+            {"global_step": min(len(before), len(after)) + 1, "column": "steps",
+             "original": len(before), "replay": len(after)},
         )  # fmt: skip
-    return Comparison(len(original), None)
+    return Comparison(len(before), None)
 
 
 @dataclass(frozen=True)

@@ -17,13 +17,14 @@ import uuid
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict
 
 import pandas as pd
 from sqlalchemy.orm import Session
 
 from analysis.episodes import EpisodeTableError, method_name
 from study.db.models import Status, StudySession
+from study.schemas.reports import AUTO
 from study.services.errors import Conflict, Invalid, NotFound
 from study.services.sessions import list_sessions
 from study.services.studies import design_of, get_study
@@ -33,8 +34,6 @@ from study.settings import Settings
 if TYPE_CHECKING:
     from analysis.report import ReportResult
 
-AUTO = "auto"
-"""Baseline choice: autonomous DeepRL when the report has it, else none."""
 NO_BASELINE = "none"
 _publishing = threading.Lock()
 
@@ -249,7 +248,36 @@ def report_dir(reports_dir: Path, study_id: int) -> Path:
     return reports_dir / f"study-{study_id}"
 
 
-def describe_report(study_id: int, built: StudyReport) -> dict[str, Any]:
+class ReportFileEntry(TypedDict):
+    name: str
+    kind: str
+    """report (Markdown), figure (PNG, SVG, PDF) or table (CSV)."""
+
+
+class ReportMethodEntry(TypedDict):
+    method: str
+    name: str
+    agents: int
+    episodes: int
+    R_T: float
+    improvement_pct: float | None
+
+
+class ReportDescription(TypedDict):
+    """What a published report says about itself: saved beside it as JSON
+    (`study-ID.json`), read back as-is (`ReportPublic` adds its URLs)."""
+
+    study_id: int
+    created_at: str
+    sessions: list[int]
+    baseline: str | None
+    n_episodes: int
+    notes: list[str]
+    files: list[ReportFileEntry]
+    methods: list[ReportMethodEntry]
+
+
+def describe_report(study_id: int, built: StudyReport) -> ReportDescription:
     """What the API says about a report: its sessions, choices, files and R_T per method."""
     result = built.result
     files = [("report", result.report)]
@@ -263,18 +291,18 @@ def describe_report(study_id: int, built: StudyReport) -> dict[str, Any]:
         "baseline": result.analysis.baseline,
         "n_episodes": result.analysis.n_episodes,
         "notes": list(built.notes),
-        "files": [{"name": path.name, "kind": kind} for kind, path in files],
+        "files": [ReportFileEntry(name=path.name, kind=kind) for kind, path in files],
         "methods": [
-            {
-                "method": str(row["method"]),
-                "name": str(row["name"]),
-                "agents": int(row["agents"]),
-                "episodes": int(row["episodes"]),
-                "R_T": float(row["R_T"]),
-                "improvement_pct": None
+            ReportMethodEntry(
+                method=str(row["method"]),
+                name=str(row["name"]),
+                agents=int(row["agents"]),
+                episodes=int(row["episodes"]),
+                R_T=float(row["R_T"]),
+                improvement_pct=None
                 if pd.isna(row["improvement_pct"])
                 else float(row["improvement_pct"]),
-            }
+            )
             for _, row in result.analysis.methods.iterrows()
         ],
     }
@@ -282,7 +310,7 @@ def describe_report(study_id: int, built: StudyReport) -> dict[str, Any]:
 
 def publish_report(
     db: Session, study_id: int, reports_dir: Path, request: ReportRequest
-) -> dict[str, Any]:
+) -> ReportDescription:
     """Build the study's report into `reports_dir/study-ID/`, replacing the previous one
     only once the new one is complete; returns its description (also saved as JSON)."""
     reports_dir.mkdir(parents=True, exist_ok=True)
@@ -302,7 +330,7 @@ def publish_report(
     return description
 
 
-def published_report(reports_dir: Path, study_id: int) -> dict[str, Any]:
+def published_report(reports_dir: Path, study_id: int) -> ReportDescription:
     path = reports_dir / f"study-{study_id}.json"
     if not path.is_file() or not report_dir(reports_dir, study_id).is_dir():
         raise NotFound(

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import secrets
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple, TypedDict, cast
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -25,6 +25,34 @@ from study.services.ownership import mark_dead_interrupted as mark_dead_interrup
 from study.services.ownership import set_status as set_status
 from study.services.ownership import silent_sessions as silent_sessions
 from study.services.studies import get_study
+
+
+class StreamSource(TypedDict):
+    """Where a replay's recorded stream comes from."""
+
+    study: str | None
+    """The source study's name."""
+    session: int
+    """The source session's id there."""
+    export: str | None
+    """The export it was read from; None: this database."""
+
+
+class ReplayStream(TypedDict):
+    """What a replay's session keeps of its source (`sessions.replay_stream`, JSON as-is):
+    the advice it is fed in order, and the image hash each advice's advisor saw."""
+
+    source: StreamSource
+    actions: list[int]
+    observation_hashes: list[str]
+
+
+class Replay(NamedTuple):
+    """A replayed run's source: its session in this database (None: from an export) and the
+    stream it is fed."""
+
+    source_id: int | None
+    stream: ReplayStream
 
 
 def participant_url(base_url: str, token: str) -> str:
@@ -75,7 +103,7 @@ def create_session(
     options: SessionOptions | None = None,
     data_dir: Path | None = None,
     threads: int | None = None,
-    replay: tuple[int | None, dict[str, Any]] | None = None,
+    replay: Replay | None = None,
 ) -> StudySession:
     """A new session in `created` state, its run validated and pinned on this machine and
     stored whole; a human one gets its participant and token. `data_dir`: where an advisor's
@@ -108,7 +136,8 @@ def create_session(
         idle_limit_s=options.idle_limit_s,
     )
     if replay is not None:
-        session.replay_of, session.replay_stream = replay
+        session.replay_of = replay.source_id
+        session.replay_stream = cast(dict[str, Any], replay.stream)  # JSON, stored as-is
     if spec.method == "human":
         pseudonym = options.participant or f"p-{secrets.token_hex(4)}"
         participant = db.scalar(

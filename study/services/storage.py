@@ -17,7 +17,6 @@ import logging
 import shutil
 from pathlib import Path
 
-from pydantic import BaseModel, Field
 from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
@@ -29,6 +28,7 @@ from study.db.models import (
     Study,
     StudySession,
 )
+from study.schemas.studies import SessionDisk, StudyDisk
 from study.services.errors import Conflict, NotFound
 from study.services.fitted_files import fitted_model_path
 from study.services.replays import replays_of
@@ -199,21 +199,6 @@ def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> 
         remove_session_files(data_dir, session_id, checkpoint)
     for other in {study_id, *(r.study_id for r in replays)}:
         remove_study_files(data_dir, other)
-
-
-class SessionDisk(BaseModel):
-    session_id: int
-    checkpoint_bytes: int = Field(description="The session's checkpoint folder.")
-
-
-class StudyDisk(BaseModel):
-    """What a study keeps on disk, beside its database rows."""
-
-    study_id: int
-    total_bytes: int
-    checkpoint_bytes: int
-    report_bytes: int = Field(description="Its report and any export being packed.")
-    sessions: list[SessionDisk]
 
 
 def _size(path: Path) -> int:

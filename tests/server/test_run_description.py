@@ -171,7 +171,7 @@ def test_a_finished_batch_still_finds_its_runs_after_a_field_is_added(
         rows = BatchRunner(
             spec, study.id, database, RunnerOptions(progress=False), Extended, migrate=False
         ).preview_rows()
-    assert [r["status"] for r in rows] == ["finished", "finished"]
+    assert [r.status for r in rows] == ["finished", "finished"]
 
 
 # --- no entry point declares a run field of its own -------------------------------------------

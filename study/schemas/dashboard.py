@@ -1,0 +1,62 @@
+"""Bodies of the researchers' dashboard (`server.routes.dashboard`): what its page polls
+and sends. Not in the OpenAPI document: the dashboard's routes are the page's own."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+from study.schemas.design import StudyDesign
+from study.schemas.studies import ConditionCounts
+from study.schemas.types import Text
+
+
+class SessionRow(BaseModel):
+    id: int
+    label: str
+    method: str
+    seed: int
+    participant: str | None
+    participant_url: str | None
+    status: str
+    status_detail: str
+    progress: dict[str, Any]
+    declined: bool = False
+    condition: str | None = None
+    outcome: str | None = None
+    preview: bool = False
+    pooled: bool = False
+
+
+class StudyRow(BaseModel):
+    id: int
+    name: str
+    description: str
+    sessions: list[SessionRow]
+    design: dict[str, Any] | None = None
+    join_url: str | None = None
+    conditions: list[ConditionCounts] = Field(default_factory=list)
+    """An online study's per-condition counts (`GET /api/studies/ID/conditions`)."""
+
+
+class NewDesign(BaseModel):
+    design: StudyDesign
+
+
+class NewStudy(BaseModel):
+    name: Text = Field(min_length=1, max_length=200)
+
+
+class NewParticipant(BaseModel):
+    participant: Text | None = Field(default=None, max_length=64)
+    """Pseudonym; generated when empty."""
+    pretrain: bool = False
+    """Start the session's random pretraining now (as `?pretrain=true` of the REST API), so
+    the robot is ready when the participant's induction ends; otherwise it starts when the
+    participant opens the link."""
+
+
+class DashboardReport(BaseModel):
+    n_episodes: int | None = Field(default=None, ge=1, le=100_000)
+    """First N episodes of every session; default: the length they have in common."""
