@@ -29,7 +29,7 @@ def one_trainer(tmp_path: Path) -> Iterator[LiveServer]:
 
 @pytest.fixture
 def one_slot_for_populations(tmp_path: Path) -> Iterator[LiveServer]:
-    with serving(tmp_path, max_trainers=1, heartbeat_s=1) as live:  # the default size
+    with serving(tmp_path, max_trainers=1, training_population=3, heartbeat_s=1) as live:
         yield live
 
 
