@@ -26,6 +26,7 @@ from learner import provenance
 from learner.advisors import RecordedAdvisor
 from learner.records import TRAINING
 from learner.run import RunSpec
+from learner.strategies import AdviceMoment
 from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
 from runs.worker.link import ParentGone, WorkerExit, WorkerLink
 from runs.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
@@ -156,7 +157,6 @@ class _Run:
             options.flush_every_steps,
             options.heartbeat_s,
             self.progress_dict,
-            advice_written_elsewhere=s.method == "human",
         )
         checkpoint = s.checkpoint_path
         if checkpoint and not Path(checkpoint).is_file():
@@ -204,7 +204,7 @@ class _Run:
                 self.start_advice,
                 self.spec.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
-                lambda: self.recorder.steps + 1,
+                self._moment,
                 self._before_waiting,
                 self._until_participant_ready,
             )
@@ -220,20 +220,29 @@ class _Run:
                 )
             self.advisor = RecordingAdvisor(
                 RecordedAdvisor(stream["actions"], stream["observation_hashes"]),
+                s.id,
                 s.method,
                 self.start_advice,
                 self.recorder.add_advice,
-                lambda: self.recorder.steps + 1,
+                self._moment,
             )
         elif machine is not None:
             self.advisor = RecordingAdvisor(
                 machine,
+                s.id,
                 s.method,
                 self.start_advice,
                 self.recorder.add_advice,
-                lambda: self.recorder.steps + 1,
+                self._moment,
             )
         return self.advisor
+
+    def _moment(self) -> AdviceMoment:
+        """What the trainer asks advice about (the advisor is called only from inside its
+        step, so there is one)."""
+        moment: AdviceMoment | None = getattr(self.trainer, "moment", None)  # SB3: no advice
+        assert moment is not None, "advice asked for outside a trainer's step"
+        return moment
 
     @property
     def advice_given(self) -> int:
