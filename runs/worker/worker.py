@@ -209,8 +209,7 @@ class _Run:
                 self._until_participant_ready,
             )
             self.env.after_step.append(self.advisor.after_step)
-            advisor = self.advisor
-            self.env.advised = lambda: advisor.carrying_out
+            self.env.participant = self.advisor
         elif s.method == "replayed":
             stream = s.replay_stream
             if not stream:
