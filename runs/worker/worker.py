@@ -168,6 +168,8 @@ class _Run:
         if s.method == "human" and self.link is None:
             raise Conflict("a human session needs the server: start it through the API")
         self.spec = learning.spec_of(s, options.spec_class)
+        self.advice_budget = self.spec.advice_budget
+        """Read once: `_advisor` runs inside `spec.build`, which it would otherwise call back."""
         self.trainer, self.env = self.spec.build(
             [self.recorder, self.reporter],
             record_motion=conn is not None,
@@ -202,7 +204,7 @@ class _Run:
                 self.link,
                 self.given,
                 self.start_advice,
-                self.spec.advice_budget,
+                self.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
                 self._moment,
                 self._before_waiting,
@@ -257,7 +259,7 @@ class _Run:
             collected_reward=self.env.collected_reward,
             last_episode_reward=self.reporter.last_episode_reward,
             advice_given=self.advice_given,
-            advice_budget=self.spec.advice_budget,
+            advice_budget=self.advice_budget,
             queued=self.queued,
             waiting_for_participant=self.waiting_for_participant,
         )
@@ -317,7 +319,7 @@ class _Run:
             self.link is not None
             and self.session.method == "human"
             and not self.link.may_train
-            and self.advice_given >= self.spec.advice_budget
+            and self.advice_given >= self.advice_budget
         )
 
     def _wait_for_training_slot(self) -> None:
