@@ -150,8 +150,9 @@ def trace_server(tmp: Path) -> tuple[Walk, Walk]:
 
     folder = tmp / "server-trace"
     (tmp / "data").mkdir()
-    saved = {k: os.environ.get(k) for k in ("IDEEPRL_WALK_TRACE", "PYTHONPATH")}
+    saved = {k: os.environ.get(k) for k in ("IDEEPRL_WALK_TRACE", "PYTHONPATH", "DATABASE_URL")}
     os.environ.update(env(folder))
+    os.environ.pop("DATABASE_URL", None)  # SQLite always: the documented walks are its own
     try:
         with serving(tmp / "data", heartbeat_s=600, pool_limit=0) as live, live.client() as api:
             study = api.post("/api/studies", json={"name": "walks"}).json()
