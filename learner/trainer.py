@@ -102,6 +102,9 @@ class Trainer(StagedRun):
         """The record of the episode the last step ended, else None."""
         self._episode: EpisodeInProgress | None = None
         self._stopped = False
+        self.moment: AdviceMoment | None = None
+        """The moment the strategy is deciding on, while it asks the advisor (what an advisor
+        that records its advice reads: the step, the learner's greedy action)."""
 
     def step(self) -> StepRecord:
         """Take one environment step (resetting first if no episode is in progress)."""
@@ -141,6 +144,7 @@ class Trainer(StagedRun):
                 episode.obs, episode.info, episode.stage, global_step,
                 config.pretraining_steps, intended, greedy,
             )  # fmt: skip
+            self.moment = moment
             try:
                 advised = self.strategy.advise(moment, self.advisor, N_ACTIONS)
             except BaseException:

@@ -12,8 +12,10 @@ from typing import Any
 import numpy as np
 
 from learner.advisors import NO_ADVICE, Advisor, NoAdvice
+from learner.strategies import AdviceMoment
 from runs.worker.link import WorkerLink
 from runs.worker.messages import AdviceRequest, AdviceResult
+from study.services.advice import AdviceGiven
 from study.services.observations import encode_png
 
 log = logging.getLogger(__name__)
@@ -32,14 +34,14 @@ class HumanAdvisor:
         start_index: int,
         advice_budget: int,
         idle_limit_s: float,
-        step_index: Callable[[], int],
+        moment: Callable[[], AdviceMoment],
         before_waiting: Callable[[], None] = lambda: None,
         until_participant_ready: Callable[[], None] = lambda: None,
     ) -> None:
         """`before_waiting()` runs before the request is sent (the worker flushes its
         records there, so every step before the wait is in the database);
         `until_participant_ready()` blocks until the participant consented and finished the
-        induction."""
+        induction. `moment()`: what the trainer is deciding on (the step, its greedy action)."""
         self._before_waiting = before_waiting
         self._until_ready = until_participant_ready
         self._link = link
@@ -47,7 +49,7 @@ class HumanAdvisor:
         self.count = start_index
         self._budget = advice_budget
         self._idle_limit_s = idle_limit_s
-        self._step_index = step_index
+        self._moment = moment
         self._answered: int | None = None
 
     def state_dict(self) -> dict[str, Any]:
@@ -74,9 +76,11 @@ class HumanAdvisor:
         if index in self._given:
             action = self._given[index]
         else:
+            moment = self._moment()
             request = AdviceRequest(
                 advice_index=index,
-                global_step=self._step_index(),
+                global_step=moment.global_step,
+                greedy_action=moment.greedy_action,
                 observation_png=encode_png(obs),
                 info=dict(info),
                 advice_budget=self._budget,
@@ -97,24 +101,28 @@ class HumanAdvisor:
 class RecordingAdvisor:
     """Wraps a machine advisor (agent, oracle, random, fitted) or a replayed stream: same
     advice, logged with the observation and the time it took, as the study's exports treat
-    every advisor alike. A simulated decision time (an advisor's `last_decision_time_s`:
-    fitted, or an oracle with times) is logged as `decision_time_s`, where a person's page
-    puts theirs. A replayed advice also logs whether it met the image its advisor saw
-    (`same_observation`); a request beyond the stream is logged without an action."""
+    every advisor alike (`study.services.advice.AdviceGiven`, complete when built: the step
+    and the learner's greedy action come from the trainer's `moment`). A simulated decision
+    time (an advisor's `last_decision_time_s`: fitted, or an oracle with times) is logged
+    as `decision_time_s`, where a person's page puts theirs. A replayed advice also logs
+    whether it met the image its advisor saw (`same_observation`); a request beyond the
+    stream is logged without an action."""
 
     def __init__(
         self,
         inner: Advisor,
+        session_id: int,
         kind: str,
         start_index: int,
-        record: Callable[[dict[str, Any]], None],
-        step_index: Callable[[], int],
+        record: Callable[[AdviceGiven], None],
+        moment: Callable[[], AdviceMoment],
     ) -> None:
         self._inner = inner
+        self._session_id = session_id
         self._kind = kind
         self.count = start_index
         self._record = record
-        self._step_index = step_index
+        self._moment = moment
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._inner, name)  # q_values, for importance advising
@@ -135,20 +143,22 @@ class RecordingAdvisor:
         answer = self._inner.advise(obs, info)
         action = None if answer is NO_ADVICE else int(answer)
         elapsed = time.perf_counter() - started
+        moment = self._moment()
         self._record(
-            {
-                "advice_index": self.count,
-                "global_step": self._step_index(),
-                "advisor": self._kind,
-                "action": action,
-                "greedy_action": None,  # filled in from the step record at flush
-                "observation_png": encode_png(obs),
-                "response_time_s": elapsed,
-                "decision_time_s": getattr(self._inner, "last_decision_time_s", None),
-                "requested_at": requested_at,
-                "answered_at": requested_at + timedelta(seconds=elapsed),
-                "same_observation": getattr(self._inner, "same_observation", None),
-            }
+            AdviceGiven(
+                session_id=self._session_id,
+                advice_index=self.count,
+                global_step=moment.global_step,
+                advisor=self._kind,
+                action=action,
+                greedy_action=moment.greedy_action,
+                observation_png=encode_png(obs),
+                response_time_s=elapsed,
+                decision_time_s=getattr(self._inner, "last_decision_time_s", None),
+                requested_at=requested_at,
+                answered_at=requested_at + timedelta(seconds=elapsed),
+                same_observation=getattr(self._inner, "same_observation", None),
+            )
         )
         self.count += 1
         return NO_ADVICE if action is None else action

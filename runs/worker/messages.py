@@ -49,6 +49,9 @@ class AdviceRequest:
     """0-based index of this advice in the session."""
     global_step: int
     """The step the advice is for."""
+    greedy_action: int
+    """The learner's own greedy choice at this step (the web process writes the advice row,
+    complete, from this request and the answer: `study.services.advice`)."""
     observation_png: bytes
     """The 64x64 image the learner sees, PNG (lossless)."""
     info: dict[str, Any]

@@ -13,11 +13,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
-from sqlalchemy import bindparam, delete, insert, update
+from sqlalchemy import delete, insert, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.records import TRAINING, EpisodeRecord, StepRecord
 from study.db.models import Advice, Episode, Step, StudySession, utcnow
+from study.services.advice import AdviceGiven, write_advice
 
 STEP_COLUMNS = frozenset(c.name for c in Step.__table__.columns) - {"id"}
 EPISODE_COLUMNS = frozenset(c.name for c in Episode.__table__.columns) - {"id"}
@@ -53,11 +54,7 @@ class Recorder:
         flush_every_steps: int,
         heartbeat_s: float,
         progress: Callable[[], dict[str, Any]],
-        advice_written_elsewhere: bool = False,
     ) -> None:
-        """`advice_written_elsewhere`: a person's advice rows come from the web process;
-        this recorder only completes them."""
-        self._advice_written_elsewhere = advice_written_elsewhere
         self._factory = factory
         self.session_id = session_id
         self._token = worker_token
@@ -67,7 +64,7 @@ class Recorder:
         self._progress = progress
         self._steps: list[dict[str, Any]] = []
         self._episodes: list[dict[str, Any]] = []
-        self._advice: list[dict[str, Any]] = []
+        self._advice: list[AdviceGiven] = []
         self._last_flush = time.monotonic()
         self.steps = 0
         self.episodes = 0
@@ -88,9 +85,10 @@ class Recorder:
             self.episodes_since_checkpoint += 1
         self.flush()
 
-    def add_advice(self, row: dict[str, Any]) -> None:
-        """A machine advisor's advice (human advice is written by the web process)."""
-        self._advice.append({**row, "session_id": self.session_id})
+    def add_advice(self, advice: AdviceGiven) -> None:
+        """A machine advisor's advice, written at the next flush (a person's advice is
+        written by the web process, complete, before the worker hears of it)."""
+        self._advice.append(advice)
 
     # --- writing -----------------------------------------------------------------------
     def tick(self) -> None:
@@ -99,31 +97,12 @@ class Recorder:
             self.flush()
 
     def flush(self, **session_values: Any) -> None:
-        # Advice rows get the learner's greedy choice from the step they advised.
-        greedy = {
-            s["global_step"]: s["greedy_action"]
-            for s in self._steps
-            if s["action_source"] == "advisor"
-        }
-        for row in self._advice:
-            row["greedy_action"] = greedy.get(row["global_step"], row["greedy_action"])
         with self._factory() as db:
-            if greedy and self._advice_written_elsewhere:
-                db.execute(
-                    update(Advice.__table__)
-                    .where(
-                        Advice.__table__.c.session_id == self.session_id,
-                        Advice.__table__.c.global_step == bindparam("step"),
-                    )
-                    .values(greedy_action=bindparam("greedy")),
-                    [{"step": k, "greedy": v} for k, v in greedy.items()],
-                )
             if self._steps:
                 db.execute(insert(Step), self._steps)
             if self._episodes:
                 db.execute(insert(Episode), self._episodes)
-            if self._advice:
-                db.execute(insert(Advice), self._advice)
+            write_advice(db, self._advice)
             self._own(db, heartbeat_at=utcnow(), progress=self._progress(), **session_values)
             db.commit()
         self._steps, self._episodes, self._advice = [], [], []

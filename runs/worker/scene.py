@@ -12,6 +12,7 @@ from runs.worker.link import WorkerLink
 from runs.worker.messages import SceneReset, SceneStep
 
 if TYPE_CHECKING:
+    from runs.worker.advisors import HumanAdvisor
     from sim.env import SortingEnv
 
 
@@ -24,9 +25,9 @@ class SceneBroadcast(gym.Wrapper):
         self.episode = -1
         self.after_step: list[Callable[[int, float, bool], None]] = []
         """Called with (action, reward, episode_over) after every step."""
-        self.advised: Callable[[], bool] = lambda: False
-        """Whether the step being taken carries out a participant's advice (asked before
-        `after_step` runs): the view animates only those."""
+        self.participant: HumanAdvisor | None = None
+        """A human session's advisor: whether the step being taken carries out its advice
+        (asked before `after_step` runs) tells the view which steps to animate."""
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
@@ -37,7 +38,7 @@ class SceneBroadcast(gym.Wrapper):
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
-        advised = self.advised()
+        advised = self.participant is not None and self.participant.carrying_out
         self.collected_reward += float(reward)
         self.steps += 1
         for hook in self.after_step:

@@ -26,6 +26,7 @@ from learner import provenance
 from learner.advisors import RecordedAdvisor
 from learner.records import TRAINING
 from learner.run import RunSpec
+from learner.strategies import AdviceMoment
 from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
 from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
 from runs.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
@@ -158,7 +159,6 @@ class _Run:
             options.flush_every_steps,
             options.heartbeat_s,
             self.progress_dict,
-            advice_written_elsewhere=s.method == "human",
         )
         checkpoint = s.checkpoint_path
         if checkpoint and not Path(checkpoint).is_file():
@@ -170,6 +170,8 @@ class _Run:
         if s.method == "human" and self.link is None:
             raise Conflict("a human session needs the server: start it through the API")
         self.spec = learning.spec_of(s, options.spec_class)
+        self.advice_budget = self.spec.advice_budget
+        """Read once: `_advisor` runs inside `spec.build`, which it would otherwise call back."""
         self.trainer, self.env = self.spec.build(
             [self.recorder, self.reporter],
             record_motion=isinstance(conn, Connection),  # a live view can watch it
@@ -204,15 +206,14 @@ class _Run:
                 self.link,
                 self.given,
                 self.start_advice,
-                self.spec.advice_budget,
+                self.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
-                lambda: self.recorder.steps + 1,
+                self._moment,
                 self._before_waiting,
                 self._until_participant_ready,
             )
             self.env.after_step.append(self.advisor.after_step)
-            advisor = self.advisor
-            self.env.advised = lambda: advisor.carrying_out
+            self.env.participant = self.advisor
         elif s.method == "replayed":
             stream = s.replay_stream
             if not stream:
@@ -222,20 +223,29 @@ class _Run:
                 )
             self.advisor = RecordingAdvisor(
                 RecordedAdvisor(stream["actions"], stream["observation_hashes"]),
+                s.id,
                 s.method,
                 self.start_advice,
                 self.recorder.add_advice,
-                lambda: self.recorder.steps + 1,
+                self._moment,
             )
         elif machine is not None:
             self.advisor = RecordingAdvisor(
                 machine,
+                s.id,
                 s.method,
                 self.start_advice,
                 self.recorder.add_advice,
-                lambda: self.recorder.steps + 1,
+                self._moment,
             )
         return self.advisor
+
+    def _moment(self) -> AdviceMoment:
+        """What the trainer asks advice about (the advisor is called only from inside its
+        step, so there is one)."""
+        moment: AdviceMoment | None = getattr(self.trainer, "moment", None)  # SB3: no advice
+        assert moment is not None, "advice asked for outside a trainer's step"
+        return moment
 
     @property
     def advice_given(self) -> int:
@@ -251,7 +261,7 @@ class _Run:
             collected_reward=self.env.collected_reward,
             last_episode_reward=self.reporter.last_episode_reward,
             advice_given=self.advice_given,
-            advice_budget=self.spec.advice_budget,
+            advice_budget=self.advice_budget,
             queued=self.queued,
             waiting_for_participant=self.waiting_for_participant,
         )
@@ -311,7 +321,7 @@ class _Run:
             self.link is not None
             and self.session.method == "human"
             and not self.link.may_train
-            and self.advice_given >= self.spec.advice_budget
+            and self.advice_given >= self.advice_budget
         )
 
     def _wait_for_training_slot(self) -> None:

@@ -1,8 +1,9 @@
 """The participant's side of a human session: what their page shows, and their advice.
 
-An advice is written to the database before it is forwarded to the worker, so nothing a
-participant gave is lost if the tab closes or the worker dies; a resumed worker replays
-it. Submitting the same advice twice is acknowledged but stored once.
+An advice is written to the database, complete (the worker's request carries its step and
+the learner's greedy action: `study.services.advice`), before it is forwarded to the worker,
+so nothing a participant gave is lost if the tab closes or the worker dies; a resumed worker
+replays it. Submitting the same advice twice is acknowledged but stored once.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from study.schemas.participant import (
     HistoryItem,
     ParticipantState,
 )
+from study.services.advice import AdviceGiven, write_advice
 from study.services.consent import NOT_CONSENTED
 from study.services.errors import Conflict, NotFound
 
@@ -172,10 +174,10 @@ def _stored(manager: SessionManager, session_id: int, index: int) -> Advice | No
         )
 
 
-def _insert(manager: SessionManager, row: Advice) -> bool:
+def _insert(manager: SessionManager, advice: AdviceGiven) -> bool:
     with manager.factory() as db:
-        db.add(row)
         try:
+            write_advice(db, [advice])
             db.commit()
         except IntegrityError:
             db.rollback()
@@ -237,20 +239,20 @@ async def submit_advice(
         now = time.monotonic()
         response_time = now - (handle.shown_at or handle.request_arrived)
         answered_at = datetime.now(UTC)
-        row = Advice(
+        advice = AdviceGiven(
             session_id=session.id,
             advice_index=body.advice_index,
             global_step=request.global_step,
             advisor="human",
             action=body.action,
-            greedy_action=None,  # the worker fills it in from its step record
+            greedy_action=request.greedy_action,
             observation_png=request.observation_png,
             response_time_s=response_time,
             decision_time_s=body.decision_time_s,
             requested_at=answered_at - timedelta(seconds=response_time),
             answered_at=answered_at,
         )
-        if not await run_in_threadpool(_insert, manager, row):
+        if not await run_in_threadpool(_insert, manager, advice):
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None
             return _receipt(stored, body, manager.version(session.id))

@@ -12,7 +12,7 @@ from learner.run import RunSpec
 from runs.worker.worker import WorkerOptions, run_session
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
-from study.db.models import Episode, Step, StudySession
+from study.db.models import Advice, Episode, Step, StudySession
 from study.schemas.studies import StudyCreate
 from study.services.errors import Conflict
 from study.services.sessions import create_session
@@ -52,6 +52,18 @@ def test_run_session_runs_a_session_to_its_end_in_this_process(tmp_path: Path) -
                 )
             )
         assert steps == last == done.checkpoint_step and trained == EPISODES
+        with factory() as db:
+            advised = db.execute(
+                select(Advice.global_step, Advice.greedy_action, Step.greedy_action)
+                .join(
+                    Step,
+                    (Step.session_id == Advice.session_id)
+                    & (Step.global_step == Advice.global_step),
+                )
+                .where(Advice.session_id == session.id)
+            ).all()
+        assert len(advised) == 10, "each machine advice written once, with its step"
+        assert all(row[1] == row[2] for row in advised), "the greedy action of its step"
         assert Path(done.checkpoint_path or "").name == "final.pt"
         assert Path(done.checkpoint_path or "").is_file(), "usable as an agent advisor"
 

@@ -90,7 +90,7 @@ def test_a_viewer_receives_the_scene_and_the_arm_moving(app: tuple[FastAPI, str]
     assert events.first("advice_given").payload == {"advice_index": 0, "action": 0}
     advised = request.payload.global_step
     step = events.first("scene_step", lambda p: p.global_step == advised)
-    assert step.payload.action == 0
+    assert step.payload.action == 0 and step.payload.advised, "a person's advice, animated"
     assert step.payload.frames and all(isinstance(f, sim.MotionFrame) for f in step.payload.frames)
     assert set(step.payload.poses) == set(reset.payload.poses)
     result = events.first("advice_result").payload
