@@ -414,7 +414,8 @@ class BatchRunner:
         first = self.queue[0]
         waited_for = first.run.is_advisor and any(s.status == WAITING for s in self.states)
         population = 1 if waited_for else self.population
-        group = next_group(self.queue, lambda s: self._key(db, s), population, workers)
+        keys = [self._key(db, s) for s in self.queue]
+        group = next_group(self.queue, keys, population, workers)
         taken = {id(s) for s in group}
         self.queue = [s for s in self.queue if id(s) not in taken]
         return group

@@ -257,19 +257,20 @@ def population_key(run: RunSpec, advice_over: bool = False) -> DQNConfig | None:
 
 
 def next_group(
-    queue: Sequence[T], key: Callable[[T], Hashable | None], population: int, workers: int
+    queue: Sequence[T], keys: Sequence[Hashable | None], population: int, workers: int
 ) -> list[T]:
-    """The runs to start next from a non-empty `queue` (oldest first): the first and the
-    waiting runs that can train with it (the same `key`, not None), at most `population`,
-    and no more than spreads them evenly over `workers`: the workers free now and those
-    that were busy when they freed (ten runs when one of two workers frees go as five now
-    and five for the other, so the other does not idle when it frees; four runs on two
-    free workers go as two and two)."""
-    first = queue[0]
-    mine = key(first)
-    mates = [first]
+    """The runs to start next from a non-empty `queue` (oldest first), whose population
+    keys are `keys` (None: alone): the first and the waiting runs that can train with it
+    (the same key), at most `population`, and no more than spreads them evenly over
+    `workers`: the workers free now and those that were busy when they freed (ten runs
+    when one of two workers frees go as five now and five for the other, so the other
+    does not idle when it frees; four runs on two free workers go as two and two)."""
+    if len(keys) != len(queue):
+        raise ValueError(f"{len(keys)} keys for {len(queue)} runs")
+    mine = keys[0]
+    mates = [queue[0]]
     if mine is not None and population > 1:
-        mates = [item for item in queue if key(item) == mine]
+        mates = [item for item, key in zip(queue, keys, strict=True) if key == mine]
     return mates[: max(1, min(population, -(-len(mates) // max(1, workers))))]
 
 

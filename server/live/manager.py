@@ -33,7 +33,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from multiprocessing import forkserver
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
@@ -72,6 +72,9 @@ from study.services.sessions import (
     set_status,
     silent_sessions,
 )
+
+if TYPE_CHECKING:
+    from learner.run import RunSpec
 
 log = logging.getLogger(__name__)
 HUB_KINDS: dict[type, str] = {
@@ -120,6 +123,8 @@ class WorkerHandle:
     """`time.monotonic()` when it took its slot, and the episodes done then: how fast it
     trains, for the queue's time estimate."""
     episodes_at_slot: int = 0
+    run: RunSpec | None = None
+    """A human session's run: its population key is taken from it when it asks to train."""
     population_key: Any = None
     """What it must share with other sessions to train with them in one population once its
     advice is over (`population_key`); None: it trains alone."""
@@ -307,9 +312,7 @@ class SessionManager:
             ready = human and session.ready_for_advice
             strategy = spec.make_strategy() or make_strategy("early", 0)
             first_turn = strategy.first_advice_step(spec.config.pretraining_steps) - 1
-            run = learning.spec_of(session, self.options.spec_class)
-            key = population_key(run, advice_over=True) if human else None
-            size = self.training_population or default_population(run, workers=self.max_trainers)
+            run = learning.spec_of(session, self.options.spec_class) if human else None
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
@@ -328,7 +331,7 @@ class SessionManager:
         )
         handle.history.extend(HistoryEntry(a.advice_index, a.action) for a in advice)
         handle.steps_before_first_turn = first_turn
-        handle.population_key, handle.population_size = key, size
+        handle.run = run
         try:
             process.start()
         except Exception as error:
@@ -398,10 +401,8 @@ class SessionManager:
         """`next_group` of the queued sessions; a paused one takes a slot alone (it is
         granted as before, and resumes where it waits)."""
 
-        def key(handle: WorkerHandle) -> Any:
-            return handle.population_key if handle.status == Status.running else None
-
-        return next_group(waiting, key, waiting[0].population_size, free)
+        keys = [h.population_key if h.status == Status.running else None for h in waiting]
+        return next_group(waiting, keys, waiting[0].population_size, free)
 
     def _busy_slots(self) -> int:
         """Trainer slots taken: a session training alone, or a population."""
@@ -814,6 +815,11 @@ class SessionManager:
                 self._ending.add(task)
                 task.add_done_callback(self._ending.discard)
         elif isinstance(message, TrainingWanted):
+            if handle.run is not None:
+                handle.population_key = population_key(handle.run, advice_over=True)
+                handle.population_size = self.training_population or default_population(
+                    handle.run, workers=self.max_trainers
+                )
             handle.queued = True
             self._train_queue.append(handle.session_id)
             self._grant_training()

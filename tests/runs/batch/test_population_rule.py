@@ -39,11 +39,11 @@ def test_the_memory_caps_it_and_one_always_runs() -> None:
 
 def test_waiting_runs_spread_over_every_worker_and_mates_share_a_key() -> None:
     queue = [("paper", i) for i in range(10)] + [("authors", 0)]
-    key = lambda run: run[0]  # noqa: E731
+    key = [run[0] for run in queue]
     # Ten mates, two workers: five now, five for the other worker when it frees.
     assert next_group(queue, key, population=8, workers=2) == queue[:5]
     assert next_group(queue, key, population=3, workers=2) == queue[:3]
     assert next_group(queue, key, population=8, workers=1) == queue[:8]
-    assert next_group(queue[-1:], key, population=8, workers=2) == [("authors", 0)]
-    assert next_group(queue, lambda run: None, population=8, workers=2) == queue[:1]  # alone
+    assert next_group(queue[-1:], key[-1:], population=8, workers=2) == [("authors", 0)]
+    assert next_group(queue, [None] * len(queue), population=8, workers=2) == queue[:1]  # alone
     assert next_group(queue, key, population=1, workers=2) == queue[:1]
