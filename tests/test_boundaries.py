@@ -271,8 +271,8 @@ RECORDS_ALLOWED: dict[str, str] = {
     "learner.advisors.Advisor.advise": GYM_INFO,
     "learner.advisors.RecordedAdvisor.advise": GYM_INFO,
     "learner.fitted.FittedAdvisor.advise": GYM_INFO,
-    "runs.worker.messages.AdviceRequest.__init__": GYM_INFO + " (advice is being rewritten "
-    "as one typed message elsewhere)",
+    "learner.strategies.AdviceMoment.__init__": GYM_INFO + " where the advice is asked",
+    "runs.worker.messages.AdviceRequest.__init__": GYM_INFO + " shown to the advisor",
     "learner.cli.given_values": LEAF_VALUES,
     "learner.fields.nest": LEAF_VALUES,
     "learner.run.RunSpec.values": LEAF_VALUES,
