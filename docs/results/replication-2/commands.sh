@@ -80,7 +80,9 @@ dst.execute("vacuum")
 # What an agent advisor reads (config and network), at its path under DATA.
 paths = {p for (p,) in dst.execute(
     "select distinct json_extract(run, '$.advisor_checkpoint') from sessions "
-    "where json_extract(run, '$.advisor_checkpoint') is not null")}
+    "where json_extract(run, '$.advisor_checkpoint') is not null "
+    "union select checkpoint_path from sessions where label like '% advisor' "
+    "and checkpoint_path is not null")}
 dst.close()
 for path in sorted(paths):
     relative = Path(path).relative_to(data)
