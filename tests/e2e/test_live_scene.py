@@ -5,7 +5,6 @@ point; a forged token sees nothing and can do nothing."""
 from __future__ import annotations
 
 import itertools
-import queue
 import re
 import time
 from collections.abc import Iterator
@@ -17,7 +16,6 @@ import pytest
 from playwright.sync_api import expect
 from sqlalchemy import func, select
 
-from server.live.hub import HubEvent
 from study.db.models import Advice
 from tests.e2e.conftest import PLAYBACK_SPEED, VIEWPORT, Live
 from tests.e2e.scene import distances, views, wait_for_scene, wait_idle
@@ -105,23 +103,29 @@ def test_the_scene_follows_pybullet_after_a_move(live: Live, pair) -> None:
     a.wait_turn()
     view = wait_for_scene(live, a.id)
     wait_idle(live, a.id)
-    steps: queue.Queue[HubEvent] = queue.Queue()
     samples: list[tuple[float, tuple[float, ...]]] = []
     view.player.speed = 1.0  # real time, as participants see it
     with live.api(a.session["participant_token"]) as api:
         station = api.get("/api/participant/state").json()["station"]
     move = 1 if station == "left" else 2  # to a side table the arm is not at: a real move
-    with live.app.state.hub.subscribe(a.id, steps.put, kinds=["scene_step"]):
-        while not steps.empty():  # the replayed latest step
-            steps.get()
+    seen: list[Any] = []  # scene steps; the hub first replays the latest earlier one
+
+    def moved() -> list[Any]:
+        return [e for e in seen if e.global_step > before and e.action == move and e.advised]
+
+    with live.app.state.hub.subscribe(a.id, lambda event: seen.append(event.payload),
+                                      kinds=["scene_step"]):  # fmt: skip
+        time.sleep(0.3)  # the replayed latest step arrives
+        before = max((e.global_step for e in seen), default=0)
         a.button(move).click()
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
             samples.append((time.monotonic(), tuple(view.mirror.positions()["arm/link_7"])))
-            if not steps.empty() and live.app.state.viewer.playback_remaining_s(a.id) == 0:
+            if moved() and live.app.state.viewer.playback_remaining_s(a.id) == 0:
                 break
             time.sleep(0.005)
-        step = steps.get(timeout=5).payload
+        assert moved(), "the advised move's scene step reached the hub"
+        step = moved()[-1]
     wait_idle(live, a.id)
     view.player.speed = PLAYBACK_SPEED
     assert step.action == move and len(step.frames) > 5, "a real move, in the physics mode"
