@@ -72,7 +72,7 @@ def steps(db: sqlite3.Connection, session_id: int) -> pd.DataFrame:
 
 def episode_rewards(db: sqlite3.Connection, session_id: int) -> np.ndarray:
     rows = db.execute(
-        "select collected_reward from episodes where session_id = ? and stage = 'training' "
+        "select collected_reward from episodes where session_id = ? and stage = 'train' "
         "order by episode",
         (session_id,),
     ).fetchall()
