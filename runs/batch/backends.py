@@ -21,6 +21,7 @@ from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import Any, Protocol
 
+from learner.machine import usable_cores
 from runs.worker.messages import Command
 from runs.worker.population import NOT_RUN, run_population
 from runs.worker.worker import WorkerOptions, run_session
@@ -29,14 +30,6 @@ ROOT = Path(__file__).absolute().parents[2]
 STOP_WAIT_S = 60.0
 KNOWN_ENDINGS = ("finished", "failed", "stopped", "interrupted", "abandoned", "lost")
 """What `run_session` returns; anything else is a problem to report."""
-
-
-def usable_cores() -> int:
-    """Cores this process may run on (a container's share, not the host's)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
 
 
 class Backend(Protocol):
