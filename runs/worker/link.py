@@ -59,11 +59,14 @@ class WorkerLink:
         on_watch: Callable[[], None],
         on_idle: Callable[[], None] = lambda: None,
         assigned: bool = True,
+        on_session_watch: Callable[[int, bool], None] | None = None,
     ) -> None:
         """`on_pause(paused, at_step_boundary)` records the new status (and checkpoints);
         `on_watch()` sends the whole scene to a viewer that just arrived; `on_idle()` runs
         about once a second while the worker waits (paused, or for advice), so it can
-        mark itself alive: a worker that stops beating is killed as hung."""
+        mark itself alive: a worker that stops beating is killed as hung.
+        `on_session_watch(session_id, watched)`: a population's link passes a viewer's
+        arrival or departure named for one of its sessions to that session."""
         self._conn = conn
         self.assigned = assigned
         """Someone's session: False while it waits in a pool, where no idle limit runs."""
@@ -71,6 +74,7 @@ class WorkerLink:
         self._parent = os.getppid()
         self._on_pause = on_pause
         self._on_idle = on_idle
+        self._on_session_watch = on_session_watch
         self.watching = False
         self.paused = False
         self.participant_ready = False
@@ -165,6 +169,10 @@ class WorkerLink:
             self.assigned = True
         elif message.name == "train":
             self.may_train = True
+        elif message.name in ("watch", "unwatch") and (
+            self._on_session_watch is not None and message.session_id is not None
+        ):
+            self._on_session_watch(message.session_id, message.name == "watch")
         elif message.name == "watch":
             self.watching = True
             self._on_watch()

@@ -165,7 +165,17 @@ def _step_until_done(
     conn: Connection | None,
     end: Callable[[int, str], None],
 ) -> None:
-    link = WorkerLink(conn, _no_pause, _nothing, _ticker(runs, population)) if conn else None
+    link = (
+        WorkerLink(
+            conn,
+            _no_pause,
+            _nothing,
+            _ticker(runs, population),
+            on_session_watch=_watcher(runs, population),
+        )
+        if conn
+        else None
+    )
     lost: set[int] = set()
     for index in [i for i in range(population.size) if runs[i].trainer.done]:
         end(runs[index].session_id, runs[index].finish().value)  # resumed at its end
@@ -237,12 +247,28 @@ def _ticker(runs: list[_Run], population: Population) -> Callable[[], None]:
     return tick
 
 
+def _watcher(runs: list[_Run], population: Population) -> Callable[[int, bool], None]:
+    """A viewer arrived at (or left) one session's page: that session's scene goes to it
+    from its next step, and all of the scene at once now (between steps)."""
+
+    def watch(session_id: int, watched: bool) -> None:
+        for index in population.active:
+            run = runs[index]
+            if run.session_id == session_id and run.link is not None:
+                run.link.watching = watched
+                if watched:
+                    run.env.announce()
+
+    return watch
+
+
 def _no_pause(paused: bool, at_step_boundary: bool) -> None:
     """Batch runs are not paused (the runner only shuts its workers down)."""
 
 
 def _nothing() -> None:
-    """Nobody watches a batch run."""
+    """A viewer not named for one session: a population passes viewers on by session
+    (`_watcher`), and nobody watches a batch run."""
 
 
 def population_key(run: RunSpec, advice_over: bool = False) -> DQNConfig | None:

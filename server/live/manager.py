@@ -471,6 +471,8 @@ class SessionManager:
             handle.episodes_at_slot = handle.progress.episode
             self.handles[old.session_id] = handle
             joined[old.session_id] = handle
+            if self.hub.watchers(old.session_id):  # a page still shows its training
+                handle.send(Command("watch", session_id=old.session_id))
             self.notify(old.session_id)
         if joined:
             threading.Thread(
@@ -840,4 +842,5 @@ class SessionManager:
     def _watch(self, session_id: int, watched: bool) -> None:
         handle = self.handles.get(session_id)
         if handle is not None:
-            handle.send(Command("watch" if watched else "unwatch"))
+            # named: a population's worker passes it to that session alone
+            handle.send(Command("watch" if watched else "unwatch", session_id=session_id))

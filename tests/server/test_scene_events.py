@@ -105,3 +105,90 @@ def test_a_viewer_receives_the_scene_and_the_arm_moving(app: tuple[FastAPI, str]
     with httpx.Client(base_url=url, headers={"X-API-Key": API_KEY}, timeout=120) as api:
         assert api.post(f"/api/sessions/{session['id']}/stop").json()["status"] == "stopped"
     participant.close()
+
+
+@pytest.fixture
+def one_slot_app(tmp_path: Path) -> Iterator[tuple[FastAPI, str]]:
+    """As `app`, with one trainer slot that queued sessions share as a population."""
+    with fresh_database(tmp_path) as url:
+        port = free_port()
+        settings = Settings(
+            database_url=url,
+            api_key=API_KEY,
+            data_dir=tmp_path,
+            port=port,
+            max_trainers=1,
+            training_population=2,
+            heartbeat_s=1,
+        )
+        app = create_app(settings)
+        server = uvicorn.Server(uvicorn.Config(app, port=port, log_level="warning"))
+        thread = threading.Thread(target=server.run, daemon=True)
+        thread.start()
+        while not server.started:
+            time.sleep(0.05)
+        try:
+            yield app, f"http://127.0.0.1:{port}"
+        finally:
+            server.should_exit = True
+            thread.join(60)
+
+
+def test_a_viewer_sees_a_session_train_in_a_population(
+    one_slot_app: tuple[FastAPI, str],
+) -> None:
+    """Two finished sessions train together in one worker (issue "The participant's first
+    minutes"): the page watching one before they moved there keeps its scene, and a page
+    opened on the other once it trains there gets its scene; each sees its own steps."""
+    import httpx
+
+    fastapi_app, url = one_slot_app
+    hub = fastapi_app.state.hub
+    with httpx.Client(base_url=url, headers={"X-API-Key": API_KEY}, timeout=60) as api:
+        study = api.post("/api/studies", json={"name": "population view"}).json()
+        path = f"/api/studies/{study['id']}/sessions"
+        ids, participants = [], []
+        for seed in (20, 21, 22):
+            body = session_body("human", advice_budget=1, seed=seed, episodes=500)
+            created = api.post(path, json=body).json()
+            ids.append(created["id"])
+            participants.append(SimulatedParticipant(url, created["participant_token"]))
+
+        def progress(session_id: int) -> dict:
+            return api.get(f"/api/sessions/{session_id}/progress").json()
+
+        def until(check: Callable[[], bool], timeout: float = 120) -> None:
+            deadline = time.monotonic() + timeout
+            while not check():
+                assert time.monotonic() < deadline, "timed out"
+                time.sleep(0.2)
+
+        for participant, session_id in zip(participants, ids, strict=True):
+            participant.begin()
+            state = participant.next_request()
+            assert participant.advise(state["advice_index"], 1).status_code == 200
+            if session_id == ids[0]:
+                until(lambda: progress(ids[0])["stage"] == "train")
+            else:
+                until(lambda s=session_id: progress(s)["queued"])
+        before = Events()
+        watching_before = hub.subscribe(ids[1], before.arrived.put)
+        api.post(f"/api/sessions/{ids[0]}/stop")
+        until(lambda: not any(progress(s)["queued"] for s in ids[1:]))
+
+        def workers() -> set[int]:
+            return {api.get(f"/api/sessions/{s}").json()["worker_pid"] for s in ids[1:]}
+
+        until(lambda: len(workers()) == 1)  # the two train in one population
+        moved = max(progress(s)["global_step"] for s in ids[1:])
+        later = Events()
+        watching_later = hub.subscribe(ids[2], later.arrived.put)
+        for events in (before, later):
+            step = events.first("scene_step", lambda p: p.global_step > moved + 3, timeout=60)
+            assert step.payload.poses, "the scene's bodies where they are"
+        for session_id in ids[1:]:
+            assert api.post(f"/api/sessions/{session_id}/stop").json()["status"] == "stopped"
+        watching_before.close()
+        watching_later.close()
+    for participant in participants:
+        participant.close()
