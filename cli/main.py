@@ -1,7 +1,10 @@
 """The `ideeprl` command line: one entry point, a sub-command per task.
 
 `train` comes from the learner; every module in `cli/commands/` that defines
-`register(subparsers)` adds its own sub-commands, so a new command is a new file. Exit
+`register(subparsers)` adds its own sub-commands, so a new command is a new file. A
+command named like its module (`ideeprl batch` is `cli/commands/batch.py`) loads that
+module alone; anything else (`--help`, `train`, `restore`, a typo) loads them all, so the
+listing and argparse's messages are whole. Exit
 codes: 0 done, 1 a runtime error, 2 a usage error, 130 interrupted
 (`cli.commands.common`).
 """
@@ -12,6 +15,7 @@ import argparse
 import importlib
 import inspect
 import pkgutil
+import sys
 from collections.abc import Sequence
 from importlib import metadata
 
@@ -28,9 +32,12 @@ def version() -> str:
         return "unknown (not installed)"
 
 
-def build_parser(spec_class: type[RunSpec] = RunSpec) -> argparse.ArgumentParser:
-    """Every command's parser; the commands that take a run (`train`, `batch`) make their
-    flags from `spec_class`, the run's declaration."""
+def build_parser(
+    spec_class: type[RunSpec] = RunSpec, command: str | None = None
+) -> argparse.ArgumentParser:
+    """Every command's parser, or only `command`'s where a module of `cli/commands/` is
+    named after it; the commands that take a run (`train`, `batch`) make their flags from
+    `spec_class`, the run's declaration."""
     parser = argparse.ArgumentParser(
         prog="ideeprl",
         description="Human advising studies in interactive deep reinforcement learning.",
@@ -40,6 +47,9 @@ def build_parser(spec_class: type[RunSpec] = RunSpec) -> argparse.ArgumentParser
     modules = ["learner.cli"] + [
         f"{commands.__name__}.{info.name}" for info in pkgutil.iter_modules(commands.__path__)
     ]
+    own = f"{commands.__name__}.{command}"
+    if own in modules and command != "common":
+        modules = [own]
     for name in modules:
         module = importlib.import_module(name)
         register = getattr(module, "register", None)
@@ -53,7 +63,9 @@ def build_parser(spec_class: type[RunSpec] = RunSpec) -> argparse.ArgumentParser
 
 
 def main(argv: Sequence[str] | None = None, spec_class: type[RunSpec] = RunSpec) -> int:
-    args = build_parser(spec_class).parse_args(argv)
+    given = list(sys.argv[1:] if argv is None else argv)
+    command = given[0] if given and not given[0].startswith("-") else None
+    args = build_parser(spec_class, command).parse_args(given)
     try:
         return int(args.func(args) or 0)
     except CommandError as error:
