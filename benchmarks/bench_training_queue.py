@@ -65,6 +65,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     stamp = datetime.now(UTC).strftime("%Y-%m-%dT%H%M%SZ")
     parser.add_argument("--log", type=Path, default=LOGS / f"training-queue-{stamp}.log")
     args = parser.parse_args(argv)
+    before = os.getloadavg()[0]
     log = Log(args.log)
     run = template(args)
     default = default_population(run.pinned(), workers=args.slots)
@@ -100,11 +101,16 @@ def main(argv: Sequence[str] | None = None) -> None:
             f"{verdict} {ARRIVALS_PER_HOUR} an hour"
         )
     log(f"{machine.cpu_kind()}; {load()}")
-    if os.getloadavg()[1] > usable_cores():
+    # Its own slots make a load of about `slots`: more than one process beyond them (or
+    # more than one before it began) is someone else's work.
+    if before > 1.0 or os.getloadavg()[0] > args.slots + 1.0:
         log(
-            f"the machine was shared (5-minute load above its {usable_cores()} cores): the "
-            "slots got part of the cores; on a quiet machine the rates are higher"
+            f"the machine was shared (1-minute load {before:.2f} before, above its own "
+            f"{args.slots} slots during it): the slots got part of the cores; on a quiet "
+            "machine the rates are higher"
         )
+    else:
+        log(f"quiet: 1-minute load {before:.2f} before it began, its own slots during it")
     log(f"\nlog: {args.log}")
 
 
