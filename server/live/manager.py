@@ -326,10 +326,11 @@ class SessionManager:
             name=f"ideeprl-session-{session_id}",
             daemon=True,
         )
-        handle = WorkerHandle(
-            session_id, token, process, parent, budget, {a.advice_index: a.action for a in advice}
-        )
-        handle.history.extend(HistoryEntry(a.advice_index, a.action) for a in advice)
+        # (an advice row without an action is a replay's request past its recorded stream:
+        # nothing was given there)
+        answered = [(a.advice_index, a.action) for a in advice if a.action is not None]
+        handle = WorkerHandle(session_id, token, process, parent, budget, dict(answered))
+        handle.history.extend(HistoryEntry(index, action) for index, action in answered)
         handle.steps_before_first_turn = first_turn
         handle.run = run
         try:
