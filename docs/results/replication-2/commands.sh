@@ -5,6 +5,12 @@
 #   docs/results/replication-2/commands.sh restore # a fresh machine: the committed state back
 #   docs/results/replication-2/commands.sh all     # every arm, in the plan's order (resumable)
 #   docs/results/replication-2/commands.sh save    # the state to commit (database, advisors)
+#   POPULATION=1 docs/results/replication-2/commands.sh paper   # its runs alone, in pairs
+#
+# Runs in populations and alone take the same course to the bit (../populations/), so
+# POPULATION only changes how a session's time is spent: with 1, two runs at a time finish
+# one after another (none is lost when a session ends mid-batch); by default a worker's
+# population of up to 8 finishes together.
 #
 # Runs from the main checkout's venv but imports the tag's code (the worktree comes first on
 # sys.path); each session records its code version, so a run from other code shows in the
@@ -25,7 +31,8 @@ batch() {  # study, label, then ideeprl batch options
   local study=$1 label=$2; shift 2
   (cd "$CODE" && "$PY" -m server.cli batch --study "$study" --label "$label" --seed 0 \
     --agents "${AGENTS:-10}" --torch-threads 1 --checkpoint-every 25 --no-progress \
-    --advisor-check require --advisor-attempts 5 --data-dir "$DATA" "$@")
+    --advisor-check require --advisor-attempts 5 --data-dir "$DATA" \
+    ${POPULATION:+--population "$POPULATION"} "$@")
 }
 AUTHORS=(--preset authors --grasp-failure-rate 0.05 --knock-off-rate 0.05)
 
