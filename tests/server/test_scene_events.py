@@ -4,6 +4,7 @@ hub, as issue 5's viser view will subscribe to them."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import queue
 import threading
 import time
@@ -25,13 +26,14 @@ from tests.server.scale import session_body
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture
-def app(tmp_path: Path) -> Iterator[tuple[FastAPI, str]]:
+@contextlib.contextmanager
+def _served(tmp_path: Path, **settings: Any) -> Iterator[tuple[FastAPI, str]]:
     """The app served by uvicorn on loopback, in this process, so the test can reach its hub."""
     with fresh_database(tmp_path) as url:
         port = free_port()
-        settings = Settings(database_url=url, api_key=API_KEY, data_dir=tmp_path, port=port)
-        app = create_app(settings)
+        app = create_app(
+            Settings(database_url=url, api_key=API_KEY, data_dir=tmp_path, port=port, **settings)
+        )
         server = uvicorn.Server(uvicorn.Config(app, port=port, log_level="warning"))
         thread = threading.Thread(target=server.run, daemon=True)
         thread.start()
@@ -42,6 +44,12 @@ def app(tmp_path: Path) -> Iterator[tuple[FastAPI, str]]:
         finally:
             server.should_exit = True
             thread.join(60)
+
+
+@pytest.fixture
+def app(tmp_path: Path) -> Iterator[tuple[FastAPI, str]]:
+    with _served(tmp_path) as served:
+        yield served
 
 
 class Events:
@@ -110,28 +118,8 @@ def test_a_viewer_receives_the_scene_and_the_arm_moving(app: tuple[FastAPI, str]
 @pytest.fixture
 def one_slot_app(tmp_path: Path) -> Iterator[tuple[FastAPI, str]]:
     """As `app`, with one trainer slot that queued sessions share as a population."""
-    with fresh_database(tmp_path) as url:
-        port = free_port()
-        settings = Settings(
-            database_url=url,
-            api_key=API_KEY,
-            data_dir=tmp_path,
-            port=port,
-            max_trainers=1,
-            training_population=2,
-            heartbeat_s=1,
-        )
-        app = create_app(settings)
-        server = uvicorn.Server(uvicorn.Config(app, port=port, log_level="warning"))
-        thread = threading.Thread(target=server.run, daemon=True)
-        thread.start()
-        while not server.started:
-            time.sleep(0.05)
-        try:
-            yield app, f"http://127.0.0.1:{port}"
-        finally:
-            server.should_exit = True
-            thread.join(60)
+    with _served(tmp_path, max_trainers=1, training_population=2, heartbeat_s=1) as served:
+        yield served
 
 
 def test_a_viewer_sees_a_session_train_in_a_population(
