@@ -133,8 +133,12 @@ def test_the_scene_follows_pybullet_after_a_move(live: Live, pair) -> None:
     assert max(gaps.values()) < CM, f"bodies off PyBullet's poses: {gaps}"
     assert gaps.keys() >= {"arm/link_7", "arm/suction_cup", "objects/cube_red"}
 
+    # A jump shows no pose between where the arm was and where it ends; a move shows them,
+    # one a tick (a short move of 0.2 s has about five; a tick late under load costs one).
+    first, last = samples[0][1], samples[-1][1]
+    between = {p for _, p in samples if p not in (first, last)}
+    assert len(between) >= 3, f"the arm was shown moving, not jumping: {len(between)} poses between"
     changes = [t for (t, p), (_, q) in itertools.pairwise(samples) if p != q]
-    assert len(changes) >= 5, "the arm was shown moving, not jumping"
     rate = (len(changes) - 1) / (changes[-1] - changes[0])
     assert rate >= 20, f"{rate:.0f} pose updates a second during the move"
 
