@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import replace
@@ -67,6 +68,7 @@ def worker_options(settings: Settings) -> WorkerOptions:
         heartbeat_s=settings.heartbeat_s,
         idle_limit_s=settings.idle_limit_s,
         nice=settings.trainer_nice,
+        idle=settings.trainer_idle,
         keep_replay_memory=settings.keep_replay_memory,
     )
 
@@ -144,6 +146,7 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         settings.data_dir,
         spec_class,
         settings.worker_threads,
+        settings.pool_practising or max(1, (os.cpu_count() or 2) - 1),
     )
     viewer = viewer_from_settings(settings, hub, factory)
     playbacks, playback_viewer = episode_playback(settings)

@@ -66,6 +66,11 @@ class Settings(BaseSettings):
     """Niceness of machine-advised workers, and of human sessions once their advice is
     over, so training never slows people's requests."""
 
+    trainer_idle: bool = True
+    """Those workers also run in Linux's SCHED_IDLE class: only when no participant's
+    worker, the web process or anything else ordinary wants the CPU (nice 10 alone still
+    gave two trainers a core's share under a crowd of 30)."""
+
     max_trainers: int = Field(default=0, ge=0)
     """Human sessions that train at once after their advice; the others wait in a queue
     (status `running`, `queued: true`). 0: the number of cores."""
@@ -115,6 +120,10 @@ class Settings(BaseSettings):
     """Pretrained sessions waiting for arrivals, all online studies' pools together: each
     is a worker process (about 110-130 MB proportional memory, its torch shared with the
     others) that spent its random practice once; 0 turns the pools off."""
+    pool_practising: int = Field(default=0, ge=0, le=1000)
+    """Pooled sessions practising at once (each takes a core for several seconds); the
+    others wait their turn, so participants advising keep the rest of the machine. 0: one
+    fewer than the cores, at least one."""
     pool_every_s: float = Field(default=2.0, gt=0, le=3600)
     """How often the pools are topped up."""
 

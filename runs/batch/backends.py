@@ -24,6 +24,7 @@ from typing import Any, Protocol
 from learner.machine import usable_cores
 from runs.worker.messages import Command
 from runs.worker.population import NOT_RUN, run_population
+from runs.worker.priority import lower_priority
 from runs.worker.worker import WorkerOptions, run_session
 
 ROOT = Path(__file__).absolute().parents[2]
@@ -77,9 +78,9 @@ def _worker_loop(database_url: str, options: WorkerOptions, conn: Connection) ->
     # Ctrl-C reaches the whole process group; the runner stops its workers in order.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s batch worker %(message)s")
-    if options.nice:
-        os.nice(options.nice)  # once: run_session would add it again at every run
-        options = replace(options, nice=0)
+    if options.nice or options.idle:
+        lower_priority(options.nice, idle=options.idle)  # once, not again at every run
+        options = replace(options, nice=0, idle=False)
     parent = os.getppid()
     while os.getppid() == parent:
         try:

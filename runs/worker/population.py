@@ -47,6 +47,7 @@ from learner import machine
 from learner.config import DQNConfig, shared_config
 from learner.run import PROCESS_BYTES, RunSpec
 from runs.worker.link import StopRequested, TaggedChannel, WorkerExit, WorkerLink
+from runs.worker.priority import lower_priority
 from runs.worker.recorder import LeaseLost
 from runs.worker.worker import WorkerOptions, _Run, claim_session, fail_session
 from study.db.engine import make_engine, make_session_factory
@@ -90,7 +91,7 @@ def run_population(
     workers (the web process's training queue): they are not claimed again, and each tells
     `conn` what its own worker told it, `Tagged` with its session."""
     if options.nice:
-        os.nice(options.nice)
+        lower_priority(options.nice, idle=options.idle)
     factory = make_session_factory(make_engine(database_url))
     statuses: dict[int, str] = {}
 

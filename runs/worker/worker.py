@@ -30,6 +30,7 @@ from learner.strategies import AdviceMoment
 from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
 from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
 from runs.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
+from runs.worker.priority import lower_priority
 from runs.worker.recorder import Checkpointable, LeaseLost, Recorder
 from runs.worker.scene import SceneBroadcast
 from study.db.engine import make_engine, make_session_factory
@@ -67,6 +68,8 @@ class WorkerOptions:
     """Show a tqdm bar of training episodes (command line runs)."""
     nice: int = 0
     """Added to the process's niceness (the server lowers machine sessions' priority)."""
+    idle: bool = False
+    """Also run in SCHED_IDLE (Linux): only when no ordinary task wants the CPU."""
     keep_replay_memory: bool = False
     """Keep the replay memory in final checkpoints (a session's own choice wins)."""
     pooled: bool = False
@@ -75,6 +78,8 @@ class WorkerOptions:
     train_nice: int = 0
     """Added to a human session's niceness once its advice is over and it trains alone, so
     the participants still advising keep the CPU."""
+    train_idle: bool = False
+    """And SCHED_IDLE then (Linux), as `idle`."""
 
 
 class _Reporter:
@@ -332,7 +337,7 @@ class _Run:
         self.link.wait_for_training_slot()
         self.queued = False
         if self.options.train_nice:
-            os.nice(self.options.train_nice)
+            lower_priority(self.options.train_nice, idle=self.options.train_idle)
         self.send_progress()
 
     def run(self) -> Status:
@@ -411,7 +416,7 @@ def run_session(
     interrupted ones resume). Human sessions need `conn`, the channel to the web process."""
     options = options or WorkerOptions()
     if options.nice:
-        os.nice(options.nice)
+        lower_priority(options.nice, idle=options.idle)
     factory = make_session_factory(make_engine(database_url))
     if worker_token is None:
         worker_token = claim_session(factory, session_id, options, human=conn is not None)

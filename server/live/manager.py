@@ -150,6 +150,15 @@ class WorkerHandle:
     advice_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     send_lock: threading.Lock = field(default_factory=threading.Lock)
 
+    @property
+    def at_first_turn(self) -> bool:
+        """Its random pretraining is over: it asks for advice, or waits for its participant
+        to be ready for it."""
+        progress = self.progress
+        done = progress.global_step if progress is not None else 0
+        waiting = progress is not None and progress.waiting_for_participant
+        return self.request is not None or waiting or done >= self.steps_before_first_turn
+
     def send(self, message: Any) -> bool:
         with self.send_lock:
             try:
@@ -316,7 +325,14 @@ class SessionManager:
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
-            replace(self.options, nice=0, train_nice=self.options.nice, pooled=pooled)
+            replace(
+                self.options,
+                nice=0,
+                idle=False,
+                train_nice=self.options.nice,
+                train_idle=self.options.idle,
+                pooled=pooled,
+            )
             if human
             else self.options
         )

@@ -8,6 +8,9 @@ study's next number added to its seed (both fixed and recorded then), and starte
 it practises, then waits at its first turn with its idle limit off. The arrival that the
 randomization gives its condition takes the oldest ready one (`assignment.arrive`); the
 idle limit runs from then (`SessionManager.assign`), and the pool is topped up again.
+At most `practising` pooled sessions practise at once (one fewer than the cores by
+default): a practice takes a core for several seconds, and the participants advising
+meanwhile keep the rest.
 A pooled session whose worker stopped (a restart, a failure) holds nobody's data: it is
 deleted and made again.
 """
@@ -23,6 +26,7 @@ from starlette.concurrency import run_in_threadpool
 
 from learner.run import RunSpec
 from server.live.manager import SessionManager
+from study.db.models import Status
 from study.services import assignment, storage
 from study.services.errors import Conflict, ServiceError
 
@@ -38,9 +42,13 @@ class Pools:
         data_dir: Path,
         spec_class: type[RunSpec] = RunSpec,
         threads: int | None = None,
+        practising: int = 1,
     ) -> None:
+        assert practising >= 1
         self.manager = manager
         self.limit = limit
+        self.practising_limit = practising
+        self._started: set[int] = set()
         self.every_s = every_s
         self.data_dir = data_dir
         self.spec_class = spec_class
@@ -69,22 +77,34 @@ class Pools:
         """Delete pooled sessions that stopped, make and start what the pools lack; the ids
         of the sessions started."""
         await run_in_threadpool(self._clear_stale)
-        made = await run_in_threadpool(self._make)
+        room = self.practising_limit - self.practising()
+        if room <= 0:
+            return []
+        made = await run_in_threadpool(self._make, room)
         for session_id in made:
             with contextlib.suppress(Conflict):
                 await self.manager.start(session_id, pooled=True)
+                self._started.add(session_id)
         return made
+
+    def practising(self) -> int:
+        """Pooled sessions this server started that are not at their first turn yet."""
+        for session_id in list(self._started):
+            handle = self.manager.handles.get(session_id)
+            if handle is None or handle.status != Status.running.value or handle.at_first_turn:
+                self._started.discard(session_id)
+        return len(self._started)
 
     def _clear_stale(self) -> None:
         with self.manager.factory() as db:
             for session_id in assignment.stale_pooled(db):
                 storage.delete_session(db, self.data_dir, session_id, live_here=False)
 
-    def _make(self) -> list[int]:
+    def _make(self, at_most: int) -> list[int]:
         made: list[int] = []
         with assignment.ARRIVALS, self.manager.factory() as db:
             for gap in assignment.pool_gaps(db, self.limit):
-                for _ in range(gap.missing):
+                for _ in range(min(gap.missing, at_most - len(made))):
                     try:
                         made.append(
                             assignment.make_pooled(

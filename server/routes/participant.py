@@ -129,13 +129,11 @@ async def readiness(session: ParticipantDep, manager: ManagerDep) -> Readiness:
         state = await advising.current_state(manager, session)
         return Readiness(status=state.status, steps_done=0, steps_before_first_turn=0, ready=False)
     progress = handle.progress
-    done = progress.global_step if progress is not None else 0
-    waiting = progress is not None and progress.waiting_for_participant
     return Readiness(
         status=handle.status,
-        steps_done=done,
+        steps_done=progress.global_step if progress is not None else 0,
         steps_before_first_turn=handle.steps_before_first_turn,
-        ready=handle.request is not None or waiting or done >= handle.steps_before_first_turn,
+        ready=handle.at_first_turn,
     )
 
 

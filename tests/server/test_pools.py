@@ -30,7 +30,9 @@ IDLE_S = 3.0
 @pytest.fixture(scope="module")
 def pooled_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     data_dir = tmp_path_factory.mktemp("pools")
-    with serving(data_dir, heartbeat_s=1, pool_limit=3, pool_every_s=0.5) as live:
+    with serving(
+        data_dir, heartbeat_s=1, pool_limit=3, pool_every_s=0.5, pool_practising=1
+    ) as live:
         yield live
 
 
@@ -69,10 +71,17 @@ def test_an_arrival_takes_a_practised_session_of_its_condition(
         def pooled() -> list[dict[str, Any]]:
             return [s for s in sessions_of(api, study) if s["pooled"]]
 
-        wait_for("3 pooled sessions (the server's limit)", lambda: len(pooled()) == 3)
+        practising: list[int] = []  # pooled sessions not at their first turn, each look
+
+        def filled() -> bool:
+            sessions = pooled()
+            practising.append(sum(not ready(server, s) for s in sessions))
+            return len(sessions) == 3 and practising[-1] == 0
+
+        wait_for("3 pooled sessions (the server's limit), practised", filled)
+        assert max(practising) == 1, f"one practises at a time, the next after it: {practising}"
         first = pooled()
         assert sorted(s["run"]["seed"] for s in first) == [40, 41, 42], "numbered as made"
-        wait_for("the pool practised", lambda: all(ready(server, s) for s in pooled()))
         time.sleep(IDLE_S + 2)
         still = pooled()
         assert {s["id"] for s in still} == {s["id"] for s in first}
