@@ -15,11 +15,14 @@ message viser's client sends, every scene message read). Each reads the inductio
 Reported: each one's first-turn wait (Start to the first request); the advice round trip
 (advice sent to the next request received: for protocol clients, measured at the client
 on loopback, so it is the server's time plus a loopback hop; for browsers, click to the
-buttons on again, which includes the 3-D view animating the move) at p50 and p95; a bare
+buttons on again, which includes the 3-D view animating the move) at p50 and p95; the
+server's own part of it, from its stamps in the database (each advice's answer to the next
+advice's request: the worker's step, the database, the messages); a bare
 `GET /api/health` measured at the same time; the proportional memory (PSS) of every
 process of the server (the web process, the fork server, the workers) sampled during the
 advice, per waiting worker and in all, against the machine's memory; the CPU the clients
-themselves used (this process's threads and Chromium), which the server did not get; and
+themselves used (this process's threads and Chromium), which the server did not get, and
+the server's CPU by part (web process, participants' workers, training); and
 how fast the finished sessions train in the server's trainer slots, extrapolated to
 participants an hour at the paper's scale.
 
@@ -52,6 +55,7 @@ from viser._messages import ViewerCameraMessage
 from websockets.sync.client import connect
 
 from benchmarks.bench_participant_page import ARGS, CHROMIUM, ENABLED
+from benchmarks.bench_server import _server_turnarounds
 from tests.server.live import LiveServer
 from tests.server.scale import rest_body
 
@@ -128,6 +132,36 @@ def cpu_s(pids: list[int]) -> float:
             continue
         total += sum(int(v) for v in fields[11:15]) / tick
     return total
+
+
+def cpu_by_process(server_pid: int) -> dict[int, tuple[float, str]]:
+    """Each server process's CPU seconds so far and its part: the web process, a worker
+    that trains (nice 10 or SCHED_IDLE, as the trainer slots run them), or another worker
+    (advising, practising; the fork server with them)."""
+    tick = os.sysconf("SC_CLK_TCK")
+    out = {}
+    for pid in descendants(server_pid):
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if pid == server_pid:
+            part = "web process"
+        elif int(fields[16]) >= 10 or int(fields[38]) == os.SCHED_IDLE:
+            part = "training"
+        else:
+            part = "participants' workers"
+        out[pid] = ((int(fields[11]) + int(fields[12])) / tick, part)
+    return out
+
+
+def cpu_by_part(before: dict[int, tuple[float, str]], server_pid: int) -> dict[str, float]:
+    """CPU seconds of each part since `before`, each process counted in the part it is in
+    at the end (a session's advice before it trains counts as training: about a second)."""
+    parts = {"web process": 0.0, "participants' workers": 0.0, "training": 0.0}
+    for pid, (cpu, part) in cpu_by_process(server_pid).items():
+        parts[part] += cpu - before.get(pid, (0.0, part))[0]
+    return parts
 
 
 def machine_mb() -> float:
@@ -350,6 +384,7 @@ def crowd(args: argparse.Namespace) -> None:
             threads: list[threading.Thread] = []
             memory: list[tuple[int, float, float]] = []
             started = time.perf_counter()
+            parts_before = cpu_by_process(server.process.pid)
             for i in range(args.participants):
                 arrival = started + i * args.arrival_s / args.participants
                 while time.perf_counter() < arrival:
@@ -364,6 +399,7 @@ def crowd(args: argparse.Namespace) -> None:
                 memory.append(_memory(server, study, results.advising))
                 time.sleep(2)
             wall = time.perf_counter() - started
+            parts = cpu_by_part(parts_before, server.process.pid)
             with httpx.Client(base_url=server.url, headers=RESEARCHER) as api:
                 rows = api.get(f"/api/studies/{study}/sessions", params={"limit": 1000}).json()
                 training_rate = _training_rate(api, rows)
@@ -371,7 +407,10 @@ def crowd(args: argparse.Namespace) -> None:
             clients = cpu_s(descendants(os.getpid())) - cpu_s(descendants(server.process.pid))
         finally:
             server.stop()
-    _report_crowd(args, results, health, memory, wall, clients - own_cpu, training_rate)
+        server_side = _server_turnarounds(f"{tmp}/bench.sqlite3")
+    _report_crowd(
+        args, results, health, memory, wall, clients - own_cpu, training_rate, server_side, parts
+    )
 
 
 def _memory(server: LiveServer, study: int, advising: int) -> tuple[int, float, float]:
@@ -406,6 +445,8 @@ def _report_crowd(
     wall: float,
     clients_cpu_s: float,
     training_rate: float,
+    server_side: list[float],
+    parts: dict[str, float],
 ) -> None:
     ms = 1000
     print(
@@ -420,6 +461,7 @@ def _report_crowd(
         ("first turn, browser (s)", results.first_turn["browser"], 1),
         ("advice round trip, protocol (ms)", results.round_trip["protocol"], ms),
         ("advice round trip, browser (ms)", results.round_trip["browser"], ms),
+        ("server side: answer -> next asked", server_side, ms),
         ("GET /api/health meanwhile (ms)", health, ms),
     ]
     for name, values, scale in rows:
@@ -440,6 +482,10 @@ def _report_crowd(
         f"clients' own CPU: {clients_cpu_s:.0f} s over {wall:.0f} s "
         f"({100 * clients_cpu_s / wall / (os.cpu_count() or 1):.0f} % of the machine), "
         "taken from the server"
+    )
+    print(
+        "server's CPU meanwhile: "
+        + ", ".join(f"{part} {seconds:.0f} s" for part, seconds in parts.items())
     )
     if training_rate > 0:
         per_hour = training_rate * 3600 / PAPER_TRAINING_STEPS
