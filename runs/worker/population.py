@@ -322,7 +322,9 @@ def default_population(run: RunSpec, cores: int | None = None, workers: int | No
     resident memory per agent falls from 522 MiB to 282 (N=2) and 106 (N=8). On a loaded
     machine larger populations looked faster (1.59x at N=8 with the load at 4): that was
     the single runs losing more to the load, not the populations gaining. Without AVX-512
-    BF16 the update is a larger share still, so the rule is the same."""
+    BF16 the update is a larger share still (95 % of a step, float32) and the rule the same:
+    on the quiet AVX2-only EPYC (log `population-batch-2026-12-04-avx2-quiet.log`) N=2 and
+    N=4 both 1.13x, the memory per agent 555, 298 and 173 MiB."""
     config = run.config
     size = POPULATION_CUDA if config.device.startswith("cuda") else POPULATION_CPU
     workers = workers or max(1, (cores or machine.usable_cores()) // max(1, config.torch_threads))
