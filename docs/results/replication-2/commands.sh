@@ -48,12 +48,16 @@ authors() { batch replication-2-authors A --methods autonomous agent procedure "
 authors_own() { batch replication-2-authors A-own --methods autonomous "${AUTHORS[@]}" --reward-scheme authors-autonomous; }
 
 # The float32 control of the authors' preset, 3 + 3, advised by A-agent's checked advisor.
+# Its autonomous arm needs no advisor, and float32 runs the same on every CPU kind's
+# instructions (the AVX2-only EPYC included): `fp32-auto` runs it alone, before the advisor.
+FP32=(--reward-scheme authors-interactive --precision fp32)
+fp32_auto() { AGENTS=3 batch replication-2-authors A-fp32 --methods autonomous "${AUTHORS[@]}" "${FP32[@]}"; }
 fp32() {
   local advisor
   advisor=$(sqlite3 "$DATA/ideeprl.sqlite3" "select json_extract(s.run, '$.advisor_checkpoint') from sessions s join studies t on t.id = s.study_id where t.name = 'replication-2-authors' and json_extract(s.run, '$.method') = 'agent' and json_extract(s.run, '$.config.precision') != 'fp32' limit 1")
   [ -n "$advisor" ] || { echo "fp32: A-agent's advisor is not trained yet: run 'authors' first"; return 1; }
   AGENTS=3 batch replication-2-authors A-fp32 --methods autonomous agent "${AUTHORS[@]}" \
-    --reward-scheme authors-interactive --precision fp32 --advisor-checkpoint "$advisor"
+    "${FP32[@]}" --advisor-checkpoint "$advisor"
 }
 
 # The population equivalence arms (issue "The paper's experiment in half an hour"): the same
@@ -117,7 +121,8 @@ case "${1:-all}" in
   authors) authors ;;
   authors-own) authors_own ;;
   fp32) fp32 ;;
+  fp32-auto) fp32_auto ;;
   alone) alone ;;
   all) paper; authors; alone; authors_own; fp32 ;;
-  *) echo "usage: $0 [save|restore|paper|authors|authors-own|fp32|alone|all]"; exit 2 ;;
+  *) echo "usage: $0 [save|restore|paper|authors|authors-own|fp32|fp32-auto|alone|all]"; exit 2 ;;
 esac
