@@ -7,11 +7,15 @@
         --out docs/results/populations
 
 Each pair names a population arm and an alone arm (study name:session label) of one
-database; their autonomous sessions pair up by seed. For every pair of sessions it
-compares the step logs in the columns that decide an agent's course (action, its source,
-the advised action, reward, termination, truncation and the observation's hash) and the
-Q-values; it tests the R_T difference for equivalence within 3 % of the alone arm's mean
-(paired TOST, `analysis.equivalence`), and draws both arms' mean curves and R_T.
+database; their autonomous sessions pair up by seed. `--roles` names the two arms
+otherwise, so that any two arms of one learner compare the same way: the float32 control
+against its bfloat16 arm (`--roles fp32 bf16`, ../replication-2/precision/).
+
+For every pair of sessions it compares the step logs in the columns that decide an
+agent's course (action, its source, the advised action, reward, termination, truncation
+and the observation's hash) and the Q-values; it tests the R_T difference for equivalence
+within 3 % of the reference arm's mean (paired TOST, `analysis.equivalence`), and draws
+both arms' mean curves and R_T.
 Writes `README.md` (numbers), `pairs.csv` and the figure (PNG and SVG) to --out.
 """
 
@@ -85,14 +89,23 @@ def hours(start: str | None, end: str | None) -> float:
     return (datetime.fromisoformat(end) - datetime.fromisoformat(start)).total_seconds() / 60
 
 
-def compare(db: sqlite3.Connection, name: str, population: str, alone: str) -> dict:
+def compare(
+    db: sqlite3.Connection,
+    name: str,
+    population: str,
+    alone: str,
+    roles: tuple[str, str] = ("population", "alone"),
+) -> dict:
+    """`population` against `alone` (the reference), seed by seed; `roles` names them in
+    the table's columns."""
+    other, ref = roles
     pop, solo = sessions(db, population), sessions(db, alone)
     seeds = [
         s
         for s in pop.index
         if s in solo.index and pop.at[s, "status"] == solo.at[s, "status"] == "finished"
     ]
-    rows, curves = [], {"population": [], "alone": []}
+    rows, curves = [], {ref: [], other: []}
     for seed in seeds:
         a, b = (
             steps(db, int(solo.at[seed, "session_id"])),
@@ -113,8 +126,8 @@ def compare(db: sqlite3.Connection, name: str, population: str, alone: str) -> d
             episode_rewards(db, int(solo.at[seed, "session_id"])),
             episode_rewards(db, int(pop.at[seed, "session_id"])),
         )
-        curves["alone"].append(ra)
-        curves["population"].append(rb)
+        curves[ref].append(ra)
+        curves[other].append(rb)
         sizes = sorted(
             {
                 (e.get("population") or {}).get("population_size", 1)
@@ -125,27 +138,28 @@ def compare(db: sqlite3.Connection, name: str, population: str, alone: str) -> d
             {
                 "preset": name,
                 "seed": int(seed),
-                "alone_session": int(solo.at[seed, "session_id"]),
-                "population_session": int(pop.at[seed, "session_id"]),
+                f"{ref}_session": int(solo.at[seed, "session_id"]),
+                f"{other}_session": int(pop.at[seed, "session_id"]),
                 "population_sizes": " ".join(map(str, sizes)),
-                "steps_alone": len(a),
-                "steps_population": len(b),
+                f"steps_{ref}": len(a),
+                f"steps_{other}": len(b),
                 "course_identical_steps": agree,
                 "first_difference_at_step": first_diff,
                 "q_max_abs_difference_while_identical": q_diff,
-                "R_T_alone": float(ra.sum()),
-                "R_T_population": float(rb.sum()),
-                "minutes_alone": hours(solo.at[seed, "started"], solo.at[seed, "finished"]),
-                "minutes_population": hours(pop.at[seed, "started"], pop.at[seed, "finished"]),
+                f"R_T_{ref}": float(ra.sum()),
+                f"R_T_{other}": float(rb.sum()),
+                f"minutes_{ref}": hours(solo.at[seed, "started"], solo.at[seed, "finished"]),
+                f"minutes_{other}": hours(pop.at[seed, "started"], pop.at[seed, "finished"]),
             }
         )
     table = pd.DataFrame(rows)
     result = None
     if len(table) >= 2:
-        margin = relative_margin(table["R_T_alone"], 0.03)
-        result = paired_tost(table["R_T_alone"], table["R_T_population"], margin)
+        margin = relative_margin(table[f"R_T_{ref}"], 0.03)
+        result = paired_tost(table[f"R_T_{ref}"], table[f"R_T_{other}"], margin)
     return {
         "name": name,
+        "roles": roles,
         "table": table,
         "tost": result,
         "curves": curves,
@@ -157,8 +171,9 @@ def compare(db: sqlite3.Connection, name: str, population: str, alone: str) -> d
 def figure(results: list[dict], out: Path) -> None:
     fig, axes = plt.subplots(2, len(results), figsize=(6 * len(results), 8), squeeze=False)
     for column, r in enumerate(results):
+        other, ref = r["roles"]
         ax = axes[0][column]
-        for arm, colour in (("alone", "tab:blue"), ("population", "tab:orange")):
+        for arm, colour in ((ref, "tab:blue"), (other, "tab:orange")):
             if not r["curves"][arm]:
                 continue
             length = min(len(c) for c in r["curves"][arm])
@@ -166,7 +181,7 @@ def figure(results: list[dict], out: Path) -> None:
             mean = data.mean(0)
             band = 1.96 * data.std(0, ddof=1) / np.sqrt(len(data)) if len(data) > 1 else 0 * mean
             x = np.arange(1, length + 1)
-            style = "-" if arm == "alone" else "--"
+            style = "-" if arm == ref else "--"
             ax.plot(x, mean, style, color=colour, label=f"{arm} ({len(data)} agents)")
             ax.fill_between(x, mean - band, mean + band, color=colour, alpha=0.15)
         ax.set_title(f"{r['name']}: mean collected reward per episode (95 % band)")
@@ -176,15 +191,15 @@ def figure(results: list[dict], out: Path) -> None:
         ax = axes[1][column]
         t = r["table"]
         if not t.empty:
-            ax.scatter(t["R_T_alone"], t["R_T_population"], color="tab:purple")
-            for _, row in t.iterrows():
-                ax.annotate(str(row["seed"]), (row["R_T_alone"], row["R_T_population"]))
-            low = min(t["R_T_alone"].min(), t["R_T_population"].min())
-            high = max(t["R_T_alone"].max(), t["R_T_population"].max())
+            x, y = t[f"R_T_{ref}"], t[f"R_T_{other}"]
+            ax.scatter(x, y, color="tab:purple")
+            for seed, xi, yi in zip(t["seed"], x, y, strict=True):
+                ax.annotate(str(seed), (xi, yi))
+            low, high = min(x.min(), y.min()), max(x.max(), y.max())
             ax.plot([low, high], [low, high], color="grey", lw=0.8)
-        ax.set_title(f"{r['name']}: R_T per seed, alone against in a population")
-        ax.set_xlabel("R_T alone")
-        ax.set_ylabel("R_T in a population")
+        ax.set_title(f"{r['name']}: R_T per seed, {other} against {ref}")
+        ax.set_xlabel(f"R_T {ref}")
+        ax.set_ylabel(f"R_T {other}")
     fig.tight_layout()
     for suffix in ("png", "svg"):
         fig.savefig(out / f"equivalence.{suffix}", dpi=110)
@@ -197,9 +212,12 @@ def main() -> None:
         "--pair", nargs=3, action="append", required=True, metavar=("NAME", "POPULATION", "ALONE")
     )
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument(
+        "--roles", nargs=2, default=("population", "alone"), metavar=("FIRST", "REFERENCE")
+    )
     args = parser.parse_args()
     db = sqlite3.connect(f"file:{args.database}?mode=ro", uri=True)
-    results = [compare(db, *pair) for pair in args.pair]
+    results = [compare(db, *pair, roles=tuple(args.roles)) for pair in args.pair]
     args.out.mkdir(parents=True, exist_ok=True)
     pd.concat([r["table"] for r in results]).to_csv(args.out / "pairs.csv", index=False)
     figure(results, args.out)
