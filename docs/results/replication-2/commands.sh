@@ -48,8 +48,8 @@ authors() { batch replication-2-authors A --methods autonomous agent procedure "
 authors_own() { batch replication-2-authors A-own --methods autonomous "${AUTHORS[@]}" --reward-scheme authors-autonomous; }
 
 # The float32 control of the authors' preset, 3 + 3, advised by A-agent's checked advisor.
-# Its autonomous arm needs no advisor, and float32 runs the same on every CPU kind's
-# instructions (the AVX2-only EPYC included): `fp32-auto` runs it alone, before the advisor.
+# Its autonomous arm needs no advisor, and the plan lets float32 arms run on the AVX2-only
+# EPYC (bfloat16 ones never): `fp32-auto` runs it alone, before an advisor exists.
 FP32=(--reward-scheme authors-interactive --precision fp32)
 fp32_auto() { AGENTS=3 batch replication-2-authors A-fp32 --methods autonomous "${AUTHORS[@]}" "${FP32[@]}"; }
 fp32() {
