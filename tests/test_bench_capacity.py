@@ -1,0 +1,36 @@
+"""The capacity benchmark's CPU accounting: processes that end before the run does are
+counted (Chromium's were missed when counted at the end), each in its part."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+from benchmarks.bench_capacity import CpuMeter
+
+BURN = "import time\nend = time.process_time() + {s}\nwhile time.process_time() < end: pass\n"
+TRAINER = (
+    "import os, subprocess, sys, time\n"
+    "os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))\n"
+    f"subprocess.run([sys.executable, '-c', {BURN.format(s=0.6)!r}])\n"
+    "time.sleep(30)\n"
+)
+
+
+def test_processes_that_end_before_the_run_are_counted_in_their_part() -> None:
+    # A stand-in server whose child trains (SCHED_IDLE) and ends; the server lives on.
+    server = subprocess.Popen([sys.executable, "-c", TRAINER])
+    try:
+        meter = CpuMeter(server.pid, every_s=0.05).start()
+        client = subprocess.Popen([sys.executable, "-c", BURN.format(s=0.6)])
+        client.wait()  # reaped before the meter stops: only its samples count it
+        time.sleep(1.5)  # the server's child has burnt its 0.6 s and ended too
+        parts = meter.stop()
+    finally:
+        server.kill()
+        server.wait()
+    assert 0.4 <= parts["protocol clients"] <= 1.5, parts  # the client (and this process)
+    assert 0.4 <= parts["training"] <= 1.0, parts  # the server's SCHED_IDLE child
+    assert parts["web process"] < 0.3, parts  # the server itself slept
+    assert parts["browsers"] == 0.0, parts
