@@ -149,7 +149,7 @@ class SB3DQNTrainer(StagedRun):
         try:
             from gymnasium import spaces
             from stable_baselines3 import DQN
-            from stable_baselines3.common.logger import configure
+            from stable_baselines3.common.logger import Logger
         except ImportError:
             raise RuntimeError(MISSING) from None
         from learner.device import configure_threads, resolve_device
@@ -191,7 +191,7 @@ class SB3DQNTrainer(StagedRun):
         model.action_space = spaces.Discrete(N_ACTIONS)
         model.n_envs = 1
         model._setup_model()
-        model.set_logger(configure(None, []))
+        model.set_logger(Logger(None, []))  # no outputs, and no folder made in /tmp
         model.exploration_rate = h["sb3_exploration_initial_eps"]
         self.model = model
         self.global_step = 0
