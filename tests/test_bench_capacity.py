@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 
 from benchmarks.bench_capacity import CpuMeter
 
@@ -13,19 +12,26 @@ BURN = "import time\nend = time.process_time() + {s}\nwhile time.process_time() 
 TRAINER = (
     "import os, subprocess, sys, time\n"
     "os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))\n"
+    "sys.stdin.readline()\n"
     f"subprocess.run([sys.executable, '-c', {BURN.format(s=0.6)!r}])\n"
-    "time.sleep(30)\n"
+    "print('trained', flush=True)\n"
+    "time.sleep(120)\n"
 )
 
 
 def test_processes_that_end_before_the_run_are_counted_in_their_part() -> None:
     # A stand-in server whose child trains (SCHED_IDLE) and ends; the server lives on.
-    server = subprocess.Popen([sys.executable, "-c", TRAINER])
+    server = subprocess.Popen(
+        [sys.executable, "-c", TRAINER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    assert server.stdin is not None and server.stdout is not None
     try:
         meter = CpuMeter(server.pid, every_s=0.05).start()
+        server.stdin.write("go\n")
+        server.stdin.flush()  # its child starts training once the meter runs
         client = subprocess.Popen([sys.executable, "-c", BURN.format(s=0.6)])
         client.wait()  # reaped before the meter stops: only its samples count it
-        time.sleep(1.5)  # the server's child has burnt its 0.6 s and ended too
+        assert server.stdout.readline() == "trained\n"  # the server's child burnt 0.6 s, ended
         parts = meter.stop()
     finally:
         server.kill()
