@@ -97,22 +97,27 @@ def cpu_kind() -> str:
 
 
 # --- processes ------------------------------------------------------------------------
+def _stat(pid: int) -> list[str] | None:
+    """The fields of /proc/PID/stat after the command's name (None: the process is gone)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+
+
 def _children() -> dict[int, list[int]]:
     tree: dict[int, list[int]] = {}
     for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            parent = int(stat.rsplit(")", 1)[1].split()[1])
-            tree.setdefault(parent, []).append(int(entry.name))
+        if entry.name.isdigit() and (fields := _stat(int(entry.name))) is not None:
+            tree.setdefault(int(fields[1]), []).append(int(entry.name))
     return tree
 
 
-def descendants(pid: int) -> list[int]:
-    """`pid` and every process under it (the fork server's workers included)."""
-    tree, found, todo = _children(), [], [pid]
+def descendants(pid: int, tree: dict[int, list[int]] | None = None) -> list[int]:
+    """`pid` and every process under it (the fork server's workers included); `tree`: a
+    `_children()` already read."""
+    tree = _children() if tree is None else tree
+    found, todo = [], [pid]
     while todo:
         current = todo.pop()
         found.append(current)
@@ -130,19 +135,12 @@ def pss_mb(pid: int) -> float:
     return 0.0
 
 
-def _stat(pid: int) -> list[str] | None:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return None
-
-
 def _is_browser(pid: int) -> bool:
     try:
         command = Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return False
-    return b"chrom" in command or b"playwright" in command or b"node" in command[:200]
+    return b"chrom" in command or b"playwright" in command  # Chromium, or Playwright's driver
 
 
 class CpuMeter:
@@ -173,8 +171,9 @@ class CpuMeter:
         return "browsers" if _is_browser(pid) else "protocol clients"
 
     def sample(self) -> None:
-        server = set(descendants(self._server))
-        for pid in set(descendants(os.getpid())) | server:
+        tree = _children()
+        server = set(descendants(self._server, tree))
+        for pid in set(descendants(os.getpid(), tree)) | server:
             fields = _stat(pid)
             if fields is None:
                 continue
@@ -521,12 +520,12 @@ def _report_crowd(
         )
     machine = wall * (os.cpu_count() or 1)
     clients = parts["protocol clients"] + parts["browsers"]
-    nice = ", in SCHED_IDLE" if args.browsers_idle else ""
+    idle = ", in SCHED_IDLE" if args.browsers_idle else ""
     print(
         f"clients' own CPU: {clients:.0f} s over {wall:.0f} s ({100 * clients / machine:.0f} % "
         f"of the machine), taken from the server: protocol clients "
         f"{parts['protocol clients']:.0f} s, Chromium {parts['browsers']:.0f} s "
-        f"({100 * parts['browsers'] / machine:.0f} %{nice})"
+        f"({100 * parts['browsers'] / machine:.0f} %{idle})"
     )
     server_parts = ("web process", "participants' workers", "training")
     print(
