@@ -104,12 +104,12 @@ class SceneMirror:
             return
         for handle in [*self.handles.values(), *self.markers.values()]:
             handle.remove()
-        self.handles.clear()
-        self.markers.clear()
-        self._sent.clear()
+        # Readers (`positions`, the tests) see no scene or the whole new one, never half of one.
+        self.handles, self.markers, self._sent = {}, {}, {}
+        handles: dict[str, Any] = {}
         with self.client.atomic():
             for body in bodies:
-                self.handles[body.name] = add_body(self.client.scene, body)
+                handles[body.name] = add_body(self.client.scene, body)
                 if body.name in LABELS and isinstance(body.geometry, sim.Box):
                     text, (fx, fy) = LABELS[body.name]
                     hx, hy, hz = (float(h) for h in body.geometry.half_extents)
@@ -120,13 +120,13 @@ class SceneMirror:
                         font_screen_scale=LABEL_SCALE,
                         anchor="bottom-center",
                     )
-            if CUP in names:
-                self._add_markers()
+            markers = self._add_markers() if CUP in names else {}
+        self.handles, self.markers = handles, markers
         self._names = names
 
-    def _add_markers(self) -> None:
+    def _add_markers(self) -> dict[str, Any]:
         scene = self.client.scene
-        self.markers["plumb"] = scene.add_cylinder(
+        plumb = scene.add_cylinder(
             "/markers/plumb",
             radius=0.004,
             height=PLUMB_LENGTH,
@@ -134,7 +134,7 @@ class SceneMirror:
             cast_shadow=False,
             receive_shadow=False,
         )
-        self.markers["spot"] = scene.add_cylinder(
+        spot = scene.add_cylinder(
             "/markers/spot",
             radius=0.055,
             height=0.004,
@@ -143,6 +143,7 @@ class SceneMirror:
             cast_shadow=False,
             receive_shadow=False,
         )
+        return {"plumb": plumb, "spot": spot}
 
     def _move_markers(self, cup: tuple[float, ...]) -> None:
         x, y, z = cup
