@@ -1,6 +1,6 @@
 """A participant's whole visit in a real browser, through nginx's one port as deployed:
 the link, consent, the three induction pages, the live scene (no developer tools shown, the
-held object said in words), all 100 advice (by click, by key, by key after dragging the
+held object said in words), all its advice (by click, by key, by key after dragging the
 view), and the thank-you page reached by itself after the last advice, with the learning
 curve; then the database holds exactly that advice."""
 
@@ -23,7 +23,8 @@ from tests.e2e.scene import canvas_pixels, colored, wait_for_scene
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-BUDGET = 100
+BUDGET = 50
+"""Half the paper's 100: every kind of turn comes several times, in half the CI time."""
 RANDOM_STEPS = 20
 """Random pretraining steps before the first advice: with seed 3 the robot then holds the
 red cube above the center table at the participant's first turn."""
@@ -130,7 +131,7 @@ def test_a_participant_gives_all_advice_and_is_thanked(live: Live, browser) -> N
     given: list[int] = []
     for index in range(BUDGET):
         action = PLAN[index % len(PLAN)]
-        if index in (1, 4, 50):  # what the page says is what the robot holds
+        if index in (1, 4, 30):  # what the page says is what the robot holds
             expect(buttons[action]).to_be_enabled(timeout=60_000)
             expect(page.locator("#holding")).to_have_text(
                 arm_sentence(request_info(live, session["id"]))
