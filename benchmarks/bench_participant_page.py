@@ -16,7 +16,13 @@ in the frame, the scene over the websocket, the KUKA meshes included) and the ti
 page's first contentful paint, to its buttons, and to the scene's arrival (when 90 % of
 the websocket's bytes of the first 20 s had come).
 
-    python -m benchmarks.bench_participant_page [--scenario first-turn|weight|all] [--runs 3]
+`idle`: the CPU Chromium takes for an advice page that waits for the participant's advice,
+nothing moving (the participant reads, or thinks), with the 3-D view shown and, as the
+reference measured in the same run, hidden (`display: none`): without a GPU the view is
+drawn in software on the participant's CPU, and on the benchmark's machine beside the
+server's. Median of `--runs` 15-second windows, each on a fresh page.
+
+    python -m benchmarks.bench_participant_page [--scenario first-turn|weight|idle|all] [--runs 3]
         [--pretraining-steps 1000] [--head-start 0]
 """
 
@@ -193,9 +199,52 @@ def weight(browser: Any, server: LiveServer, study: int, args: argparse.Namespac
         api.post(f"/api/sessions/{session['id']}/stop")
 
 
+def _browser_cpu_s() -> float:
+    """CPU seconds Chromium's processes (under this one) have used so far."""
+    from benchmarks.bench_capacity import _children, _is_browser, _stat, descendants
+
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0
+    for pid in descendants(os.getpid(), _children()):
+        if _is_browser(pid) and (fields := _stat(pid)) is not None:
+            total += int(fields[11]) + int(fields[12])
+    return total / tick
+
+
+def idle(browser: Any, server: LiveServer, study: int, args: argparse.Namespace) -> None:
+    window_s, settle_s = 15.0, 8.0
+    cores: dict[str, list[float]] = {"shown": [], "hidden": []}
+    for _ in range(args.runs):
+        session = _session(server, study, 200, budget=5)
+        SimulatedParticipant(server.url, session["participant_token"]).begin()
+        for view in ("shown", "hidden"):
+            context = browser.new_context(viewport={"width": 1280, "height": 800})
+            page = context.new_page()
+            page.goto(f"{server.url}/p/{session['participant_token']}/advise")
+            page.wait_for_function(ENABLED, timeout=600_000, polling=100)
+            if view == "hidden":
+                page.evaluate("document.querySelector('#scene').style.display = 'none'")
+            time.sleep(settle_s)  # the scene arrives and is drawn; the page settles
+            before, started = _browser_cpu_s(), time.perf_counter()
+            time.sleep(window_s)
+            used = (_browser_cpu_s() - before) / (time.perf_counter() - started)
+            cores[view].append(used)
+            context.close()
+            print(f"  3-D view {view}: Chromium {used:.2f} cores; {_load()}")
+        with server.client() as api:
+            api.post(f"/api/sessions/{session['id']}/stop")
+    shown, hidden = statistics.median(cores["shown"]), statistics.median(cores["hidden"])
+    print(
+        f"an advice page waiting for advice, 1280x800, over {args.runs} runs of {window_s:.0f} s: "
+        f"Chromium median {shown:.2f} cores with the 3-D view shown "
+        f"({min(cores['shown']):.2f}-{max(cores['shown']):.2f}), {hidden:.2f} with it hidden; "
+        f"the view costs {shown - hidden:.2f} cores; {_load()}"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", choices=["first-turn", "weight", "all"], default="all")
+    parser.add_argument("--scenario", choices=["first-turn", "weight", "idle", "all"], default="all")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--pretraining-steps", type=int, default=1000)
     parser.add_argument("--head-start", type=float, default=0.0)
@@ -212,6 +261,8 @@ def main() -> None:
                 weight(browser, server, study, args)
             if args.scenario in ("first-turn", "all"):
                 first_turn(browser, server, study, args)
+            if args.scenario in ("idle", "all"):
+                idle(browser, server, study, args)
         finally:
             browser.close()
             server.stop()
