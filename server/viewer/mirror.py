@@ -26,6 +26,14 @@ POSITION_EPS = 1e-5
 """Metres: a body that moved less than this is not sent again."""
 SHADOWS = False
 """Shadows cost a second render pass; browsers without a GPU (software WebGL) then lag."""
+SKY_RGB, GROUND_RGB, HEMISPHERE_INTENSITY = (255, 255, 255), (140, 140, 150), 2.6
+"""The scene's light besides viser's default directional lights: a hemisphere light, white
+from above and grey from below, in place of viser's image-based environment map. The map
+made every pixel sample a prefiltered HDR image: on a browser without a GPU (software
+WebGL) an advice page waiting for advice kept 0.65 of a core busy with it, 0.23 without
+(AVX2-only EPYC, benchmarks/logs/idle-page-2026-12-04-avx2.log), for a look that hardly
+differs (docs/screenshots). The same light for every participant, with a GPU or without:
+what they see does not depend on their device."""
 LABELS = {
     "tables/left": ("LEFT table", (0.0, 1.0)),
     "tables/right": ("RIGHT table", (0.0, -1.0)),
@@ -48,6 +56,18 @@ def _rgb(rgba: tuple[float, float, float, float]) -> tuple[int, int, int]:
 
 def _opacity(rgba: tuple[float, float, float, float]) -> float | None:
     return None if rgba[3] >= 1.0 else float(rgba[3])
+
+
+def light(scene: viser.SceneApi) -> None:
+    """Light a client's scene (see `HEMISPHERE_INTENSITY`); no shadows (`SHADOWS`)."""
+    scene.configure_environment_map(None)
+    scene.configure_default_lights(enabled=True, cast_shadow=SHADOWS)
+    scene.add_light_hemisphere(
+        "/light/hemisphere",
+        sky_color=SKY_RGB,
+        ground_color=GROUND_RGB,
+        intensity=HEMISPHERE_INTENSITY,
+    )
 
 
 def add_body(scene: viser.SceneApi, body: sim.BodySpec) -> Any:
@@ -91,6 +111,7 @@ class SceneMirror:
 
     def __init__(self, client: viser.ClientHandle) -> None:
         self.client = client
+        light(client.scene)
         self.handles: dict[str, Any] = {}
         self._sent: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
         self._names: tuple[str, ...] = ()
