@@ -244,7 +244,8 @@ def idle(browser: Any, server: LiveServer, study: int, args: argparse.Namespace)
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", choices=["first-turn", "weight", "idle", "all"], default="all")
+    scenarios = ["first-turn", "weight", "idle", "all"]
+    parser.add_argument("--scenario", choices=scenarios, default="all")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--pretraining-steps", type=int, default=1000)
     parser.add_argument("--head-start", type=float, default=0.0)
