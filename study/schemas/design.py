@@ -112,8 +112,8 @@ class StudyDesign(BaseModel):
     p95 under 100 ms (8: 58 ms; 14: 741 ms; `benchmarks/bench_capacity.py`, README
     "Speed"), measured with the benchmark's two Chromium pages on the same two cores. 30 at
     once reach the aim only with a pool practised for them (`pool`; the practice of arrivals
-    beyond it shares the cores): then 43-126 ms over three runs with the browsers, 23 ms
-    without them (AVX2-only EPYC): measure yours and set it."""
+    beyond it shares the cores): then a median 99 ms (43-126) over five runs with the
+    browsers, 23 ms without them (AVX2-only EPYC): measure yours and set it."""
     alpha: Number = Field(default=0.05, gt=0, lt=1)
     """The report's significance level for comparing the conditions."""
     idle_limit_s: Number = Field(default=600.0, gt=0, le=86_400)
