@@ -184,7 +184,9 @@ def weight(browser: Any, server: LiveServer, study: int, args: argparse.Namespac
         paint = page.evaluate(
             "performance.getEntriesByName('first-contentful-paint')[0]?.startTime ?? -1"
         )
-        time.sleep(max(0.0, window_s - (time.perf_counter() - started)))
+        # Playwright's sync API hands over events only while it is called: wait through it,
+        # or the frames would be counted (and stamped) at the next call, the reload's.
+        page.wait_for_timeout(max(0.0, window_s - (time.perf_counter() - started)) * 1000)
         wire.report(
             f"the advice page at 390x844 over Slow 4G (1.6 Mbit/s, 150 ms), {load}:",
             started,
