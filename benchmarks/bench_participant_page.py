@@ -201,19 +201,9 @@ def weight(browser: Any, server: LiveServer, study: int, args: argparse.Namespac
         api.post(f"/api/sessions/{session['id']}/stop")
 
 
-def _browser_cpu_s() -> float:
-    """CPU seconds Chromium's processes (under this one) have used so far."""
-    from benchmarks.bench_capacity import _children, _is_browser, _stat, descendants
-
-    tick = os.sysconf("SC_CLK_TCK")
-    total = 0
-    for pid in descendants(os.getpid(), _children()):
-        if _is_browser(pid) and (fields := _stat(pid)) is not None:
-            total += int(fields[11]) + int(fields[12])
-    return total / tick
-
-
 def idle(browser: Any, server: LiveServer, study: int, args: argparse.Namespace) -> None:
+    from benchmarks.bench_capacity import CpuMeter  # which imports this module's constants
+
     window_s, settle_s = 15.0, 8.0
     cores: dict[str, list[float]] = {"shown": [], "hidden": []}
     for _ in range(args.runs):
@@ -227,9 +217,10 @@ def idle(browser: Any, server: LiveServer, study: int, args: argparse.Namespace)
             if view == "hidden":
                 page.evaluate("document.querySelector('#scene').style.display = 'none'")
             time.sleep(settle_s)  # the scene arrives and is drawn; the page settles
-            before, started = _browser_cpu_s(), time.perf_counter()
+            assert server.process is not None, "the server runs"
+            meter, started = CpuMeter(server.process.pid).start(), time.perf_counter()
             time.sleep(window_s)
-            used = (_browser_cpu_s() - before) / (time.perf_counter() - started)
+            used = meter.stop()["browsers"] / (time.perf_counter() - started)
             cores[view].append(used)
             context.close()
             print(f"  3-D view {view}: Chromium {used:.2f} cores; {_load()}")

@@ -109,8 +109,8 @@ class Player:
         self._queue: deque[Item] = deque()
         self._cond = threading.Condition()
         self._playing_until = 0.0
-        self._busy = False
-        """An item is being shown: building a scene can outlast its estimate."""
+        """When the item being shown should be done (0: none is); building a scene can
+        outlast it."""
         self._closed = False
         self._thread = threading.Thread(target=self._run, name="viewer-player", daemon=True)
 
@@ -140,7 +140,7 @@ class Player:
         with self._cond:
             now = time.monotonic()
             left = max(0.0, self._playing_until - now)
-            if self._busy:
+            if self._playing_until:  # an item is still being shown, however long it takes
                 left = max(left, self.tick_s)
             steps = [i.message for i in self._queue if i.moves]
             if len(steps) < JUMP_BACKLOG:
@@ -164,7 +164,6 @@ class Player:
             backlog = sum(1 for i in self._queue if i.moves)
             # Busy from the moment it is taken, so `remaining_s` never reads 0 in between.
             self._playing_until = time.monotonic() + self.tick_s
-            self._busy = True
             if self._animated(item, backlog):
                 duration = motion_duration(item.message)  # type: ignore[arg-type]
                 self._playing_until += duration / (self.speed * (1 + backlog))
@@ -187,7 +186,6 @@ class Player:
             finally:
                 with self._cond:
                     self._playing_until = 0.0
-                    self._busy = False
 
     def _show(self, item: Item, backlog: int) -> None:
         message = item.message
