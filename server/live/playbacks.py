@@ -64,6 +64,9 @@ class Playbacks:
         self._on_close = on_close
         self._clock = clock
         self._lock = threading.Lock()
+        self._reaping = threading.Lock()
+        """One thread at a time waits for a rerun process: two waiting at once race in
+        `os.waitpid`, and the loser can read a reaped process as alive."""
         self._open: dict[str, Playback] = {}
         self._context = multiprocessing.get_context("spawn")
         self._stopping = threading.Event()
@@ -129,7 +132,18 @@ class Playbacks:
             else:
                 playback.state, playback.detail = "failed", result.detail
         if playback.process is not None:
-            playback.process.join(JOIN_S)
+            self._end(playback.process, terminate=False)
+
+    def _end(self, process: multiprocessing.process.BaseProcess, terminate: bool) -> None:
+        """Wait for the process to end (ending it first if `terminate`); one that ignores
+        SIGTERM for `JOIN_S` is killed."""
+        with self._reaping:
+            if terminate and process.is_alive():
+                process.terminate()
+                process.join(JOIN_S)
+                if process.is_alive():
+                    process.kill()
+            process.join(JOIN_S)
 
     def get(self, playback_id: str, touch: bool = True) -> Playback | None:
         """The open playback (its idle time starts again), or None."""
@@ -146,10 +160,8 @@ class Playbacks:
         if playback is None:
             return False
         playback.closed = True
-        process = playback.process
-        if process is not None and process.is_alive():
-            process.terminate()
-            process.join(JOIN_S)
+        if playback.process is not None:
+            self._end(playback.process, terminate=True)
         if self._on_close is not None:
             self._on_close(playback)
         return True
