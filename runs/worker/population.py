@@ -309,8 +309,7 @@ MEMORY_SHARE = 0.8
 
 def default_population(run: RunSpec, cores: int | None = None, workers: int | None = None) -> int:
     """How many runs a worker trains together when the batch leaves it open, by a simple
-    rule: 16 on CUDA (one batched forward pass keeps the GPU busy; not measured here yet),
-    2 on a CPU; and no more than the memory holds when each of the `workers` (default:
+    rule: 16 on CUDA, 2 on a CPU; and no more than the memory holds when each of the `workers` (default:
     cores / torch threads) trains a population of the run's size (`RunSpec.memory_needed`,
     `MEMORY_SHARE` of the memory).
 
@@ -324,7 +323,14 @@ def default_population(run: RunSpec, cores: int | None = None, workers: int | No
     the single runs losing more to the load, not the populations gaining. Without AVX-512
     BF16 the update is a larger share still (95 % of a step, float32) and the rule the same:
     on the quiet AVX2-only EPYC (log `population-batch-2026-12-04-avx2-quiet.log`) N=2 and
-    N=4 both 1.13x, the memory per agent 555, 298 and 173 MiB."""
+    N=4 both 1.13x, the memory per agent 555, 298 and 173 MiB.
+
+    On CUDA the update leaves the critical path, and the population's size only has to
+    fill the GPU: measured once, on a lent H200 beside a 16-core Xeon
+    (`docs/results/cuda-2026-12-04/`), a population of 10 took 5.96 ms per agent-step, of
+    which the update 1.07 and rendering the camera image on the CPU 2.98; four workers'
+    populations used 7.9 GiB of the GPU's memory. There the CPU's cores bound the rate, so
+    the workers default to one per core as on a CPU."""
     config = run.config
     size = POPULATION_CUDA if config.device.startswith("cuda") else POPULATION_CPU
     workers = workers or max(1, (cores or machine.usable_cores()) // max(1, config.torch_threads))
