@@ -309,9 +309,9 @@ MEMORY_SHARE = 0.8
 
 def default_population(run: RunSpec, cores: int | None = None, workers: int | None = None) -> int:
     """How many runs a worker trains together when the batch leaves it open, by a simple
-    rule: 16 on CUDA, 2 on a CPU; and no more than the memory holds when each of the `workers` (default:
-    cores / torch threads) trains a population of the run's size (`RunSpec.memory_needed`,
-    `MEMORY_SHARE` of the memory).
+    rule: 16 on CUDA, 2 on a CPU; and no more than the memory holds when each of the
+    `workers` (default: cores / torch threads) trains a population of the run's size
+    (`RunSpec.memory_needed`, `MEMORY_SHARE` of the memory).
 
     On a CPU each agent's update is 88 % of its step and stays its own (the same kernels on
     the same shapes as alone), so a population shares only the rest: measured on a quiet
