@@ -22,8 +22,14 @@ from learner.run import RunSpec
 from runs.worker.rerun import Rerun
 from runs.worker.worker import WorkerOptions
 from server.deps import API_KEY_HEADER, participant_session, require_researcher
-from server.guard import LOGIN, Describe, RequestGuard
-from server.headers import SecurityHeaders, validation_error, without_input
+from server.guard import (
+    LOGIN,
+    Describe,
+    RequestGuard,
+    SecurityHeaders,
+    validation_error,
+    without_input,
+)
 from server.limits import WindowLimit
 from server.live.hub import Hub
 from server.live.manager import SessionManager
