@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, cast
 
@@ -486,36 +486,33 @@ class RunSpec:
         return make_strategy(self.strategy, self.advice_budget, **self.strategy_options.given())
 
     def build(
-        self,
-        callbacks: Sequence[Any] = (),
-        *,
-        record_motion: bool = False,
-        wrap_env: Callable[[Any], Any] | None = None,
-        wrap_advisor: Callable[[Advisor | None], Advisor | None] | None = None,
+        self, callbacks: Sequence[Any] = (), *, record_motion: bool = False
     ) -> tuple[Trainer | SB3DQNTrainer, Any]:
-        """The trainer and its environment. `wrap_env` wraps the environment before the
-        trainer sees it (the server's scene broadcast), `wrap_advisor` the machine advisor
-        (the server records its advice; for `human` it gets None and supplies the person)."""
-        from learner.trainer import Trainer
-
+        """The trainer and its environment, as the run describes them."""
         spec = self.validate()
         env = spec.make_env(record_motion)
-        if wrap_env is not None:
-            env = wrap_env(env)
-        if spec.learner == "sb3-dqn":
+        advisor = None if spec.learner == "sb3-dqn" else spec.make_advisor()
+        return spec.make_trainer(env, advisor, callbacks), env
+
+    def make_trainer(
+        self, env: Any, advisor: Advisor | None, callbacks: Sequence[Any] = ()
+    ) -> Trainer | SB3DQNTrainer:
+        """The run's learner on `env`, advised by `advisor`: the ones `make_env` and
+        `make_advisor` make, or what a caller wraps them in (the session worker adds the
+        live view's scene broadcast and records the advice, or supplies the person). The
+        spec is a validated one (`validate`); SB3's DQN takes no advice."""
+        if self.learner == "sb3-dqn":
             from learner.sb3_dqn import SB3DQNTrainer
 
             return SB3DQNTrainer(
-                env, spec.config, spec.seed, list(callbacks), hyperparameters=spec.sb3
-            ), env
-        advisor = spec.make_advisor()
-        if wrap_advisor is not None:
-            advisor = wrap_advisor(advisor)
-        trainer = Trainer(
-            env, spec.config, advisor, spec.make_strategy(), spec.seed, list(callbacks),
-            schedule=spec.make_schedule(),
+                env, self.config, self.seed, list(callbacks), hyperparameters=self.sb3
+            )
+        from learner.trainer import Trainer
+
+        return Trainer(
+            env, self.config, advisor, self.make_strategy(), self.seed, list(callbacks),
+            schedule=self.make_schedule(),
         )  # fmt: skip
-        return trainer, env
 
     def make_schedule(self) -> Schedule | None:
         """The procedure control's schedule (None for other methods)."""

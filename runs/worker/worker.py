@@ -176,13 +176,12 @@ class _Run:
             raise Conflict("a human session needs the server: start it through the API")
         self.spec = learning.spec_of(s, options.spec_class)
         self.advice_budget = self.spec.advice_budget
-        """Read once: `_advisor` runs inside `spec.build`, which it would otherwise call back."""
-        self.trainer, self.env = self.spec.build(
-            [self.recorder, self.reporter],
-            record_motion=isinstance(conn, Connection),  # a live view can watch it
-            wrap_env=self._broadcast,
-            wrap_advisor=self._advisor,
-        )
+        """Read once, before the advisor that counts against it is made."""
+        spec = self.spec.validate()
+        # The run's parts, each wrapped here: the worker calls into `learner/`, never back.
+        env = self._broadcast(spec.make_env(record_motion=isinstance(conn, Connection)))
+        advisor = None if spec.learner == "sb3-dqn" else self._advisor(spec.make_advisor())
+        self.trainer = spec.make_trainer(env, advisor, [self.recorder, self.reporter])
         if checkpoint:
             self.trainer.load_checkpoint(checkpoint)
         else:
