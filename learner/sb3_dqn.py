@@ -132,6 +132,17 @@ def describe(hyper: dict[str, Any], config: dict[str, Any]) -> str:
     return f"{METHOD} (Stable-Baselines3 DQN: {items}; max_episode_steps={limit})"
 
 
+class _Exploration:
+    """SB3's exploration rate, read as the staged loop reads a trainer's epsilon."""
+
+    def __init__(self, model: Any) -> None:
+        self.model = model
+
+    @property
+    def value(self) -> float:
+        return float(self.model.exploration_rate)
+
+
 class SB3DQNTrainer(StagedRun):
     """Trains SB3's DQN on one environment with the `Trainer`'s contract; see the module
     docstring. `hyperparameters`: the `sb3_*` fields (default `sb3_hyperparameters(config)`);
@@ -194,6 +205,7 @@ class SB3DQNTrainer(StagedRun):
         model.set_logger(Logger(None, []))  # no outputs, and no folder made in /tmp
         model.exploration_rate = h["sb3_exploration_initial_eps"]
         self.model = model
+        self.epsilon = _Exploration(model)
         self.global_step = 0
         self.episodes_done = {"pretrain": 0, "train": 0}
         self.episode_record: EpisodeRecord | None = None
@@ -262,9 +274,6 @@ class SB3DQNTrainer(StagedRun):
             truncated, info, epsilon, loss is not None,
         )  # fmt: skip
         return self._end_step(taken, loss)
-
-    def _epsilon_now(self) -> float:
-        return float(self.model.exploration_rate)
 
     # --- checkpoints -----------------------------------------------------------------------
     def save_checkpoint(

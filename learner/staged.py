@@ -63,7 +63,7 @@ class StagedRun:
     """The stage-and-episode loop a trainer offers its callers, shared by
     `learner.trainer.Trainer` and `learner.sb3_dqn.SB3DQNTrainer`: they set `config`, `env`,
     `callbacks`, `global_step`, `episodes_done`, `episode_record`, `_episode`, `_env_rng`
-    and `_stopped`, and define `step()` (which ends in `_end_step`) and `_epsilon_now()`."""
+    `_stopped` and `epsilon`, and define `step()` (which ends in `_end_step`)."""
 
     config: Any
     env: gym.Env[Any, Any]
@@ -75,12 +75,11 @@ class StagedRun:
     _env_rng: np.random.Generator
     _stopped: bool
     strategy: AdvisingStrategy | None = None
+    epsilon: Any
+    """Exploration: its `value` is epsilon after the last update (the episode record's).
+    Read as a value, not asked of the subclass, so the loop never calls back into it."""
 
     def step(self) -> StepRecord:
-        raise NotImplementedError
-
-    def _epsilon_now(self) -> float:
-        """Exploration's epsilon after the last update (the episode record's)."""
         raise NotImplementedError
 
     def _after_update(self) -> None:
@@ -195,7 +194,7 @@ class StagedRun:
             terminated=terminated,
             truncated=truncated,
             advised_steps=episode.advised_steps,
-            epsilon=self._epsilon_now(),
+            epsilon=float(self.epsilon.value),
             mean_loss=episode.loss_sum / episode.loss_count if episode.loss_count else None,
             first_global_step=episode.first_global_step,
             last_global_step=self.global_step,

@@ -173,9 +173,6 @@ class Trainer(StagedRun):
             truncated, info, self.epsilon.value, updates,
         )  # fmt: skip
 
-    def _epsilon_now(self) -> float:
-        return self.epsilon.value
-
     def _after_update(self) -> None:
         self.epsilon.step()
 
