@@ -491,8 +491,7 @@ class RunSpec:
         """The trainer and its environment, as the run describes them."""
         spec = self.validate()
         env = spec.make_env(record_motion)
-        advisor = None if spec.learner == "sb3-dqn" else spec.make_advisor()
-        return spec.make_trainer(env, advisor, callbacks), env
+        return spec.make_trainer(env, spec.make_advisor(), callbacks), env
 
     def make_trainer(
         self, env: Any, advisor: Advisor | None, callbacks: Sequence[Any] = ()

@@ -180,7 +180,7 @@ class _Run:
         spec = self.spec.validate()
         # The run's parts, each wrapped here: the worker calls into `learner/`, never back.
         env = self._broadcast(spec.make_env(record_motion=isinstance(conn, Connection)))
-        advisor = None if spec.learner == "sb3-dqn" else self._advisor(spec.make_advisor())
+        advisor = self._advisor(spec.make_advisor())  # None for sb3-dqn, which takes none
         self.trainer = spec.make_trainer(env, advisor, [self.recorder, self.reporter])
         if checkpoint:
             self.trainer.load_checkpoint(checkpoint)
