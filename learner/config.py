@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import re
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from learner.docstrings import field_docstrings
-from learner.fields import FieldError, bounded, build, check_object
+from learner.fields import AtLeast, FieldError, Needs, bounded, build, checked
 
 Head = Literal["linear", "softmax"]
 Loss = Literal["mse", "huber"]
@@ -36,10 +35,20 @@ AUTHORS = {
 }
 """The `authors` preset: what their Keras scripts did beyond the paper's text (each field's
 docstring says where it comes from; shared/reference/README.md, "The learner as coded")."""
-_DEVICE = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
+PRESET_FIELDS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "modern": {"target_network": True, "double_dqn": True, "loss": "huber", "grad_clip_norm": 10.0},
+    "authors": AUTHORS,
+}
+"""The fields each preset sets; the rest keep their defaults (the paper's)."""
 
 
 @dataclass(frozen=True)
+@checked(
+    AtLeast("pretraining_steps", "batch_size", "the first update samples a full batch"),
+    AtLeast("memory_size", "batch_size", "the memory holds at least one batch"),
+    Needs("double_dqn", "target_network"),
+)
 class DQNConfig:
     """The paper's deep Q-learning (Algorithms 1 and 2) and the few choices it leaves open.
 
@@ -119,29 +128,14 @@ class DQNConfig:
     precision: Precision = bounded("auto", role="numerics")
     """Convolution precision of the fast update: `bf16` where the device supports it
     natively (`auto`), else `fp32`. Dense layers and the loss stay float32."""
-    device: str = bounded("auto", role="numerics", max_length=16)
+    device: str = bounded(
+        "auto", role="numerics", max_length=16, pattern=r"auto|cpu|cuda(:[0-9]+)?"
+    )
     """`auto` (CUDA when available, else CPU), `cpu`, `cuda` or `cuda:N`."""
     torch_threads: int = bounded(0, 0, 256, role="numerics")
     """Torch CPU threads for this process; 0 picks half the cores (1 to 4), leaving the
     rest to the simulator and other workers: 1 on a 2-core machine. Results are
     bit-identical only for the same thread count."""
-
-    def __post_init__(self) -> None:
-        check_object(self)  # every field against its declaration (type, choices, range)
-        if self.pretraining_steps < self.batch_size:
-            raise FieldError(
-                "pretraining_steps",
-                f"pretraining_steps ({self.pretraining_steps}) must be at least batch_size "
-                f"({self.batch_size}): the first update samples a full batch from memory",
-            )
-        if self.memory_size < self.batch_size:
-            raise FieldError(
-                "memory_size", f"memory_size must be at least batch_size ({self.batch_size})"
-            )
-        if self.double_dqn and not self.target_network:
-            raise FieldError("double_dqn", "double_dqn needs target_network=True")
-        if not _DEVICE.match(self.device):
-            raise FieldError("device", "device must be 'auto', 'cpu', 'cuda' or 'cuda:N'")
 
     @classmethod
     def preset(cls, name: str, **overrides: Any) -> DQNConfig:
@@ -150,20 +144,9 @@ class DQNConfig:
         fitted the Keras way, Glorot init, updates during advice and not on an episode's
         final step, the 252-step limit of their `time > 250`); keyword overrides are checked
         like `from_dict`."""
-        if name == "paper":
-            base: dict[str, Any] = {}
-        elif name == "authors":
-            base = dict(AUTHORS)
-        elif name == "modern":
-            base = {
-                "target_network": True,
-                "double_dqn": True,
-                "loss": "huber",
-                "grad_clip_norm": 10.0,
-            }
-        else:
+        if name not in PRESET_FIELDS:
             raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
-        return cls.from_dict({**base, **overrides})
+        return cls.from_dict({**PRESET_FIELDS[name], **overrides})
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> DQNConfig:
@@ -175,7 +158,11 @@ class DQNConfig:
         return dataclasses.asdict(self)
 
     def replace(self, **changes: Any) -> DQNConfig:
-        return self.from_dict({**self.to_dict(), **changes})
+        """This config with some fields changed, each checked like `from_dict`'s."""
+        unknown = sorted(set(changes) - {f.name for f in dataclasses.fields(self)})
+        if unknown:
+            raise FieldError(unknown[0], f"unknown field {unknown[0]}")
+        return dataclasses.replace(self, **changes)
 
 
 PER_AGENT_FIELDS = ("advice_budget", "episodes")

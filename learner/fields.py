@@ -282,8 +282,8 @@ def _storable(leaf: Leaf, text: str) -> None:
 
 
 def check_object(obj: Any) -> None:
-    """Check every leaf of a dataclass instance in place (for `__post_init__`): ints given
-    for floats become floats; raises `FieldError` (a `ValueError`)."""
+    """Check every leaf of a dataclass instance in place: ints given for floats become
+    floats; raises `FieldError` (a `ValueError`)."""
     for leaf in leaves(type(obj)):
         if len(leaf.path) != 1:
             continue  # a nested dataclass checks its own
@@ -291,6 +291,62 @@ def check_object(obj: Any) -> None:
         checked = check(leaf, value)
         if checked is not value:
             object.__setattr__(obj, leaf.name, checked)
+
+
+@dataclass(frozen=True)
+class AtLeast:
+    """A rule across fields: `field` must be at least `other`, for the reason `why`."""
+
+    field: str
+    other: str
+    why: str = ""
+
+    def check(self, obj: Any) -> None:
+        value, bound = getattr(obj, self.field), getattr(obj, self.other)
+        if value < bound:  # both checked numbers by now: safe to show
+            why = f": {self.why}" if self.why else ""
+            raise FieldError(
+                self.field, f"{self.field} ({value}) must be at least {self.other} ({bound}){why}"
+            )
+
+
+@dataclass(frozen=True)
+class Needs:
+    """A rule across fields: `field` switched on needs `other` switched on."""
+
+    field: str
+    other: str
+
+    def check(self, obj: Any) -> None:
+        if getattr(obj, self.field) and not getattr(obj, self.other):
+            raise FieldError(self.field, f"{self.field} needs {self.other}=True")
+
+
+Rule = AtLeast | Needs
+_T = typing.TypeVar("_T", bound=type)
+
+
+def checked(*rules: Rule) -> Callable[[_T], _T]:
+    """Class decorator, under `@dataclass`: every instance is checked as it is made, each
+    leaf against its declaration (`check_object`), then the `rules` across fields, in
+    order. The rules are declared data, like the fields: the class writes no
+    `__post_init__`, so making one (`build`, `dataclasses.replace`) never calls back into the
+    module that declares it."""
+
+    def decorate(cls: _T) -> _T:
+        if "__post_init__" in vars(cls):
+            raise TypeError(f"{cls.__name__}: @checked writes __post_init__; declare rules")
+
+        def __post_init__(self: Any) -> None:
+            check_object(self)
+            for rule in rules:
+                rule.check(self)
+
+        cls.__post_init__ = __post_init__  # type: ignore[attr-defined]
+        cls.__rules__ = rules  # type: ignore[attr-defined]
+        return cls
+
+    return decorate
 
 
 def build(cls: type, data: Any, path: str = "", base: Any = None) -> Any:

@@ -29,8 +29,8 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 
 from learner import machine
 from learner.advisors import ADVISOR_KINDS, Advisor, make_advisor
-from learner.config import DQNConfig, Preset
-from learner.fields import FieldError, bounded, build, check_object, flatten, group, nest, to_json
+from learner.config import PRESET_FIELDS, DQNConfig, Preset
+from learner.fields import FieldError, bounded, build, checked, flatten, group, nest, to_json
 from learner.strategies import (
     _STRATEGIES,
     STRATEGY_NAMES,
@@ -122,6 +122,7 @@ class RunSpecError(FieldError):
 
 
 @dataclass(frozen=True)
+@checked()
 class StrategyOptions:
     """The advising strategy's options besides its budget; None: the strategy's default
     (`STRATEGY_OPTIONS`), or the strategy takes no such option."""
@@ -131,9 +132,6 @@ class StrategyOptions:
     threshold: float | None = bounded(None, 0.0, 1_000_000.0, role="treatment")
     """importance, mistake_correcting: the advisor's Q-value spread (max - min) from which a
     state is important (their default 0.1)."""
-
-    def __post_init__(self) -> None:
-        check_object(self)
 
     def given(self) -> dict[str, Any]:
         """The options set, by name."""
@@ -147,6 +145,7 @@ assert all(set(options) <= _OPTION_NAMES for options in STRATEGY_OPTIONS.values(
 
 
 @dataclass(frozen=True)
+@checked()
 class RunSpec:
     """Everything that decides a run's course; two runs with equal specs on the same CPU kind
     take the same steps (determinism), whatever entry point started them."""
@@ -205,9 +204,6 @@ class RunSpec:
     scenario: ScenarioOptions = group(ScenarioOptions)
     """Reward scheme and realism rates (`sim.ScenarioOptions`)."""
 
-    def __post_init__(self) -> None:
-        check_object(self)
-
     # --- what the run is ---------------------------------------------------------------
     @property
     def advisor(self) -> str:
@@ -255,11 +251,10 @@ class RunSpec:
                 "version", f"run documents of version 1 to {SPEC_VERSION} can be read"
             )
         preset = data.get("preset", "paper")
-        try:
-            base = cls(config=DQNConfig.preset(preset))
-        except ValueError:
-            base = cls()  # `build` reports the bad preset by its field
-        return build(cls, data, base=base)
+        config = data.get("config", {})
+        if isinstance(preset, str) and preset in PRESET_FIELDS and isinstance(config, Mapping):
+            data["config"] = {**PRESET_FIELDS[preset], **config}  # else `build` names the field
+        return build(cls, data)
 
     def to_json(self) -> dict[str, Any]:
         """The stored document: every field spelled out, with its `version`."""

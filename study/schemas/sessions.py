@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 
-from learner.fields import bounded, check_object
+from learner.fields import bounded, checked
 from learner.run import SPEC_VERSION, RunSpec
 from study.schemas.runs import body_model
 
@@ -23,6 +23,7 @@ API_VERSION_NOTE = (
 
 
 @dataclass(frozen=True)
+@checked()
 class SessionOptions:
     """What describes a session but not its run: its name, its participant, how its worker
     treats it. Declared like the run (`learner.fields`), beside it in the REST body."""
@@ -37,9 +38,6 @@ class SessionOptions:
     an advisor needs, a few MB instead of about 250 MB at paper scale."""
     idle_limit_s: float | None = bounded(None, 0.0, 86_400.0, exclusive_minimum=True)
     """Seconds without advice before a human session is abandoned (default: the server's)."""
-
-    def __post_init__(self) -> None:
-        check_object(self)
 
 
 NOT_THE_RUN = tuple(f.name for f in dataclasses.fields(SessionOptions))

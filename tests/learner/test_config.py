@@ -5,6 +5,7 @@ import pytest
 
 from learner import DQNConfig
 from learner.config import field_docs
+from learner.fields import FieldError, checked
 
 
 def test_paper_preset_has_the_papers_hyperparameters() -> None:
@@ -50,7 +51,7 @@ def test_every_field_is_documented() -> None:
         ({"episodes": True}, ["episodes", "an integer"]),
         ({"episodes": 0}, ["episodes", "from 1 to"]),
         ({"gamma": 1.5}, ["gamma", "a number from 0 to 1"]),
-        ({"device": "gpu"}, ["device", "'cuda'"]),
+        ({"device": "gpu"}, ["device", "cuda"]),
         ({"double_dqn": True}, ["double_dqn", "target_network"]),
         ({"pretraining_steps": 64}, ["pretraining_steps", "batch_size"]),
     ],
@@ -62,6 +63,32 @@ def test_bad_fields_raise_a_message_naming_the_field_and_valid_values(
         DQNConfig.from_dict(values)
     for word in words:
         assert word in str(error.value)
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: DQNConfig(pretraining_steps=64),  # made directly
+        lambda: DQNConfig().replace(memory_size=16, pretraining_steps=16, batch_size=32),
+        lambda: dataclasses.replace(DQNConfig(), double_dqn=True),
+        lambda: DQNConfig(batch_size=0),  # a field alone
+        lambda: DQNConfig().replace(device="gpu"),
+        lambda: DQNConfig().replace(colour="red"),  # not a field
+    ],
+)
+def test_every_way_of_making_a_config_checks_its_fields_and_rules(make: object) -> None:
+    with pytest.raises(FieldError):
+        make()  # type: ignore[operator]
+
+
+def test_a_checked_class_declares_its_rules_and_writes_no_post_init() -> None:
+    assert [type(rule).__name__ for rule in DQNConfig.__rules__] == ["AtLeast", "AtLeast", "Needs"]
+    with pytest.raises(TypeError, match="declare rules"):
+
+        @dataclasses.dataclass(frozen=True)
+        @checked()
+        class Own:
+            def __post_init__(self) -> None: ...
 
 
 def test_unknown_preset_names_the_valid_ones() -> None:
