@@ -1,4 +1,6 @@
-"""Writes a worker's records to the database in batches, and keeps its checkpoints.
+"""What a run tells, as the trainer's callbacks: `Recorder` writes its records to the
+database in batches and keeps its checkpoints; `Reporter` tells the web process (and a
+progress bar) how it goes.
 
 Exactly-once across crashes: rows are flushed before each checkpoint, and the checkpoint's
 position (steps, episodes, advice) is saved with it. A resumed worker loads the checkpoint
@@ -17,9 +19,11 @@ from sqlalchemy import delete, insert, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.records import TRAINING, EpisodeRecord, StepRecord
+from runs.worker.messages import EpisodeDone, Progress
 from study.db.models import Advice, Episode, Step, StudySession, utcnow
 from study.services.advice import AdviceGiven, write_advice
 
+PROGRESS_EVERY_S = 0.2
 STEP_COLUMNS = frozenset(c.name for c in Step.__table__.columns) - {"id"}
 EPISODE_COLUMNS = frozenset(c.name for c in Episode.__table__.columns) - {"id"}
 
@@ -53,7 +57,7 @@ class Recorder:
         checkpoint_dir: Path,
         flush_every_steps: int,
         heartbeat_s: float,
-        progress: Callable[[], dict[str, Any]],
+        progress: Callable[[], dict[str, Any]] = dict,
     ) -> None:
         self._factory = factory
         self.session_id = session_id
@@ -61,7 +65,8 @@ class Recorder:
         self._dir = checkpoint_dir
         self._flush_every = flush_every_steps
         self._heartbeat_s = heartbeat_s
-        self._progress = progress
+        self.progress = progress
+        """The run's progress, stored with each flush (the `Reporter`'s)."""
         self._steps: list[dict[str, Any]] = []
         self._episodes: list[dict[str, Any]] = []
         self._advice: list[AdviceGiven] = []
@@ -103,7 +108,7 @@ class Recorder:
             if self._episodes:
                 db.execute(insert(Episode), self._episodes)
             write_advice(db, self._advice)
-            self._own(db, heartbeat_at=utcnow(), progress=self._progress(), **session_values)
+            self._own(db, heartbeat_at=utcnow(), progress=self.progress(), **session_values)
             db.commit()
         self._steps, self._episodes, self._advice = [], [], []
         self._last_flush = time.monotonic()
@@ -164,3 +169,86 @@ class Recorder:
         if result.rowcount != 1:  # type: ignore[attr-defined]
             db.rollback()
             raise LeaseLost(f"session {self.session_id} is no longer this worker's")
+
+
+class Sender(Protocol):
+    def send(self, message: Any) -> None: ...
+
+
+class Reporter:
+    """The trainer's callback that tells the web process how the run goes: its `Progress` a
+    few times a second and after each training episode, each episode's record; and a
+    command line's bar. The run sets what only it knows: `queued`, `waiting_for_participant`,
+    and the `advisor` once made (its `count` is the advice given)."""
+
+    def __init__(
+        self,
+        link: Sender | None,
+        recorder: Recorder,
+        env: Any,
+        episodes: int,
+        advice_budget: int,
+    ) -> None:
+        self.link = link
+        """None: nobody listens (a batch run, or the web process is gone)."""
+        self.recorder = recorder
+        self.env = env
+        """The environment the trainer steps (its reward so far; its episode is set here)."""
+        self.episodes = episodes
+        self.advice_budget = advice_budget
+        self.advisor: Any = None
+        self.bar: Any = None
+        self.stage = "pretrain"
+        self.epsilon = 1.0
+        self.last_episode_reward: float | None = None
+        self.queued = False
+        self.waiting_for_participant = False
+        self._sent = 0.0
+        recorder.progress = self.progress_dict
+
+    @property
+    def advice_given(self) -> int:
+        return int(getattr(self.advisor, "count", 0))
+
+    def progress(self) -> Progress:
+        return Progress(
+            stage=self.stage,
+            global_step=self.recorder.steps,
+            episode=self.recorder.episodes,
+            episodes=self.episodes,
+            epsilon=self.epsilon,
+            collected_reward=self.env.collected_reward,
+            last_episode_reward=self.last_episode_reward,
+            advice_given=self.advice_given,
+            advice_budget=self.advice_budget,
+            queued=self.queued,
+            waiting_for_participant=self.waiting_for_participant,
+        )
+
+    def progress_dict(self) -> dict[str, Any]:
+        return vars(self.progress())
+
+    def send(self, message: Any) -> None:
+        if self.link is not None:
+            self.link.send(message)
+
+    def send_progress(self) -> None:
+        self.send(self.progress())
+        self._sent = time.monotonic()
+
+    # --- learner callbacks -------------------------------------------------------------
+    def on_step(self, record: StepRecord) -> None:
+        self.stage = record.stage
+        self.epsilon = float(record.epsilon)
+        if time.monotonic() - self._sent >= PROGRESS_EVERY_S:
+            self.send_progress()
+
+    def on_episode(self, record: EpisodeRecord) -> None:
+        self.send(EpisodeDone(record.to_dict()))
+        if record.stage != TRAINING:
+            return
+        self.last_episode_reward = float(record.collected_reward)
+        self.env.episode = self.recorder.episodes
+        self.send_progress()
+        if self.bar is not None:
+            self.bar.update(1)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import time
 import traceback
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -24,14 +23,13 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from learner import provenance
 from learner.advisors import RecordedAdvisor
-from learner.records import TRAINING
 from learner.run import RunSpec
 from learner.strategies import AdviceMoment
 from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
 from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
-from runs.worker.messages import EpisodeDone, Progress, StatusChanged, TrainingWanted
+from runs.worker.messages import StatusChanged, TrainingWanted
 from runs.worker.priority import lower_priority
-from runs.worker.recorder import Checkpointable, LeaseLost, Recorder
+from runs.worker.recorder import Checkpointable, LeaseLost, Recorder, Reporter
 from runs.worker.scene import SceneBroadcast
 from study.db.engine import make_engine, make_session_factory
 from study.db.models import Advice, Status, StudySession, utcnow
@@ -40,7 +38,6 @@ from study.services.errors import Conflict
 from study.services.sessions import claim, get_session, set_status
 
 log = logging.getLogger(__name__)
-PROGRESS_EVERY_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -80,35 +77,6 @@ class WorkerOptions:
     the participants still advising keep the CPU."""
     train_idle: bool = False
     """And SCHED_IDLE then (Linux), as `idle`."""
-
-
-class _Reporter:
-    """Learner callback that sends live progress over the channel, a few times a second."""
-
-    def __init__(self, run: _Run) -> None:
-        self._run = run
-        self._sent = 0.0
-        self.stage = "pretrain"
-        self.epsilon = 1.0
-        self.last_episode_reward: float | None = None
-
-    def on_step(self, record: Any) -> None:
-        self.stage = record.stage
-        self.epsilon = float(record.epsilon)
-        if time.monotonic() - self._sent >= PROGRESS_EVERY_S:
-            self._run.send_progress()
-            self._sent = time.monotonic()
-
-    def on_episode(self, record: Any) -> None:
-        self._run.send(EpisodeDone(record.to_dict()))
-        if record.stage != TRAINING:
-            return
-        self.last_episode_reward = float(record.collected_reward)
-        self._run.env.episode = self._run.recorder.episodes
-        self._run.send_progress()
-        self._sent = time.monotonic()
-        if self._run.bar is not None:
-            self._run.bar.update(1)
 
 
 class _Run:
@@ -155,7 +123,6 @@ class _Run:
             if conn
             else None
         )
-        self.reporter = _Reporter(self)
         self.recorder = Recorder(
             self.factory,
             session_id,
@@ -163,15 +130,12 @@ class _Run:
             options.data_dir / "checkpoints" / f"session-{session_id}",
             options.flush_every_steps,
             options.heartbeat_s,
-            self.progress_dict,
         )
         checkpoint = s.checkpoint_path
         if checkpoint and not Path(checkpoint).is_file():
             checkpoint = None  # a fresh start, as for a session never checkpointed
         self.start_advice = s.checkpoint_advice if checkpoint else 0
         self.advisor: Any = None
-        self.queued = False
-        self.waiting_for_participant = False
         if s.method == "human" and self.link is None:
             raise Conflict("a human session needs the server: start it through the API")
         self.spec = learning.spec_of(s, options.spec_class)
@@ -180,7 +144,11 @@ class _Run:
         spec = self.spec.validate()
         # The run's parts, each wrapped here: the worker calls into `learner/`, never back.
         env = self._broadcast(spec.make_env(record_motion=isinstance(conn, Connection)))
+        self.reporter = Reporter(
+            self.link, self.recorder, env, spec.config.episodes, self.advice_budget
+        )
         advisor = self._advisor(spec.make_advisor())  # None for sb3-dqn, which takes none
+        self.reporter.advisor = self.advisor
         self.trainer = spec.make_trainer(env, advisor, [self.recorder, self.reporter])
         if checkpoint:
             self.trainer.load_checkpoint(checkpoint)
@@ -190,7 +158,6 @@ class _Run:
         self.env.steps = self.recorder.steps
         self.env.episode = self.recorder.episodes
         self.reporter.stage = str(getattr(self.trainer, "stage", "pretrain"))
-        self.bar: Any = None
         self.saver: Checkpointable = self.trainer
         """What writes the run's checkpoints: its trainer, or a population's agent (whose
         checkpoint also records the population's numerics)."""
@@ -255,30 +222,11 @@ class _Run:
     def advice_given(self) -> int:
         return int(getattr(self.advisor, "count", 0))
 
-    def progress(self) -> Progress:
-        return Progress(
-            stage=self.reporter.stage,
-            global_step=self.recorder.steps,
-            episode=self.recorder.episodes,
-            episodes=self.spec.config.episodes,
-            epsilon=self.reporter.epsilon,
-            collected_reward=self.env.collected_reward,
-            last_episode_reward=self.reporter.last_episode_reward,
-            advice_given=self.advice_given,
-            advice_budget=self.advice_budget,
-            queued=self.queued,
-            waiting_for_participant=self.waiting_for_participant,
-        )
-
-    def progress_dict(self) -> dict[str, Any]:
-        return vars(self.progress())
-
     def send(self, message: Any) -> None:
-        if self.link is not None:
-            self.link.send(message)
+        self.reporter.send(message)
 
     def send_progress(self) -> None:
-        self.send(self.progress())
+        self.reporter.send_progress()
 
     def set_status(self, status: Status, detail: str = "") -> None:
         with self.factory() as db:
@@ -314,10 +262,10 @@ class _Run:
         assert self.link is not None
         if self.link.participant_ready:
             return
-        self.waiting_for_participant = True
+        self.reporter.waiting_for_participant = True
         self._before_waiting()
         self.link.wait_for_participant(self.session.idle_limit_s or self.options.idle_limit_s)
-        self.waiting_for_participant = False
+        self.reporter.waiting_for_participant = False
 
     def _needs_training_slot(self) -> bool:
         """A human session whose advice is over trains only in one of the server's slots."""
@@ -330,11 +278,11 @@ class _Run:
 
     def _wait_for_training_slot(self) -> None:
         assert self.link is not None
-        self.queued = True
+        self.reporter.queued = True
         self.send(TrainingWanted())
         self._before_waiting()
         self.link.wait_for_training_slot()
-        self.queued = False
+        self.reporter.queued = False
         if self.options.train_nice:
             lower_priority(self.options.train_nice, idle=self.options.train_idle)
         self.send_progress()
@@ -345,7 +293,7 @@ class _Run:
         if self.options.progress_bar:
             from tqdm import tqdm
 
-            self.bar = tqdm(
+            self.reporter.bar = tqdm(
                 total=self.spec.config.episodes,
                 initial=self.recorder.episodes,
                 desc=f"session {self.session_id}",
@@ -365,8 +313,8 @@ class _Run:
                     return self.exit(exit_, at_step_boundary=False)
             return self.finish()
         finally:
-            if self.bar is not None:
-                self.bar.close()
+            if self.reporter.bar is not None:
+                self.reporter.bar.close()
 
     def between_steps(self) -> None:
         """What a run does between two learner steps: heartbeat and flush when due, wait for
@@ -396,7 +344,7 @@ class _Run:
         if isinstance(exit_, HandOver):  # still running, under its token: nothing to record
             return status
         if isinstance(exit_, ParentGone):
-            self.link = None  # nobody is listening any more
+            self.link = self.reporter.link = None  # nobody is listening any more
         self.set_status(status, str(exit_))
         return status
 
