@@ -4,11 +4,12 @@ manager, and the two kinds of credentials (researcher key, participant token).""
 from __future__ import annotations
 
 import secrets
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request, Security
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
+from fastapi.security.utils import get_authorization_scheme_param
 from sqlalchemy.orm import Session
 
 from server.live.advising import ParticipantSession
@@ -79,6 +80,23 @@ def participant_session(
         found = ParticipantSession(session.id, session.spec.advice_budget, session.condition)
     known[token] = found
     return found
+
+
+def credential_guards(settings: Settings) -> dict[str, Callable[[Request], None]]:
+    """The two credentials checked by `server.guard.RequestGuard` before a body is read, by
+    the security scheme a route declares: the same checks as the dependencies above."""
+
+    def researcher(request: Request) -> None:
+        require_researcher(settings, request.headers.get(API_KEY_HEADER))
+
+    def participant(request: Request) -> None:
+        scheme, token = get_authorization_scheme_param(request.headers.get("Authorization"))
+        given = None
+        if scheme.lower() == "bearer" and token:
+            given = HTTPAuthorizationCredentials(scheme=scheme, credentials=token)
+        participant_session(request, given)
+
+    return {"APIKeyHeader": researcher, "HTTPBearer": participant}
 
 
 ResearcherDep = Depends(require_researcher)

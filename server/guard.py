@@ -145,7 +145,7 @@ class RequestGuard:
         self,
         app: ASGIApp,
         max_body_bytes: int,
-        guards: dict[str | Callable[..., Any], Callable[[Request], Any]],
+        guards: Mapping[str, Callable[[Request], Any]],
         describe: Describe | None = None,
     ) -> None:
         self.app = app

@@ -13,15 +13,13 @@ from fastapi import FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from fastapi.security import HTTPAuthorizationCredentials
-from fastapi.security.utils import get_authorization_scheme_param
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from learner.fields import leaves
 from learner.run import RunSpec
 from runs.worker.rerun import Rerun
 from runs.worker.worker import WorkerOptions
-from server.deps import API_KEY_HEADER, participant_session, require_researcher
+from server.deps import credential_guards
 from server.guard import (
     LOGIN,
     Describe,
@@ -89,26 +87,6 @@ def describe_run_field(spec_class: type[RunSpec]) -> Describe:
         return leaf.allowed() if leaf is not None else None
 
     return describe
-
-
-def credential_guards(settings: Settings) -> dict[Any, Any]:
-    """What `RequestGuard` checks before reading a body, per dependency a route declares."""
-
-    def researcher(request: Request) -> None:
-        require_researcher(settings, request.headers.get(API_KEY_HEADER))
-
-    def participant(request: Request) -> None:
-        scheme, token = get_authorization_scheme_param(request.headers.get("Authorization"))
-        given = None
-        if scheme.lower() == "bearer" and token:
-            given = HTTPAuthorizationCredentials(scheme=scheme, credentials=token)
-        participant_session(request, given)
-
-    return {
-        "APIKeyHeader": researcher,
-        "HTTPBearer": participant,
-        LOGIN: dashboard.require_login,
-    }
 
 
 def episode_playback(settings: Settings) -> tuple[Playbacks, PlaybackViewer]:
@@ -211,7 +189,7 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
     app.add_middleware(
         RequestGuard,
         max_body_bytes=settings.max_request_bytes,
-        guards=credential_guards(settings),
+        guards={**credential_guards(settings), LOGIN: dashboard.require_login},
         describe=describe_run_field(spec_class),
     )
     app.add_middleware(SecurityHeaders)
