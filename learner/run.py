@@ -436,9 +436,9 @@ class RunSpec:
             )
 
     def make_env(self, record_motion: bool = False) -> gym.Env[Any, Any]:
-        import sim
+        from sim.env import SortingEnv  # PyBullet: imported when an environment is made
 
-        return sim.SortingEnv(
+        return SortingEnv(
             motion=self.motion or "fast",
             sort_rule=self.sort_rule,
             max_episode_steps=self.config.max_episode_steps,
