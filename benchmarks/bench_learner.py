@@ -2,6 +2,7 @@
 
     python -m benchmarks.bench_learner                  # update speed, run time, memory
     python -m benchmarks.bench_learner --curves 60      # + fast vs plain learning curves
+    python -m benchmarks.bench_learner --profile        # the update by part, and its bound
 
 1. The update: the learner's (`DQNConfig(update="fast")`) against a reference written the
    way the common DQN references write it (a replay deque of numpy frames, float32
@@ -20,7 +21,12 @@
    episode 325, whatever the paper's text says).
 3. Resident memory with a full 20,000-transition replay memory (in a fresh process), in
    stages: torch alone is about 280 MiB, the memory adds its frames (235 MiB) and no more.
-4. With --curves N: collected reward of N training episodes, the fast update against the
+4. With --profile: the update alone, one thread, by part (torch's profiler over blocks of
+   updates, several rounds, medians): each convolution's forward and backward with its
+   rate in GFLOPS, the layout copies, the element-wise work (the phase max-pool, ReLU and
+   their gradients), the dense layers and the rest; then what the convolutions alone cost
+   the paper's experiment (140,739 updates on 2 cores): the bound the rest cannot beat.
+5. With --curves N: collected reward of N training episodes, the fast update against the
    trainer's plain float32 update (`update="plain"`: NCHW convs and max-pools, like the
    reference), same seeds and everything else, drawn to
    docs/images/learner_fast_vs_plain.png (takes a while: the plain update is the slow one).
@@ -199,6 +205,102 @@ def bench_update(threads: int, repeats: int, block: int, frames: list[np.ndarray
     }
 
 
+EXPERIMENT_UPDATES = 140_739
+"""Updates of the paper's experiment: 10 autonomous runs, the advisor, 10 agent-advised
+(the replication's arm B, `docs/results/replication-2/`)."""
+
+
+def _part(name: str, shapes: list[list[int]]) -> str:
+    if name == "aten::mkldnn_convolution":
+        return f"conv {tuple(shapes[1])} forward"
+    if name == "aten::convolution_backward":
+        return f"conv {tuple(shapes[2])} backward"
+    if name in ("aten::copy_", "aten::fill_", "aten::zero_", "aten::clone", "aten::contiguous"):
+        return "layout copies and fills"
+    if name in ("aten::addmm", "aten::mm"):
+        return "dense layers"
+    if name in (
+        "aten::sub", "aten::mul", "aten::maximum", "aten::threshold_backward", "aten::sign_",
+        "aten::clamp_min_", "aten::relu_", "aten::add_", "aten::sum",
+    ):  # fmt: skip
+        return "element-wise (phase max-pool, ReLU, their gradients)"
+    return "rest (optimizer, loss, indexing, autograd)"
+
+
+def _conv_flop(part: str, batch: int) -> float:
+    """FLOPs of one update's calls of a convolution part (its forward runs on the batch
+    and its next states; its backward on the batch, the first layer's without the input's
+    gradient)."""
+    out_c, in_c, k, _ = (int(v) for v in part.split("(")[1].split(")")[0].split(", "))
+    side = {12: 32, 16: 16, 32: 8}[in_c]  # the space-to-depth layers' output sides
+    one = 2.0 * batch * side * side * out_c * in_c * k * k
+    if part.endswith("forward"):
+        return 2 * one
+    return one if in_c == 12 else 2 * one
+
+
+def bench_profile(rounds: int, block: int, frames: list[np.ndarray]) -> dict:
+    """The learner's update by part (one thread), medians over `rounds` profiled blocks."""
+    from torch.profiler import ProfilerActivity, profile
+
+    from learner.agent import DQNAgent
+    from learner.config import DQNConfig
+    from learner.replay import ReplayMemory
+
+    torch.set_num_threads(1)
+    rng = np.random.default_rng(0)
+    agent = DQNAgent(DQNConfig(torch_threads=1), torch.device("cpu"))
+    memory = ReplayMemory(len(frames), agent.frame_shape)
+    for t in range(len(frames) - 1):
+        memory.add(agent.encode(frames[t]), t % 4, 0.0, agent.encode(frames[t + 1]), False, False)
+    batches = [memory.sample(BATCH, rng) for _ in range(block)]
+    for b in batches[:3]:
+        agent.update(b)
+    parts: dict[str, list[float]] = {}
+    walls: list[float] = []
+    for _ in range(rounds):
+        start = time.perf_counter()
+        with profile(activities=[ProfilerActivity.CPU], record_shapes=True) as prof:
+            for b in batches:
+                agent.update(b)
+        walls.append(1000 * (time.perf_counter() - start) / block)
+        totals: dict[str, float] = {}
+        for event in prof.key_averages(group_by_input_shape=True):
+            part = _part(event.key, event.input_shapes)
+            totals[part] = totals.get(part, 0.0) + event.self_cpu_time_total / 1000 / block
+        for part, ms in totals.items():
+            parts.setdefault(part, []).append(ms)
+    medians = {part: statistics.median(ms) for part, ms in parts.items()}
+    return {
+        "conv_dtype": str(agent.dtype).replace("torch.", ""),
+        "update_ms": statistics.median(walls),
+        "update_ms_range": (min(walls), max(walls)),
+        "parts": dict(sorted(medians.items(), key=lambda kv: -kv[1])),
+    }
+
+
+def print_profile(r: dict) -> None:
+    low, high = r["update_ms_range"]
+    print(
+        f"  one update, 1 thread, {r['conv_dtype']} convs: {r['update_ms']:.1f} ms under the "
+        f"profiler (rounds {low:.1f}-{high:.1f}); by part, ms per update:"
+    )
+    conv_ms = 0.0
+    for part, ms in r["parts"].items():
+        rate = ""
+        if part.startswith("conv"):
+            conv_ms += ms
+            rate = f"  {_conv_flop(part, BATCH) / ms / 1e6:6.1f} GFLOPS"
+        print(f"    {part:58} {ms:6.1f}{rate}")
+    share = conv_ms / sum(r["parts"].values())
+    bound = EXPERIMENT_UPDATES * conv_ms / 1000 / 2 / 60
+    print(
+        f"  the convolutions: {conv_ms:.1f} ms ({share:.0%} of the profiled time); at this "
+        f"rate the paper's experiment's {EXPERIMENT_UPDATES:,} updates need {bound:.0f} min "
+        "of the 2 cores for them alone"
+    )
+
+
 def _time_block(update: Callable[[], float], block: int) -> float:
     start = time.perf_counter()
     for _ in range(block):
@@ -312,6 +414,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--curves", type=int, default=0, metavar="EPISODES")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--footprint", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--profile", action="store_true", help="the update by part only")
+    parser.add_argument("--rounds", type=int, default=7, help="profiled blocks (--profile)")
     args = parser.parse_args(argv)
     warnings.filterwarnings("ignore", message="Using padding='same' with even kernel")
     if args.footprint:
@@ -320,6 +424,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs", flush=True)
 
     frames = real_frames(5000)
+    if args.profile:
+        print(f"\nthe update by part, batch {BATCH}, median of {args.rounds} profiled blocks")
+        print_profile(bench_profile(args.rounds, args.block, frames))
+        print(f"load average {os.getloadavg()[0]:.1f} at the end", flush=True)
+        return
     print(f"\nupdate, batch {BATCH} (median of {args.repeats} pairs of {args.block}-update blocks)")
     for threads in args.threads:
         r = bench_update(threads, args.repeats, args.block, frames)

@@ -12,8 +12,10 @@ to float rounding; in float32 the outputs agree to ~1e-8, gradients included).
 
 The convolutions run in bfloat16 where the device supports it; the input's scaling by
 1/255 is folded into the first kernel, so uint8 frames go straight in. The replay memory
-keeps frames already rearranged (`pack_frame`), so the first layer's input is a copy of
-long contiguous runs.
+keeps frames already rearranged (`pack_frame`), so the first layer's input is only their
+conversion to the compute dtype; the first two layers' "same" padding is the same on both
+sides after space-to-depth, so their convolutions pad (no zero-filled copy), and every
+layer's output stays channels-last through the max-pool and its gradient.
 """
 
 from __future__ import annotations
@@ -78,27 +80,41 @@ def unpack_frames(packed: torch.Tensor) -> torch.Tensor:
 
 def space_to_depth(
     x: torch.Tensor, packed: bool, layout: PhaseLayout, dtype: torch.dtype
-) -> torch.Tensor:
-    """Pad and rearrange to (B, 4C, H/2 + ks - 1, W/2 + ks - 1), channels (ry, rx, c), in
-    channels-last memory: one zero fill and one strided copy that also converts dtype.
-    `x` is packed frames (B, H/2, W/2, 4C) or activations (B, C, H, W)."""
+) -> tuple[torch.Tensor, int]:
+    """The layer's input as its space-to-depth convolution reads it, (B, 4C, h, w) with
+    channels (ry, rx, c) in channels-last memory, and the zero pixels the convolution adds
+    on each side itself. `x` is packed frames (B, H/2, W/2, 4C) or activations (B, C, H, W).
+
+    Where the layer's padding is the same on both sides (the paper's first two layers), the
+    convolution pads: the input is only rearranged, one strided copy that also converts
+    the dtype (packed frames are already in this layout: a conversion alone). Else (the
+    third layer pads after only) it is padded here too: a zero fill and the copy."""
+    a = layout.pad_before // 2
+    after = layout.s2d_kernel - 1 - a
     if packed:
         b, h2, w2, c4 = x.shape
         c = c4 // 4
+        if a == after:
+            return x.permute(0, 3, 1, 2).to(dtype), a
         src = x.view(b, h2, w2, 2, 2, c)
     else:
         b, c, h, w = x.shape
         h2, w2 = h // 2, w // 2
         src = x.view(b, c, h2, 2, w2, 2).permute(0, 2, 4, 3, 5, 1)
-    sh, sw = h2 + layout.s2d_kernel - 1, w2 + layout.s2d_kernel - 1
+    if a == after:
+        out = torch.empty(b, h2, w2, 2, 2, c, dtype=dtype, device=x.device)
+        out.copy_(src)
+        return out.view(b, h2, w2, 4 * c).permute(0, 3, 1, 2), a
+    sh, sw = h2 + a + after, w2 + a + after
     out = torch.zeros(b, sh, sw, 2, 2, c, dtype=dtype, device=x.device)
-    a = layout.pad_before // 2
     out[:, a : a + h2, a : a + w2].copy_(src)
-    return out.view(b, sh, sw, 4 * c).permute(0, 3, 1, 2)
+    return out.view(b, sh, sw, 4 * c).permute(0, 3, 1, 2), 0
 
 
 class _PhaseMaxBiasRelu(torch.autograd.Function):
-    """relu(max over the 4 phases + bias) on (B, 4*o, h, w) NCHW (bias: see `_add_bias`).
+    """relu(max over the 4 phases + bias) on (B, 4*o, h, w) (bias: see `_add_bias`), in
+    the memory format the convolution gave (channels-last: no transposing copy, forward
+    or back).
     The gradient goes to the first maximal phase in row-major window order, as
     `max_pool2d`'s does; masks are built from signs of differences, which are exact and much
     faster on the CPU than `where`."""
@@ -258,6 +274,12 @@ class PhaseConvForward:
         """Q-values of packed uint8 frames (B, H/2, W/2, 4C), see `pack_frame`."""
         x = frames
         for i, (layout, (kernel, bias)) in enumerate(zip(self.layouts, weights, strict=True)):
-            y = F.conv2d(space_to_depth(x, i == 0, layout, self.dtype), kernel)
-            x = phase_max_bias_relu(y.contiguous(), bias)
+            s, padding = space_to_depth(x, i == 0, layout, self.dtype)
+            x = phase_max_bias_relu(channels_last(F.conv2d(s, kernel, padding=padding)), bias)
         return self.network.output(x.flatten(1))
+
+
+def channels_last(y: torch.Tensor) -> torch.Tensor:
+    """A layer's convolution output as the phase max-pool takes it, alone or in a
+    population (one memory format: the same float order in its gradients)."""
+    return y.contiguous(memory_format=torch.channels_last)

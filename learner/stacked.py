@@ -34,7 +34,13 @@ import torch.nn.functional as F
 from learner.agent import DQNAgent
 from learner.config import shared_config
 from learner.network import QNetwork
-from learner.phase_conv import PhaseConvForward, PhaseLayout, phase_max_bias_relu, space_to_depth
+from learner.phase_conv import (
+    PhaseConvForward,
+    PhaseLayout,
+    channels_last,
+    phase_max_bias_relu,
+    space_to_depth,
+)
 from learner.replay import ReplaySample
 
 ConvMode = Literal["loop", "grouped"]
@@ -82,27 +88,29 @@ def stacked_q(
     n, m = frames.shape[:2]
     x = frames.flatten(0, 1)
     for i, layout in enumerate(layouts):
-        s = space_to_depth(x, i == 0, layout, dtype)
+        s, pad = space_to_depth(x, i == 0, layout, dtype)
         kernels = weights.kernels[i]
         if n == 1:
-            y = F.conv2d(s, kernels[0]).contiguous()
+            y = F.conv2d(s, kernels[0], padding=pad)
         elif conv == "grouped":
-            y = _grouped_conv(s, kernels, n)
+            y = _grouped_conv(s, kernels, n, pad)
         else:
-            y = torch.cat([F.conv2d(s[a * m : (a + 1) * m], k) for a, k in enumerate(kernels)])
-            y = y.contiguous()
-        x = phase_max_bias_relu(y, weights.biases[i])
+            rows = [F.conv2d(s[a * m : (a + 1) * m], k, padding=pad) for a, k in enumerate(kernels)]
+            y = torch.cat(rows)
+        x = phase_max_bias_relu(channels_last(y), weights.biases[i])
     features = x.flatten(1).unflatten(0, (n, m))
     return torch.stack([net.output(f) for net, f in zip(weights.networks, features, strict=True)])
 
 
-def _grouped_conv(s: torch.Tensor, kernels: list[torch.Tensor], n: int) -> torch.Tensor:
+def _grouped_conv(
+    s: torch.Tensor, kernels: list[torch.Tensor], n: int, padding: int
+) -> torch.Tensor:
     """One grouped convolution of n agents' rows of `s` (n*M, C, h, w): agent a's channels
     form group a; returns (n*M, O, h', w') contiguous."""
     grouped = s.unflatten(0, (n, -1)).transpose(0, 1).flatten(1, 2)
     grouped = grouped.contiguous(memory_format=torch.channels_last)
     kernel = torch.cat(kernels).contiguous(memory_format=torch.channels_last)
-    y = F.conv2d(grouped, kernel, groups=n)
+    y = F.conv2d(grouped, kernel, padding=padding, groups=n)
     return y.unflatten(1, (n, -1)).transpose(0, 1).flatten(0, 1).contiguous()
 
 
