@@ -2,7 +2,8 @@
 
     python -m benchmarks.plot_population_batch \
         benchmarks/logs/population-batch-2026-12-03-quiet.log \
-        benchmarks/logs/population-batch-2026-12-04-avx2-quiet.log
+        benchmarks/logs/population-batch-2026-12-04-avx2-quiet.log \
+        benchmarks/logs/population-batch-2026-12-04-avx2-padded.log
 
 Reads what `benchmarks/bench_population_batch.py` wrote (its CPU kind line, its summary of
 training agent-steps per second and memory per agent, and its profile of a step by part)
@@ -44,12 +45,8 @@ def read_log(path: Path) -> dict:
             parts[int(match["n"])] = {name: float(ms) for name, ms in split}
     if not rates:
         raise SystemExit(f"{path}: no summary lines of bench_population_batch")
-    return {"kind": kind, "date": _date(path), "rates": rates, "parts": parts}
-
-
-def _date(path: Path) -> str:
-    match = re.search(r"\d{4}-\d{2}-\d{2}", path.name)
-    return match.group(0) if match else path.stem
+    return {"kind": kind, "name": path.stem.removeprefix("population-batch-"), "rates": rates,
+            "parts": parts}  # fmt: skip
 
 
 def plot(logs: Sequence[Path], out: Path = OUT) -> Path:
@@ -62,7 +59,7 @@ def plot(logs: Sequence[Path], out: Path = OUT) -> Path:
     fig, axes = plt.subplots(1, 2 + len(runs), figsize=(5 * (2 + len(runs)), 4.2))
     for run in runs:
         sizes = sorted(run["rates"])
-        label = f"{run['kind']} ({run['date']})"
+        label = f"{run['kind']} ({run['name']})"
         rate = [run["rates"][n][0] for n in sizes]
         axes[0].plot(sizes, rate, "o-", label=label)
         axes[1].plot(sizes, [run["rates"][n][2] for n in sizes], "o-", label=label)
@@ -85,7 +82,7 @@ def plot(logs: Sequence[Path], out: Path = OUT) -> Path:
             values = [run["parts"][n].get(name, 0.0) for n in sizes]
             ax.bar([str(n) for n in sizes], values, bottom=bottom, label=name)
             bottom = [b + v for b, v in zip(bottom, values, strict=True)]
-        ax.set_title(f"one agent-step by part (ms)\n{run['kind']}", fontsize=9)
+        ax.set_title(f"one agent-step by part (ms)\n{run['kind']} ({run['name']})", fontsize=9)
         ax.set_xlabel("population size N (one process)")
         ax.legend(fontsize=7)
     fig.tight_layout()

@@ -30,7 +30,10 @@ def test_draws_every_kind(tmp_path: Path) -> None:
     logs = [
         LOGS / "population-batch-2026-12-03-quiet.log",
         LOGS / "population-batch-2026-12-04-avx2-quiet.log",
+        LOGS / "population-batch-2026-12-04-avx2-padded.log",
     ]
     out = plot(logs, tmp_path / "population_batch.png")
     assert out.read_bytes().startswith(b"\x89PNG")
-    assert "AVX-512 BF16" in out.with_suffix(".svg").read_text()
+    svg = out.with_suffix(".svg").read_text()
+    assert "AVX-512 BF16" in svg
+    assert "2026-12-04-avx2-quiet" in svg and "2026-12-04-avx2-padded" in svg  # told apart
