@@ -1,9 +1,17 @@
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from learner.network import QNetwork
-from learner.phase_conv import PhaseConvForward, pack_frame, unpack_frames
+from learner.phase_conv import (
+    PhaseConvForward,
+    channels_last,
+    pack_frame,
+    phase_max_bias_relu,
+    space_to_depth,
+    unpack_frames,
+)
 
 
 def frames_with_flat_regions(count: int, seed: int = 0) -> np.ndarray:
@@ -74,3 +82,31 @@ def test_fast_forward_in_bfloat16_stays_close() -> None:
         quick = fast(packed, fast.weights())
     assert quick.dtype == torch.float32
     assert (quick - plain).abs().max() < 0.02 * plain.abs().max() + 1e-3
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
+def test_a_layer_its_convolution_pads_computes_what_zeros_padded_before_do(
+    dtype: torch.dtype,
+) -> None:
+    """The first two layers' "same" padding is symmetric after space-to-depth, so their
+    convolutions pad (no zero-filled copy); the third pads after only, so it is padded
+    before. Either way a layer computes the convolution of the zero-padded input."""
+    torch.manual_seed(2)
+    network = QNetwork()
+    fast = PhaseConvForward(network, dtype)
+    images = frames_with_flat_regions(4, seed=2)
+    x = torch.from_numpy(np.stack([pack_frame(image) for image in images]))
+    pads = []
+    with torch.no_grad():
+        for i, (layout, kernel) in enumerate(zip(fast.layouts, fast.kernels(), strict=True)):
+            s, pad = space_to_depth(x, i == 0, layout, dtype)
+            pads.append(pad)
+            y = F.conv2d(s, kernel, padding=pad)
+            zeros = F.pad(s, (pad,) * 4).contiguous(memory_format=torch.channels_last)
+            expected = F.conv2d(zeros, kernel)
+            tolerance = 1e-6 if dtype == torch.float32 else 1e-2
+            assert torch.allclose(y.float(), expected.float(), rtol=tolerance, atol=tolerance)
+            bias = network.convs[i].bias
+            assert bias is not None
+            x = phase_max_bias_relu(channels_last(y), bias)
+    assert pads == [2, 1, 0]
