@@ -323,7 +323,8 @@ def default_population(run: RunSpec, cores: int | None = None, workers: int | No
     the single runs losing more to the load, not the populations gaining. Without AVX-512
     BF16 the update is a larger share still (95 % of a step, float32) and the rule the same:
     on the quiet AVX2-only EPYC (log `population-batch-2026-12-04-avx2-quiet.log`) N=2 and
-    N=4 both 1.13x, the memory per agent 555, 298 and 173 MiB.
+    N=4 both 1.13x, the memory per agent 555, 298 and 173 MiB; with the padded update
+    (`population-batch-2026-12-04-avx2-padded.log`, every rate 1.5x) N=2 1.08x, N=4 0.99x.
 
     On CUDA the update leaves the critical path, and the population's size only has to
     fill the GPU: measured once, on a lent H200 beside a 16-core Xeon
