@@ -220,7 +220,7 @@ class _Run:
 
     @property
     def advice_given(self) -> int:
-        return int(getattr(self.advisor, "count", 0))
+        return self.reporter.advice_given
 
     def send(self, message: Any) -> None:
         self.reporter.send(message)
