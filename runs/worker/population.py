@@ -319,12 +319,13 @@ def default_population(run: RunSpec, cores: int | None = None, workers: int | No
     `benchmarks/logs/population-batch-2026-12-03-quiet.log`), two populations side by side
     against two single runs: N=2 1.06x, N=4 1.04x, N=8 0.90x, N=16 0.93x, while the
     resident memory per agent falls from 522 MiB to 282 (N=2) and 106 (N=8). On a loaded
-    machine larger populations looked faster (1.59x at N=8 with the load at 4): that was
+    machine larger populations looked faster (1.59x at N=8 with the load at 4-6): that was
     the single runs losing more to the load, not the populations gaining. Without AVX-512
     BF16 the update is a larger share still (95 % of a step, float32) and the rule the same:
     on the quiet AVX2-only EPYC (log `population-batch-2026-12-04-avx2-quiet.log`) N=2 and
     N=4 both 1.13x, the memory per agent 555, 298 and 173 MiB; with the padded update
-    (`population-batch-2026-12-04-avx2-padded.log`, every rate 1.5x) N=2 1.08x, N=4 0.99x.
+    (`population-batch-2026-12-04-avx2-padded.log`, the rates 1.38-1.57x those before) N=2
+    1.08x, N=4 0.99x.
 
     On CUDA the update leaves the critical path, and the population's size only has to
     fill the GPU: measured once, on a lent H200 beside a 16-core Xeon
