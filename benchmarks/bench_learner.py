@@ -239,6 +239,21 @@ def _conv_flop(part: str, batch: int) -> float:
     return one if in_c == 12 else 2 * one
 
 
+def matmul_rate(dtype: torch.dtype, size: int = 2048, repeats: int = 7) -> float:
+    """The core's matrix-multiply rate in GFLOPS (one thread, a size x size `torch.matmul`,
+    median of `repeats`): what the update's convolutions are held against."""
+    torch.set_num_threads(1)
+    a = torch.randn(size, size).to(dtype)
+    b = torch.randn(size, size).to(dtype)
+    torch.matmul(a, b)
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        torch.matmul(a, b)
+        times.append(time.perf_counter() - start)
+    return 2.0 * size**3 / statistics.median(times) / 1e9
+
+
 def bench_profile(rounds: int, block: int, frames: list[np.ndarray]) -> dict:
     """The learner's update by part (one thread), medians over `rounds` profiled blocks."""
     from torch.profiler import ProfilerActivity, profile
@@ -272,6 +287,7 @@ def bench_profile(rounds: int, block: int, frames: list[np.ndarray]) -> dict:
             parts.setdefault(part, []).append(ms)
     medians = {part: statistics.median(ms) for part, ms in parts.items()}
     return {
+        "matmul_gflops": matmul_rate(agent.dtype),
         "conv_dtype": str(agent.dtype).replace("torch.", ""),
         "update_ms": statistics.median(walls),
         "update_ms_range": (min(walls), max(walls)),
@@ -294,10 +310,13 @@ def print_profile(r: dict) -> None:
         print(f"    {part:58} {ms:6.1f}{rate}")
     share = conv_ms / sum(r["parts"].values())
     bound = EXPERIMENT_UPDATES * conv_ms / 1000 / 2 / 60
+    flop = sum(_conv_flop(part, BATCH) for part in r["parts"] if part.startswith("conv"))
     print(
-        f"  the convolutions: {conv_ms:.1f} ms ({share:.0%} of the profiled time); at this "
-        f"rate the paper's experiment's {EXPERIMENT_UPDATES:,} updates need {bound:.0f} min "
-        "of the 2 cores for them alone"
+        f"  the convolutions: {conv_ms:.1f} ms ({share:.0%} of the profiled time) at "
+        f"{flop / conv_ms / 1e6:.1f} GFLOPS, against the core's {r['conv_dtype']} matmul rate "
+        f"of {r['matmul_gflops']:.1f} GFLOPS (2048x2048, 1 thread); at this rate the paper's "
+        f"experiment's {EXPERIMENT_UPDATES:,} updates need {bound:.0f} min of the 2 cores for "
+        "them alone"
     )
 
 
