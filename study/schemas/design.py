@@ -109,8 +109,8 @@ class StudyDesign(BaseModel):
     capacity: int = Field(default=8, strict=True, ge=1, le=10_000)
     """Participants at once (started visits not ended); more arrivals see the study full.
     The default is what this project's 2-core machine holds with the advice round trip's
-    p95 under 100 ms (8: 58 ms; 14: 741 ms; `benchmarks/bench_capacity.py`, README
-    "Speed"), measured with the benchmark's two Chromium pages on the same two cores. 30 at
+    p95 under 100 ms (8: 58 ms; 14: 741 ms; `benchmarks/bench_capacity.py`,
+    docs/speed.md), measured with the benchmark's two Chromium pages on the same two cores. 30 at
     once reach the aim only with a pool practised for them (`pool`; the practice of arrivals
     beyond it shares the cores): then a median 99 ms (43-126) over five runs with the
     browsers, 23 ms without them (AVX2-only EPYC): measure yours and set it."""
