@@ -30,7 +30,6 @@ from runs.batch.backends import usable_cores
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Step, StudySession
-from study.schemas.studies import StudyCreate
 from study.services.studies import create_study
 
 PRETRAINING_STEPS = 1000
@@ -78,7 +77,7 @@ def main(argv: list[str] | None = None) -> None:
         engine = make_engine(url)
         upgrade(engine)
         with make_session_factory(engine)() as db:
-            study = create_study(db, StudyCreate(name="bench")).id
+            study = create_study(db, "bench").id
         template = RunSpec.from_json({"config": {"episodes": args.episodes, "torch_threads": 1}})
         spec = BatchSpec(template=template, methods=("autonomous",), agents=args.workers)
         load_before = os.getloadavg()[0]

@@ -49,7 +49,6 @@ from runs.batch.runner import BatchRunner
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Step
-from study.schemas.studies import StudyCreate
 from study.services.studies import create_study
 
 RESULTS = Path(__file__).parent / "results"
@@ -91,7 +90,7 @@ def fresh_study(url: str, name: str) -> int:
     engine = make_engine(url)
     upgrade(engine)
     with make_session_factory(engine)() as db:
-        return create_study(db, StudyCreate(name=name)).id
+        return create_study(db, name).id
 
 
 def training_rate(url: str, session_ids: list[int]) -> tuple[int, float]:

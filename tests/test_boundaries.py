@@ -307,3 +307,86 @@ def test_the_record_check_finds_what_crosses_and_what_is_a_bare_dict() -> None:
         assert RECORD.search(bare), bare
     for typed in ("dict[str, int]", "ReportDescription", "Any", "dict[int, list[str]]"):
         assert not RECORD.search(typed), typed
+
+
+# --- a service takes domain values, never a REST body ------------------------------------
+def request_bodies(trees: dict[str, ast.Module]) -> set[str]:
+    """The models a route takes as its request body: a parameter of a route (a function
+    under `@router.post(...)` and the like) annotated with a pydantic model, which FastAPI
+    reads from the body."""
+    models = defined_models(trees)
+    found = set()
+    for module, tree in trees.items():
+        if not module.startswith("server.routes."):
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and _route(node):
+                for arg in [*node.args.args, *node.args.kwonlyargs]:
+                    if arg.annotation is not None:
+                        name = _qualified(module, tree, arg.annotation)
+                        if name in models:
+                            found.add(name)
+    return found
+
+
+def _route(node: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
+    verbs = {"get", "post", "put", "patch", "delete"}
+    return any(
+        isinstance(d, ast.Call) and isinstance(d.func, ast.Attribute) and d.func.attr in verbs
+        for d in node.decorator_list
+    )
+
+
+def bodies_taken(trees: dict[str, ast.Module], bodies: set[str], package: str) -> list[str]:
+    """`module.function(parameter: Body)` for every function of `package` that takes one."""
+    found = []
+    for module, tree in trees.items():
+        if not module.startswith(package):
+            continue
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                continue
+            for arg in [*node.args.posonlyargs, *node.args.args, *node.args.kwonlyargs]:
+                names = ast.walk(arg.annotation) if arg.annotation is not None else ()
+                for part in names:
+                    named = isinstance(part, ast.Name | ast.Attribute)
+                    if named and _qualified(module, tree, part) in bodies:
+                        found.append(f"{module}.{node.name}({ast.unparse(arg)})")
+    return sorted(set(found))
+
+
+def test_no_service_takes_a_rest_body() -> None:
+    """Issue 18: the core's services are plain functions over domain values; the routes,
+    the dashboard and the command line each read their own body and call the same ones."""
+    trees = _trees()
+    bodies = request_bodies(trees)
+    assert {"study.schemas.studies.StudyCreate", "study.schemas.participant.AdviceCreate"} <= bodies
+    taken = bodies_taken(trees, bodies, "study.services.")
+    assert not taken, f"take the body's values (keywords, a domain value), not the body: {taken}"
+
+
+def test_the_body_check_sees_a_service_taking_a_body() -> None:
+    route = ast.parse(
+        "from study.schemas.studies import StudyCreate, Other\n"
+        "@router.post('')\ndef create(db, body: StudyCreate) -> None: pass\n"
+        "def helper(db, body: Other) -> None: pass\n"
+    )
+    schemas = ast.parse(
+        "import pydantic as p\nclass StudyCreate(p.BaseModel): pass\n"
+        "class Other(p.BaseModel): pass\n"
+    )
+    service = ast.parse(
+        "from study.schemas import studies\n"
+        "def make(db, body: studies.StudyCreate | None, name: str) -> None: pass\n"
+        "def fine(db, name: str) -> None: pass\n"
+    )
+    trees = {
+        "server.routes.x": route,
+        "study.schemas.studies": schemas,
+        "study.services.y": service,
+    }
+    bodies = request_bodies(trees)
+    assert bodies == {"study.schemas.studies.StudyCreate"}
+    assert bodies_taken(trees, bodies, "study.services.") == [
+        "study.services.y.make(body: studies.StudyCreate | None)"
+    ]

@@ -310,7 +310,6 @@ def resolve_study(db: Session, study: str, create: bool = True) -> tuple[int | N
     from sqlalchemy import select
 
     from study.db.models import Study
-    from study.schemas.studies import StudyCreate
     from study.services.studies import create_study
 
     if study.isdigit():
@@ -327,7 +326,7 @@ def resolve_study(db: Session, study: str, create: bool = True) -> tuple[int | N
         return found.id, f"study {found.id} ({found.name})"
     if not create:
         return None, f"new study {study!r} (not created: dry run)"
-    created = create_study(db, StudyCreate(name=study, description="Baselines run in batch."))
+    created = create_study(db, study, description="Baselines run in batch.")
     return created.id, f"new study {created.id} ({created.name})"
 
 

@@ -68,7 +68,9 @@ def create_study(args: argparse.Namespace) -> int:
     upgrade(engine, settings.data_dir / BACKUPS)
     with make_session_factory(engine)() as db:
         try:
-            study = studies.create_study(db, body)
+            study = studies.create_study(
+                db, body.name, description=body.description, texts=body.texts, design=body.design
+            )
         except ServiceError as error:
             if isinstance(error, Invalid):
                 raise CommandError(f"{error.field}: {error.message}", EXIT_USAGE) from None

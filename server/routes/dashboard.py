@@ -38,7 +38,7 @@ from study.schemas.dashboard import (
 )
 from study.schemas.reports import ReportPublic
 from study.schemas.sessions import SessionOptions
-from study.schemas.studies import Preview, StudyCreate, StudyUpdate
+from study.schemas.studies import Preview
 from study.services import reports, sessions, studies
 
 COOKIE = "ideeprl_dashboard"
@@ -152,7 +152,7 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
 @router.post("/dashboard/api/studies/{study_id}/design", dependencies=[LoginDep])
 def set_design(db: DbDep, study_id: StudyId, body: NewDesign) -> dict[str, Any]:
     """The study's design, whole (as `PATCH /api/studies/ID` with `design`)."""
-    study = studies.update_study(db, study_id, StudyUpdate(design=body.design))
+    study = studies.update_study(db, study_id, design=body.design)
     return {"design": study.design}
 
 
@@ -205,7 +205,7 @@ async def command(
 
 @router.post("/dashboard/api/studies", dependencies=[LoginDep], status_code=201)
 def new_study(db: DbDep, body: NewStudy) -> dict[str, int]:
-    return {"id": studies.create_study(db, StudyCreate(name=body.name)).id}
+    return {"id": studies.create_study(db, body.name).id}
 
 
 @router.post(

@@ -26,7 +26,9 @@ router = APIRouter(prefix="/api/studies", tags=["studies"], dependencies=[Resear
 
 @router.post("", status_code=201)
 def create_study(db: DbDep, settings: SettingsDep, body: StudyCreate) -> StudyPublic:
-    study = studies.create_study(db, body)
+    study = studies.create_study(
+        db, body.name, description=body.description, texts=body.texts, design=body.design
+    )
     storage.remove_study_files(settings.data_dir, study.id)  # left by a database reusing ids
     return studies.public(db, study, settings.base_url)
 
@@ -45,7 +47,9 @@ def get_study(db: DbDep, settings: SettingsDep, study_id: StudyId) -> StudyPubli
 def update_study(
     db: DbDep, settings: SettingsDep, study_id: StudyId, body: StudyUpdate
 ) -> StudyPublic:
-    return studies.public(db, studies.update_study(db, study_id, body), settings.base_url)
+    changes = body.model_dump(exclude_unset=True, exclude={"design"})
+    study = studies.update_study(db, study_id, **changes, design=body.design)
+    return studies.public(db, study, settings.base_url)
 
 
 @router.delete("/{study_id}", status_code=204)

@@ -1,9 +1,14 @@
 """Studies: create, list, read, change, delete. An online study's design is checked here
-(each condition's run as a session's would be) and stored with every default written out."""
+(each condition's run as a session's would be) and stored with every default written out.
+
+Like every service, these take domain values (a name, texts, a `StudyDesign`), never a
+REST body: the routes, the dashboard and the command line read their own bodies and call
+the same functions."""
 
 from __future__ import annotations
 
 import secrets
+from collections.abc import Mapping
 
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
@@ -11,7 +16,7 @@ from sqlalchemy.orm import Session
 
 from study.db.models import Study, StudySession
 from study.schemas.design import StudyDesign
-from study.schemas.studies import StudyCreate, StudyPublic, StudyUpdate
+from study.schemas.studies import StudyPublic
 from study.services import learning
 from study.services.errors import Conflict, Invalid, NotFound
 
@@ -64,33 +69,53 @@ def design_of(study: Study) -> StudyDesign | None:
     return None if study.design is None else StudyDesign.model_validate(study.design)
 
 
-def create_study(db: Session, body: StudyCreate) -> Study:
-    study = Study(**body.model_dump(exclude={"design"}))
-    if body.design is not None:
-        set_design(study, body.design)
+def create_study(
+    db: Session,
+    name: str,
+    *,
+    description: str = "",
+    texts: Mapping[str, str] | None = None,
+    design: StudyDesign | None = None,
+) -> Study:
+    """A new study; with a `design`, an online one (its link and assignment seed made)."""
+    study = Study(name=name, description=description, texts=dict(texts or {}))
+    if design is not None:
+        set_design(study, design)
     db.add(study)
+    _commit(db, name)
+    return study
+
+
+def _commit(db: Session, name: str | None) -> None:
     try:
         db.commit()
     except IntegrityError:
         db.rollback()
-        raise Conflict(f"a study named {body.name!r} exists already; choose another name") from None
-    return study
+        raise Conflict(f"a study named {name!r} exists already; choose another name") from None
 
 
 def list_studies(db: Session) -> list[Study]:
     return list(db.scalars(select(Study).order_by(Study.id)))
 
 
-def update_study(db: Session, study_id: int, body: StudyUpdate) -> Study:
+def update_study(
+    db: Session,
+    study_id: int,
+    *,
+    name: str | None = None,
+    description: str | None = None,
+    texts: Mapping[str, str] | None = None,
+    design: StudyDesign | None = None,
+) -> Study:
+    """Change what is given (None: keep it); a new design replaces the old one whole."""
     study = get_study(db, study_id)
-    for field, value in body.model_dump(exclude_unset=True, exclude={"design"}).items():
-        if value is not None:
-            setattr(study, field, value)
-    if body.design is not None:
-        set_design(study, body.design)
-    try:
-        db.commit()
-    except IntegrityError:
-        db.rollback()
-        raise Conflict(f"a study named {body.name!r} exists already; choose another name") from None
+    if name is not None:
+        study.name = name
+    if description is not None:
+        study.description = description
+    if texts is not None:
+        study.texts = dict(texts)
+    if design is not None:
+        set_design(study, design)
+    _commit(db, name)
     return study

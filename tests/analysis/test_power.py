@@ -26,7 +26,6 @@ from learner.run import RunSpec
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Episode, Status
-from study.schemas.studies import StudyCreate
 from study.services.sessions import create_session
 from study.services.studies import create_study
 
@@ -159,7 +158,7 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
         "oracle": [[1.5, 2.0, 1.5, 2.5], [2.0, 2.5, 2.0, 1.0], [1.0, 2.5, 2.5, 2.0]],
     }
     with make_session_factory(engine)() as db:
-        study = create_study(db, StudyCreate(name="pilot", description="power"))
+        study = create_study(db, "pilot", description="power")
         for method, runs in rewards.items():
             for seed, episodes in enumerate(runs):
                 session = create_session(db, study.id, RunSpec(method=method, seed=seed))
@@ -249,7 +248,7 @@ def test_the_command_refuses_what_it_cannot_do(
     assert "no autonomous DeepRL sessions" in capsys.readouterr().err
     engine = make_engine(f"sqlite:///{data_dir / 'ideeprl.sqlite3'}")
     with make_session_factory(engine)() as db:
-        few = create_study(db, StudyCreate(name="tiny pilot"))
+        few = create_study(db, "tiny pilot")
         for method in ("autonomous", "autonomous", "oracle"):
             session = create_session(db, few.id, RunSpec(method=method))
             session.status = Status.finished.value

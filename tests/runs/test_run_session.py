@@ -13,7 +13,6 @@ from runs.worker.worker import WorkerOptions, run_session
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Advice, Episode, Step, StudySession
-from study.schemas.studies import StudyCreate
 from study.services.errors import Conflict
 from study.services.sessions import create_session
 from study.services.studies import create_study
@@ -29,7 +28,7 @@ def test_run_session_runs_a_session_to_its_end_in_this_process(tmp_path: Path) -
         upgrade(engine)
         factory = make_session_factory(engine)
         with factory() as db:
-            study = create_study(db, StudyCreate(name="batch"))
+            study = create_study(db, "batch")
             session = create_session(
                 db, study.id, RunSpec.from_json(session_body("oracle", advice_budget=10)["run"])
             )

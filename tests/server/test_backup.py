@@ -30,7 +30,6 @@ from study.db.backup import RESTORED, BackupError, backup, restore
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import alembic_config, upgrade
 from study.db.models import Episode, Status, Study, StudySession
-from study.schemas.studies import StudyCreate
 from study.services import learning
 from study.services.export import export_study
 from study.services.sessions import create_session
@@ -58,7 +57,7 @@ def _sessions_with_checkpoints(engine: Engine, data_dir: Path) -> dict[int, byte
     factory = make_session_factory(engine)
     contents = {}
     with factory() as db:
-        study = create_study(db, StudyCreate(name="backed up"))
+        study = create_study(db, "backed up")
         for status, name in ((Status.running, "step-000000120.pt"), (Status.finished, "final.pt")):
             session = create_session(db, study.id, RunSpec(method="oracle"), data_dir=data_dir)
             path = data_dir / "checkpoints" / f"session-{session.id}" / name
@@ -83,7 +82,7 @@ class Writer(threading.Thread):
         index = 0
         while not self.done.is_set():
             with self.factory() as db:
-                study = create_study(db, StudyCreate(name=f"row {index}", description="x" * 500))
+                study = create_study(db, f"row {index}", description="x" * 500)
                 self.committed.append(study.id)
             index += 1
 
@@ -280,7 +279,7 @@ def test_sessions_backed_up_while_they_write_resume_to_the_records_of_uninterrup
         engine = make_engine(url)
         upgrade(engine)
         with make_session_factory(engine)() as db:
-            study = create_study(db, StudyCreate(name="backed up while running")).id
+            study = create_study(db, "backed up while running").id
             runs = [learning.parse(body["run"]) for body in WRITERS.values()]
             ids = [create_session(db, study, run).id for run in runs]
         workers = {i: spawn.Process(target=run_session, args=(i, url, options)) for i in ids}

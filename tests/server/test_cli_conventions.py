@@ -21,7 +21,6 @@ from cli.commands.common import show_progress
 from cli.main import main
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
-from study.schemas.studies import StudyCreate
 from study.services.export import TABLES
 from study.services.studies import create_study
 
@@ -61,7 +60,7 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     engine = make_engine(f"sqlite:///{folder / 'ideeprl.sqlite3'}")
     upgrade(engine)
     with make_session_factory(engine)() as db:
-        create_study(db, StudyCreate(name="pilot study", description="for the CLI tests"))
+        create_study(db, "pilot study", description="for the CLI tests")
     engine.dispose()
     return folder
 

@@ -11,7 +11,6 @@ from study.db.backup import backup, restore
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import FittedAdvisorModel, StudySession
-from study.schemas.studies import StudyCreate
 from study.services.fitting import write_model_file
 from study.services.sessions import create_session
 from study.services.studies import create_study
@@ -34,7 +33,7 @@ def test_a_restored_fitted_session_names_its_model_in_the_new_data_folder(
         engine = make_engine(url)
         upgrade(engine)
         with make_session_factory(engine)() as db:
-            study = create_study(db, StudyCreate(name="fitted backup")).id
+            study = create_study(db, "fitted backup").id
             row = FittedAdvisorModel(study_id=study, model=model.to_json(), session_ids=[])
             db.add(row)
             db.commit()

@@ -16,7 +16,6 @@ from runs.worker.worker import WorkerOptions, run_session
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Status, StudySession
-from study.schemas.studies import StudyCreate
 from study.services.export import export_study
 from study.services.numerics import NumericsRefused
 from study.services.sessions import create_session, set_status
@@ -37,7 +36,7 @@ def database(tmp_path: Path) -> Iterator[str]:
 def _stopped_bf16_session(url: str) -> int:
     """A session pinned to bfloat16 convolutions that stopped before its end."""
     with make_session_factory(make_engine(url))() as db:
-        study = create_study(db, StudyCreate(name="numerics"))
+        study = create_study(db, "numerics")
         spec = RunSpec.from_json({"method": "oracle", "config": TINY})
         session = create_session(db, study.id, spec)
         assert session.run["config"]["device"] in ("cpu", "cuda")  # pinned when created
@@ -110,7 +109,7 @@ def test_ideeprl_train_refuses_to_resume_on_other_numerics(
 
 def test_sessions_are_pinned_where_they_are_created(database: str) -> None:
     with Session(make_engine(database)) as db:
-        study = create_study(db, StudyCreate(name="pinned"))
+        study = create_study(db, "pinned")
         made = create_session(db, study.id, RunSpec.from_json({"config": TINY}), threads=1)
         config = made.spec.config
     native = machine.bf16_native_cpu() or config.device == "cuda"

@@ -10,7 +10,6 @@ from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Episode, Status
 from study.schemas.design import StudyDesign
-from study.schemas.studies import StudyCreate
 from study.services import assignment, studies
 from study.services.reports import build_report
 
@@ -47,7 +46,7 @@ def test_the_report_compares_the_conditions_without_previews(tmp_path: Path) -> 
     )
     rewards = random.Random(5)
     with make_session_factory(engine)() as db:
-        study = studies.create_study(db, StudyCreate(name="online-report", design=design))
+        study = studies.create_study(db, "online-report", design=design)
         design = studies.design_of(study)
         assert design is not None
         tokens = [

@@ -13,7 +13,6 @@ from runs.worker.worker import WorkerOptions, run_session
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Step, StudySession
-from study.schemas.studies import StudyCreate
 from study.services.episodes import load_training_steps
 from study.services.outcomes import fill_outcomes
 from study.services.sessions import create_session
@@ -30,7 +29,7 @@ def test_old_logs_get_their_outcomes_by_replaying_their_episodes(tmp_path: Path)
         upgrade(engine)
         factory = make_session_factory(engine)
         with factory() as db:
-            study = create_study(db, StudyCreate(name="outcomes"))
+            study = create_study(db, "outcomes")
             spec = RunSpec.from_json({
                 "method": "oracle", "error_rate": 0.3, "config": TINY,
                 "scenario": {"knock_off_rate": 0.3, "reward_scheme": "authors-interactive"},

@@ -21,7 +21,6 @@ from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Advice, Step, StudySession
 from study.schemas.sessions import SessionOptions
-from study.schemas.studies import StudyCreate
 from study.services.sessions import create_session
 from study.services.studies import create_study
 from tests.server.live import fresh_database
@@ -80,7 +79,7 @@ def database(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Database]:
         engine = make_engine(url)
         upgrade(engine)
         with make_session_factory(engine)() as db:
-            create_study(db, StudyCreate(name="replays"))
+            create_study(db, "replays")
         engine.dispose()
         yield Database(url, tmp / "data")
 

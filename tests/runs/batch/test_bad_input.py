@@ -12,7 +12,6 @@ from sqlalchemy.orm import Session
 
 from study.db.migrate import upgrade
 from study.db.models import Study
-from study.schemas.studies import StudyCreate
 from study.services.studies import create_study
 from tests.runs.batch.helpers import SCALE, Place, sessions
 from tests.runs.batch.helpers import in_process as run
@@ -87,7 +86,7 @@ def test_a_study_with_nothing_finished_says_how_to_fill_it(
     assert code == 0 and "new study" in out and "not created" in out
     assert run(place, capsys, "batch", "--study", "still empty", *SCALE, "--agents", "0")[0] == 2
     with Session(place.engine()) as db:
-        study = create_study(db, StudyCreate(name="still empty")).id
+        study = create_study(db, "still empty").id
     assert sessions(place.engine(), study) == []
     code, out = run(place, capsys, "report", "--study", str(study), "--out", str(tmp_path / "r"))
     assert code == 1 and "no finished sessions to analyse; run sessions first" in out
@@ -100,7 +99,7 @@ def test_report_sessions_must_belong_to_the_study(
 ) -> None:
     upgrade(place.engine())
     with Session(place.engine()) as db:
-        study = create_study(db, StudyCreate(name="other")).id
+        study = create_study(db, "other").id
     code, out = run(
         place, capsys, "report", "--study", str(study), "--sessions", "424242",
         "--out", str(tmp_path / "r"),

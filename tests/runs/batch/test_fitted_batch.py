@@ -21,7 +21,6 @@ from learner.seeding import reset_seeds
 from runs.worker.worker import WorkerOptions, run_session
 from study.db.migrate import upgrade
 from study.db.models import Advice, Episode, FittedAdvisorModel, Step, StudySession
-from study.schemas.studies import StudyCreate
 from study.services import storage
 from study.services.errors import Invalid
 from study.services.sessions import create_session
@@ -49,7 +48,7 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
     engine = place.engine()
     upgrade(engine)
     with Session(engine) as db:  # the pilot: one oracle session, run by a real worker
-        study = create_study(db, StudyCreate(name="fitted pilot")).id
+        study = create_study(db, "fitted pilot").id
         spec = RunSpec.from_json({
             "method": "oracle", "error_rate": 0.3, "decision_time_median_s": 1.5, "config": TINY,
         })  # fmt: skip
@@ -158,7 +157,7 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
 def test_fit_says_what_is_missing(place: Place, capsys: pytest.CaptureFixture[str]) -> None:
     upgrade(place.engine())
     with Session(place.engine()) as db:
-        create_study(db, StudyCreate(name="unadvised"))
+        create_study(db, "unadvised")
     code, out = run(place, capsys, "fit", "--study", "unadvised")
     assert code == 1 and "no human session with advice to fit" in out, out
     code, out = run(place, capsys, "fit", "--study", "unadvised", "--methods", "sb3-dqn")

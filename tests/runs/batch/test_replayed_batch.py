@@ -19,7 +19,6 @@ def _advised_study(place: Place) -> tuple[int, list[int]]:
     from runs.worker.worker import WorkerOptions, run_session
     from study.db.engine import make_engine, make_session_factory
     from study.db.migrate import upgrade
-    from study.schemas.studies import StudyCreate
     from study.services.sessions import create_session
     from study.services.studies import create_study
 
@@ -29,7 +28,7 @@ def _advised_study(place: Place) -> tuple[int, list[int]]:
               "memory_size": 200, "max_episode_steps": 15, "torch_threads": 1}  # fmt: skip
     spec = RunSpec.from_json({"method": "oracle", "config": config})
     with make_session_factory(engine)() as db:
-        study = create_study(db, StudyCreate(name="advised")).id
+        study = create_study(db, "advised").id
         finished = create_session(db, study, spec).id
         create_session(db, study, spec.replace(seed=1))  # never run
     engine.dispose()
