@@ -54,6 +54,20 @@ def add_deprecated(parser: argparse.ArgumentParser, skip: tuple[str, ...] = ()) 
         parser.add_argument("--advisor", dest="deprecated_advisor", help=argparse.SUPPRESS)
 
 
+def add_set_option(group: argparse._ActionsContainer, help: str) -> None:
+    """`--set FIELD=VALUE`, repeatable: any field of the run by its leaf name (read by
+    `given_values`, which checks the name and the value)."""
+    group.add_argument(
+        "--set",
+        dest="assignments",
+        action="append",
+        type=_parse_assignment,
+        default=[],
+        metavar="FIELD=VALUE",
+        help=f"{help} (VALUE as JSON, else a string); repeatable",
+    )
+
+
 def given_values(args: argparse.Namespace, spec_class: type[RunSpec]) -> dict[str, Any]:
     """The run's leaves the flags gave (generated flags, `--set FIELD=VALUE`, deprecated
     names), by leaf name, each checked; `FieldError` for a bad one."""
@@ -96,15 +110,7 @@ def add_arguments(parser: argparse.ArgumentParser, spec_class: type[RunSpec] = R
     )
     add_spec_arguments(run, spec_class)
     add_deprecated(parser)
-    parser.add_argument(
-        "--set",
-        dest="assignments",
-        action="append",
-        type=_parse_assignment,
-        default=[],
-        metavar="FIELD=VALUE",
-        help="set any field of the run by its name (VALUE as JSON, else a string); repeatable",
-    )
+    add_set_option(parser, "set any field of the run by its name")
     parser.add_argument("--checkpoint-every", type=int, default=25, metavar="EPISODES")
     parser.add_argument(
         "--resume",
@@ -221,7 +227,7 @@ def _checkpoint_due(finished: EpisodeRecord | None, every: int) -> bool:
     return finished.episode % every == 0
 
 
-def _parse_assignment(item: str) -> tuple[str, Any]:
+def _parse_assignment(item: str) -> tuple[str, str]:
     name, sep, value = item.partition("=")
     if not sep or not name.strip():
         raise argparse.ArgumentTypeError("--set takes FIELD=VALUE")

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cli.commands.common import service_exit_code, show_progress
-from learner.cli import add_deprecated, given_values
+from learner.cli import add_deprecated, add_set_option, given_values
 from learner.fields import FieldError, leaves, nest, parse_text
 from learner.fields import add_arguments as add_spec_arguments
 from learner.run import RunSpec
@@ -132,15 +132,7 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         run, spec_class, skip=("method",), defaults={"torch_threads": "1 (half the cores, 1-4)"}
     )
     add_deprecated(parser, skip=("method",))
-    what.add_argument(
-        "--set",
-        dest="assignments",
-        action="append",
-        type=_assignment,
-        default=[],
-        metavar="FIELD=VALUE",
-        help="set any field of the runs by its name (VALUE as JSON, else a string); repeatable",
-    )
+    add_set_option(what, "set any field of the runs by its name")
     what.add_argument(
         "--run",
         dest="run_file",
@@ -206,13 +198,6 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     how.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_database_options(how)
     parser.set_defaults(func=batch, spec_class=spec_class)
-
-
-def _assignment(text: str) -> tuple[str, str]:
-    name, sep, value = text.partition("=")
-    if not sep or not name.strip():
-        raise argparse.ArgumentTypeError("--set takes FIELD=VALUE")
-    return name.strip(), value
 
 
 def spec_from(args: argparse.Namespace) -> BatchSpec:

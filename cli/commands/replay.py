@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cli.commands.batch import _assignment, add_database_options, settings_from
+from cli.commands.batch import add_database_options, settings_from
 from cli.commands.common import (
     EXIT_USAGE,
     CommandError,
@@ -20,7 +20,7 @@ from cli.commands.common import (
     print_json,
     service_exit_code,
 )
-from learner.cli import given_values
+from learner.cli import add_set_option, given_values
 from learner.fields import FieldError
 from learner.fields import add_arguments as add_spec_arguments
 from learner.run import RunSpec
@@ -75,15 +75,7 @@ def register(subparsers: Any) -> None:
         "original's run unchanged",
     )
     add_spec_arguments(run, RunSpec, skip=("method",))
-    what.add_argument(
-        "--set",
-        dest="assignments",
-        action="append",
-        type=_assignment,
-        default=[],
-        metavar="FIELD=VALUE",
-        help="change any field of the run by its name; repeatable",
-    )
+    add_set_option(what, "change any field of the run by its name")
     how = parser.add_argument_group("how to run it")
     how.add_argument(
         "--no-run", action="store_true", help="create the replay's session, do not run it"
