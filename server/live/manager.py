@@ -62,6 +62,7 @@ from runs.worker.population import (
 from runs.worker.worker import WorkerOptions, worker_main
 from server.live import visits
 from server.live.hub import Hub
+from server.live.reaping import join
 from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status
 from study.services import learning, numerics
 from study.services.errors import Conflict
@@ -243,7 +244,7 @@ class SessionManager:
         for handle in handles:
             handle.send(Command("shutdown"))
         for handle in handles:
-            await run_in_threadpool(handle.process.join, 60)
+            await run_in_threadpool(join, handle.process, 60)
             if handle.process.is_alive():
                 handle.process.terminate()
 
@@ -286,7 +287,7 @@ class SessionManager:
         handle.status = status.value
         with contextlib.suppress(Exception):
             handle.process.kill()
-        handle.process.join(5)
+        join(handle.process, 5)
         log.log(level, "session %s: %s", handle.session_id, detail)
         self._call_soon(self.notify, handle.session_id)
 
@@ -430,7 +431,7 @@ class SessionManager:
         exited), train the sessions still running under their tokens in one population
         worker; each gets a handle of its own on that worker."""
         for handle in group:
-            await run_in_threadpool(handle.process.join, self.command_timeout_s)
+            await run_in_threadpool(join, handle.process, self.command_timeout_s)
             if handle.process.is_alive():  # it resumes from its last checkpoint
                 log.warning("session %s: its worker did not hand over; killed", handle.session_id)
                 await run_in_threadpool(self._terminate, handle)
@@ -515,7 +516,7 @@ class SessionManager:
     def _terminate(handle: WorkerHandle) -> None:
         with contextlib.suppress(Exception):
             handle.process.kill()
-        handle.process.join(5)
+        join(handle.process, 5)
 
     def set_trainer_slots(self, slots: int) -> None:
         """Change how many human sessions may train at once (0: none); freed slots go to
@@ -672,7 +673,7 @@ class SessionManager:
             await self._until(session_id, lambda h: h.status not in LIVE_STATUSES)
             return
         handle.send(Command("stop"))
-        await run_in_threadpool(handle.process.join, self.command_timeout_s)
+        await run_in_threadpool(join, handle.process, self.command_timeout_s)
         if handle.process.is_alive():
             detail = (
                 f"stopped by the researcher; its worker did not answer within "
@@ -762,8 +763,7 @@ class SessionManager:
             if kind is not None:
                 self.hub.publish(handle.session_id, kind, message)
             self._call_soon(self._apply, handle, message)
-        handle.process.join(10)
-        self._exited(handle, handle.process.exitcode)
+        self._exited(handle, join(handle.process, 10))
 
     def _read_population(
         self, conn: Connection, process: Any, members: dict[int, WorkerHandle]
@@ -781,9 +781,9 @@ class SessionManager:
             if kind is not None:
                 self.hub.publish(handle.session_id, kind, message.message)
             self._call_soon(self._apply, handle, message.message)
-        process.join(10)
+        code = join(process, 10)
         for handle in members.values():
-            self._exited(handle, process.exitcode)
+            self._exited(handle, code)
 
     def _exited(self, handle: WorkerHandle, code: int | None) -> None:
         """The session's worker is gone: if it left the session live, it died."""

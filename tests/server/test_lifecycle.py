@@ -96,5 +96,5 @@ def test_a_killed_worker_is_noticed_at_once(server: LiveServer, api: httpx.Clien
     wait_step(api, session["id"], 0)
     os.kill(api.get(f"/api/sessions/{session['id']}").json()["worker_pid"], signal.SIGKILL)
     interrupted = wait_for_status(api, session["id"], {"interrupted"}, timeout=30)
-    assert "exited unexpectedly" in interrupted["status_detail"]
+    assert "exited unexpectedly (exit code -9)" in interrupted["status_detail"]
     assert api.post(f"/api/sessions/{session['id']}/stop").json()["status"] == "stopped"
