@@ -51,7 +51,8 @@ authors_own() { batch replication-2-authors A-own --methods autonomous "${AUTHOR
 # Its autonomous arm needs no advisor, and the plan lets float32 arms run on the AVX2-only
 # EPYC (bfloat16 ones never): `fp32-auto` runs it alone, before an advisor exists.
 FP32=(--reward-scheme authors-interactive --precision fp32)
-fp32_auto() { AGENTS=3 batch replication-2-authors A-fp32 --methods autonomous "${AUTHORS[@]}" "${FP32[@]}"; }
+# FP32_AGENTS=10: seeds 0-9, the plan's amendment 2 (exploratory; the plan's arm is 0-2).
+fp32_auto() { AGENTS=${FP32_AGENTS:-3} batch replication-2-authors A-fp32 --methods autonomous "${AUTHORS[@]}" "${FP32[@]}"; }
 fp32() {
   local advisor
   advisor=$(sqlite3 "$DATA/ideeprl.sqlite3" "select json_extract(s.run, '$.advisor_checkpoint') from sessions s join studies t on t.id = s.study_id where t.name = 'replication-2-authors' and json_extract(s.run, '$.method') = 'agent' and json_extract(s.run, '$.config.precision') != 'fp32' limit 1")
