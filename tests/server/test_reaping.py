@@ -29,7 +29,8 @@ def _wrong_codes(
         process.start()
         codes: list[int | None] = []
         threads = [
-            threading.Thread(target=lambda: codes.append(joiner(process, 5))) for _ in range(3)
+            threading.Thread(target=lambda c=codes, p=process: c.append(joiner(p, 5)))
+            for _ in range(3)
         ]
         for thread in threads:
             thread.start()
