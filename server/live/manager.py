@@ -65,6 +65,7 @@ from server.live.hub import Hub
 from server.live.reaping import join
 from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status
 from study.services import learning, numerics
+from study.services.assignment import expire_unopened_everywhere
 from study.services.errors import Conflict
 from study.services.sessions import (
     claim,
@@ -261,6 +262,7 @@ class SessionManager:
         with self.factory() as db:
             marked = mark_dead_interrupted(db, self.stale_after_s, set(self.handles))
             silent = silent_sessions(db, self.stale_after_s, set(owned))
+            expire_unopened_everywhere(db)  # links never opened free their place on time
         for session_id, token in silent:
             handle = owned[session_id]
             if handle.token != token:

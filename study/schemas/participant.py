@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from sim.actions import ACTION_NAMES
 from study.schemas.types import Int, Key, Number, Text
@@ -92,7 +92,7 @@ class AdviceReceipt(BaseModel):
 class ConsentCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    agree: bool = Field(description="True: consent; False: decline.")
+    agree: StrictBool = Field(description="True: consent; False: decline (JSON true or false).")
     texts_version: int | None = Field(
         default=None,
         ge=1,

@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from study.schemas.types import MAX_ID, Text
 
@@ -38,7 +38,7 @@ class ReportCreate(BaseModel):
         default=None, ge=1, le=100_000, description="First N episodes of every agent."
     )
     title: Text | None = Field(default=None, max_length=200, description="Report title.")
-    allow_mismatch: bool = Field(
+    allow_mismatch: StrictBool = Field(
         default=False,
         description="Also give the t-tests of methods that ran under different settings "
         "(reward scheme, learner, scenario); the report's warning stays.",

@@ -146,6 +146,22 @@ def expire_unopened(db: Session, study: Study, design: StudyDesign) -> int:
     return int(result.rowcount)  # type: ignore[attr-defined]
 
 
+def expire_unopened_everywhere(db: Session) -> int:
+    """`expire_unopened` for every online study with a visit waiting to be opened: the web
+    process's reaper calls it, so a place frees on time even when nobody arrives after."""
+    waiting = select(StudySession.study_id).where(
+        StudySession.condition.is_not(None),
+        StudySession.status == Status.created.value,
+        StudySession.pooled.is_(False),
+        StudySession.outcome.is_(None),
+    )
+    expired = 0
+    for study in db.scalars(select(Study).where(Study.id.in_(waiting))):
+        if study.design is not None:
+            expired += expire_unopened(db, study, StudyDesign.model_validate(study.design))
+    return expired
+
+
 def block_order(seed: int, block: int, conditions: list[str]) -> list[str]:
     """Block `block`'s conditions in the order the study's seed gives."""
     return random.Random(f"{seed}/{block}").sample(sorted(conditions), len(conditions))

@@ -61,7 +61,11 @@ def record_decision(
     """Consent (`agree`) or decline, with the time and the texts version shown.
 
     The first consent stands (a second click changes nothing); a decline is recorded even
-    after an earlier one, and a participant who declined may still consent later."""
+    after an earlier one, and a participant who declined may still consent later, in a lab
+    session; an online visit that has ended (declined, excluded, timed out) takes no
+    decision any more."""
+    if session.outcome is not None and session.consented_at is None:
+        raise Conflict(f"this visit has ended ({session.outcome}); it takes no consent now")
     if version_id is not None:
         version = db.get(StudyTexts, version_id)
         if version is None or version.study_id != session.study_id:

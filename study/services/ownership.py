@@ -19,7 +19,14 @@ from datetime import UTC, datetime, timedelta
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
-from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession, utcnow
+from study.db.models import (
+    ENDED_EARLY,
+    LIVE_STATUSES,
+    RESUMABLE_STATUSES,
+    Status,
+    StudySession,
+    utcnow,
+)
 from study.services.errors import Conflict, NotFound
 
 HOST = socket.gethostname()
@@ -41,6 +48,11 @@ def claim(db: Session, session_id: int, resume: bool) -> str:
             raise Conflict(f"session {session_id} is {session.status} already")
         if session.status == Status.finished:
             raise Conflict(f"session {session_id} has finished; create a new session to rerun it")
+        if session.status in [s.value for s in ENDED_EARLY]:
+            raise Conflict(
+                f"session {session_id} is {session.status}: its participant's visit has ended "
+                "and it cannot run again; the study's link gives the place to a new arrival"
+            )
         if not resume:
             raise Conflict(f"session {session_id} is {session.status}; resume it instead of start")
         raise Conflict(f"session {session_id} is {session.status} and cannot be resumed")

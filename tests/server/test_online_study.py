@@ -368,12 +368,21 @@ def test_a_decline_over_the_participant_api_ends_the_visit_too(
     study = make_study(api, "online-api-decline")
     token = token_of(arrive(server, study, "A1", "10.9.0.1"))
     with server.client(key=None, token=token) as participant:
+        for loose in ("yes", "true", 1, None):  # only JSON true or false is a decision
+            unclear = participant.post("/api/participant/consent", json={"agree": loose})
+            assert unclear.status_code == 422, (loose, unclear.text)
         declined = participant.post("/api/participant/consent", json={"agree": False})
         assert declined.status_code == 200, declined.text
         state = participant.get("/api/participant/state").json()
         assert state["status"] == "declined" and "ended" in state["message"]
+        late = participant.post("/api/participant/consent", json={"agree": True})
+        assert late.status_code == 409 and "visit has ended" in late.json()["detail"]
     (session,) = sessions_of(api, study)
     assert session["outcome"] == "declined" and session["status"] == "declined"
+    assert session["declined_at"] and session["consented_at"] is None
+    for again in ("start", "resume"):  # both say the same: the visit is over
+        refused = api.post(f"/api/sessions/{session['id']}/{again}")
+        assert refused.status_code == 409 and "visit has ended" in refused.json()["detail"]
 
 
 def test_bad_panel_parameters_are_a_400_not_a_session(
@@ -394,7 +403,12 @@ def test_a_link_never_opened_times_out_and_frees_its_place(
 ) -> None:
     study = make_study(api, "online-unopened", target=1, idle_limit_s=0.5)
     first = token_of(arrive(server, study, "U1", "10.11.0.1"))  # the redirect not followed
-    time.sleep(0.6)
+    # Nobody else arrives: the server's own round (every 2 heartbeats) frees the place.
+    deadline = time.monotonic() + 15
+    while (waiting := sessions_of(api, study)[0])["status"] != "timed_out":
+        assert time.monotonic() < deadline, waiting
+        time.sleep(0.25)
+    assert waiting["outcome"] == "timed_out" and "never opened" in waiting["status_detail"]
     second = token_of(arrive(server, study, "U2", "10.11.0.2"))
     made = {s["participant_url"].rsplit("/", 1)[1]: s for s in sessions_of(api, study)}
     assert made[first]["status"] == "timed_out" and made[first]["outcome"] == "timed_out"
