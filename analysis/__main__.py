@@ -17,6 +17,7 @@ from typing import Any
 
 import pandas as pd
 
+from analysis.baseline import AUTO, NO_BASELINE, BaselineError, choose_baseline
 from analysis.demo_curves import demo_episodes
 from analysis.episodes import CONTRACT, EpisodeTableError
 from analysis.exported import ExportError, read_export
@@ -34,7 +35,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("out_dir", help="folder for the report")
     parser.add_argument("--demo", action="store_true", help="use made-up curves, not a CSV")
-    parser.add_argument("--baseline", default="autonomous", help="method to improve on")
+    parser.add_argument(
+        "--baseline",
+        default=AUTO,
+        help=f"method (or an online study's condition) to improve on; {AUTO!r} (default): "
+        f"autonomous DeepRL when there is some, else none; {NO_BASELINE!r}: compare the "
+        "methods with each other",
+    )
     parser.add_argument("--episodes", type=int, dest="n_episodes", help="keep the first N")
     parser.add_argument("--smoothing", type=int, default=1, help="moving average for plots")
     parser.add_argument("--title", default="IDeepRL study: the paper's analysis")
@@ -51,19 +58,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ExportError as error:
             print(f"error: {error}", file=sys.stderr)
             return 2
-        episodes = export.episodes
-        extra = {"settings": export.settings, "steps": export.steps}
+        episodes, settings = export.episodes, export.settings
         notes = [f"Sessions from the export `{args.episodes}`."]
+        if export.design is not None:  # an online study: its conditions are compared
+            # (a session with no condition, a batch run beside the study, keeps its method)
+            group = {i: str(run.method) for i, run in export.runs.items()} | export.conditions
+            episodes = episodes.assign(method=episodes["session_id"].map(group))
+            settings = settings.assign(method=settings["session_id"].map(group))
+            notes.append(f"An online study: its conditions are compared, at α = {export.alpha:g}.")
+        extra = {"settings": settings, "steps": export.steps, "alpha": export.alpha}
     else:
         episodes = pd.read_csv(args.episodes)
         notes = [f"Episodes from `{args.episodes}`."]
+    try:
+        baseline, baseline_notes = choose_baseline(episodes["method"].unique(), args.baseline)
+    except BaselineError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     try:
         result = write_report(
             episodes,
             args.out_dir,
             title=args.title,
-            baseline=args.baseline,
-            notes=notes,
+            baseline=baseline,
+            notes=[*notes, *baseline_notes],
             n_episodes=args.n_episodes,
             smoothing=args.smoothing,
             **extra,

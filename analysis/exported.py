@@ -19,7 +19,7 @@ import math
 import tempfile
 import zipfile
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +50,16 @@ class Exported:
     export has it)."""
     settings: pd.DataFrame
     """The audit's settings table (`analysis.settings`)."""
+    design: dict[str, Any] | None = None
+    """An online study's design as `study.json` has it (None: a lab study, an older
+    export)."""
+    conditions: dict[int, str] = field(default_factory=dict)
+    """An online study's condition of each session that has one, by session id."""
+
+    @property
+    def alpha(self) -> float:
+        """The design's α (an online study), else the analysis' 0.05."""
+        return float((self.design or {}).get("alpha", 0.05))
 
 
 def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
@@ -68,7 +78,17 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
     training = training.sort_values(["session_id", "episode"])
     steps = _with_stage(_table(path, "steps"))
     steps = steps[steps["stage"] == "train"].sort_values(["session_id", "global_step"])
+    design = _design(path)
+    conditions = {}
+    if design is not None and "condition" in sessions:
+        conditions = {
+            int(row["session_id"]): str(row["condition"])
+            for row in _rows(sessions)
+            if not _missing(row["condition"])
+        }
     return Exported(
+        design=design,
+        conditions=conditions,
         runs=runs,
         episodes=training[list(EPISODE_TABLE_COLUMNS)].reset_index(drop=True),
         steps=steps[[*STEP_COLUMNS, *(["outcome"] if "outcome" in steps else [])]].reset_index(
@@ -105,6 +125,15 @@ def _provenance(sessions: pd.DataFrame) -> dict[int, list[Any]] | None:
         int(row["session_id"]): [] if _missing(row["provenance"]) else json.loads(row["provenance"])
         for row in _rows(sessions)
     }
+
+
+def _design(folder: Path) -> dict[str, Any] | None:
+    """`study.json`'s design (None where the export has none: a lab study, older ones)."""
+    file = folder / "study.json"
+    if not file.is_file():
+        return None
+    design = json.loads(file.read_text()).get("design")
+    return design if isinstance(design, dict) else None
 
 
 def _table(folder: Path, name: str) -> pd.DataFrame:

@@ -36,6 +36,11 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="an online study's panel ids as they are, for payment (default: pseudonymous)",
     )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier export in --out (a folder holding anything else is refused)",
+    )
     add_json_option(parser, "the folder, the format and each table file's row count")
     add_database_options(parser)
     parser.set_defaults(func=export)
@@ -44,14 +49,23 @@ def register(subparsers: Any) -> None:
 def export(args: argparse.Namespace) -> int:
     from study.db.engine import make_session_factory
     from study.services.errors import ServiceError
-    from study.services.export import export_study
+    from study.services.export import clear_earlier_export, export_study
 
     if args.out.exists() and not args.out.is_dir():
         raise CommandError(f"{args.out} is a file; --out takes a folder", code=2)
+    used = args.out.is_dir() and any(args.out.iterdir())
+    if used and not args.overwrite:
+        raise CommandError(
+            f"{args.out} is not empty: export into a new or empty folder, or add --overwrite "
+            "to replace an earlier export there",
+            code=2,
+        )
     engine = existing_database(settings_from(args))
     with make_session_factory(engine)() as db:
         study_id, _ = find_study(db, args.study)
         try:
+            if used:
+                clear_earlier_export(args.out)
             counts = export_study(db, study_id, args.out, args.format, panel_ids=args.panel_ids)
         except ServiceError as error:
             raise CommandError(error.message, service_exit_code(error)) from None

@@ -7,10 +7,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
+from analysis.baseline import AUTO
 from study.schemas.types import MAX_ID, Text
-
-AUTO = "auto"
-"""Baseline choice: autonomous DeepRL when the report has it, else none."""
 
 
 class ReportCreate(BaseModel):

@@ -47,6 +47,7 @@ from study.db.models import (
 )
 from study.services import learning, visit_export
 from study.services.columns import TEXT_KEYS, table_columns
+from study.services.errors import Conflict
 from study.services.studies import get_study
 from study.services.tables import column, resource, write_csv, write_parquet
 
@@ -283,11 +284,41 @@ def export_study(
     write_csv(out / "columns.csv", DICTIONARY_COLUMNS, dictionary)
     (out / "study.json").write_text(
         json.dumps(
-            {"id": study.id, "name": study.name, "description": study.description, "rows": counts},
+            {
+                "id": study.id,
+                "name": study.name,
+                "description": study.description,
+                "design": study.design,  # an online study's conditions, α, checks; else null
+                "rows": counts,
+            },
             indent=2,
         )
     )
     return counts
+
+
+EXTRA_FILES = ("datapackage.json", "columns.csv", "study.json")
+"""What an export writes besides its tables (and the `advice/` folder of images)."""
+
+
+def clear_earlier_export(out: Path) -> int:
+    """Remove what an earlier export wrote into `out` (its tables in either format, the
+    data package, `advice/`), so a new one leaves nothing of the old study behind; returns
+    the entries removed. A folder that holds anything else is refused, untouched."""
+    ours = {*EXTRA_FILES, *(f"{t}.{fmt}" for t in TABLES for fmt in FORMATS)}
+    entries = list(out.iterdir())
+    foreign = sorted(
+        e.name for e in entries if not ((e.name == "advice" and e.is_dir()) or e.name in ours)
+    )
+    if foreign:
+        listed = ", ".join(foreign[:5]) + (", ..." if len(foreign) > 5 else "")
+        raise Conflict(f"{out} holds more than an earlier export ({listed}); choose another folder")
+    for entry in entries:
+        if entry.is_dir():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+    return len(entries)
 
 
 def export_zip(

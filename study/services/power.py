@@ -14,6 +14,7 @@ from pathlib import Path
 
 from sqlalchemy.orm import Session
 
+from analysis.baseline import AUTO, NO_BASELINE
 from analysis.episodes import (
     EpisodeTableError,
     method_name,
@@ -34,7 +35,7 @@ from analysis.stats import agent_totals
 from study.csvsafe import safe_frame
 from study.services.episodes import load_episodes
 from study.services.errors import Conflict, Invalid
-from study.services.reports import AUTO, NO_BASELINE, ReportRequest, select_sessions
+from study.services.reports import ReportRequest, select_sessions
 from study.services.studies import get_study
 
 MIN_DRAWS = 100

@@ -22,9 +22,10 @@ from typing import TYPE_CHECKING, TypedDict
 import pandas as pd
 from sqlalchemy.orm import Session
 
+from analysis.baseline import AUTO, BaselineError
+from analysis.baseline import choose_baseline as baseline_rule
 from analysis.episodes import EpisodeTableError, method_name
 from study.db.models import Status, StudySession
-from study.schemas.reports import AUTO
 from study.services.errors import Conflict, Invalid, NotFound
 from study.services.sessions import list_sessions
 from study.services.studies import design_of, get_study
@@ -34,7 +35,6 @@ from study.settings import Settings
 if TYPE_CHECKING:
     from analysis.report import ReportResult
 
-NO_BASELINE = "none"
 _publishing = threading.Lock()
 
 
@@ -133,24 +133,11 @@ def select_sessions(
 
 
 def choose_baseline(methods: set[str], baseline: str) -> tuple[str | None, list[str]]:
-    if baseline == NO_BASELINE:
-        return None, []
-    if baseline == AUTO:
-        if "autonomous" in methods:
-            return "autonomous", []
-        return None, [
-            "No autonomous DeepRL sessions in this report, so no improvement in percent: "
-            "the methods are compared with each other. Add the baseline with "
-            "`ideeprl batch --methods autonomous` in the same study, or name another "
-            "method as the baseline."
-        ]
-    if baseline not in methods:
-        raise Invalid(
-            "baseline",
-            f"baseline method {baseline!r} has no sessions in this report (methods: "
-            f"{', '.join(sorted(methods))}); name one of them, {AUTO!r} or {NO_BASELINE!r}",
-        )
-    return baseline, []
+    """`analysis.baseline.choose_baseline`, its error a 422 on `baseline`."""
+    try:
+        return baseline_rule(methods, baseline)
+    except BaselineError as error:
+        raise Invalid("baseline", str(error)) from None
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,8 @@ run from its columns, the episode table and the steps, and the report with its a
 from __future__ import annotations
 
 import csv
+import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -60,3 +62,39 @@ def test_a_folder_that_is_no_export_is_a_usage_error(tmp_path: Path) -> None:
     with pytest.raises(ExportError, match="not a study export"):
         read_export(tmp_path)
     assert main([str(tmp_path), str(tmp_path / "out")]) == 2
+
+
+def _as_online_study(folder: Path, alpha: float) -> dict[int, str]:
+    """The fixture's export rewritten as an online study's: its `study.json` with a design
+    (α, two conditions) and a condition per session, as today's export writes them."""
+    shutil.copytree(OLD_EXPORT, folder)
+    with (folder / "sessions.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    names = {"autonomous": "no-advice", "oracle": "advised"}
+    for row in rows:
+        row["condition"] = names[row["method"]]
+    with (folder / "sessions.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    study = json.loads((folder / "study.json").read_text())
+    conditions = [{"name": name} for name in names.values()]
+    study["design"] = {"alpha": alpha, "conditions": conditions}
+    (folder / "study.json").write_text(json.dumps(study))
+    return {int(row["session_id"]): row["condition"] for row in rows}
+
+
+def test_an_online_studys_export_compares_its_conditions_at_its_alpha(tmp_path: Path) -> None:
+    folder = tmp_path / "online"
+    conditions = _as_online_study(folder, alpha=0.01)
+    export = read_export(folder)
+    assert export.conditions == conditions and export.alpha == 0.01
+    assert main([str(folder), str(tmp_path / "auto")]) == 0
+    text = (tmp_path / "auto" / "report.md").read_text()
+    assert "conditions are compared, at α = 0.01" in text
+    assert "No autonomous DeepRL sessions" in text, "no method is named 'autonomous' now"
+    assert "advised" in text and "no-advice" in text
+    assert main([str(folder), str(tmp_path / "vs"), "--baseline", "no-advice"]) == 0
+    assert main([str(folder), str(tmp_path / "none"), "--baseline", "none"]) == 0
+    assert main([str(folder), str(tmp_path / "bad"), "--baseline", "autonomous"]) == 2
+    assert not (tmp_path / "bad").exists()

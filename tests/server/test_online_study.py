@@ -216,6 +216,8 @@ def test_preview_takes_no_place_stays_out_of_the_export_and_deletes_in_one_call(
     assert len(sessions_of(api, study)) == 3
     folder = exported(api, study, tmp_path / "pseudonymous")
     check_frictionless(folder)
+    design = json.loads((folder / "study.json").read_text())["design"]
+    assert design == api.get(f"/api/studies/{study['id']}").json()["design"], "for the analysis"
     exported_ids = {int(r["session_id"]) for r in table(folder, "sessions")}
     assert made.json()["session_id"] not in exported_ids and len(exported_ids) == 2
     assert {r["session_id"] for r in table(folder, "assignments")} == set(map(str, exported_ids))

@@ -226,3 +226,23 @@ def test_every_exported_run_is_accepted_back_unchanged(
             spec = spec_from(build_parser().parse_args([*argv, *place.flags]))
             back = spec.spec_of(document["method"], document["seed"])
             assert back == RunSpec.from_json(document)
+
+
+def test_an_export_never_mixes_with_what_a_folder_held(
+    place: Place, baselines: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "used"
+    (out / "advice").mkdir(parents=True)
+    stale = out / "advice" / "session-999-advice-00000.png"  # another study's image
+    stale.write_bytes(b"old")
+    (out / "episodes.parquet").write_bytes(b"old")
+    argv = ["export", "--study", "baselines", "--out", str(out), *place.flags]
+    assert main(argv) == 2 and "not empty" in capsys.readouterr().err
+    assert stale.exists(), "a refused export touches nothing"
+    assert main([*argv, "--overwrite"]) == 0
+    assert not stale.exists() and not (out / "episodes.parquet").exists()
+    assert (out / "episodes.csv").is_file() and (out / "study.json").is_file()
+
+    (out / "notes.txt").write_text("mine")
+    assert main([*argv, "--overwrite"]) == 1 and "notes.txt" in capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "mine" and (out / "episodes.csv").is_file()
