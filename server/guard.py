@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -384,13 +384,10 @@ QUOTABLE = 12
 SENT = "(the value sent)"
 
 
-def _leaves(body: bytes) -> set[str]:
-    """Every value (string or number) of a JSON body that a message could quote, as it
+def _leaves(value: Any) -> set[str]:
+    """Every value (string or number) under a JSON value that a message could quote, as it
     would be printed (`str` and `repr`); not the keys, which name fields."""
-    try:
-        stack = [json.loads(body)]
-    except ValueError:
-        return set()
+    stack = [value]
     found: set[str] = set()
     while stack:
         item = stack.pop()
@@ -403,19 +400,61 @@ def _leaves(body: bytes) -> set[str]:
     return found
 
 
+_NOTHING = object()
+
+
+async def _json_body(request: Request) -> Any:
+    """The request's body as JSON (`_NOTHING`: none, not JSON, or streamed, not kept)."""
+    try:
+        body = await request.body()
+        return json.loads(body) if body else _NOTHING
+    except (RuntimeError, ValueError):
+        return _NOTHING
+
+
+def _value_at(body: Any, loc: Sequence[Any]) -> Any:
+    """The part of the body an error's `loc` points to (`_NOTHING` if it points nowhere);
+    a step that names no key (a union member's tag) stays where it is."""
+    if not loc or loc[0] != "body" or body is _NOTHING:
+        return _NOTHING
+    node = body
+    for part in loc[1:]:
+        in_list = isinstance(node, list) and isinstance(part, int) and abs(part) < len(node)
+        if in_list or (isinstance(node, dict) and part in node):
+            node = node[part]
+    return node
+
+
+def _hidden(message: str, values: set[str]) -> str:
+    if len(message) < QUOTABLE:
+        return message
+    for value in sorted(values, key=len, reverse=True):
+        message = message.replace(value, SENT)
+    return message
+
+
 async def without_input(request: Request, message: str) -> str:
     """`message` with every long value of the request's body taken out: a 422 says what is
     wrong with a field, never what was sent (a message built by a service or the learner's
     config may quote it)."""
-    try:
-        body = await request.body()
-    except RuntimeError:  # the body was streamed, not kept: nothing to compare with
-        return message
-    if len(message) < QUOTABLE or not body:
-        return message
-    for value in sorted(_leaves(body), key=len, reverse=True):
-        message = message.replace(value, SENT)
-    return message
+    body = await _json_body(request)
+    return message if body is _NOTHING else _hidden(message, _leaves(body))
+
+
+_UNION_MEMBER = re.compile(
+    r"^(function-(after|before|wrap|plain)|constrained-\w+|json-or-python)\["
+)
+_BASE_TYPE = re.compile(r"(?<![\w.])(str|int|float|bool|list|dict|bytes)(?![\w(])")
+
+
+def _readable(part: Any) -> Any:
+    """A `loc` step as a person reads it: pydantic names a union's member by its validator
+    chain (with a function's address, `functools.partial(<function ...> at 0x...)`); say
+    the type it takes instead."""
+    if not isinstance(part, str) or not (_UNION_MEMBER.match(part) or " at 0x" in part):
+        return part
+    kinds = _BASE_TYPE.findall(part)
+    return kinds[-1] if kinds else "(one of the allowed kinds)"
 
 
 def _printable(value: Any) -> Any:
@@ -427,10 +466,17 @@ def _printable(value: Any) -> Any:
 async def validation_error(request: Request, error: RequestValidationError) -> JSONResponse:
     """FastAPI's 422, without echoing the input: input it cannot encode (NaN, a lone
     surrogate) would turn the 422 into a 500, and a message need not repeat the input."""
+    body = await _json_body(request)
+    everything = set() if body is _NOTHING else _leaves(body)
     detail = []
     for e in error.errors():
-        loc = [_printable(part) for part in e.get("loc", ())]
-        msg = await without_input(request, _printable(e.get("msg", "")))
+        where = e.get("loc", ())
+        loc = [_printable(_readable(part)) for part in where]
+        # only the value this error is about is hidden: the message may rightly name other
+        # text the body also holds (an allowed option sent in another field)
+        sent = _value_at(body, where)
+        quoted = everything if sent is _NOTHING else _leaves(sent)
+        msg = _hidden(_printable(e.get("msg", "")), quoted)
         if e.get("type") == "extra_forbidden" and loc:
             # the field's name is the sender's text: say where, not what
             loc[-1] = "(unknown field)"

@@ -242,6 +242,28 @@ def test_a_422_names_the_field_without_echoing_what_was_sent(
             assert response.json()["detail"][0]["loc"][0] == "body"
 
 
+def test_a_422_reads_as_a_person_would_and_hides_only_the_value_it_is_about(
+    server: LiveServer, participant_token: tuple[int, str]
+) -> None:
+    study, token = participant_token
+    with server.client(key=None, token=token) as participant:  # a union: int, float or text
+        wrong = participant.post(
+            "/api/participant/questionnaire", json={"answers": {"trust": {"q1": [1]}}}
+        )
+    assert wrong.status_code == 422, wrong.text
+    steps = [part for item in wrong.json()["detail"] for part in item["loc"]]
+    assert " at 0x" not in wrong.text and "function-after" not in wrong.text, wrong.text
+    assert {"int", "float", "str"} <= set(steps), steps
+    with server.client() as api:  # the message's list of allowed schemes, one of them sent
+        body = {
+            "label": "authors-interactive",
+            "run": {"method": "oracle", "scenario": {"reward_scheme": "a-scheme-of-mine"}},
+        }
+        response = api.post(f"/api/studies/{study}/sessions", json=body)
+    assert response.status_code == 422, response.text
+    assert "a-scheme-of-mine" not in response.text and "authors-interactive" in response.text
+
+
 def test_every_text_field_is_bounded(
     server: LiveServer, participant_token: tuple[int, str]
 ) -> None:
