@@ -27,6 +27,11 @@ def register(subparsers: Any) -> None:
         "capacity, alpha, idle_limit_s, panel, check, questionnaire)",
     )
     create.add_argument("--name", help="the study's name (instead of the file's)")
+    create.add_argument(
+        "--public-url",
+        help="address participants reach the server at, for the printed link (as `ideeprl "
+        "serve --public-url`; default IDEEPRL_PUBLIC_URL, else http://127.0.0.1:8000)",
+    )
     add_json_option(create, "the study as the API returns it")
     add_database_options(create)
     create.set_defaults(func=create_study)
@@ -75,11 +80,18 @@ def create_study(args: argparse.Namespace) -> int:
             if isinstance(error, Invalid):
                 raise CommandError(f"{error.field}: {error.message}", EXIT_USAGE) from None
             raise CommandError(error.message) from None
-        public = studies.public(db, study, settings.base_url)
+        public = studies.public(db, study, args.public_url or settings.base_url)
     engine.dispose()
     if args.json:
         print_json(public.model_dump(mode="json"))
-    else:
-        link = f"; its link: {public.join_url}" if public.join_url else ""
-        print(f"study {public.id} ({public.name}) created{link}")
+        return 0
+    print(f"study {public.id} ({public.name}) created")
+    if public.join_url:
+        print(f"its link: {public.join_url}")
+        if not (args.public_url or settings.public_url):
+            print(
+                "(for a server at the default address; behind another one give --public-url "
+                "or IDEEPRL_PUBLIC_URL, as `ideeprl serve` has it: the dashboard shows the "
+                "link as the server sees it)"
+            )
     return 0

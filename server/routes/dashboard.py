@@ -108,6 +108,13 @@ def logout(request: Request) -> Response:
     return response
 
 
+@router.get("/", include_in_schema=False)
+def root() -> Response:
+    """The server's address alone leads to the dashboard (participants come by their own
+    links, the API lives under /api and its reference at /docs)."""
+    return RedirectResponse("/dashboard", status_code=303)
+
+
 @router.get("/dashboard")
 def dashboard(request: Request) -> Response:
     if not _logged_in(request):

@@ -33,6 +33,13 @@ def _overview(server: LiveServer, cookie: str) -> int:
         return copied.get("/dashboard/api/overview").status_code
 
 
+def test_the_servers_address_alone_leads_to_the_dashboards_login(server: LiveServer) -> None:
+    with httpx.Client(base_url=server.url, timeout=30, follow_redirects=True) as browser:
+        landing = browser.get("/")
+    assert [r.headers["location"] for r in landing.history] == ["/dashboard", "/dashboard/login"]
+    assert landing.status_code == 200 and 'name="key"' in landing.text
+
+
 def test_the_cookie_is_refused_after_logout(server: LiveServer) -> None:
     first = _login(server).cookies[COOKIE]
     second = _login(server).cookies[COOKIE]

@@ -337,7 +337,7 @@ design:
 
 
 def test_a_study_from_a_design_file_reads_back_as_the_file(
-    server: LiveServer, api: httpx.Client, tmp_path: Path
+    server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     import yaml
 
@@ -348,8 +348,10 @@ def test_a_study_from_a_design_file_reads_back_as_the_file(
     source = tmp_path / "design.yaml"
     source.write_text(DESIGN_FILE)
     argv = ["study", "create", "--from", str(source), "--database-url", server.database_url]
-    assert main([*argv, "--data-dir", str(tmp_path)]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--data-dir", str(tmp_path), "--public-url", server.url]) == 0
     (study,) = [s for s in api.get("/api/studies").json() if s["name"] == "online-from-file"]
+    assert f"its link: {study['join_url']}\n" in capsys.readouterr().out, "the server's link"
 
     def normalised(design: dict[str, Any]) -> dict[str, Any]:
         return stored_design(StudyDesign.model_validate(design))
