@@ -3,12 +3,24 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints
+from pydantic_core import PydanticCustomError
 
 from study.schemas.design import StudyDesign
 from study.schemas.types import Text, Texts
+
+
+def _not_blank(value: str) -> str:
+    value = value.strip()
+    if not value:
+        raise PydanticCustomError("blank", "A name must not be blank")
+    return value
+
+
+StudyName = Annotated[Text, StringConstraints(max_length=200), AfterValidator(_not_blank)]
+"""A study's name: spaces around it dropped, then at least one character."""
 
 
 class StudyBase(BaseModel):
@@ -23,7 +35,7 @@ class StudyBase(BaseModel):
 
 
 class StudyCreate(StudyBase):
-    name: Text = Field(min_length=1, max_length=200, description="Unique name of the study.")
+    name: StudyName = Field(description="Unique name of the study (not blank).")
     design: StudyDesign | None = Field(
         default=None,
         description="An online study's design (conditions, targets, capacity, panel, check, "
@@ -35,7 +47,7 @@ class StudyCreate(StudyBase):
 class StudyUpdate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    name: Text | None = Field(default=None, min_length=1, max_length=200)
+    name: StudyName | None = None
     description: Text | None = Field(default=None, max_length=10_000)
     texts: Texts | None = Field(default=None, max_length=32)
     design: StudyDesign | None = Field(

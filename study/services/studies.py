@@ -116,6 +116,29 @@ def update_study(
     if texts is not None:
         study.texts = dict(texts)
     if design is not None:
+        _keeps_conditions_in_use(db, study, design)
         set_design(study, design)
     _commit(db, name)
     return study
+
+
+def _keeps_conditions_in_use(db: Session, study: Study, design: StudyDesign) -> None:
+    """A new design may not drop a condition that has sessions: its participants' data
+    would lose the arm it belongs to (lower its target to close it instead)."""
+    old = set((study.design or {}).get("conditions", {}))
+    dropped = sorted(old - set(design.conditions))
+    if not dropped:
+        return
+    query = (
+        select(StudySession.condition, func.count())
+        .where(StudySession.study_id == study.id, StudySession.condition.in_(dropped))
+        .where(StudySession.preview.is_(False))
+        .group_by(StudySession.condition)
+    )
+    used = {condition: count for condition, count in db.execute(query)}
+    if used:
+        listed = ", ".join(f"{name!r} ({n} session{'s' * (n != 1)})" for name, n in used.items())
+        raise Conflict(
+            f"the new design drops condition(s) that have sessions: {listed}; keep them "
+            "(lower a target to its completed count to close it) or start a new study"
+        )

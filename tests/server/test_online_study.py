@@ -436,3 +436,27 @@ def test_mturk_workers_return_to_mturks_own_submit_url(
             page = b.get(f"/p/{token}/end").text
         url = f"{expected}/mturk/externalSubmit?assignmentId=A%20{worker}&amp;code=NOPE"
         assert f'content="5;url={url}"' in page
+
+
+def test_a_new_design_keeps_every_condition_that_has_participants(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = make_study(api, "online-redesign")
+    token_of(arrive(server, study, "R1", "10.14.0.1"))
+    (session,) = sessions_of(api, study)
+    taken = session["condition"]
+    other = ({"early", "alternating"} - {taken}).pop()
+    kept_only_other = design()
+    del kept_only_other["conditions"][taken]
+    refused = api.patch(f"/api/studies/{study['id']}", json={"design": kept_only_other})
+    assert refused.status_code == 409 and repr(taken) in refused.json()["detail"], refused.text
+    unused_dropped = design()
+    del unused_dropped["conditions"][other]  # nobody is in it yet: it may go
+    assert api.patch(f"/api/studies/{study['id']}", json={"design": unused_dropped}).is_success
+    stored = api.get(f"/api/studies/{study['id']}").json()["design"]["conditions"]
+    assert set(stored) == {taken}
+    for blank in ("", "   ", "\t\n"):
+        assert api.patch(f"/api/studies/{study['id']}", json={"name": blank}).status_code == 422
+        assert api.post("/api/studies", json={"name": blank}).status_code == 422
+    renamed = api.patch(f"/api/studies/{study['id']}", json={"name": "  online-redesigned "})
+    assert renamed.json()["name"] == "online-redesigned"
