@@ -17,6 +17,16 @@
     };
     slider.addEventListener("input", touch);
     slider.addEventListener("change", touch);
+    // A click, tap or key on the slider where it already stands (its midpoint, or an end
+    // for Home/End) is an answer too, though the value does not change and no input event
+    // comes: answered as a change, which also clears the item's "please answer".
+    const answerAsItStands = () => {
+      if (!slider.dataset.touched) slider.dispatchEvent(new Event("change", { bubbles: true }));
+    };
+    slider.addEventListener("pointerup", answerAsItStands);
+    slider.addEventListener("keyup", (event) => {
+      if (/^(Arrow|Home$|End$|Page)/.test(event.key)) answerAsItStands();
+    });
   }
 
   // An answer given clears that item's "please answer".
