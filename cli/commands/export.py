@@ -53,16 +53,16 @@ def export(args: argparse.Namespace) -> int:
 
     if args.out.exists() and not args.out.is_dir():
         raise CommandError(f"{args.out} is a file; --out takes a folder", code=2)
-    used = args.out.is_dir() and any(args.out.iterdir())
-    if used and not args.overwrite:
-        raise CommandError(
-            f"{args.out} is not empty: export into a new or empty folder, or add --overwrite "
-            "to replace an earlier export there",
-            code=2,
-        )
     engine = existing_database(settings_from(args))
     with make_session_factory(engine)() as db:
-        study_id, _ = find_study(db, args.study)
+        study_id, _ = find_study(db, args.study)  # an unknown study says so first
+        used = args.out.is_dir() and any(args.out.iterdir())
+        if used and not args.overwrite:
+            raise CommandError(
+                f"{args.out} is not empty: export into a new or empty folder, or add "
+                "--overwrite to replace an earlier export there",
+                code=2,
+            )
         try:
             if used:
                 clear_earlier_export(args.out)

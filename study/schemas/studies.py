@@ -3,24 +3,12 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any
+from typing import Any
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints
-from pydantic_core import PydanticCustomError
+from pydantic import BaseModel, ConfigDict, Field
 
 from study.schemas.design import StudyDesign
-from study.schemas.types import Text, Texts
-
-
-def _not_blank(value: str) -> str:
-    value = value.strip()
-    if not value:
-        raise PydanticCustomError("blank", "A name must not be blank")
-    return value
-
-
-StudyName = Annotated[Text, StringConstraints(max_length=200), AfterValidator(_not_blank)]
-"""A study's name: spaces around it dropped, then at least one character."""
+from study.schemas.types import StudyName, Text, Texts
 
 
 class StudyBase(BaseModel):

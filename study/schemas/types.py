@@ -36,3 +36,14 @@ MAX_TEXT = 50_000
 """Characters of one page text (the consent form is the longest, about 3,000)."""
 Texts = dict[Key, Annotated[Text, Field(max_length=MAX_TEXT)]]
 """Page texts by key (a study's, or a condition's over them)."""
+
+
+def _not_blank(value: str) -> str:
+    value = value.strip()
+    if not value:
+        raise PydanticCustomError("blank", "A name must not be blank")
+    return value
+
+
+StudyName = Annotated[Text, StringConstraints(max_length=200), AfterValidator(_not_blank)]
+"""A study's name: spaces around it dropped, then at least one character."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import secrets
 from collections.abc import Mapping
 
+from pydantic import TypeAdapter, ValidationError
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
@@ -17,6 +18,7 @@ from sqlalchemy.orm import Session
 from study.db.models import Study, StudySession
 from study.schemas.design import StudyDesign
 from study.schemas.studies import StudyPublic
+from study.schemas.types import StudyName
 from study.services import learning
 from study.services.errors import Conflict, Invalid, NotFound
 
@@ -78,12 +80,26 @@ def create_study(
     design: StudyDesign | None = None,
 ) -> Study:
     """A new study; with a `design`, an online one (its link and assignment seed made)."""
+    name = valid_name(name)
     study = Study(name=name, description=description, texts=dict(texts or {}))
     if design is not None:
         set_design(study, design)
     db.add(study)
     _commit(db, name)
     return study
+
+
+_NAME = TypeAdapter(StudyName)
+
+
+def valid_name(name: str) -> str:
+    """A study's name as stored (`StudyName`: spaces around it dropped, not blank, at most
+    200 characters, text a database can hold), whoever gives it: the API, a design file,
+    `ideeprl batch --study NAME`."""
+    try:
+        return _NAME.validate_python(name)
+    except ValidationError as error:
+        raise Invalid("name", f"the study's name: {error.errors()[0]['msg']}") from None
 
 
 def _commit(db: Session, name: str | None) -> None:
@@ -110,7 +126,7 @@ def update_study(
     """Change what is given (None: keep it); a new design replaces the old one whole."""
     study = get_study(db, study_id)
     if name is not None:
-        study.name = name
+        study.name = name = valid_name(name)
     if description is not None:
         study.description = description
     if texts is not None:

@@ -117,6 +117,9 @@ def test_unknown_studies_are_runtime_errors_and_bad_options_usage_errors(
     assert main(["report", "--study", "pilot study", "--out", out, *flags]) == 1
     assert "no finished sessions" in capsys.readouterr().err
     assert main(["report", "--study", "1", "--n-episodes", "0", "--out", out, *flags]) == 2
+    # a study made by name from the command line follows the API's rule for names
+    assert main(["batch", "--study", "   ", "--methods", "autonomous", *flags]) == 2
+    assert "name must not be blank" in capsys.readouterr().err
     with pytest.raises(SystemExit) as stopped:
         main(["export", "--no-such-option"])
     assert stopped.value.code == 2
