@@ -56,9 +56,10 @@ def test_the_example_design_file_makes_its_online_study(tmp_path: Path) -> None:
     from cli.main import main
 
     written = yaml.safe_load(EXAMPLE_DESIGN.read_text())
+    url = f"sqlite:///{tmp_path / 'example.sqlite3'}"  # this file, whatever DATABASE_URL says
     argv = ["study", "create", "--from", str(EXAMPLE_DESIGN), "--data-dir", str(tmp_path)]
-    assert main(argv) == 0
-    engine = make_engine(f"sqlite:///{tmp_path / 'ideeprl.sqlite3'}")
+    assert main([*argv, "--database-url", url]) == 0
+    engine = make_engine(url)
     try:
         with make_session_factory(engine)() as db:
             (study,) = db.scalars(select(Study)).all()
