@@ -17,7 +17,13 @@ from typing import Any
 
 import pandas as pd
 
-from analysis.baseline import AUTO, NO_BASELINE, BaselineError, choose_baseline
+from analysis.baseline import (
+    AUTO,
+    NO_BASELINE,
+    BaselineError,
+    choose_baseline,
+    compare_conditions,
+)
 from analysis.demo_curves import demo_episodes
 from analysis.episodes import CONTRACT, EpisodeTableError
 from analysis.exported import ExportError, read_export
@@ -63,9 +69,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if export.design is not None:  # an online study: its conditions are compared
             # (a session with no condition, a batch run beside the study, keeps its method)
             group = {i: str(run.method) for i, run in export.runs.items()} | export.conditions
-            episodes = episodes.assign(method=episodes["session_id"].map(group))
-            settings = settings.assign(method=settings["session_id"].map(group))
-            notes.append(f"An online study: its conditions are compared, at α = {export.alpha:g}.")
+            episodes, settings, note = compare_conditions(episodes, settings, group, export.alpha)
+            notes.append(note)
         extra = {"settings": settings, "steps": export.steps, "alpha": export.alpha}
     else:
         episodes = pd.read_csv(args.episodes)

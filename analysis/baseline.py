@@ -1,14 +1,20 @@
-"""Which method (or online condition) a report measures the others against.
+"""What a report compares, and which method (or online condition) it measures the others
+against.
 
 One rule for the report from the database (`ideeprl report`, the API) and the one from an
-export (`python -m analysis EXPORT OUT`): `auto` takes autonomous DeepRL when the report
-has it, else compares the methods with each other; `none` never names a baseline; any
-other name must have sessions in the report.
+export (`python -m analysis EXPORT OUT`): an online study's conditions stand where methods
+stand; `auto` takes autonomous DeepRL when the report has it, else compares the methods
+with each other; `none` never names a baseline; any other name must have sessions in the
+report.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # (the web process reads AUTO from here, without pandas)
+    import pandas as pd
 
 AUTO = "auto"
 """The baseline is autonomous DeepRL when present, else none."""
@@ -40,3 +46,15 @@ def choose_baseline(methods: Iterable[str], baseline: str) -> tuple[str | None, 
             f"{', '.join(sorted(present))}); name one of them, {AUTO!r} or {NO_BASELINE!r}"
         )
     return baseline, []
+
+
+def compare_conditions(
+    episodes: pd.DataFrame, settings: pd.DataFrame, group: Mapping[int, str], alpha: float
+) -> tuple[pd.DataFrame, pd.DataFrame, str]:
+    """An online study's episodes and settings with each session's `group` (its condition,
+    or its method where it has none) as its method, and the report's note saying so."""
+    return (
+        episodes.assign(method=episodes["session_id"].map(group)),
+        settings.assign(method=settings["session_id"].map(group)),
+        f"An online study: its conditions are compared, at α = {alpha:g}.",
+    )

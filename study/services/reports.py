@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, TypedDict
 import pandas as pd
 from sqlalchemy.orm import Session
 
-from analysis.baseline import AUTO, BaselineError
+from analysis.baseline import AUTO, BaselineError, compare_conditions
 from analysis.baseline import choose_baseline as baseline_rule
 from analysis.episodes import EpisodeTableError, method_name
 from study.db.models import Status, StudySession
@@ -173,9 +173,8 @@ def build_report(
     episodes = load_episodes(db, [s.id for s in sessions])
     settings = session_settings(sessions)
     if design is not None:  # the conditions are what is compared
-        episodes["method"] = episodes["session_id"].map(group)
-        settings["method"] = settings["session_id"].map(group)
-        notes.append(f"An online study: its conditions are compared, at α = {design.alpha:g}.")
+        episodes, settings, note = compare_conditions(episodes, settings, group, design.alpha)
+        notes.append(note)
     steps = load_training_steps(db, [s.id for s in sessions])
     advice = load_advised_steps(db, [s.id for s in sessions])
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))

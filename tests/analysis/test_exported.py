@@ -78,7 +78,7 @@ def _as_online_study(folder: Path, alpha: float) -> dict[int, str]:
         writer.writeheader()
         writer.writerows(rows)
     study = json.loads((folder / "study.json").read_text())
-    conditions = [{"name": name} for name in names.values()]
+    conditions = {name: {"run": {"method": method}} for method, name in names.items()}
     study["design"] = {"alpha": alpha, "conditions": conditions}
     (folder / "study.json").write_text(json.dumps(study))
     return {int(row["session_id"]): row["condition"] for row in rows}
