@@ -117,35 +117,92 @@ class _PhaseMaxBiasRelu(torch.autograd.Function):
     or back).
     The gradient goes to the first maximal phase in row-major window order, as
     `max_pool2d`'s does; masks are built from signs of differences, which are exact and much
-    faster on the CPU than `where`."""
+    faster on the CPU than `where`. The phases are views of `y` or, in bfloat16, a copy
+    with each phase apart (`_phases`): the same values either way, to the bit."""
 
     @staticmethod
     def forward(ctx, y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
-        y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
+        phases, ctx.apart = _phases(y)
+        y0, y1, y2, y3 = phases.unbind(0)
         m01, m23 = torch.maximum(y0, y1), torch.maximum(y2, y3)
         out = _add_bias(torch.maximum(m01, m23), bias).relu_()
-        ctx.save_for_backward(y, m01, m23, out)
+        ctx.save_for_backward(y if not ctx.apart else phases, m01, m23, out)
         ctx.bias_groups = bias.shape[0] if bias.dim() == 2 else 0
         return out
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        y, m01, m23, out = ctx.saved_tensors
+        saved, m01, m23, out = ctx.saved_tensors
         grad = torch.ops.aten.threshold_backward(grad, out, 0)
         if ctx.bias_groups:  # each group's sum as if alone: the same float order
             sums = [g.sum((0, 2, 3), dtype=torch.float32) for g in grad.chunk(ctx.bias_groups)]
             grad_bias = torch.stack(sums)
         else:
             grad_bias = grad.sum((0, 2, 3), dtype=torch.float32)
-        y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
+        if ctx.apart:
+            phases, grad_phases = saved, torch.empty_like(saved)
+        else:
+            grad_y = torch.empty_like(saved)
+            phases, grad_phases = _phase_views(saved), _phase_views(grad_y)
+        y0, y1, y2, y3 = phases.unbind(0)
         grad_hi = grad * _greater(m23, m01)
         grad_lo = grad - grad_hi
-        grad_y = torch.empty_like(y).unflatten(1, (4, -1))
-        torch.mul(grad_lo, _greater(y1, y0), out=grad_y[:, 1])
-        torch.sub(grad_lo, grad_y[:, 1], out=grad_y[:, 0])
-        torch.mul(grad_hi, _greater(y3, y2), out=grad_y[:, 3])
-        torch.sub(grad_hi, grad_y[:, 3], out=grad_y[:, 2])
-        return grad_y.flatten(1, 2), grad_bias
+        g0, g1, g2, g3 = grad_phases.unbind(0)
+        torch.mul(grad_lo, _greater(y1, y0), out=g1)
+        torch.sub(grad_lo, g1, out=g0)
+        torch.mul(grad_hi, _greater(y3, y2), out=g3)
+        torch.sub(grad_hi, g3, out=g2)
+        return (_join_phases(grad_phases) if ctx.apart else grad_y), grad_bias
+
+
+def _phase_views(y: torch.Tensor) -> torch.Tensor:
+    """The four output phases of (B, 4*o, h, w) as views (4, B, o, h, w) of `y`."""
+    return y.unflatten(1, (4, -1)).transpose(0, 1)
+
+
+def _phases(y: torch.Tensor) -> tuple[torch.Tensor, bool]:
+    """The four output phases of (B, 4*o, h, w) channels-last, as (4, B, o, h, w), and
+    whether they were copied apart.
+
+    In float32, views of `y` (no copy). In 2-byte types, a copy with each phase's values
+    apart, (4, B, h, w, o) in memory: on strided views of `y` (o of every 4*o values) the
+    CPU's bfloat16 kernels run several times slower than this one copy costs (measured on
+    the Xeon with AMX: the first layer's max-pool forward and back 19.3 ms to 6.0, float32
+    views 8.5). Where a phase's o values of a pixel fill one or two 8-byte words, they
+    move as int64."""
+    b, c, h, w = y.shape
+    o = c // 4
+    nhwc = y.permute(0, 2, 3, 1)
+    if y.element_size() != 2 or not nhwc.is_contiguous():
+        return _phase_views(y), False
+    words = _phase_words(o, y.element_size())
+    if words:
+        flat = nhwc.reshape(-1).view(torch.int64).view(b * h * w, 4, words)
+        apart = flat.transpose(0, 1).contiguous().view(y.dtype).view(4, b, h, w, o)
+    else:
+        apart = nhwc.reshape(b, h, w, 4, o).permute(3, 0, 1, 2, 4).contiguous()
+    return apart.permute(0, 1, 4, 2, 3), True
+
+
+def _join_phases(phases: torch.Tensor) -> torch.Tensor:
+    """(B, 4*o, h, w) channels-last from phases copied apart by `_phases`: the copy back."""
+    _, b, o, h, w = phases.shape
+    apart = phases.permute(0, 1, 3, 4, 2)
+    out = torch.empty((b, h, w, 4, o), dtype=phases.dtype, device=phases.device)
+    words = _phase_words(o, phases.element_size())
+    if words:
+        flat = apart.reshape(-1).view(torch.int64).view(4, b * h * w, words)
+        out.view(-1).view(torch.int64).view(b * h * w, 4, words).copy_(flat.transpose(0, 1))
+    else:
+        out.permute(3, 0, 1, 2, 4).copy_(apart)
+    return out.view(b, h, w, 4 * o).permute(0, 3, 1, 2)
+
+
+def _phase_words(o: int, itemsize: int) -> int:
+    """How many 8-byte words hold one phase's o values of a pixel, where moving them as
+    int64 is the faster copy (one or two words, measured); else 0."""
+    size = o * itemsize
+    return size // 8 if size % 8 == 0 and size // 8 <= 2 else 0
 
 
 def _greater(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -156,18 +213,26 @@ def _greater(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 def phase_max_bias_relu(y: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
     if torch.is_grad_enabled() and (y.requires_grad or bias.requires_grad):
         return _PhaseMaxBiasRelu.apply(y, bias)
-    y0, y1, y2, y3 = y.unflatten(1, (4, -1)).unbind(1)
+    y0, y1, y2, y3 = _phases(y)[0].unbind(0)
     m = torch.maximum(torch.maximum(y0, y1), torch.maximum(y2, y3))
     return _add_bias(m, bias).relu_()
 
 
 def _add_bias(m: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
     """m += bias in place: a bias (o,) for every image, or (G, o), one per group of
-    consecutive images (the agents of a population, `learner.stacked`)."""
-    if bias.dim() == 1:
-        return m.add_(bias.to(m.dtype).view(1, -1, 1, 1))
-    groups = bias.shape[0]
-    m.unflatten(0, (groups, -1)).add_(bias.to(m.dtype).view(groups, 1, -1, 1, 1))
+    consecutive images (the agents of a population, `learner.stacked`).
+
+    `m` is channels-last, so its channels are the innermost o values of each pixel: the
+    bias is added as one row of a pixel row's w*o values (the bias repeated w times),
+    which the CPU's kernels vectorise, where adding it per channel runs in loops of o
+    (several times slower in bfloat16). The same sums, element by element."""
+    groups = bias.shape[0] if bias.dim() == 2 else 1
+    b, o, h, w = m.shape
+    row = bias.to(m.dtype).reshape(groups, 1, o).repeat(1, w, 1).view(groups, 1, w * o)
+    if m.permute(0, 2, 3, 1).is_contiguous():
+        m.permute(0, 2, 3, 1).view(groups, (b // groups) * h, w * o).add_(row)
+    else:
+        m.unflatten(0, (groups, -1)).add_(bias.to(m.dtype).view(groups, 1, -1, 1, 1))
     return m
 
 

@@ -110,3 +110,40 @@ def test_a_layer_its_convolution_pads_computes_what_zeros_padded_before_do(
             assert bias is not None
             x = phase_max_bias_relu(channels_last(y), bias)
     assert pads == [2, 1, 0]
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
+@pytest.mark.parametrize("out_channels", [4, 8, 16])
+@pytest.mark.parametrize("groups", [0, 2])
+def test_the_phase_max_pool_is_max_pool2d_to_the_bit(
+    dtype: torch.dtype, out_channels: int, groups: int
+) -> None:
+    """The max over the four output phases, plus bias and ReLU, computes what `max_pool2d`
+    of the same pixels in their places does: outputs and the input's gradient equal to the
+    bit, ties included (the gradient to the first maximum in row-major window order), in
+    float32 (phases as views) and in bfloat16 (phases copied apart, by words where they
+    fit), for one bias and for a population's bias per group of images."""
+    torch.manual_seed(3)
+    batch, side, o = 4, 6, out_channels
+    # few distinct values: many windows with tied maxima
+    y = (torch.randint(-3, 4, (batch, 4 * o, side, side)) / 4).to(dtype)
+    y = y.contiguous(memory_format=torch.channels_last).requires_grad_()
+    bias = torch.randn(groups, o) if groups else torch.randn(o)
+    bias.requires_grad_()
+    out = phase_max_bias_relu(y, bias)
+    grad = torch.randn(out.shape).to(dtype)
+    (out * grad).sum().backward()
+
+    # the same pixels in their places: channel (py, px, c) at (i, j) is pixel (2i+py, 2j+px)
+    y_ref = y.detach().clone().requires_grad_()
+    places = y_ref.view(batch, 2, 2, o, side, side).permute(0, 3, 4, 1, 5, 2)
+    pooled = F.max_pool2d(places.reshape(batch, o, 2 * side, 2 * side), 2)
+    b = bias.detach().to(dtype)
+    b = b.repeat_interleave(batch // groups, 0) if groups else b.expand(batch, o)
+    expected = (pooled + b.view(batch, o, 1, 1)).relu()
+    (expected * grad).sum().backward()
+
+    assert torch.equal(out.detach(), expected.detach())
+    assert torch.equal(y.grad, y_ref.grad)
+    with torch.no_grad():  # the inference path (action selection, targets)
+        assert torch.equal(phase_max_bias_relu(y, bias), expected)
