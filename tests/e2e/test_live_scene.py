@@ -140,7 +140,10 @@ def test_the_scene_follows_pybullet_after_a_move(live: Live, pair) -> None:
     assert len(between) >= 3, f"the arm was shown moving, not jumping: {len(between)} poses between"
     changes = [t for (t, p), (_, q) in itertools.pairwise(samples) if p != q]
     rate = (len(changes) - 1) / (changes[-1] - changes[0])
-    assert rate >= 20, f"{rate:.0f} pose updates a second during the move"
+    # The player interpolates at 30 Hz; the move's own frames come a few a second. Half
+    # the tick rate tells the two apart and allows for a loaded machine (19 a second was
+    # seen with a batch training beside the suite).
+    assert rate >= 15, f"{rate:.0f} pose updates a second during the move"
 
 
 def test_a_reload_returns_to_the_same_point(live: Live, pair) -> None:
