@@ -126,7 +126,7 @@ class _PhaseMaxBiasRelu(torch.autograd.Function):
         y0, y1, y2, y3 = phases.unbind(0)
         m01, m23 = torch.maximum(y0, y1), torch.maximum(y2, y3)
         out = _add_bias(torch.maximum(m01, m23), bias).relu_()
-        ctx.save_for_backward(y if not ctx.apart else phases, m01, m23, out)
+        ctx.save_for_backward(phases if ctx.apart else y, m01, m23, out)
         ctx.bias_groups = bias.shape[0] if bias.dim() == 2 else 0
         return out
 
@@ -228,11 +228,13 @@ def _add_bias(m: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
     (several times slower in bfloat16). The same sums, element by element."""
     groups = bias.shape[0] if bias.dim() == 2 else 1
     b, o, h, w = m.shape
-    row = bias.to(m.dtype).reshape(groups, 1, o).repeat(1, w, 1).view(groups, 1, w * o)
-    if m.permute(0, 2, 3, 1).is_contiguous():
-        m.permute(0, 2, 3, 1).view(groups, (b // groups) * h, w * o).add_(row)
+    per_group = bias.to(m.dtype).view(groups, 1, o)
+    pixels = m.permute(0, 2, 3, 1)
+    if pixels.is_contiguous():
+        row = per_group.repeat(1, w, 1).view(groups, 1, w * o)
+        pixels.view(groups, (b // groups) * h, w * o).add_(row)
     else:
-        m.unflatten(0, (groups, -1)).add_(bias.to(m.dtype).view(groups, 1, -1, 1, 1))
+        m.unflatten(0, (groups, -1)).add_(per_group.view(groups, 1, o, 1, 1))
     return m
 
 
