@@ -6,6 +6,7 @@
 #   docs/results/replication-2/commands.sh all     # every arm, in the plan's order (resumable)
 #   docs/results/replication-2/commands.sh save    # the state to commit (database, advisors)
 #   POPULATION=1 docs/results/replication-2/commands.sh paper   # its runs alone, in pairs
+#   WORKERS=1 ...                                                # one run at a time
 #
 # Runs in populations and alone take the same course to the bit (../populations/), so
 # POPULATION only changes how a session's time is spent: with 1, two runs at a time finish
@@ -32,7 +33,7 @@ batch() {  # study, label, then ideeprl batch options
   (cd "$CODE" && "$PY" -m server.cli batch --study "$study" --label "$label" --seed 0 \
     --agents "${AGENTS:-10}" --torch-threads 1 --checkpoint-every 25 --no-progress \
     --advisor-check require --advisor-attempts 5 --data-dir "$DATA" \
-    ${POPULATION:+--population "$POPULATION"} "$@")
+    ${POPULATION:+--population "$POPULATION"} ${WORKERS:+--workers "$WORKERS"} "$@")
 }
 AUTHORS=(--preset authors --grasp-failure-rate 0.05 --knock-off-rate 0.05)
 
@@ -42,6 +43,17 @@ paper() { batch replication-2-paper B --methods autonomous agent procedure --pre
 # (a') the authors' learner and scene under one rule: A-auto, A-agent, A-procedure. The
 # autonomous runs of label A-auto (the population equivalence arm) are the same runs.
 authors() { batch replication-2-authors A --methods autonomous agent procedure "${AUTHORS[@]}" --reward-scheme authors-interactive; }
+
+# The plan's amendment 1, step 2: all five `authors` advisors failed their check, so A-agent
+# and A-procedure are advised by (b)'s checked `paper` advisor, checked again here under A's
+# own scenario (`--advisor-check require` refuses it if it fails there).
+authors_paper_advisor() {
+  local advisor
+  advisor=$(sqlite3 "$DATA/ideeprl.sqlite3" "select s.checkpoint_path from sessions s join studies t on t.id = s.study_id where t.name = 'replication-2-paper' and s.label = 'B advisor' and s.status = 'finished' limit 1")
+  [ -n "$advisor" ] || { echo "authors-paper-advisor: (b)'s advisor is not trained yet: run 'paper' first"; return 1; }
+  batch replication-2-authors A --methods autonomous agent procedure "${AUTHORS[@]}" \
+    --reward-scheme authors-interactive --advisor-checkpoint "$advisor" "$@"
+}
 
 # (a) as the authors made it: their autonomous arm learned and scored under its own rule,
 # against A-agent (the report withholds a primary test: two reward rules).
@@ -120,10 +132,11 @@ case "${1:-all}" in
   restore) restore ;;
   paper) paper ;;
   authors) authors ;;
+  authors-paper-advisor) shift; authors_paper_advisor "$@" ;;
   authors-own) authors_own ;;
   fp32) fp32 ;;
   fp32-auto) fp32_auto ;;
   alone) alone ;;
   all) paper; authors; alone; authors_own; fp32 ;;
-  *) echo "usage: $0 [save|restore|paper|authors|authors-own|fp32|fp32-auto|alone|all]"; exit 2 ;;
+  *) echo "usage: $0 [save|restore|paper|authors|authors-paper-advisor|authors-own|fp32|fp32-auto|alone|all]"; exit 2 ;;
 esac
