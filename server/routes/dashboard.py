@@ -151,6 +151,7 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
                 design=study.design,
                 join_url=study_public.join_url,
                 conditions=counts,
+                report_built_at=reports.report_built_at(reports.reports_dir(settings), study.id),
             )
         )
     return rows

@@ -38,6 +38,9 @@ class StudyRow(BaseModel):
     join_url: str | None = None
     conditions: list[ConditionCounts] = Field(default_factory=list)
     """An online study's per-condition counts (`GET /api/studies/ID/conditions`)."""
+    report_built_at: str | None = None
+    """When its published report was built; None without one (never built, or removed with
+    a deleted session): the page shows, refetches or hides its report by it."""
 
 
 class NewDesign(BaseModel):

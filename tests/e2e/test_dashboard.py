@@ -134,4 +134,14 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
     assert {"sessions.csv", "episodes.csv", "steps.csv", "advice.csv"} <= set(archive.namelist())
     sessions_csv = archive.read("sessions.csv").decode()
     assert sessions_csv.count("\n") >= 5  # header and four sessions
+
+    # Deleting a session removes its study's report (a participant's data lives on in it):
+    # the page drops the report and its links rather than point at removed files.
+    assert report.is_visible()
+    with live.api() as api:
+        assert api.delete(f"/api/sessions/{human_id}").status_code == 204
+        gone = api.get(f"/api/studies/{study['id']}/report")
+        assert gone.status_code == 404 and "removed when a session was deleted" in gone.text
+    expect(report).to_be_hidden(timeout=15_000)
+    expect(section.locator("button.build-report")).to_have_text("Build report")
     context.close()

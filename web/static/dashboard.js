@@ -140,6 +140,7 @@
           return link;
         })
     );
+    box.dataset.builtAt = report.created_at;
     box.hidden = false;
   }
 
@@ -213,16 +214,30 @@
         buildButton.textContent = "Rebuild report";
       }
     });
-    fetch(`/dashboard/api/studies/${study.id}/report`, { cache: "no-store" })
-      .then((r) => (r.ok ? r.json() : null))
-      .then((report) => {
-        if (!report) return;
-        showReport(section, report);
-        buildButton.textContent = "Rebuild report";
-      })
-      .catch(() => {});
     sections.set(study.id, section);
     return section;
+  }
+
+  // The report shown is the one the server has: refetched when another was built (here,
+  // through the API or the command line), hidden when it is gone (a deleted session takes
+  // its study's report with it), so no link on the page points at removed files.
+  async function syncReport(study, section) {
+    const box = section.querySelector(".report");
+    const shown = box.dataset.builtAt || null;
+    if (shown === study.report_built_at) return;
+    const buildButton = section.querySelector(".build-report");
+    // Removed between the overview and this request: hidden as if the overview had said so.
+    const response = study.report_built_at
+      ? await fetch(`/dashboard/api/studies/${study.id}/report`, { cache: "no-store" })
+      : null;
+    if (!response || !response.ok) {
+      box.hidden = true;
+      delete box.dataset.builtAt;
+      buildButton.textContent = "Build report";
+      return;
+    }
+    showReport(section, await response.json());
+    buildButton.textContent = "Rebuild report";
   }
 
   async function refreshCurves(study, section, colors) {
@@ -292,6 +307,7 @@
         tbody.innerHTML = `<tr><td colspan="6" class="muted">No session yet. “New participant link” makes a human session.</td></tr>`;
       }
       refreshCurves(study, section, colors).catch((e) => showError(`Curves: ${e.message}`));
+      syncReport(study, section).catch((e) => showError(`Report of study ${study.id}: ${e.message}`));
       wanted.push(section);
     }
     container.replaceChildren(...wanted);
