@@ -36,9 +36,7 @@ def choose_baseline(methods: Iterable[str], baseline: str) -> tuple[str | None, 
             return "autonomous", []
         return None, [
             "No autonomous DeepRL sessions in this report, so no improvement in percent: "
-            "the methods are compared with each other. Add the baseline with "
-            "`ideeprl batch --methods autonomous` in the same study, or name another "
-            "method as the baseline."
+            "the methods are compared with each other (or name one of them as the baseline)."
         ]
     if baseline not in present:
         raise BaselineError(

@@ -520,6 +520,28 @@ class RunSpec:
             raise RunSpecError("schedule", str(error)) from None
 
 
+def run_flags(spec: RunSpec) -> list[str]:
+    """The command-line flags (`ideeprl batch`, `ideeprl run`) that describe `spec` beside
+    its method: `--preset`, `--seed` and every field whose value is not the preset's, each
+    compared after `normalized` (so an unadvised run gives no advice options)."""
+    import json
+
+    from learner.fields import leaves
+
+    ours = spec.normalized().values()
+    base = type(spec).from_json({"preset": spec.preset, "method": spec.method}).normalized()
+    theirs = base.values()
+    parts: list[str] = []
+    for leaf in leaves(type(spec)):
+        value = ours[leaf.name]
+        if leaf.name == "method" or (value == theirs[leaf.name] and leaf.name != "seed"):
+            continue
+        parts += [leaf.flag, value if isinstance(value, str) else json.dumps(value)]
+    if "--preset" not in parts:
+        parts = ["--preset", spec.preset, *parts]
+    return parts
+
+
 def from_old_settings(settings: Mapping[str, Any], config: DQNConfig) -> RunSpec:
     """A run from an older checkpoint's metadata (before the run was one JSON document: an
     `advisor` and a `budget` beside the config, the strategy's options loose or in

@@ -11,6 +11,7 @@ difference) at the design's alpha.
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import threading
 import uuid
@@ -25,6 +26,7 @@ from sqlalchemy.orm import Session
 from analysis.baseline import AUTO, BaselineError, compare_conditions
 from analysis.baseline import choose_baseline as baseline_rule
 from analysis.episodes import EpisodeTableError, method_name
+from learner.run import RunSpec, run_flags
 from study.db.models import Status, StudySession
 from study.services.errors import Conflict, Invalid, NotFound
 from study.services.sessions import list_sessions
@@ -122,14 +124,74 @@ def select_sessions(
         if absent:
             notes.append(f"No sessions of method(s) {', '.join(absent)} to include.")
     if not chosen:
-        present = sorted({s.method for s in everything})
-        raise Conflict(
-            f"study {study_id} has no finished sessions to analyse"
-            + (f" with these choices (its methods: {', '.join(present)})" if present else "")
-            + "; run sessions first (e.g. ideeprl batch --study "
-            f"{study_id}), or choose sessions explicitly"
-        )
+        raise Conflict(_nothing_chosen(study_id, everything, request))
     return chosen, notes
+
+
+def _nothing_chosen(study_id: int, everything: list[StudySession], request: ReportRequest) -> str:
+    """Why no session was chosen, naming what the study has."""
+    if not everything:
+        return (
+            f"study {study_id} has no sessions yet: run some first (`ideeprl batch --study "
+            f"{study_id} ...`, or participants' sessions)"
+        )
+    finished = [s for s in everything if s.status == Status.finished.value]
+    if not finished:
+        return (
+            f"study {study_id} has no finished session yet ({len(everything)} unfinished: "
+            f"{_ids(everything)}); wait until they finish, or choose sessions explicitly, with "
+            "a number of episodes"
+        )
+    labels = sorted({s.label for s in finished if s.label}, key=str)
+    methods = sorted({s.method for s in finished})
+    problems = []
+    if request.label is not None and request.label not in labels:
+        problems.append(
+            f"no finished session is labelled {request.label!r} (its labels: "
+            f"{', '.join(map(repr, labels)) or 'none'})"
+        )
+    if request.methods and not set(request.methods) & set(methods):
+        problems.append(
+            f"none is of method(s) {', '.join(request.methods)} (its methods: {', '.join(methods)})"
+        )
+    if not problems:
+        problems.append(
+            f"no finished session matches the label and methods together (its methods: "
+            f"{', '.join(methods)}; labels: {', '.join(map(repr, labels)) or 'none'})"
+        )
+    return f"study {study_id} has no finished sessions to analyse with these choices: " + (
+        "; ".join(problems)
+    )
+
+
+def baseline_next_step(db: Session, study_id: int, chosen: list[StudySession]) -> str:
+    """How to give a report without autonomous sessions its baseline: the study's finished
+    autonomous sessions that the choice left out, or else the batch that runs them with the
+    chosen sessions' settings (the first one's run, as an autonomous run; the report
+    still flags any setting that differs)."""
+    everything = [s for s in list_sessions(db, study_id) if not s.preview and not s.pooled]
+    advisors = advisor_sessions(everything)
+    left_out = [
+        s
+        for s in everything
+        if s.method == "autonomous" and s.status == Status.finished.value and s.id not in advisors
+    ]
+    if left_out:
+        return (
+            f"Study {study_id} has finished autonomous DeepRL sessions this choice left out "
+            f"({_ids(left_out)}): include them (the methods or label chosen excluded them) "
+            "to compare against them."
+        )
+    first = RunSpec.from_json(chosen[0].run)
+    seeds = [s.seed for s in chosen if s.method == chosen[0].method]
+    spec = first.replace(method="autonomous", seed=min(seeds))
+    command = ["ideeprl", "batch", "--study", str(study_id), "--methods", "autonomous"]
+    command += ["--agents", str(len(seeds)), "--label", "autonomous", *run_flags(spec)]
+    return (
+        "To add the baseline with the same settings as the first session here ("
+        f"{chosen[0].id}), one agent for each of its method's seeds: "
+        f"`{shlex.join(command)}` (with `--data-dir` or `--database-url` as the server's)."
+    )
 
 
 def choose_baseline(methods: set[str], baseline: str) -> tuple[str | None, list[str]]:
@@ -170,6 +232,8 @@ def build_report(
     design = design_of(study)
     group = {s.id: (s.condition if design and s.condition else s.method) for s in sessions}
     baseline, baseline_notes = choose_baseline(set(group.values()), request.baseline)
+    if baseline is None and request.baseline == AUTO and design is None:
+        baseline_notes.append(baseline_next_step(db, study_id, sessions))
     episodes = load_episodes(db, [s.id for s in sessions])
     settings = session_settings(sessions)
     if design is not None:  # the conditions are what is compared
@@ -320,9 +384,20 @@ def published_report(reports_dir: Path, study_id: int) -> ReportDescription:
     path = reports_dir / f"study-{study_id}.json"
     if not path.is_file() or not report_dir(reports_dir, study_id).is_dir():
         raise NotFound(
-            f"study {study_id} has no report yet; POST /api/studies/{study_id}/report builds one"
+            f"study {study_id} has no report: none was built, or the last one was removed "
+            "when a session was deleted; build one (the dashboard's Build report, or POST "
+            f"/api/studies/{study_id}/report)"
         )
     return json.loads(path.read_text())
+
+
+def report_built_at(reports_dir: Path, study_id: int) -> str | None:
+    """When the study's published report was built (its `created_at`), None without one:
+    what a page polls to know whether the report it shows is still the one there is."""
+    try:
+        return published_report(reports_dir, study_id)["created_at"]
+    except (NotFound, OSError, ValueError, KeyError):
+        return None
 
 
 def report_file(reports_dir: Path, study_id: int, name: str) -> Path:

@@ -161,7 +161,7 @@ def test_the_paper_comparison_needs_the_papers_methods(tmp_path: Path) -> None:
     assert "None of the paper's methods" in text and "369.88" not in text
     assert pd.read_csv(result.tables["paper"]).empty
     # no human sessions: Figure 6 shows the first advised method against the baseline
-    assert "Figure 6 shows oracle-IDeepRL agents" in text
+    assert "Figure 6 shows the individual oracle-IDeepRL agents" in text
     assert "Figure 6's reference is r1" in text
 
 

@@ -4,6 +4,7 @@ no autonomous baseline."""
 
 from __future__ import annotations
 
+import shlex
 import time
 from pathlib import Path
 
@@ -105,3 +106,16 @@ def test_a_killed_batch_resumes_with_the_missing_runs_only(
     for s in after:
         assert float(methods[s.method]["R_T"]) == pytest.approx(totals[s.id][1])
     assert "Baseline: none" in (out / "report.md").read_text()
+
+    # The report says how to add the baseline; its command, run as given, makes one that the
+    # next report compares against, under the same settings (no warning that they differ).
+    suggested = printed.split("with the same settings", 1)[1].split("`")[1]
+    assert suggested.startswith(f"ideeprl batch --study {study} --methods autonomous")
+    code, ran = in_process(place, capsys, *shlex.split(suggested)[1:])
+    assert code == 0, ran
+    code, printed = in_process(place, capsys, "report", "--study", str(study), "--out", str(out))
+    assert code == 0, printed
+    assert "No autonomous DeepRL sessions" not in printed and "not comparable" not in printed
+    methods = {r["method"]: r for r in read_csv(out / "r_t_per_method.csv")}
+    assert set(methods) == {"autonomous", "oracle", "random"}
+    assert all(methods[m]["improvement_pct"] != "" for m in ("oracle", "random"))

@@ -73,6 +73,13 @@ def test_choices_and_mistakes(place: Place, api: httpx.Client) -> None:
     body = only_agent.json()
     assert body["baseline"] is None and [m["method"] for m in body["methods"]] == ["agent"]
     assert any("No autonomous DeepRL sessions" in note for note in body["notes"])
+    autonomous = [
+        s.id
+        for s in sessions(place.engine(), study)
+        if s.method == "autonomous" and not s.label.endswith("advisor")
+    ]
+    left_out = next(n for n in body["notes"] if "this choice left out" in n)
+    assert all(str(i) in left_out for i in autonomous) and len(autonomous) == 2
 
     unknown = api.post(f"/api/studies/{study}/report", json={"sessions": [987654]})
     assert unknown.status_code == 422
