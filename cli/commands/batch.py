@@ -367,6 +367,11 @@ def _dry_run(args: argparse.Namespace, spec: BatchSpec, settings: Settings) -> i
         if engine is not None and inspect(engine).has_table("sessions"):
             with make_session_factory(engine)() as db:
                 study_id, what = resolve_study(db, args.study, create=False)
+        elif args.study.isdigit():  # as the real run would say: an id names no new study
+            raise LookupError(
+                f"no study with id {args.study}; there are no studies yet. Give a name "
+                "instead to create a study"
+            )
     except LookupError as error:
         return _fail(str(error), 1)
     if study_id is None:
@@ -447,8 +452,37 @@ def _run(args: argparse.Namespace, spec: BatchSpec, study_id: int, settings: Set
     print(f"all {len(result.runs)} runs finished in study {study_id} ({result.wall_time_s:.0f} s)")
     if args.report:
         return _report(args, spec, result, settings)
-    print(f"report: ideeprl report --study {study_id} --label {shlex.quote(spec.label)} --out DIR")
+    print(f"report: {report_command(args, spec, result, settings)}")
     return 0
+
+
+def report_command(
+    args: argparse.Namespace, spec: BatchSpec, result: BatchResult, settings: Settings
+) -> str:
+    """The `ideeprl report` of exactly this batch's runs: by its label when every run has
+    it, else by session (a batch takes over finished runs of the same description that an
+    earlier batch made under another label)."""
+    from sqlalchemy import select
+
+    from study.db.engine import make_engine, make_session_factory
+    from study.db.models import StudySession
+
+    ids = result.session_ids()
+    with make_session_factory(make_engine(settings.db_url))() as db:
+        labels = set(db.scalars(select(StudySession.label).where(StudySession.id.in_(ids))))
+    parts = ["ideeprl", "report", "--study", str(result.study_id)]
+    if labels == {spec.label}:
+        parts += ["--label", spec.label]
+    else:
+        parts += ["--sessions", *map(str, sorted(ids))]
+    parts += ["--out", "DIR"]
+    if args.data_dir:
+        parts += ["--data-dir", str(args.data_dir)]
+    if args.database_url:
+        from sqlalchemy.engine import make_url
+
+        parts += ["--database-url", make_url(args.database_url).render_as_string()]
+    return shlex.join(parts)
 
 
 def _report(

@@ -77,6 +77,10 @@ def test_a_dry_run_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[
     planned = json.loads(out[out.index("{") :])
     assert [r["status"] for r in planned["runs"]] == ["new"] * 3  # the advisor, two agents
     assert planned["study"] is None and planned["runs"][0]["run"] == "advisor"
+    # An id names no new study, with a database or without: as the real run says.
+    code, out = run(place, capsys, "batch", "--study", "987654", *SCALE, "--dry-run")
+    assert code == 1 and "error: no study with id 987654" in out
+    assert not (tmp_path / "data").exists()
 
 
 def test_a_study_with_nothing_finished_says_how_to_fill_it(
@@ -89,7 +93,7 @@ def test_a_study_with_nothing_finished_says_how_to_fill_it(
         study = create_study(db, "still empty").id
     assert sessions(place.engine(), study) == []
     code, out = run(place, capsys, "report", "--study", str(study), "--out", str(tmp_path / "r"))
-    assert code == 1 and "no finished sessions to analyse; run sessions first" in out
+    assert code == 1 and f"study {study} has no sessions yet: run some first" in out
     assert f"ideeprl batch --study {study}" in out
     assert not (tmp_path / "r").exists()
 

@@ -149,6 +149,24 @@ def test_the_same_command_again_runs_nothing(
     assert [(s.id, s.finished_at, s.checkpoint_path) for s in sessions(engine, study)] == before
 
 
+def test_the_report_command_names_the_runs_it_took_over(
+    place: Place, baselines: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A batch under a new label takes over the finished runs of the same description, which
+    keep their label: the report command it prints names them by session, not by label."""
+    engine = place.engine()
+    study = study_id(engine, "baselines")
+    compared = [s.id for s in sessions(engine, study) if not s.label.endswith("advisor")]
+    code, out = in_process(place, capsys, *BASELINES, *SCALE, "--label", "renamed")
+    assert code == 0, out
+    hint = out.split("report: ", 1)[1].splitlines()[0]
+    assert " --label " not in hint
+    assert f" --sessions {' '.join(map(str, sorted(compared)))} --out DIR " in hint
+    assert f"--data-dir {place.data_dir}" in hint
+    code, out = in_process(place, capsys, *BASELINES, *SCALE)
+    assert "--label baselines --out DIR" in out.split("report: ", 1)[1].splitlines()[0]
+
+
 def test_runs_are_identified_by_their_configuration(
     place: Place, baselines: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
