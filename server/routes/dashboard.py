@@ -257,11 +257,14 @@ DASHBOARD_STUDIES = "/dashboard/api/studies"
 def build_report(
     db: DbDep, settings: SettingsDep, study_id: StudyId, body: DashboardReport | None = None
 ) -> ReportPublic:
-    """The study's report over its finished sessions (advisors left out), autonomous
-    DeepRL as the baseline when there is one. Sessions of different lengths are compared
-    over the episodes they have in common (the report says so), unless `n_episodes`."""
-    chosen = body.n_episodes if body is not None else None
-    request = reports.ReportRequest(n_episodes=chosen, common_length=chosen is None)
+    """The study's report over its finished sessions (advisors left out), against the
+    baseline chosen (by default autonomous DeepRL when there is one). Sessions of different
+    lengths are compared over the episodes they have in common (the report says so),
+    unless `n_episodes`."""
+    body = body or DashboardReport()
+    request = reports.ReportRequest(
+        n_episodes=body.n_episodes, common_length=body.n_episodes is None, baseline=body.baseline
+    )
     description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
     return report_routes.public_report(description, study_id, DASHBOARD_STUDIES)
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import swagger_ui_bundle
 from fastapi import FastAPI
 from fastapi.openapi.docs import get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
-from fastapi.responses import HTMLResponse
+from fastapi.responses import HTMLResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
 ASSETS = "/docs-assets"
@@ -31,6 +31,12 @@ def add_docs(app: FastAPI) -> None:
             swagger_css_url=f"{ASSETS}/swagger-ui.css",
             swagger_favicon_url=f"{ASSETS}/favicon-32x32.png",
         )
+
+    @app.get("/api/docs", include_in_schema=False)
+    @app.get("/redoc", include_in_schema=False)
+    def docs_elsewhere() -> RedirectResponse:
+        """Where people guess the docs are (beside the API, FastAPI's ReDoc): /docs."""
+        return RedirectResponse("/docs", status_code=307)
 
     @app.get(oauth2_redirect, include_in_schema=False)
     def swagger_ui_redirect() -> HTMLResponse:

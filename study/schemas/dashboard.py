@@ -7,6 +7,7 @@ from typing import Any
 
 from pydantic import BaseModel, Field
 
+from analysis.baseline import AUTO
 from study.schemas.design import StudyDesign
 from study.schemas.studies import ConditionCounts
 from study.schemas.types import Text
@@ -63,3 +64,6 @@ class NewParticipant(BaseModel):
 class DashboardReport(BaseModel):
     n_episodes: int | None = Field(default=None, ge=1, le=100_000)
     """First N episodes of every session; default: the length they have in common."""
+    baseline: Text = Field(default=AUTO, max_length=40)
+    """auto (autonomous when present), none, or a method (an online study: a condition),
+    as the REST API's report takes it."""

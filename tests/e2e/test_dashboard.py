@@ -107,6 +107,17 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
     )
     save_screenshot(page, "dashboard-report", full_page=True)
 
+    # Another baseline, chosen on the page: the oracle with no errors, against which the
+    # others are measured (the report the REST API serves is the same one).
+    baseline = section.locator("select.report-baseline")
+    expect(baseline.locator("option")).to_have_count(4)  # auto, none, autonomous, oracle
+    baseline.select_option("oracle")
+    section.locator("button.build-report").click()
+    expect(report.locator(".report-when")).to_contain_text("against oracle", timeout=120_000)
+    with live.api() as api:
+        assert api.get(f"/api/studies/{study['id']}/report").json()["baseline"] == "oracle"
+    expect(report.locator("tr[data-method='autonomous'] td").nth(4)).not_to_have_text("—")
+
     section.locator(".new-participant input").fill("P01")
     section.locator(".new-participant button").click()
     human = section.locator("tr", has_text="P01")

@@ -306,6 +306,9 @@ def test_security_headers_on_every_page(
         docs = browser.get("/docs")
         policy = docs.headers["content-security-policy"]
         assert "script-src 'self' 'unsafe-inline';" in policy and "https:" not in policy
+        for guess in ("/api/docs", "/redoc"):  # where people look for the docs
+            moved = browser.get(guess)
+            assert moved.status_code == 307 and moved.headers["location"] == "/docs", guess
 
 
 FORMULAS = ['=HYPERLINK("http://evil.example","click")', "+cmd|' /C calc'!A0", "@SUM(A1)", "-2+3"]

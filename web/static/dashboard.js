@@ -205,7 +205,11 @@
       buildButton.disabled = true;
       buildButton.textContent = "Building…";
       try {
-        showReport(section, await call(`/dashboard/api/studies/${study.id}/report`, { method: "POST" }));
+        const baseline = section.querySelector(".report-baseline").value;
+        showReport(
+          section,
+          await call(`/dashboard/api/studies/${study.id}/report`, { method: "POST", body: JSON.stringify({ baseline }) })
+        );
         showError("");
       } catch (e) {
         showError(`Report of study ${study.id}: ${e.message}`);
@@ -216,6 +220,26 @@
     });
     sections.set(study.id, section);
     return section;
+  }
+
+  // The baseline's choices: auto, none, and each method (an online study: each condition)
+  // the study's sessions have; the researcher's choice is kept across polls.
+  function showBaselines(study, section) {
+    const select = section.querySelector(".report-baseline");
+    const groups = study.design
+      ? study.conditions.map((c) => c.condition)
+      : [...new Set(study.sessions.map((s) => s.method))].sort();
+    const wanted = ["auto", "none", ...groups];
+    const have = [...select.options].map((o) => o.value);
+    if (wanted.join("\n") === have.join("\n")) return;
+    const chosen = select.value;
+    for (const option of [...select.options].slice(2)) option.remove();
+    for (const group of groups) {
+      const option = document.createElement("option");
+      option.value = option.textContent = group;
+      select.append(option);
+    }
+    select.value = wanted.includes(chosen) ? chosen : "auto";
   }
 
   // The report shown is the one the server has: refetched when another was built (here,
@@ -307,6 +331,7 @@
         tbody.innerHTML = `<tr><td colspan="6" class="muted">No session yet. “New participant link” makes a human session.</td></tr>`;
       }
       refreshCurves(study, section, colors).catch((e) => showError(`Curves: ${e.message}`));
+      showBaselines(study, section);
       syncReport(study, section).catch((e) => showError(`Report of study ${study.id}: ${e.message}`));
       wanted.push(section);
     }
