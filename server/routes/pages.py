@@ -76,6 +76,10 @@ class Visit:
     """How the visit ended (`Outcome`); None while it goes on, and always in a lab study."""
     design: dict[str, Any] | None = None
     """The online study's design (None in a lab study)."""
+    strategy: str = "early"
+    """When the robot asks (`learner.strategies`): what `{advice_plan}` tells the person."""
+    interval: int | None = None
+    """The alternating strategy's: one advised action in every `interval`."""
 
     @property
     def online(self) -> bool:
@@ -96,14 +100,50 @@ class Visit:
     def done(self) -> bool:
         return self.advice_given >= self.advice_budget or self.status == Status.finished
 
+    def advice_plan(self) -> str:
+        """When this person advises, as the robot's strategy has it (`{advice_plan}`)."""
+        n = self.advice_budget
+        if self.strategy == "early" or (self.strategy == "alternating" and self.interval == 1):
+            return (
+                f"For {'its first' if self.strategy == 'early' else 'the next'} {n} actions, "
+                "**you** choose what it does. After that it continues on its own"
+            )
+        if self.strategy == "alternating":
+            return (
+                f"**You** choose {n} of its actions, one action in every {self.interval or 2}: it "
+                "takes the actions in between on its own, so you will see it move by itself "
+                "between your choices. After your last choice it continues on its own"
+            )
+        return (
+            f"**You** choose {n} of its actions, at moments the robot picks itself; in "
+            "between and after, it acts on its own"
+        )
+
+    def time_rule(self) -> str:
+        """How long a choice may take (`{time_rule}`): no limit in a lab study; an online
+        study ends a visit that gives no answer for its design's `idle_limit_s`."""
+        if self.design is None:
+            return "There is **no time limit**. Take the time you need for each choice."
+        minutes = max(1, round(float(self.design.get("idle_limit_s", 600)) / 60))
+        return (
+            "Take the time you need for each choice. Only if you give no answer for "
+            f"{minutes} minute{'s' if minutes != 1 else ''} does the study end early."
+        )
+
     def resolved_texts(self) -> dict[str, str]:
         """Every page text as it is shown now: the study's or the default, filled in."""
-        rule = describe_rule(self.sort_rule)
+        fill = {
+            "{advice_budget}": str(self.advice_budget),
+            "{sorting_rule}": describe_rule(self.sort_rule),
+            "{advice_plan}": self.advice_plan(),
+            "{time_rule}": self.time_rule(),
+        }
         out = {}
         for key in TEXT_KEYS:
             raw = self.texts.get(key) or (WEB_DIR / "texts" / f"{key}.txt").read_text()
-            raw = raw.replace("{advice_budget}", str(self.advice_budget))
-            out[key] = raw.replace("{sorting_rule}", rule)
+            for name, value in fill.items():
+                raw = raw.replace(name, value)
+            out[key] = raw
         return out
 
     def text(self, key: str) -> Markup:
@@ -141,6 +181,8 @@ def _visit(request: Request, token: str) -> Visit | None:
             questionnaire_due=questionnaire.required and questionnaire.submitted_at is None,
             outcome=session.outcome,
             design=session.study.design,
+            strategy=session.spec.strategy,
+            interval=session.spec.strategy_options.interval,
         )
 
 

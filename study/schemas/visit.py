@@ -77,11 +77,11 @@ class CheckQuestion(BaseModel):
 
 def default_questions() -> list[CheckQuestion]:
     """SPEC 5: where a blue cube goes, where a red disk (under the session's sort rule),
-    and what Drop does over the centre table (nothing: the arm keeps its position)."""
+    and what Drop does over the center table (nothing: the arm keeps its position)."""
     sides = [
         Choice(value="left", label="On the left table"),
         Choice(value="right", label="On the right table"),
-        Choice(value="centre", label="It stays on the centre table"),
+        Choice(value="centre", label="It stays on the center table"),
     ]
     where = "Under the sorting rule of this study, where does a {} go?"
     return [
@@ -93,10 +93,10 @@ def default_questions() -> list[CheckQuestion]:
         ),
         CheckQuestion(
             id="drop_at_centre",
-            text="The robot holds an object and its arm is over the centre table. "
+            text="The robot holds an object and its arm is over the center table. "
             "What does Drop do?",
             choices=[
-                Choice(value="release", label="It puts the object back on the centre table"),
+                Choice(value="release", label="It puts the object back on the center table"),
                 Choice(value="keep", label="Nothing: the robot keeps holding it where it is"),
                 Choice(value="right", label="It carries the object to the right table"),
             ],

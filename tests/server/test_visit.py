@@ -296,6 +296,38 @@ def test_a_lab_study_asks_no_check_and_no_questionnaire(
     participant.client.close()
 
 
+@pytest.mark.slow
+def test_the_texts_say_when_this_participant_advises_and_how_long_they_may_take(
+    server: LiveServer, api: httpx.Client, online: dict[str, Any]
+) -> None:
+    """The induction's plan follows the session's strategy (the first N actions, or one in
+    every k with moves of its own between), and the time rule the study's: no limit in a lab
+    study, the design's idle limit in an online one."""
+    lab = api.post("/api/studies", json={"name": "lab texts"}).json()
+    design = StudyDesign(conditions=ONE_CONDITION, idle_limit_s=300).model_dump(mode="json")
+    set_design(server, online["id"], design)
+    made = []
+    for study, run, plan, limit in (
+        (lab, {}, "For its first 2 actions", "<strong>no time limit</strong>"),
+        (
+            online,
+            {"strategy": "alternating", "interval": 3, "advice_budget": 4},
+            "choose 4 of its actions, one action in every 3",
+            "Only if you give no answer for 5 minutes does the study end early",
+        ),
+    ):
+        created, participant = new_participant(server, api, study["id"], **run)
+        made.append(created["id"])
+        page = f"{server.url}/p/{created['participant_token']}"
+        assert limit in httpx.get(f"{page}/consent").text
+        participant.consent()
+        assert plan in httpx.get(f"{page}/induction/1").text
+        assert limit in httpx.get(f"{page}/induction/3").text
+        participant.client.close()
+    for session_id in made:
+        assert api.post(f"/api/sessions/{session_id}/stop").status_code == 200
+
+
 CUSTOM = [
     {"id": "clarity", "kind": "likert", "text": "The robot's moves were clear.", "required": True,
      "points": 5, "anchors": ["Strongly disagree", "Disagree", "Neutral", "Agree",
