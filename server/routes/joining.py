@@ -8,7 +8,7 @@ from fastapi import APIRouter, Request
 from fastapi.responses import RedirectResponse, Response
 from starlette.concurrency import run_in_threadpool
 
-from server.routes.pages import end_page
+from server.routes.pages import end_page, participant_page, study_title
 from study.db.models import Outcome
 from study.schemas.design import StudyDesign
 from study.services import assignment, studies
@@ -33,6 +33,28 @@ def _too_many(what: str) -> Response:
 
 
 @router.get("/join/{key}")
+async def open_link(request: Request, key: str) -> Response:
+    """An arrival from the panel (its id in the link) or coming back (the cookie) gets its
+    session at once. Anyone else (the bare link: a link preview, a crawler, a person sent
+    it without the panel) sees a page whose Begin button makes the session: a GET alone
+    takes no place in the study."""
+    found = await run_in_threadpool(_design_or_none, request, key)
+    if found is not None:
+        study_design, title = found
+        panel_id = request.query_params.get(study_design.panel.params[0], "").strip()
+        if not panel_id and request.cookies.get(COOKIE) is None:
+            query = request.url.query
+            return participant_page(
+                request,
+                "participant/join.html",
+                None,
+                title,
+                action=f"/join/{key}" + (f"?{query}" if query else ""),
+            )
+    return await join(request, key)
+
+
+@router.post("/join/{key}")
 async def join(request: Request, key: str) -> Response:
     settings = request.app.state.settings
     address = request.client.host if request.client is not None else "?"
@@ -57,7 +79,8 @@ async def join(request: Request, key: str) -> Response:
         )
     arrival = await run_in_threadpool(_arrive, request, study_id, params)
     if arrival.token is None:
-        return end_page(request, None, design, Outcome.full, arrival.params)
+        title = await run_in_threadpool(_title, request, study_id)
+        return end_page(request, None, design, Outcome.full, arrival.params, title)
     if arrival.session_id is not None:
         request.app.state.manager.assign(arrival.session_id)  # from a pool: its clock runs
     response = RedirectResponse(f"/p/{arrival.token}", status_code=303)
@@ -71,6 +94,22 @@ async def join(request: Request, key: str) -> Response:
         path=f"/join/{key}",
     )
     return response
+
+
+def _design_or_none(request: Request, key: str) -> tuple[StudyDesign, str] | None:
+    """The design of a link's study and its title; None for an unknown link (the
+    arrival's handler says so)."""
+    try:
+        with request.app.state.session_factory() as db:
+            study, design = assignment.study_for_key(db, key)
+            return design, study_title(study.texts)
+    except NotFound:
+        return None
+
+
+def _title(request: Request, study_id: int) -> str:
+    with request.app.state.session_factory() as db:
+        return study_title(studies.get_study(db, study_id).texts)
 
 
 def _design(request: Request, key: str) -> tuple[int, StudyDesign]:

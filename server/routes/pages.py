@@ -211,11 +211,25 @@ async def _load(request: Request, token: str, warm_up: bool = True) -> Visit | N
     return visit
 
 
-def _page(request: Request, name: str, visit: Visit | None, **context: Any) -> HTMLResponse:
-    title = visit.text("title") if visit is not None else Markup("IDeepRL")
+def _page(
+    request: Request, name: str, visit: Visit | None, title: str | None = None, **context: Any
+) -> HTMLResponse:
+    """A participant page, titled by the visit's texts (or `title`: a study's, before a
+    session exists)."""
+    if title is None:
+        title = (visit.text("title") if visit is not None else Markup("IDeepRL")).striptags()
     return templates.TemplateResponse(
-        request, name, {"visit": visit, "site_title": title.striptags(), **context}
+        request, name, {"visit": visit, "site_title": title, **context}
     )
+
+
+participant_page = _page
+
+
+def study_title(texts: dict[str, Any] | None) -> str:
+    """A study's page title (its `title` text, else the default), before any session."""
+    raw = str((texts or {}).get("title") or (WEB_DIR / "texts" / "title.txt").read_text())
+    return render_text(raw).striptags()
 
 
 def _error(request: Request) -> HTMLResponse:
@@ -427,14 +441,16 @@ def end_page(
     design: StudyDesign,
     outcome: Outcome,
     params: dict[str, str] | None = None,
+    title: str | None = None,
 ) -> Response:
     """An outcome's page: its code, and a redirect to the panel's URL for it (when set),
-    filled in with the arrival's panel parameters `params`."""
+    filled in with the arrival's panel parameters `params`; `title` without a visit."""
     heading, message = END_PAGES[outcome]
     return _page(
         request,
         "participant/end.html",
         visit,
+        title,
         outcome=outcome.value,
         heading=heading,
         message=message,

@@ -61,12 +61,15 @@ def arrive(
     server: LiveServer, study: dict[str, Any], pid: str | None, address: str, **params: str
 ) -> httpx.Response:
     """One arrival at the study link from `address` (the test server trusts loopback's
-    X-Forwarded-For, as it trusts its reverse proxy)."""
+    X-Forwarded-For, as it trusts its reverse proxy); without a panel id, through the
+    link's page (its Begin button)."""
     query = {"STUDY_ID": "s1", "SESSION_ID": f"x-{pid}", **params}
     if pid is not None:
         query["PROLIFIC_PID"] = pid
     path = urlsplit(study["join_url"]).path
     with httpx.Client(base_url=server.url, headers={"X-Forwarded-For": address}) as client:
+        if pid is None:
+            return client.post(path, params=query)
         return client.get(path, params=query)
 
 
@@ -156,10 +159,18 @@ def test_without_a_panel_id_a_cookie_tells_arrivals_apart(
     study = make_study(api, "online-cookie")
     path = urlsplit(study["join_url"]).path
     with httpx.Client(base_url=server.url, headers={"X-Forwarded-For": "10.2.0.1"}) as browser:
-        first = token_of(browser.get(path))
+        # The bare link (a link preview, a crawler, someone sent it without the panel): a page
+        # whose Begin button makes the session; the GET takes no place.
+        for _ in range(3):
+            landing = browser.get(path, params={"STUDY_ID": "S"})
+            assert landing.status_code == 200 and 'id="begin"' in landing.text
+            assert f'action="{path}?STUDY_ID=S"' in landing.text
+            assert "<title>Help a robot learn to sort</title>" in landing.text
+        assert sessions_of(api, study) == []
+        first = token_of(browser.post(path))
         assert token_of(browser.get(path)) == first, "the cookie brings them back"
     with httpx.Client(base_url=server.url, headers={"X-Forwarded-For": "10.2.0.2"}) as other:
-        assert token_of(other.get(path)) != first
+        assert token_of(other.post(path)) != first
     assert len(sessions_of(api, study)) == 2
 
 
@@ -169,6 +180,7 @@ def test_at_capacity_arrivals_see_the_full_page(server: LiveServer, api: httpx.C
     token_of(arrive(server, study, "C2", "10.3.0.2"))
     turned = arrive(server, study, "C3", "10.3.0.3")
     assert turned.status_code == 200 and "FULL1" in turned.text
+    assert "Help a robot learn to sort</title>" in turned.text, "the study's title"
 
 
 def test_a_decline_ends_the_visit_and_its_place_is_refilled_first(
