@@ -119,12 +119,18 @@ class Visit:
             "between and after, it acts on its own"
         )
 
+    @property
+    def idle_limit_s(self) -> float | None:
+        """An online study's limit on waiting for an answer (the visit ends `timed_out`);
+        None in a lab study, whose session waits and resumes when the person comes back."""
+        return None if self.design is None else float(self.design.get("idle_limit_s", 600))
+
     def time_rule(self) -> str:
         """How long a choice may take (`{time_rule}`): no limit in a lab study; an online
         study ends a visit that gives no answer for its design's `idle_limit_s`."""
         if self.design is None:
             return "There is **no time limit**. Take the time you need for each choice."
-        minutes = max(1, round(float(self.design.get("idle_limit_s", 600)) / 60))
+        minutes = max(1, round((self.idle_limit_s or 600) / 60))
         return (
             "Take the time you need for each choice. Only if you give no answer for "
             f"{minutes} minute{'s' if minutes != 1 else ''} does the study end early."

@@ -200,3 +200,42 @@ def check_the_records(live: Live, session_id: int) -> None:
     assert answers["custom", "clarity"].value_number == 4
     assert answers["custom", "minutes"].value_number == 12.5
     assert answers["custom", "comments"].value_text == "Fun, if slow."
+
+
+def test_a_participant_who_leaves_a_turn_is_warned_before_the_visit_ends(
+    live: Live, browser: Any
+) -> None:
+    """An online study's idle limit ends a visit whose turn goes unanswered: the texts say
+    so, and the advice page warns, with the time left, before it happens."""
+    run = {**RUN, "config": {**RUN["config"], "pretraining_steps": 30, "advice_budget": 3}}
+    design = {
+        "conditions": {"early": {"run": run, "target": 1}},
+        "panel": {"kind": "prolific", "codes": CODES, "return_delay_s": 4},
+        "idle_limit_s": 24,
+        "pool": 0,
+    }
+    with live.api() as api:
+        made = api.post("/api/studies", json={"name": "online idle turn", "design": design})
+        assert made.status_code == 201, made.text
+        study = made.json()
+    arrivals = Arrivals(browser)
+    try:
+        page = arrivals.arrive(study, "PID-IDLE")
+        expect(page.locator("[data-page=consent]")).to_contain_text("no answer for 1 minute")
+        through_the_induction(page)
+        for question, value in RIGHT.items():
+            page.check(f"input[name='{question}'][value='{value}']")
+        page.click("#submit")
+        expect(page).to_have_url(re.compile(r"/advise$"), timeout=60_000)
+        expect(page.locator("button.action").first).to_be_enabled(timeout=120_000)
+        status = page.locator("#status-text")
+        expect(status).to_have_text("Your turn: what should the robot do?")
+        # Warned at half the limit (at most 90 s before its end), the seconds left said.
+        expect(status).to_have_text(
+            "Are you still there? Please choose within about 12 seconds, or the study ends.",
+            timeout=20_000,
+        )
+        expect(page.locator("[data-page=end]")).to_be_visible(timeout=60_000)
+        assert_returned(page, "timed_out")
+    finally:
+        arrivals.close()

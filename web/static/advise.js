@@ -18,6 +18,7 @@
   let activeSince = null; // performance.now() when the buttons became active
   let readinessPolling = false;
   let beforeFirstTurn = false; // the latest state: no advice asked yet, robot practising
+  let idleWarning = null; // the timer of an online study's warning before its idle limit
 
   function api(path, options = {}) {
     const headers = { Authorization: `Bearer ${config.token}` };
@@ -33,6 +34,18 @@
   function setButtons(on) {
     for (const b of buttons) b.disabled = !on;
     document.body.classList.toggle("your-turn", on);
+    clearTimeout(idleWarning);
+    if (on && config.idleLimitS) idleWarning = setTimeout(warnIdle, warnAfterS(config.idleLimitS) * 1000);
+  }
+
+  // An online study ends a visit that leaves a turn unanswered for its idle limit (counted
+  // by the robot from when it asked, a little before the buttons light up): a warning well
+  // before, with the time left, instead of an end without notice.
+  const warnAfterS = (limit) => Math.max(limit / 2, limit - 90);
+  function warnIdle() {
+    const left = config.idleLimitS - warnAfterS(config.idleLimitS);
+    const when = left >= 120 ? `${Math.round(left / 60)} minutes` : `${Math.round(left)} seconds`;
+    setStatus(`Are you still there? Please choose within about ${when}, or the study ends.`, "paused");
   }
 
   function rewardWords(reward) {
