@@ -436,7 +436,11 @@ END_PAGES = {
         "Your time ran out",
         "The study waited for you longer than it can, so it has ended.",
     ),
-    Outcome.full: ("The study is full", "Every place in this study is taken now."),
+    Outcome.full: (
+        "The study is full",
+        "This study has all the participants it can take, so your visit ends here. Thank "
+        "you for your interest.",
+    ),
 }
 """Heading and message of each outcome's page."""
 

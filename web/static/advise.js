@@ -9,6 +9,7 @@
   const KEYS = { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
   const LAST_MOVE_MS = 4000;
   const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+  const capital = (name) => name.charAt(0).toUpperCase() + name.slice(1); // as on the buttons
 
   let version = null;
   let enabledFor = null; // the advice index the buttons answer, or null
@@ -87,7 +88,7 @@
       const [shown, , mood] = rewardWords(item.reward);
       li.innerHTML = `<span class="history-index"></span><span class="history-action"></span><span class="reward small"></span>`;
       li.children[0].textContent = `#${item.advice_index + 1}`;
-      li.children[1].textContent = item.action_name;
+      li.children[1].textContent = capital(item.action_name);
       li.children[2].textContent = item.reward === null ? "…" : shown;
       li.children[2].dataset.mood = mood;
       list.append(li);
@@ -219,7 +220,7 @@
     const button = buttons.find((b) => Number(b.dataset.action) === action);
     button.classList.add("chosen");
     setTimeout(() => button.classList.remove("chosen"), 900);
-    const name = config.actionNames[action];
+    const name = capital(config.actionNames[action]);
     $("feedback").textContent = `Sending “${name}”…`;
     setStatus("The robot is moving…", "busy");
     for (let attempt = 0; attempt < 5; attempt++) {
