@@ -115,7 +115,7 @@ def test_unknown_studies_are_runtime_errors_and_bad_options_usage_errors(
         capsys.readouterr().err
     )
     assert main(["report", "--study", "pilot study", "--out", out, *flags]) == 1
-    assert "no finished sessions" in capsys.readouterr().err
+    assert "study 1 has no sessions yet: run some first" in capsys.readouterr().err
     assert main(["report", "--study", "1", "--n-episodes", "0", "--out", out, *flags]) == 2
     # a study made by name from the command line follows the API's rule for names
     assert main(["batch", "--study", "   ", "--methods", "autonomous", *flags]) == 2
@@ -147,7 +147,7 @@ def test_json_output_is_all_of_stdout_and_keeps_the_exit_codes(
     assert captured.out == "" and "error: no study with name no such study" in captured.err
     assert main(["report", "--study", "pilot study", "--out", str(out), *flags]) == 1
     captured = capsys.readouterr()
-    assert captured.out == "" and "no finished sessions" in captured.err
+    assert captured.out == "" and "has no sessions yet" in captured.err
     assert main(["report", "--study", "1", "--n-episodes", "0", "--out", str(out), *flags]) == 2
     assert capsys.readouterr().out == ""
 
