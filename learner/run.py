@@ -520,25 +520,27 @@ class RunSpec:
             raise RunSpecError("schedule", str(error)) from None
 
 
-def run_flags(spec: RunSpec) -> list[str]:
-    """The command-line flags (`ideeprl batch`, `ideeprl run`) that describe `spec` beside
-    its method: `--preset`, `--seed` and every field whose value is not the preset's, each
-    compared after `normalized` (so an unadvised run gives no advice options)."""
+def run_flags(spec: RunSpec, normalized: bool = True) -> list[str]:
+    """The command-line flags (`ideeprl batch`, `ideeprl train`) that describe `spec` beside
+    its method: `--preset`, `--seed` and every field whose value is not the preset's. With
+    `normalized`, both sides are compared after `normalized` (an unadvised run gives no
+    advice options); without, as given (a batch's template, whose runs take several
+    methods)."""
     import json
 
     from learner.fields import leaves
 
-    ours = spec.normalized().values()
-    base = type(spec).from_json({"preset": spec.preset, "method": spec.method}).normalized()
-    theirs = base.values()
-    parts: list[str] = []
+    base = type(spec).from_json({"preset": spec.preset, "method": spec.method})
+    if normalized:
+        spec, base = spec.normalized(), base.normalized()
+    ours, theirs = spec.values(), base.values()
+    parts = ["--preset", spec.preset]
     for leaf in leaves(type(spec)):
         value = ours[leaf.name]
-        if leaf.name == "method" or (value == theirs[leaf.name] and leaf.name != "seed"):
+        unchanged = value == theirs[leaf.name] and leaf.name != "seed"
+        if leaf.name in ("method", "preset") or unchanged:
             continue
         parts += [leaf.flag, value if isinstance(value, str) else json.dumps(value)]
-    if "--preset" not in parts:
-        parts = ["--preset", spec.preset, *parts]
     return parts
 
 

@@ -15,7 +15,7 @@ from cli.commands.common import service_exit_code, show_progress
 from learner.cli import add_deprecated, add_set_option, given_values
 from learner.fields import FieldError, leaves, nest, parse_text
 from learner.fields import add_arguments as add_spec_arguments
-from learner.run import RunSpec
+from learner.run import RunSpec, run_flags
 
 if TYPE_CHECKING:  # the command line starts without the batch's imports
     from sqlalchemy.orm import Session
@@ -252,12 +252,7 @@ def command_line(args: argparse.Namespace, spec: BatchSpec) -> str:
     if spec.replay_study is not None:
         parts += ["--replay-study", str(spec.replay_study)]
         parts += ["--replay-methods", ",".join(spec.replay_methods)]
-    template = spec.template
-    base = type(template).from_json({"preset": template.preset}).values()
-    for leaf in leaves(type(template)):
-        value = template.values()[leaf.name]
-        if leaf.name != "method" and (value != base[leaf.name] or leaf.name == "seed"):
-            parts += [leaf.flag, value if isinstance(value, str) else json.dumps(value)]
+    parts += run_flags(spec.template, normalized=False)
     for method, changes in spec.per_method.items():
         for name, value in changes.items():
             text = value if isinstance(value, str) else json.dumps(value)

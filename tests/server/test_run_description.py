@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import shlex
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -201,6 +202,19 @@ def test_the_rest_body_the_batch_and_the_command_lines_define_no_run_field() -> 
             {"method"} if command == "batch" else set()
         )
         assert generated == expected
+
+
+def test_the_batch_prints_the_command_that_describes_the_same_runs() -> None:
+    """The command a batch prints to finish it (and writes into its report) describes the
+    same runs: its preset included, whatever it is (`learner.run.run_flags`)."""
+    for preset in ("paper", "authors"):
+        argv = ["batch", "--study", "again", "--methods", "autonomous", "agent", "--agents", "2",
+                "--preset", preset, "--episodes", "3", "--knock-off-rate", "0.05"]  # fmt: skip
+        args = build_parser().parse_args(argv)
+        spec = batch_command.spec_from(args)
+        line = batch_command.command_line(args, spec)
+        again = build_parser().parse_args(shlex.split(line)[1:])
+        assert batch_command.spec_from(again) == spec, line
 
 
 # --- every number bounded where it is declared ----------------------------------------------------
