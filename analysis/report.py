@@ -146,13 +146,10 @@ def _individual_plan(
         others = [m for m in order if m != analysis.baseline]
         if not others:
             return None, ["Figure 6 is left out: it needs a method besides the baseline."]
+        paper = "the paper's shows the human-advised ones; " if method == "human" else ""
         notes.append(
-            f"Figure 6 shows the individual {method_name(others[0])} agents (the paper's "
-            f"shows the human-advised ones; this report has no {method_name(method)} "
-            "sessions)."
-            if method == "human"
-            else f"Figure 6 shows the individual {method_name(others[0])} agents (this report "
-            f"has no {method_name(method)} sessions)."
+            f"Figure 6 shows the individual {method_name(others[0])} agents ({paper}this "
+            f"report has no {method_name(method)} sessions)."
         )
         method = others[0]
     if reference_label is None:

@@ -32,40 +32,53 @@ def _too_many(what: str) -> Response:
     )
 
 
+Linked = tuple[int, StudyDesign, str]
+"""A study link's study: its id, its design and its page title."""
+
+
 @router.get("/join/{key}")
 async def open_link(request: Request, key: str) -> Response:
     """An arrival from the panel (its id in the link) or coming back (the cookie) gets its
     session at once. Anyone else (the bare link: a link preview, a crawler, a person sent
     it without the panel) sees a page whose Begin button makes the session: a GET alone
     takes no place in the study."""
-    found = await run_in_threadpool(_design_or_none, request, key)
-    if found is not None:
-        study_design, title = found
-        panel_id = request.query_params.get(study_design.panel.params[0], "").strip()
-        if not panel_id and request.cookies.get(COOKIE) is None:
-            query = request.url.query
-            return participant_page(
-                request,
-                "participant/join.html",
-                None,
-                title,
-                action=f"/join/{key}" + (f"?{query}" if query else ""),
-            )
-    return await join(request, key)
+    try:
+        linked = await run_in_threadpool(_linked, request, key)
+    except NotFound:
+        return _not_a_link()
+    _, design, title = linked
+    panel_id = request.query_params.get(design.panel.params[0], "").strip()
+    if not panel_id and request.cookies.get(COOKIE) is None:
+        query = request.url.query
+        return participant_page(
+            request,
+            "participant/join.html",
+            None,
+            title,
+            action=f"/join/{key}" + (f"?{query}" if query else ""),
+        )
+    return await _join(request, key, linked)
 
 
 @router.post("/join/{key}")
 async def join(request: Request, key: str) -> Response:
+    return await _join(request, key, None)
+
+
+async def _join(request: Request, key: str, linked: Linked | None) -> Response:
+    """The arrival itself (`linked`: the link's study when the caller looked it up)."""
     settings = request.app.state.settings
     address = request.client.host if request.client is not None else "?"
     if not request.app.state.arrivals_by_address.allow(
         address, settings.join_per_address_per_minute
     ):
         return _too_many("from your address")
-    try:
-        study_id, design = await run_in_threadpool(_design, request, key)
-    except NotFound:
-        return Response("This study link is not valid.", status_code=404, media_type="text/plain")
+    if linked is None:
+        try:
+            linked = await run_in_threadpool(_linked, request, key)
+        except NotFound:
+            return _not_a_link()
+    study_id, design, title = linked
     per_study = settings.join_per_place_per_minute * design.capacity
     if not request.app.state.arrivals_by_study.allow(key, per_study):
         return _too_many("at this study")
@@ -79,7 +92,6 @@ async def join(request: Request, key: str) -> Response:
         )
     arrival = await run_in_threadpool(_arrive, request, study_id, params)
     if arrival.token is None:
-        title = await run_in_threadpool(_title, request, study_id)
         return end_page(request, None, design, Outcome.full, arrival.params, title)
     if arrival.session_id is not None:
         request.app.state.manager.assign(arrival.session_id)  # from a pool: its clock runs
@@ -96,26 +108,14 @@ async def join(request: Request, key: str) -> Response:
     return response
 
 
-def _design_or_none(request: Request, key: str) -> tuple[StudyDesign, str] | None:
-    """The design of a link's study and its title; None for an unknown link (the
-    arrival's handler says so)."""
-    try:
-        with request.app.state.session_factory() as db:
-            study, design = assignment.study_for_key(db, key)
-            return design, study_title(study.texts)
-    except NotFound:
-        return None
+def _not_a_link() -> Response:
+    return Response("This study link is not valid.", status_code=404, media_type="text/plain")
 
 
-def _title(request: Request, study_id: int) -> str:
-    with request.app.state.session_factory() as db:
-        return study_title(studies.get_study(db, study_id).texts)
-
-
-def _design(request: Request, key: str) -> tuple[int, StudyDesign]:
+def _linked(request: Request, key: str) -> Linked:
     with request.app.state.session_factory() as db:
         study, design = assignment.study_for_key(db, key)
-        return study.id, design
+        return study.id, design, study_title(study.texts)
 
 
 def _arrive(request: Request, study_id: int, params: dict[str, str]) -> assignment.Arrival:
