@@ -46,3 +46,38 @@ def test_another_seed_gives_another_episode(motion: str) -> None:
         assert replay(env, 1, actions) != replay(env, 2, actions)
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_watching_or_recording_the_motion_does_not_change_what_happens(seed: int) -> None:
+    """A person's session records its motion for the 3-D view and a live viewer reads the
+    poses after every step; a batch run does neither. All three must take the same course:
+    a grasp read the cup's pose from PyBullet's cached link state, which recording
+    refreshes, so a recorded run once held a grabbed object differently (and diverged)."""
+    rng = np.random.default_rng(seed)
+    actions = rng.integers(0, 4, 60).tolist()
+    plain = sim.SortingEnv(motion="physics")
+    recorded = sim.SortingEnv(motion="physics", record_motion=True)
+    watched = sim.SortingEnv(motion="physics")
+    try:
+        runs = []
+        for env, watch in ((plain, False), (recorded, False), (watched, True)):
+            obs, info = env.reset(seed=seed)
+            course = [obs.tobytes()]
+            for action in actions:
+                obs, reward, terminated, truncated, info = env.step(action)
+                if watch:
+                    env.unwrapped.body_poses()
+                course.append((obs.tobytes(), reward, terminated))
+                if terminated or truncated:
+                    break
+            runs.append(course)
+    finally:
+        for env in (plain, recorded, watched):
+            env.close()
+    first_difference = [
+        next((i for i, (a, b) in enumerate(zip(runs[0], other)) if a != b), None)
+        for other in runs[1:]
+    ]
+    assert first_difference == [None, None]
+    assert [len(r) for r in runs[1:]] == [len(runs[0])] * 2
