@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import base64
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any
@@ -18,7 +19,7 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
 
-from runs.worker.messages import AdviceAnswer
+from runs.worker.messages import AdviceAnswer, AdviceRequest
 from server.live.manager import HistoryEntry, SessionManager
 from sim.actions import ACTION_NAMES
 from study.db.models import Advice, Status, StudySession
@@ -80,6 +81,15 @@ def _arm(info: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _own_moves(request: AdviceRequest | None, history: Iterable[HistoryEntry]) -> int | None:
+    """The robot's own moves between the last advised step and this request's (the
+    `alternating` strategy's turns come after some; None before the first choice)."""
+    if request is None:
+        return None
+    before = [e.global_step for e in history if e.advice_index < request.advice_index]
+    return request.global_step - max(before) - 1 if before else None
+
+
 async def current_state(manager: SessionManager, session: ParticipantSession) -> ParticipantState:
     """`participant_state` from an async route: a session without a live worker is read
     from the database in a worker thread, so a crowd polling finished or queued sessions
@@ -138,6 +148,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
         advice_budget=budget,
         advice_given=given,
         advice_left=max(0, budget - given),
+        own_moves=_own_moves(request, handle.history),
         last_reward=handle.last_reward,
         episode=shown.episode if shown else 0,
         stage=shown.stage if shown else None,
@@ -259,7 +270,7 @@ async def submit_advice(
         handle.given[body.advice_index] = body.action
         handle.request = None
         handle.moving = True
-        handle.history.append(HistoryEntry(body.advice_index, body.action))
+        handle.history.append(HistoryEntry(body.advice_index, body.action, request.global_step))
         handle.send(AdviceAnswer(body.advice_index, body.action))
         manager.hub.publish(
             session.id, "advice_given", {"advice_index": body.advice_index, "action": body.action}

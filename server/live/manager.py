@@ -98,6 +98,8 @@ COALESCE_S = 0.05
 class HistoryEntry:
     advice_index: int
     action: int
+    global_step: int
+    """The step advised: the robot's own moves since are counted from it."""
     reward: float | None = None
 
 
@@ -347,9 +349,12 @@ class SessionManager:
         )
         # (an advice row without an action is a replay's request past its recorded stream:
         # nothing was given there)
-        answered = [(a.advice_index, a.action) for a in advice if a.action is not None]
-        handle = WorkerHandle(session_id, token, process, parent, budget, dict(answered))
-        handle.history.extend(HistoryEntry(index, action) for index, action in answered)
+        answered = [
+            (a.advice_index, a.action, a.global_step) for a in advice if a.action is not None
+        ]
+        given = {index: action for index, action, _ in answered}
+        handle = WorkerHandle(session_id, token, process, parent, budget, given)
+        handle.history.extend(HistoryEntry(*row) for row in answered)
         handle.steps_before_first_turn = first_turn
         handle.run = run
         try:

@@ -62,6 +62,11 @@ class ParticipantState(BaseModel):
     station: str | None = Field(
         default=None, description="Where the arm is at this request: center, left, right."
     )
+    own_moves: int | None = Field(
+        default=None,
+        description="Actions the robot took on its own since the last advised one (the "
+        "alternating strategy's moves between turns); None before the first choice.",
+    )
     advice_budget: int
     advice_given: int
     advice_left: int

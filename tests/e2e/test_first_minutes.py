@@ -1,8 +1,9 @@
 """A participant's first minutes (issue 21), in Chromium through nginx: the first turn comes
 without the 3-D view replaying the robot's practice moves, and only the participant's own
 advised moves are shown as motion; on a phone (390x844, and a tablet at one turn) the
-scene, the sentence, the choices left and the four buttons stay in view at every turn, and
-the view's markers and the map beside the camera image show the arm's station."""
+scene, the status, the sentence, the choices left and the four buttons stay in view at every
+turn, and the view's markers and the map beside the camera image show the arm's station; a
+turn of the alternating strategy says how often the robot moved on its own since the last."""
 
 from __future__ import annotations
 
@@ -95,12 +96,19 @@ def phone_action(intent: str, info: dict[str, Any]) -> int:
     return MOVE[side]
 
 
-IN_VIEW = ["#scene", "#holding", ".counter-block", *(f"button.action >> nth={i}" for i in range(4))]
+IN_VIEW = [
+    "#scene",
+    "#status",
+    "#holding",
+    ".counter-block",
+    *(f"button.action >> nth={i}" for i in range(4)),
+]
 
 
 def assert_all_in_view(page: Any) -> None:
-    """The scene at its minimum height, the sentence, the choices left and the four buttons
-    inside the viewport without scrolling, nothing wider than it, buttons big enough to tap."""
+    """The scene at its minimum height, the status, the sentence, the choices left and the
+    four buttons inside the viewport without scrolling, nothing wider than it, buttons big
+    enough to tap."""
     size = page.viewport_size
     width, height = size["width"], size["height"]
     assert page.evaluate("window.scrollY") == 0
@@ -172,6 +180,37 @@ def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
     assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
     context.close()
     assert seen == {(s, h) for s in ("center", "left", "right") for h in ("holding", "empty")}
+
+
+def test_an_alternating_visit_says_the_robots_own_moves(live: Live, browser: Any) -> None:
+    """One action in every 3 advised, on a phone: the second turn says that the robot
+    moved twice by itself, in view."""
+    session = live.human_session(
+        "alternating phone", seed=5, advice_budget=2, strategy="alternating", interval=3
+    )
+    live.begin(session)
+    context = browser.new_context(viewport=PHONE, has_touch=True, is_mobile=True)
+    page = context.new_page()
+    page.goto(session["participant_url"])
+    expect(page).to_have_url(re.compile(r"/advise$"), timeout=30_000)
+    grab = page.locator("button.action[data-action='0']")
+    expect(grab).to_be_enabled(timeout=120_000)
+    expect(page.locator("#own-moves")).to_be_hidden()
+    grab.tap()
+    expect(page.locator("#advice-left")).to_have_text("1")
+    expect(grab).to_be_enabled(timeout=60_000)
+    sentence = page.locator("#own-moves")
+    expect(sentence).to_have_text("Since your last choice it moved 2 times on its own.")
+    expect(page.locator("#holding")).to_contain_text("The robot is")
+    assert_all_in_view(page)
+    wait_for_scene(live, session["id"])
+    wait_idle(live, session["id"])
+    save_screenshot(page, "advice-phone-own-moves")
+
+    station = request_info(live, session["id"])["station"]
+    page.locator(f"button.action[data-action='{1 if station == 'left' else 2}']").tap()
+    expect(page).to_have_url(re.compile(r"/thanks$"), timeout=30_000)
+    context.close()
 
 
 def request_info(live: Live, session_id: int) -> dict[str, Any]:

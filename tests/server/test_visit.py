@@ -328,6 +328,33 @@ def test_the_texts_say_when_this_participant_advises_and_how_long_they_may_take(
         assert api.post(f"/api/sessions/{session_id}/stop").status_code == 200
 
 
+@pytest.mark.slow
+def test_an_alternating_turn_says_how_often_the_robot_moved_on_its_own(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    """One action in every 3 advised: the second turn comes after 2 moves of the robot's
+    own, which the state says (the page words it), also once the session is resumed."""
+    study = api.post("/api/studies", json={"name": "own moves"}).json()
+    created, participant = new_participant(
+        server, api, study["id"], strategy="alternating", interval=3, advice_budget=2
+    )
+    assert participant.begin().status_code == 200
+    first = participant.next_request()
+    assert first["advice_index"] == 0 and first["own_moves"] is None, "no choice before"
+    assert participant.advise(0, 1).status_code == 200
+    second = participant.next_request()
+    assert second["advice_index"] == 1 and second["own_moves"] == 2
+
+    assert api.post(f"/api/sessions/{created['id']}/stop").status_code == 200
+    wait_for_status(api, created["id"], {"stopped"})
+    assert participant.state()["own_moves"] is None, "no turn while stopped"
+    assert api.post(f"/api/sessions/{created['id']}/resume").status_code == 200
+    resumed = participant.next_request()
+    assert resumed["advice_index"] == 1 and resumed["own_moves"] == 2, "from the stored advice"
+    assert api.post(f"/api/sessions/{created['id']}/stop").status_code == 200
+    participant.client.close()
+
+
 CUSTOM = [
     {"id": "clarity", "kind": "likert", "text": "The robot's moves were clear.", "required": True,
      "points": 5, "anchors": ["Strongly disagree", "Disagree", "Neutral", "Agree",

@@ -102,11 +102,20 @@
     $("observation-empty").hidden = true;
   }
 
+  // An alternating strategy's turn comes after moves the robot chose itself: say so, or
+  // the scene seems to have changed by more than the participant's last choice.
+  function ownMovesWords(n) {
+    if (!n) return "";
+    return ` Since your last choice it moved ${n === 1 ? "once" : `${n} times`} on its own.`;
+  }
+
   // The sentence, and beside the camera image a small map of the three tables with the
   // arm's one lit: the image alone can make a side table look like the center one.
   function showArm(s, on) {
     $("holding").hidden = !on;
-    $("holding").textContent = on ? window.describeArm(s) : "";
+    $("arm-words").textContent = on ? window.describeArm(s) : "";
+    $("own-moves").textContent = on ? ownMovesWords(s.own_moves) : "";
+    $("own-moves").hidden = !$("own-moves").textContent;
     $("holding").dataset.held = on && s.held ? "yes" : "no";
     const map = $("station-map");
     map.hidden = !on || !s.station;
