@@ -3,7 +3,8 @@ without the 3-D view replaying the robot's practice moves, and only the particip
 advised moves are shown as motion; on a phone (390x844, and a tablet at one turn) the
 scene, the status, the sentence, the choices left and the four buttons stay in view at every
 turn, and the view's markers and the map beside the camera image show the arm's station; a
-turn of the alternating strategy says how often the robot moved on its own since the last."""
+turn of the alternating strategy says how often the robot moved on its own since the last,
+and the last choice's result shows before the page moves on."""
 
 from __future__ import annotations
 
@@ -182,9 +183,12 @@ def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
     assert seen == {(s, h) for s in ("center", "left", "right") for h in ("holding", "empty")}
 
 
-def test_an_alternating_visit_says_the_robots_own_moves(live: Live, browser: Any) -> None:
+def test_an_alternating_visit_says_the_robots_own_moves_and_shows_the_last_result(
+    live: Live, browser: Any
+) -> None:
     """One action in every 3 advised, on a phone: the second turn says that the robot
-    moved twice by itself, in view."""
+    moved twice by itself, in view; after the last choice the page shows what that choice
+    earned before it goes on to the thanks."""
     session = live.human_session(
         "alternating phone", seed=5, advice_budget=2, strategy="alternating", interval=3
     )
@@ -209,6 +213,9 @@ def test_an_alternating_visit_says_the_robots_own_moves(live: Live, browser: Any
 
     station = request_info(live, session["id"])["station"]
     page.locator(f"button.action[data-action='{1 if station == 'left' else 2}']").tap()
+    last = page.locator("#history li").first
+    expect(last.locator(".history-index")).to_have_text("#2")
+    expect(last.locator(".reward")).to_have_text(re.compile(r"^[+-]?\d"), timeout=10_000)
     expect(page).to_have_url(re.compile(r"/thanks$"), timeout=30_000)
     context.close()
 

@@ -1,6 +1,7 @@
 // The advice page: follows the session's state by long-polling, enables the action
 // buttons when the robot waits for advice and the 3-D view has finished showing its last
-// move, and sends one advice per click or key press.
+// move, and sends one advice per click or key press. After the last it follows on until
+// that choice's result is shown (or the last move's time is up), then moves on.
 "use strict";
 (() => {
   const config = JSON.parse(document.getElementById("page-config").textContent);
@@ -14,7 +15,9 @@
   let version = null;
   let enabledFor = null; // the advice index the buttons answer, or null
   let generation = 0; // bumps on every state, so stale waits give up
-  let finished = false;
+  let finished = false; // the last choice is made: the page waits for its result, then goes on
+  let leaving = false;
+  let latest = null; // the latest state shown
   let sentIndex = null;
   let activeSince = null; // performance.now() when the buttons became active
   let readinessPolling = false;
@@ -135,10 +138,13 @@
 
   const VISIT_ENDED = ["declined", "excluded", "timed_out"];
   async function render(s) {
-    const gen = ++generation;
+    if (finished && !s.history.length) return; // the session is over: keep what is shown
+    latest = s;
     showCounter(s);
     showReward(s);
     showHistory(s);
+    if (finished) return; // the last choice's result, which `finish` waits for
+    const gen = ++generation;
     if (s.advice_budget > 0 && s.advice_left === 0) return finish(gen);
     const ready =
       s.status === "running" && s.advice_wanted && !s.robot_moving && s.advice_index !== sentIndex;
@@ -176,11 +182,19 @@
     setButtons(false);
     setStatus("That was your last choice. Thank you!", "turn");
     showArm({}, false);
-    // Show the last advised move (the view shows the robot's own moves without motion,
-    // but never wait on it for long).
+    // Show the last advised move (the view shows the robot's own moves without motion)
+    // and what it earned, which comes once the robot has made it; never wait long.
+    const until = performance.now() + LAST_MOVE_MS;
     await Promise.race([waitForPlayback(gen), sleep(LAST_MOVE_MS)]);
+    while (!lastResultShown() && performance.now() < until) await sleep(100);
     await sleep(800);
+    leaving = true;
     window.location.assign(`/p/${config.token}`);  // thanks, or an online study's questionnaire
+  }
+
+  function lastResultShown() {
+    const last = latest && latest.history[latest.history.length - 1];
+    return Boolean(last) && last.reward !== null;
   }
 
   // Before the first turn the robot practises with random moves; show how far it is.
@@ -263,7 +277,7 @@
 
   async function follow() {
     let failures = 0;
-    while (!finished) {
+    while (!leaving) {
       const path = version === null ? "/api/participant/state" : `/api/participant/state?after=${version}&timeout=20`;
       try {
         const response = await api(path);
@@ -281,7 +295,7 @@
         failures += 1;
         setButtons(false);
         enabledFor = null;
-        setStatus("Connection lost. Trying again…", "paused");
+        if (!finished) setStatus("Connection lost. Trying again…", "paused");
         await sleep(Math.min(10000, 1000 * failures));
         version = null;
       }
