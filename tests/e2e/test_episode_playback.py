@@ -1,6 +1,7 @@
 """A researcher plays a participant's episode back in the dashboard: a worker reruns it,
 the page plays, pauses and steps through it showing each step as the database logged it,
-the advice turns with the participant's decision times and the image they were shown,
+the advice turns (numbered from 1, as the participant's page does) with the participant's
+decision times and the image they were shown,
 and the 3-D view draws the step shown. Leaving the page closes the playback."""
 
 from __future__ import annotations
@@ -174,6 +175,7 @@ def test_a_researcher_plays_back_a_participants_episode(live: Live, browser: Any
     rows = page.locator("#advice-list tr")
     expect(rows).to_have_count(len(advice))
     for row, given in zip(rows.all(), advice, strict=True):
+        expect(row.locator(".advice-index")).to_have_text(f"#{given.advice_index + 1}")
         expect(row.locator(".decision-time")).to_have_text(f"{given.decision_time_s:.2f} s")
         expect(row.locator(".advice-action")).to_have_text(sim.ACTION_NAMES[given.action])
     assert [a.decision_time_s for a in advice] == [decision_time(a.advice_index) for a in advice]
@@ -182,6 +184,7 @@ def test_a_researcher_plays_back_a_participants_episode(live: Live, browser: Any
     page.locator(f"#advice-list tr[data-advice='{turn.advice_index}']").click()
     expect_step(page, steps[index])
     expect(page.locator("#step-source")).to_have_text("advisor")
+    expect(page.locator("#advice-number")).to_have_text(f"#{turn.advice_index + 1}")
     expect(page.locator("#step-advice")).to_contain_text(
         f"the participant chose {sim.ACTION_NAMES[turn.action]} after {turn.decision_time_s:.2f} s"
     )

@@ -69,7 +69,7 @@
     const advice = adviceAt(current);
     $("step-advice").hidden = !advice;
     if (advice) {
-      $("advice-number").textContent = `#${advice.advice_index}`;
+      $("advice-number").textContent = `#${advice.advice_index + 1}`;
       $("advice-who").textContent = advice.advisor === "human" ? "the participant" : `the ${advice.advisor} advisor`;
       $("advice-action").textContent = advice.action_name;
       $("advice-time").textContent = advice.decision_time_s === null ? "" : `after ${seconds(advice.decision_time_s)}`;
@@ -92,11 +92,11 @@
         tr.dataset.advice = a.advice_index;
         tr.dataset.index = a.index;
         tr.innerHTML = `<td class="advice-index"></td><td class="advice-step"></td><td><img class="advice-image" width="48" height="48"></td><td class="advice-action"></td><td class="decision-time"></td>`;
-        tr.querySelector(".advice-index").textContent = `#${a.advice_index}`;
+        tr.querySelector(".advice-index").textContent = `#${a.advice_index + 1}`; // as the participant's page
         tr.querySelector(".advice-step").textContent = a.index + 1;
         const img = tr.querySelector(".advice-image");
         img.src = a.image_url;
-        img.alt = `What the ${a.advisor} advisor saw at advice ${a.advice_index}`;
+        img.alt = `What the ${a.advisor} advisor saw at advice ${a.advice_index + 1}`;
         tr.querySelector(".advice-action").textContent = a.action_name;
         tr.querySelector(".decision-time").textContent = seconds(a.decision_time_s);
         tr.addEventListener("click", () => {
