@@ -7,10 +7,12 @@ with a twentieth of the triangles, so the arm PyBullet loads has such meshes, wr
 cache folder; the viewer still gets the full meshes from `read_obj`.
 """
 
+import contextlib
 import functools
 import hashlib
 import os
 import re
+import stat
 import tempfile
 from pathlib import Path
 
@@ -92,6 +94,25 @@ def link_mesh_path(link: int) -> Path:
     return IIWA_DIR / "meshes" / f"link_{link}.obj"
 
 
+def model_folder() -> Path:
+    """This user's folder for the generated model files: `ideeprl-sim-UID`, mode 0700.
+
+    One folder for every user held files that only their first writer could read: after
+    root had run the platform, a service running as its own user failed every session with
+    "Cannot load URDF file". A folder of that name that is not this user's own directory, or
+    that others may write to (and so may have changed the robot), is passed over for a new
+    one.
+    """
+    base = Path(tempfile.gettempdir())
+    folder = base / f"ideeprl-sim-{os.getuid()}"
+    with contextlib.suppress(FileExistsError):
+        folder.mkdir(mode=0o700)
+    info = folder.lstat()
+    if stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and not info.st_mode & 0o022:
+        return folder
+    return Path(tempfile.mkdtemp(prefix=f"{folder.name}-", dir=base))
+
+
 def _write_once(path: Path, text: str) -> None:
     """Write atomically, so processes building environments side by side never see half a file."""
     if path.exists():
@@ -114,8 +135,9 @@ def arm_urdf(
     matters because the physics mode rebuilds the world at every reset.
 
     Link colours are replaced because the stock orange and light blue would be confused with
-    the red and blue objects in a 64x64 image. Files go to a cache folder named by a hash of
-    their content, so changing any argument (or pybullet_data) makes a new, consistent set.
+    the red and blue objects in a 64x64 image. Files go to a folder in this user's
+    `model_folder` named by a hash of their content, so changing any argument (or
+    pybullet_data) makes a new, consistent set.
     """
     assert len(link_rgba) == ARM_LINKS
     meshes = {
@@ -126,7 +148,7 @@ def arm_urdf(
     digest = hashlib.sha256(
         "\n".join([urdf, cup_xml, repr(link_rgba), *meshes.values()]).encode()
     ).hexdigest()[:16]
-    folder = Path(tempfile.gettempdir()) / "ideeprl-sim" / digest
+    folder = model_folder() / digest
     for link, text in meshes.items():
         _write_once(folder / f"link_{link}.obj", text)
 
