@@ -142,6 +142,7 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         viewer.start()
         playbacks.open()
         pools.open()
+        await manager.resume_after_restart()
         yield
         await pools.close()
         playbacks.close_all()

@@ -36,6 +36,14 @@ WAITED_FOR_PARTICIPANT = "the participant did not consent and start"
 a session by itself when the participant comes back)."""
 
 
+SHUTTING_DOWN = "the server is shutting down"
+"""The detail of a session its server's shutdown interrupted (an update, a restart): the
+server resumes such a human session by itself when it starts again, so the participant goes
+on where they were."""
+SHUT_DOWN_WHILE_PAUSED = "the server shut down while the session was paused; resume it"
+"""The detail of a session the researcher had paused: it waits for them, not the restart."""
+
+
 class HandOver(WorkerExit):
     """A trainer slot is free for this session in a population (`Command("handover")`):
     the worker checkpoints and exits, the session still `running` under its token, and a
@@ -192,7 +200,7 @@ class WorkerLink:
             stop.session_id = message.session_id
             raise stop
         elif message.name == "shutdown":
-            raise ParentGone("the server is shutting down")
+            raise ParentGone(SHUT_DOWN_WHILE_PAUSED if self.paused else SHUTTING_DOWN)
 
 
 class TaggedChannel:

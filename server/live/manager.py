@@ -40,7 +40,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from learner.strategies import make_strategy
-from runs.worker.link import WAITED_FOR_PARTICIPANT
+from runs.worker.link import SHUTTING_DOWN, WAITED_FOR_PARTICIPANT
 from runs.worker.messages import (
     AdviceRequest,
     AdviceResult,
@@ -63,7 +63,7 @@ from runs.worker.worker import WorkerOptions, worker_main
 from server.live import visits
 from server.live.hub import Hub
 from server.live.reaping import join
-from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status
+from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status, StudySession
 from study.services import learning, numerics
 from study.services.assignment import expire_unopened_everywhere
 from study.services.errors import Conflict
@@ -237,6 +237,38 @@ class SessionManager:
             threading.Thread(target=forkserver.ensure_running, daemon=True).start()
         await run_in_threadpool(self._reap)
         self._reaper = asyncio.create_task(self._reap_forever())
+
+    async def resume_after_restart(self) -> list[int]:
+        """Resume the participants' sessions that the last shutdown interrupted; their ids.
+
+        A restart (an update, `systemctl restart`) would otherwise leave a person in the
+        middle of a visit on "the researcher can resume it", with no researcher there in an
+        online study. Machine sessions stay for their batch or researcher, pooled ones for
+        their pool (which makes them again), and those a crash or a pause left for the
+        researcher.
+        """
+        with self.factory() as db:
+            interrupted = db.scalars(
+                select(StudySession).where(
+                    StudySession.status == Status.interrupted, StudySession.pooled.is_(False)
+                )
+            )
+            ids = [
+                s.id
+                for s in interrupted
+                if s.method == "human" and s.status_detail.startswith(SHUTTING_DOWN)
+            ]
+        resumed = []
+        for session_id in ids:
+            try:
+                await self.resume(session_id)
+            except Exception:  # it stays for the researcher; the others and the server go on
+                log.exception("session %s did not resume after the restart", session_id)
+            else:
+                resumed.append(session_id)
+        if resumed:
+            log.info("resumed after the restart: sessions %s", resumed)
+        return resumed
 
     async def close(self) -> None:
         """Server shutdown: workers checkpoint and become `interrupted` (resumable)."""
@@ -445,7 +477,7 @@ class SessionManager:
         tokens = await run_in_threadpool(self._still_ours, group)
         members = [h for h in group if h.session_id in tokens]
         if members and self._closing:
-            detail = "the server shut down as it started training; resume it"
+            detail = f"{SHUTTING_DOWN} as it started training"
             for handle in members:
                 await run_in_threadpool(
                     self._set_status, handle.session_id, Status.interrupted, detail, handle.token

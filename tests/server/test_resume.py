@@ -132,6 +132,51 @@ def test_a_human_session_survives_a_server_crash_without_asking_again(live: Live
     other.close()
 
 
+def test_a_restart_resumes_a_participants_session_by_itself(live: LiveServer) -> None:
+    """An update or `systemctl restart` in the middle of a visit: the participant goes on
+    where they were, with nobody there to resume their session; a machine session stays
+    for whoever started it, and a session the researcher paused stays for them."""
+    given = 3
+    with live.client() as api:
+        study = api.post("/api/studies", json={"name": "restart"}).json()
+        human, paused = (
+            api.post(
+                f"/api/studies/{study['id']}/sessions",
+                json=session_body("human", advice_budget=10, episodes=1),
+            ).json()
+            for _ in range(2)
+        )
+        machine = api.post(
+            f"/api/studies/{study['id']}/sessions",
+            json=session_body("oracle", advice_budget=30, episodes=200),
+        ).json()
+        api.post(f"/api/sessions/{machine['id']}/start")
+        participant = SimulatedParticipant(live.url, human["participant_token"])
+        participant.begin()
+        for index in range(given):
+            state = participant.next_request()
+            assert participant.advise(state["advice_index"], index % 4).status_code == 200
+        assert participant.next_request()["advice_index"] == given
+        waiting = SimulatedParticipant(live.url, paused["participant_token"])
+        waiting.begin()
+        assert waiting.next_request()["advice_wanted"]
+        assert api.post(f"/api/sessions/{paused['id']}/pause").status_code == 200
+        assert api.get(f"/api/sessions/{machine['id']}").json()["status"] == "running"
+
+    live.stop()  # SIGINT, as systemd's stop sends SIGTERM: the server shuts down in order
+    live.start()
+    state = participant.next_request(timeout=60)
+    assert (state["status"], state["advice_wanted"]) == ("running", True), state
+    assert (state["advice_index"], state["advice_given"]) == (given, given)
+    with live.client() as api:
+        stayed = [api.get(f"/api/sessions/{s['id']}").json() for s in (machine, paused)]
+    assert [s["status"] for s in stayed] == ["interrupted", "interrupted"], stayed
+    assert "shutting down" in stayed[0]["status_detail"]
+    assert "paused" in stayed[1]["status_detail"]
+    participant.close()
+    waiting.close()
+
+
 def _alive(pid: int) -> bool:
     """Running (a zombie nobody has reaped yet counts as gone)."""
     try:
