@@ -19,7 +19,9 @@ the records an uninterrupted run would have written (the worker rewinds past it)
 
 from __future__ import annotations
 
+import getpass
 import json
+import os
 import shutil
 import sqlite3
 import subprocess
@@ -172,15 +174,62 @@ def _relative(path: str, data_dir: Path) -> Path | None:
     return None
 
 
+def _copy_private(source: Path, target: Path) -> None:
+    """Copy `source` to a file only its owner may read (the researcher key), never readable
+    by others on the way: a plain copy takes the umask's 0644."""
+    fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "wb") as f:
+        f.write(source.read_bytes())
+    target.chmod(0o600)  # a file that was there keeps its mode through O_CREAT
+
+
+def _make_private_folder(work: Path, out: Path) -> None:
+    """`work` (and its `files/`), mode 0700: a backup holds every participant's data."""
+    shutil.rmtree(work, ignore_errors=True)
+    try:
+        work.parent.mkdir(parents=True, exist_ok=True)
+        work.mkdir(mode=0o700)
+        work.chmod(0o700)  # whatever the umask
+        (work / FILES).mkdir()
+    except OSError as error:
+        shutil.rmtree(work, ignore_errors=True)
+        raise BackupError(
+            f"cannot write into {out.parent} ({error.strerror}); name a folder that the user "
+            f"{_user()} can write (one it owns)"
+        ) from None
+
+
+def _user() -> str:
+    """This process's user's name (its uid where it has none, as in some containers)."""
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        return str(os.getuid())
+
+
 def backup(database_url: str, data_dir: Path, out: Path) -> Backup:
     """A consistent copy of the database and the checkpoints it refers to, in `out` (a
-    folder that must not exist yet)."""
+    folder that must not exist yet, made readable by this user alone). A backup that fails
+    leaves nothing behind."""
     url = make_url(database_url)
     if out.exists():
         raise BackupError(f"{out} exists already; name a new folder for the backup")
     work = out.with_name(f".{out.name}.partial")
-    shutil.rmtree(work, ignore_errors=True)
-    (work / FILES).mkdir(parents=True)
+    _make_private_folder(work, out)
+    try:
+        done = _copy_into(url, data_dir, work)
+    except (OSError, sqlite3.Error) as error:
+        shutil.rmtree(work, ignore_errors=True)
+        raise BackupError(f"the backup into {out} failed: {error}") from None
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    work.rename(out)
+    return Backup(out, done.database, done.files, done.missing)
+
+
+def _copy_into(url: URL, data_dir: Path, work: Path) -> Backup:
+    """The backup's contents written into the folder `work`."""
     database = work / (SQLITE_FILE if _is_sqlite(url) else POSTGRES_FILE)
     copied: set[Path] = set()
     for _ in range(ATTEMPTS):
@@ -220,7 +269,7 @@ def backup(database_url: str, data_dir: Path, out: Path) -> Backup:
     files = sorted(str(p) for p in wanted - {Path(m) for m in missing})
     key = data_dir / API_KEY_FILE
     if key.is_file():
-        shutil.copyfile(key, work / FILES / API_KEY_FILE)
+        _copy_private(key, work / FILES / API_KEY_FILE)
         files.append(API_KEY_FILE)
     manifest = _manifest(
         url,
@@ -231,8 +280,7 @@ def backup(database_url: str, data_dir: Path, out: Path) -> Backup:
         missing=missing,
     )
     (work / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
-    work.rename(out)
-    return Backup(out, url.get_backend_name(), files, missing)
+    return Backup(work, url.get_backend_name(), files, missing)
 
 
 def _manifest(url: URL, database: Path, **contents: Any) -> dict[str, Any]:
@@ -306,7 +354,10 @@ def restore(folder: Path, database_url: str, data_dir: Path) -> Restored:
     for name in manifest["files"]:
         target = data_dir / name
         target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(folder / FILES / name, target)
+        if name == API_KEY_FILE:
+            _copy_private(folder / FILES / name, target)
+        else:
+            shutil.copyfile(folder / FILES / name, target)
     moved = _move_paths(url, manifest, data_dir)
     return Restored(created_at=manifest["created_at"], files=list(manifest["files"]), moved=moved)
 

@@ -11,6 +11,7 @@ import os
 import shutil
 import signal
 import sqlite3
+import stat
 import threading
 import time
 from collections.abc import Iterator
@@ -34,6 +35,7 @@ from study.services import learning
 from study.services.export import export_study
 from study.services.sessions import create_session
 from study.services.studies import create_study
+from study.settings import Settings
 from tests.server.live import fresh_database
 from tests.server.scale import session_body
 from tests.server.test_resume import records
@@ -177,6 +179,65 @@ def test_restore_refuses_a_database_that_has_tables(
         restore(tmp_path / "backup", url, data_dir)
     with pytest.raises(BackupError, match="exists already"):
         backup(url, data_dir, tmp_path / "backup")
+
+
+def test_a_backup_and_its_restore_keep_the_data_and_the_key_to_their_owner(
+    installation: tuple[Engine, Path], tmp_path: Path
+) -> None:
+    """The folder holds everyone's data and the researcher key: others may not read either."""
+    engine, data_dir = installation
+    data_dir.mkdir(exist_ok=True)
+    Settings(data_dir=data_dir, api_key="").ensure_api_key()  # 0600, as the server makes it
+    url = engine.url.render_as_string(False)
+    out = tmp_path / "backup"
+    assert (
+        main(["backup", "--out", str(out), "--data-dir", str(data_dir), "--database-url", url]) == 0
+    )
+    assert stat.S_IMODE(out.stat().st_mode) == 0o700
+    assert stat.S_IMODE((out / "files" / "api_key").stat().st_mode) == 0o600
+    fresh = tmp_path / "restored"
+    with fresh_database(fresh) as copy:
+        assert main(["restore", str(out), "--data-dir", str(fresh), "--database-url", copy]) == 0
+    assert stat.S_IMODE((fresh / "api_key").stat().st_mode) == 0o600
+    assert (fresh / "api_key").read_text() == (data_dir / "api_key").read_text()
+
+
+def _unwritable(tmp_path: Path, kind: str) -> Path:
+    """A place no backup can be written to: under a file, or in a folder it may not write."""
+    if kind == "under a file":
+        (tmp_path / "a file").write_text("")
+        return tmp_path / "a file" / "backup"
+    if os.geteuid() == 0:
+        pytest.skip("root writes into any folder")
+    (tmp_path / "read-only").mkdir(mode=0o500)
+    return tmp_path / "read-only" / "backup"
+
+
+@pytest.mark.parametrize("kind", ["under a file", "in a read-only folder"])
+def test_a_backup_that_cannot_be_written_says_so_in_one_line(
+    installation: tuple[Engine, Path], tmp_path: Path, kind: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    engine, data_dir = installation
+    out = _unwritable(tmp_path, kind)
+    url = engine.url.render_as_string(False)
+    args = ["backup", "--out", str(out), "--data-dir", str(data_dir), "--database-url", url]
+    assert main(args) == 1
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and error.startswith("error: cannot write"), error
+    assert str(out.parent) in error
+    assert not list(tmp_path.rglob("*.partial"))
+
+
+def test_a_backup_that_fails_midway_leaves_no_partial_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The backup folder is made, then the database is not there (a wrong --data-dir)."""
+    missing = f"sqlite:///{tmp_path / 'data' / 'ideeprl.sqlite3'}"
+    out = tmp_path / "backups" / "tonight"
+    args = ["backup", "--out", str(out), "--data-dir", str(tmp_path / "data")]
+    assert main([*args, "--database-url", missing]) == 1
+    assert "no database at" in capsys.readouterr().err
+    assert list((tmp_path / "backups").iterdir()) == []
 
 
 def test_a_database_at_an_older_revision_is_backed_up_before_it_is_migrated(
