@@ -19,8 +19,10 @@ import sys
 from collections.abc import Sequence
 from importlib import metadata
 
+from sqlalchemy.exc import OperationalError
+
 from cli import commands
-from cli.commands.common import CommandError, fail
+from cli.commands.common import CommandError, database_down, fail
 from learner.run import RunSpec
 
 
@@ -70,6 +72,8 @@ def main(argv: Sequence[str] | None = None, spec_class: type[RunSpec] = RunSpec)
         return int(args.func(args) or 0)
     except CommandError as error:
         return fail(error.message, error.code)
+    except OperationalError as error:
+        return fail(database_down(error))
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cli.commands.common import service_exit_code, show_progress
+from cli.commands.common import service_exit_code, show_progress, shown_url
 from learner.cli import add_deprecated, add_set_option, given_values
 from learner.fields import FieldError, leaves, nest, parse_text
 from learner.fields import add_arguments as add_spec_arguments
@@ -336,7 +336,7 @@ def batch(args: argparse.Namespace) -> int:
         with make_session_factory(engine)() as db:
             study_id, what = resolve_study(db, args.study)
         assert study_id is not None
-        print(f"{what}, database {settings.db_url}")
+        print(f"{what}, database {shown_url(settings.db_url)}")
         return _run(args, spec, study_id, settings)
     except LookupError as error:
         return _fail(str(error), 1)
@@ -377,9 +377,9 @@ def _dry_run(args: argparse.Namespace, spec: BatchSpec, settings: Settings) -> i
         rows = runner.preview_rows()
     if args.json:
         runs = [dataclasses.asdict(row) for row in rows]
-        print(json.dumps({"study": study_id, "database": url, "runs": runs}, indent=2))
+        print(json.dumps({"study": study_id, "database": shown_url(url), "runs": runs}, indent=2))
         return 0
-    print(f"{what}, database {url}")
+    print(f"{what}, database {shown_url(url)}")
     for row in rows:
         head = f"  {row.run:<18} seed {row.seed:<8}"
         state = f"session {row.session}: {row.status}" if row.session else row.status

@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     import argparse
 
     from sqlalchemy.engine import Engine
+    from sqlalchemy.exc import OperationalError
     from sqlalchemy.orm import Session
 
     from study.settings import Settings
@@ -72,6 +73,35 @@ def show_progress(disabled: bool, stream: TextIO | None = None) -> bool:
     redirected to a file (logs then hold the results, not thousands of bar redraws)."""
     stream = stream or sys.stderr
     return not disabled and bool(getattr(stream, "isatty", lambda: False)())
+
+
+def shown_url(url: str) -> str:
+    """A database URL as it may be printed: its password hidden (`serve`'s banner goes to
+    the journal, a batch's output to logs)."""
+    return make_url(url).render_as_string(hide_password=True)
+
+
+def database_down(error: OperationalError) -> str:
+    """What to say, in one line, when the database does not answer (a PostgreSQL server that
+    is down, a wrong password or host)."""
+    reason = " ".join(str(error.orig or error).split())
+    return (
+        f"the database did not answer: {reason}; check that it runs and that "
+        "--database-url, DATABASE_URL or the .env file here name it"
+    )
+
+
+def check_database(url: str) -> None:
+    """Connect once, so that a database that is down raises here (`cli.main` says so in one
+    line) and not inside uvicorn's start-up, which logs a traceback."""
+    from study.db.engine import make_engine
+
+    engine = make_engine(url)
+    try:
+        with engine.connect():
+            pass
+    finally:
+        engine.dispose()
 
 
 def existing_database(settings: Settings) -> Engine:

@@ -28,6 +28,7 @@ def register(subparsers: Any) -> None:
 def serve(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from cli.commands.common import check_database, shown_url
     from server.main import UVICORN_OPTIONS, create_app
     from study.settings import Settings
 
@@ -52,12 +53,13 @@ def serve(args: argparse.Namespace) -> int:
         f"  API docs:        {base}/docs\n"
         f"  API:             {base}/api\n"
         f"  participant URL: {base}/p/TOKEN (each human session has its own link)\n"
-        f"  database:        {settings.db_url}\n"
+        f"  database:        {shown_url(settings.db_url)}\n"
         f"  researcher key:  {key}{saved}\n"
         f"  send it as the X-API-Key header, e.g.\n"
         f"  curl -H 'X-API-Key: {key}' {base}/api/studies",
         flush=True,
     )
+    check_database(settings.db_url)
     uvicorn.run(
         app,
         host=settings.host,

@@ -23,6 +23,7 @@ from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.services.export import TABLES
 from study.services.studies import create_study
+from tests.server.live import free_port
 
 ROOT = Path(__file__).absolute().parents[2]
 TINY_TRAIN = [
@@ -150,6 +151,32 @@ def test_json_output_is_all_of_stdout_and_keeps_the_exit_codes(
     assert captured.out == "" and "has no sessions yet" in captured.err
     assert main(["report", "--study", "1", "--n-episodes", "0", "--out", str(out), *flags]) == 2
     assert capsys.readouterr().out == ""
+
+
+def test_printed_database_urls_hide_the_password(tmp_path: Path) -> None:
+    """`serve`'s banner goes to the journal, which more people read than the `.env`; a
+    database that is down (here: a PostgreSQL port nothing listens on) is one line, not a
+    traceback. The URL is given here, never the environment's own DATABASE_URL."""
+    port = free_port()
+    url = f"postgresql://ideeprl:s3cret@127.0.0.1:{port}/ideeprl"
+    data = str(tmp_path / "data")
+    served = ideeprl(
+        "serve", "--port", str(free_port()), cwd=tmp_path, DATABASE_URL=url, IDEEPRL_DATA_DIR=data
+    )
+    assert f"database:        postgresql+psycopg://ideeprl:***@127.0.0.1:{port}/" in served.stdout
+    commands = [
+        served,
+        ideeprl("batch", "--study", "pilot", "--methods", "autonomous", "--dry-run", "--json",
+                "--database-url", url, cwd=tmp_path),
+        ideeprl("export", "--study", "1", "--out", str(tmp_path / "out"), "--database-url", url,
+                cwd=tmp_path),
+    ]  # fmt: skip
+    for done in commands:
+        assert "s3cret" not in done.stdout + done.stderr
+        assert done.returncode == 1, done.stderr
+        assert done.stderr.startswith("error: the database did not answer: ")
+        assert done.stderr.count("\n") == 1, done.stderr
+        assert f"port {port} failed" in done.stderr
 
 
 class FakeTerminal:
