@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -463,23 +463,52 @@ def _printable(value: Any) -> Any:
     return str(value).encode("utf-8", "backslashreplace").decode("utf-8")
 
 
-async def validation_error(request: Request, error: RequestValidationError) -> JSONResponse:
+Home = Callable[[str], str | None]
+"""Where a run's field of this name belongs (e.g. `run.config.advice_budget`), or None."""
+_PLAIN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,39}")
+"""A field name the 422 may repeat: what a field's name looks like, and no longer."""
+
+
+def _unknown_field(body: Any, where: Sequence[Any], home: Home | None) -> tuple[str, str]:
+    """The last `loc` step and the message for an unknown field. A plain identifier is
+    named, since it is what the sender has to fix, and a run's field sent in the wrong
+    place (in or beside a `run`) says where it belongs; any other name is the sender's
+    text and is not repeated."""
+    name = where[-1]
+    listed = "the API document (/openapi.json) lists the valid ones"
+    if not (isinstance(name, str) and _PLAIN_NAME.fullmatch(name)):
+        return "(unknown field)", f"an unknown field; {listed}"
+    parent = _value_at(body, where[:-1])
+    by_a_run = "run" in where[:-1] or (isinstance(parent, dict) and "run" in parent)
+    belongs = home(name) if home is not None and by_a_run else None
+    if belongs is not None:
+        return name, f"unknown field '{name}' here: it belongs in {belongs}"
+    return name, f"unknown field '{name}'; {listed}"
+
+
+def validation_error(
+    home: Home | None = None,
+) -> Callable[[Request, RequestValidationError], Awaitable[JSONResponse]]:
     """FastAPI's 422, without echoing the input: input it cannot encode (NaN, a lone
-    surrogate) would turn the 422 into a 500, and a message need not repeat the input."""
-    body = await _json_body(request)
-    everything = set() if body is _NOTHING else _leaves(body)
-    detail = []
-    for e in error.errors():
-        where = e.get("loc", ())
-        loc = [_printable(_readable(part)) for part in where]
-        # only the value this error is about is hidden: the message may rightly name other
-        # text the body also holds (an allowed option sent in another field)
-        sent = _value_at(body, where)
-        quoted = everything if sent is _NOTHING else _leaves(sent)
-        msg = _hidden(_printable(e.get("msg", "")), quoted)
-        if e.get("type") == "extra_forbidden" and loc:
-            # the field's name is the sender's text: say where, not what
-            loc[-1] = "(unknown field)"
-            msg = "an unknown field; the API document (/openapi.json) lists the valid ones"
-        detail.append({"loc": loc, "msg": msg, "type": _printable(e.get("type", "value_error"))})
-    return JSONResponse({"detail": detail}, status_code=422)
+    surrogate) would turn the 422 into a 500, and a message need not repeat the input.
+    `home`: where a run's field belongs, for an unknown field sent elsewhere."""
+
+    async def handler(request: Request, error: RequestValidationError) -> JSONResponse:
+        body = await _json_body(request)
+        everything = set() if body is _NOTHING else _leaves(body)
+        detail = []
+        for e in error.errors():
+            where = e.get("loc", ())
+            loc = [_printable(_readable(part)) for part in where]
+            # only the value this error is about is hidden: the message may rightly name
+            # other text the body also holds (an allowed option sent in another field)
+            sent = _value_at(body, where)
+            quoted = everything if sent is _NOTHING else _leaves(sent)
+            msg = _hidden(_printable(e.get("msg", "")), quoted)
+            if e.get("type") == "extra_forbidden" and loc:
+                loc[-1], msg = _unknown_field(body, where, home)
+            kind = _printable(e.get("type", "value_error"))
+            detail.append({"loc": loc, "msg": msg, "type": kind})
+        return JSONResponse({"detail": detail}, status_code=422)
+
+    return handler

@@ -23,6 +23,7 @@ from server.deps import credential_guards
 from server.guard import (
     LOGIN,
     Describe,
+    Home,
     RequestGuard,
     SecurityHeaders,
     validation_error,
@@ -87,6 +88,14 @@ def describe_run_field(spec_class: type[RunSpec]) -> Describe:
         return leaf.allowed() if leaf is not None else None
 
     return describe
+
+
+def run_field_home(spec_class: type[RunSpec]) -> Home:
+    """Where a run's field of a given name belongs (`run.config.advice_budget`), for the
+    422 on an unknown field: a run's field sent beside its `run` or in the wrong group."""
+    homes = {leaf.path[-1]: ".".join(("run", *leaf.path)) for leaf in leaves(spec_class)}
+    assert len(homes) == len(leaves(spec_class)), "a run's field names are unique"
+    return homes.get
 
 
 def episode_playback(settings: Settings) -> tuple[Playbacks, PlaybackViewer]:
@@ -194,7 +203,8 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         describe=describe_run_field(spec_class),
     )
     app.add_middleware(SecurityHeaders)
-    app.add_exception_handler(RequestValidationError, validation_error)  # type: ignore[arg-type]
+    refuse = validation_error(run_field_home(spec_class))
+    app.add_exception_handler(RequestValidationError, refuse)  # type: ignore[arg-type]
     install_openapi(app)
     add_docs(app)
 

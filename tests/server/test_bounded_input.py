@@ -242,6 +242,41 @@ def test_a_422_names_the_field_without_echoing_what_was_sent(
             assert response.json()["detail"][0]["loc"][0] == "body"
 
 
+def test_a_422_names_an_unknown_field_and_says_where_a_runs_field_belongs(
+    server: LiveServer, participant_token: tuple[int, str]
+) -> None:
+    """A field name that is a plain identifier is named (it is what the sender must fix);
+    one that a run has elsewhere says where. Other names the sender wrote are not echoed."""
+    study, _ = participant_token
+    long_name = "echo_me_" + "x" * 60
+    cases: list[tuple[str, dict[str, object], list[str], str | None]] = [
+        ("sessions", {"run": {"method": "oracle", "advice_budget": 5}},
+         ["body", "run", "advice_budget"], "belongs in run.config.advice_budget"),
+        ("sessions", {"advice_budget": 5, "run": {"method": "oracle"}},
+         ["body", "advice_budget"], "belongs in run.config.advice_budget"),
+        ("sessions", {"run": {"method": "oracle", "config": {"reward_scheme": "paper"}}},
+         ["body", "run", "config", "reward_scheme"], "belongs in run.scenario.reward_scheme"),
+        ("sessions", {"run": {"method": "oracle", "config": {"colour": 1}}},
+         ["body", "run", "config", "colour"], None),
+        ("studies", {"name": f"unknown-{uuid.uuid4().hex}", "seed": 3},
+         ["body", "seed"], None),  # no run here: a run's field is not the hint
+    ]  # fmt: skip
+    with server.client() as api:
+        for endpoint, body, loc, hint in cases:
+            path = f"/api/studies/{study}/sessions" if endpoint == "sessions" else "/api/studies"
+            response = api.post(path, json=body)
+            assert response.status_code == 422, response.text
+            error = response.json()["detail"][0]
+            assert error["loc"] == loc and f"unknown field '{loc[-1]}'" in error["msg"], error
+            assert (hint in error["msg"]) if hint else ("belongs in" not in error["msg"]), error
+        response = api.post(
+            f"/api/studies/{study}/sessions", json={"run": {"method": "oracle", long_name: 1}}
+        )
+    assert response.status_code == 422, response.text
+    assert long_name not in response.text
+    assert response.json()["detail"][0]["loc"][-1] == "(unknown field)"
+
+
 def test_a_422_reads_as_a_person_would_and_hides_only_the_value_it_is_about(
     server: LiveServer, participant_token: tuple[int, str]
 ) -> None:

@@ -192,7 +192,7 @@ def test_the_check_is_graded_under_the_sessions_rule_and_gates_the_start(
         ({"answers": {"blue_cube": "left"}}, "answer question 'red_disk' too"),
         ({"answers": {**RIGHT, "blue_cube": "up"}}, "takes one of left, right, centre"),
         ({"answers": {**RIGHT, "blue_cube": 1}}, "string"),
-        ({"answer": RIGHT}, "an unknown field"),
+        ({"answer": RIGHT}, "unknown field 'answer'"),
     ]:
         refused = client.post("/api/participant/check", json=bad)
         assert refused.status_code == 422 and where in refused.text, (bad, refused.text)
