@@ -23,11 +23,15 @@ NOBODY = 65534
 
 
 @pytest.fixture
-def temp_dir(monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+def temp_dir(
+    monkeypatch: pytest.MonkeyPatch, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[Path]:
     """A fresh system temporary folder, world-writable and sticky as /tmp is.
 
-    Made beside pytest's own folders, which other users cannot enter.
+    Made beside pytest's own folders, which other users cannot enter; pytest's are placed
+    first, since pytest too asks `tempfile` where they go.
     """
+    tmp_path_factory.getbasetemp()
     base = Path(tempfile.mkdtemp(prefix="ideeprl-test-tmp-"))
     base.chmod(0o1777)
     monkeypatch.setattr(tempfile, "tempdir", str(base))
