@@ -14,8 +14,13 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from analysis.episodes import method_name
+
 ADVICE_COLUMNS = ["session_id", "global_step", "action", "outcome"]
 """The advised steps a report needs, in step order per session."""
+REPLAYED_ADVICE_COLUMNS = ["session_id", "action", "same_observation"]
+"""A replay's advice rows: `action` missing for a request past the recorded stream,
+`same_observation` whether the replayed advice met the image its advisor saw."""
 QUALITY_COLUMNS = [
     "session_id", "method", "label", "advice", "placed", "misplaced", "lost",
     "unknown_outcome", "longest_repeat", "R_T",
@@ -83,3 +88,28 @@ def quality_correlations(quality: pd.DataFrame) -> pd.DataFrame:
         columns=["method", "agents", "mean_placed", "mean_longest_repeat", "spearman_rho",
                  "spearman_p"],
     )  # fmt: skip
+
+
+def replayed_advice_notes(advice: pd.DataFrame, arms: dict[int, str]) -> list[str]:
+    """Per replayed arm (`arms`: a replay's session id to its arm), how much of its advice
+    met the image its advisor saw. Advice fed by order to another learner meets other
+    states as the runs part; advice given on another image is a person's answer to a
+    question the learner did not ask, and the arm's effect is that much less the people's."""
+    notes = []
+    for arm in dict.fromkeys(arms.values()):
+        rows = advice[advice["session_id"].map(arms) == arm]
+        given = rows[rows["action"].notna()]
+        met = int(given["same_observation"].fillna(False).astype(bool).sum())
+        past = len(rows) - len(given)
+        replays = sum(a == arm for a in arms.values())
+        note = (
+            f"The {method_name(arm)} arm ({replays} replay{'s' if replays != 1 else ''}): "
+            f"{met} of {len(given)} replayed advice met the image its advisor saw "
+            "(`same_observation`)"
+        )
+        if met < len(given):
+            note += "; the rest answered another state than the one the learner was in"
+        if past:
+            note += f"; {past} request(s) came after the recorded advice ran out and got none"
+        notes.append(note + ".")
+    return notes

@@ -12,13 +12,13 @@ import pandas as pd
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from analysis.advice import ADVICE_COLUMNS
+from analysis.advice import ADVICE_COLUMNS, REPLAYED_ADVICE_COLUMNS
 from analysis.episodes import EPISODE_TABLE_COLUMNS
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.records import TRAINING
 from learner.run import RunSpec
-from study.db.models import Episode, Step, StudySession
+from study.db.models import Advice, Episode, Step, StudySession
 from study.services import learning
 
 
@@ -74,6 +74,18 @@ def load_advised_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
     )
     rows = [tuple(row) for row in db.execute(query)]
     return pd.DataFrame(rows, columns=ADVICE_COLUMNS)
+
+
+def load_replayed_advice(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
+    """The advice rows of these sessions (`analysis.advice.REPLAYED_ADVICE_COLUMNS`): what a
+    replay did with the stream it was fed."""
+    query = (
+        select(Advice.session_id, Advice.action, Advice.same_observation)
+        .where(Advice.session_id.in_(list(session_ids)))
+        .order_by(Advice.session_id, Advice.advice_index)
+    )
+    rows = [tuple(row) for row in db.execute(query)]
+    return pd.DataFrame(rows, columns=REPLAYED_ADVICE_COLUMNS)
 
 
 def session_settings(

@@ -239,8 +239,26 @@ def replay_run(original: RunSpec, values: Mapping[str, Any]) -> RunSpec:
 
 def unchanged(stream: Stream, run: RunSpec) -> bool:
     """Whether `run` is the source's own run (only its method differs)."""
-    original = stream.run.replace(method="replayed", advisor_checkpoint=None, error_rate=0.0)
-    return original.normalized() == run.normalized()
+    return _same_run(stream.run, run)
+
+
+def _same_run(original: RunSpec, run: RunSpec) -> bool:
+    as_replay = original.replace(method="replayed", advisor_checkpoint=None, error_rate=0.0)
+    return as_replay.normalized() == run.normalized()
+
+
+def unchanged_replays(db: Session, sessions: Iterable[StudySession]) -> dict[int, int]:
+    """Of these sessions, the replays that run their source's own run (the determinism
+    check), by id, with their source's id: the same agent again, not one of its own. Only a
+    source in this database is known; a replay of an export counts as changed."""
+    found = {}
+    for session in sessions:
+        if session.method != "replayed" or session.replay_of is None:
+            continue
+        source = db.get(StudySession, session.replay_of)
+        if source is not None and _same_run(source.spec, session.spec):
+            found[session.id] = source.id
+    return found
 
 
 def create_replay(

@@ -29,6 +29,7 @@ from analysis.episodes import EpisodeTableError, method_name
 from learner.run import RunSpec, run_flags
 from study.db.models import Status, StudySession
 from study.services.errors import Conflict, Invalid, NotFound
+from study.services.replays import unchanged_replays
 from study.services.sessions import list_sessions
 from study.services.studies import design_of, get_study
 from study.services.tables import iso_z
@@ -102,12 +103,20 @@ def select_sessions(
         chosen = [by_id[i] for i in dict.fromkeys(request.sessions)]
     else:
         advisors = advisor_sessions(everything)
-        others = [s for s in everything if s.id not in advisors]
+        checks = unchanged_replays(db, everything)
+        others = [s for s in everything if s.id not in advisors and s.id not in checks]
         chosen = [s for s in others if s.status == Status.finished.value]
         if advisors:
             notes.append(
                 f"Left out session(s) {', '.join(map(str, sorted(advisors)))}: the trained "
                 "agent(s) advising the agent-IDeepRL sessions, not compared agents."
+            )
+        if checks:
+            notes.append(
+                f"Left out session(s) {', '.join(map(str, sorted(checks)))}: unchanged "
+                f"replay(s) of session(s) {', '.join(map(str, sorted(set(checks.values()))))} "
+                "(a check that the platform reproduces a run, the same agent again, not one "
+                "of its own); choose sessions by id to include them."
             )
         unfinished = [s for s in others if s.status != Status.finished.value]
         if unfinished:
@@ -218,10 +227,12 @@ def build_report(
     """Write the report of the chosen sessions into `out_dir` (see `write_report`). The
     analysis (pandas' tables, scipy's tests, matplotlib's figures) loads here, when a report
     is built, not with the web app."""
+    from analysis.advice import replayed_advice_notes
     from analysis.report import write_report
     from study.services.episodes import (
         load_advised_steps,
         load_episodes,
+        load_replayed_advice,
         load_training_steps,
         session_settings,
     )
@@ -241,6 +252,9 @@ def build_report(
         notes.append(note)
     steps = load_training_steps(db, [s.id for s in sessions])
     advice = load_advised_steps(db, [s.id for s in sessions])
+    replayed = {s.id: group[s.id] for s in sessions if s.method == "replayed"}
+    if replayed:
+        notes += replayed_advice_notes(load_replayed_advice(db, list(replayed)), replayed)
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
     if empty:
         raise Conflict(
