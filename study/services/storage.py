@@ -4,8 +4,9 @@ much, and deletion that removes it all with the rows.
 Deleting is how a participant's data goes: their session's rows (steps, episodes, advice
 with the images they saw), its checkpoints, the study's report (built from their data),
 the advisor models fitted from their advice (`fitted_advisors`, and their files), the
-replays made from their advice (`sessions.replay_of`, in any study, with their files and
-their studies' reports), and their pseudonym once no session of theirs remains. Rows go
+replays made from their advice (`sessions.replay_of`) and the `fitted` runs those models
+advised (each in any study, with their files and their studies' reports), and their
+pseudonym once no session of theirs remains. Rows go
 first, in one transaction; files after, so a failure leaves files of a deleted session
 (removed again when the id would be used, which it never is: ids are not reused), never
 rows without their files.
@@ -81,14 +82,42 @@ def remove_study_files(data_dir: Path, study_id: int) -> None:
         _remove(path)
 
 
-def _fitted_from(db: Session, session_ids: set[int]) -> list[tuple[int, int]]:
-    """Delete the fitted advisor models made from these sessions' advice (a participant's
-    data lives on in them); returns their (study, model) ids, for their files."""
-    rows = db.scalars(select(FittedAdvisorModel))
-    used = [r for r in rows if session_ids & {int(i) for i in r.session_ids}]
-    for row in used:
-        db.delete(row)
-    return [(r.study_id, r.id) for r in used]
+def _made_from(
+    db: Session,
+    data_dir: Path,
+    session_ids: set[int],
+    models: list[FittedAdvisorModel] | None = None,
+) -> tuple[list[StudySession], list[FittedAdvisorModel]]:
+    """What was made from these sessions' data (and from `models`), in any study: their
+    replays, the advisor models fitted from their advice, the `fitted` runs those models
+    advised (a run names its model's file), and in turn what was made from those. A
+    participant's data lives on in each of them."""
+    every_model = list(db.scalars(select(FittedAdvisorModel)))
+    fitted_runs = [s for s in db.scalars(select(StudySession)) if s.method == "fitted"]
+    known = set(session_ids)
+    made: list[StudySession] = []
+    used: dict[int, FittedAdvisorModel] = {}
+    frontier, fresh = set(session_ids), list(models or [])
+    while frontier or fresh:
+        replays = [r for r in replays_of(db, frontier) if r.id not in known]
+        reached = frontier | {r.id for r in replays}
+        fresh += [
+            m for m in every_model if m.id not in used and reached & {int(i) for i in m.session_ids}
+        ]
+        used.update((m.id, m) for m in fresh)
+        files = {str(fitted_model_path(data_dir, m.study_id, m.id).resolve()) for m in fresh}
+        known.update(r.id for r in replays)
+        runs = [s for s in fitted_runs if s.id not in known and _model_file(s) in files]
+        known.update(s.id for s in runs)
+        made += [*replays, *runs]
+        frontier, fresh = {s.id for s in runs}, []
+    return made, list(used.values())
+
+
+def _model_file(session: StudySession) -> str | None:
+    """The model file a `fitted` run names, resolved as the model's own path is."""
+    name = session.run.get("fitted_model")
+    return str(Path(name).resolve()) if isinstance(name, str) and name else None
 
 
 def remove_fitted_files(data_dir: Path, models: list[tuple[int, int]]) -> None:
@@ -119,22 +148,23 @@ def _advised_by(db: Session, sessions: list[StudySession]) -> list[int]:
 
 
 def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool) -> None:
-    """Delete one session: rows, checkpoints, the study's report; refused while it runs."""
+    """Delete one session: rows, checkpoints, the study's report, and what was made from its
+    data (`_made_from`); refused while any of them runs."""
     session = db.get(StudySession, session_id)
     if session is None:
         raise NotFound(f"no session with id {session_id}")
     _refuse_live(session, live_here)
-    replays = replays_of(db, [session_id])
-    for replay in replays:
-        _refuse_live(replay, False)
-    advised = _advised_by(db, [session, *replays])
+    made, models = _made_from(db, data_dir, {session_id})
+    for other in made:
+        _refuse_live(other, False)
+    advised = _advised_by(db, [session, *made])
     if advised:
         raise Conflict(
             f"session {session_id}'s checkpoint advises unfinished session(s) "
             f"{', '.join(map(str, advised))}; delete or finish them first"
         )
     study_id, checkpoint, participant_id = session.study_id, session.checkpoint_path, None
-    derived = [(r.id, r.checkpoint_path, r.study_id) for r in replays]
+    derived = [(r.id, r.checkpoint_path, r.study_id) for r in made]
     if session.participant_id is not None:
         others = db.scalar(
             select(func.count()).where(
@@ -143,8 +173,11 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
             )
         )
         participant_id = None if others else session.participant_id
-    fitted = _fitted_from(db, {session_id, *(r.id for r in replays)})
-    db.delete(session)  # the database deletes its replays (replay_of cascades)
+    fitted = [(m.study_id, m.id) for m in models]
+    db.execute(delete(FittedAdvisorModel).where(FittedAdvisorModel.id.in_([m.id for m in models])))
+    # The database deletes the replays with their sources (replay_of cascades).
+    db.execute(delete(StudySession).where(StudySession.id.in_([r.id for r in made])))
+    db.delete(session)
     if participant_id is not None:
         participant = db.get(Participant, participant_id)
         if participant is not None:
@@ -153,13 +186,14 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
     remove_session_files(data_dir, session_id, checkpoint)
     remove_fitted_files(data_dir, fitted)
     remove_study_files(data_dir, study_id)  # its report was built from this session's data
-    for replay_id, replay_checkpoint, replay_study in derived:
-        remove_session_files(data_dir, replay_id, replay_checkpoint)
-        remove_study_files(data_dir, replay_study)
+    for made_id, made_checkpoint, made_study in derived:
+        remove_session_files(data_dir, made_id, made_checkpoint)
+        remove_study_files(data_dir, made_study)
 
 
 def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> None:
-    """Delete a study with its sessions, participants, checkpoints, report and exports."""
+    """Delete a study with its sessions, participants, checkpoints, report and exports, its
+    fitted models, and what was made from its sessions' data and models elsewhere."""
     study = get_study(db, study_id)
     sessions = list(study.sessions)
     running = [s.id for s in sessions if s.status in LIVE or s.id in live]
@@ -168,36 +202,35 @@ def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> 
             f"study {study_id} has {len(running)} running session(s) "
             f"({', '.join(map(str, running))}); stop them first"
         )
-    replays = [r for r in replays_of(db, [s.id for s in sessions]) if r.study_id != study_id]
-    running += [r.id for r in replays if r.status in LIVE or r.id in live]
+    own_models = list(
+        db.scalars(select(FittedAdvisorModel).where(FittedAdvisorModel.study_id == study_id))
+    )
+    made, models = _made_from(db, data_dir, {s.id for s in sessions}, own_models)
+    elsewhere = [r for r in made if r.study_id != study_id]
+    running += [r.id for r in elsewhere if r.status in LIVE or r.id in live]
     if running:
         raise Conflict(
-            f"study {study_id}'s sessions have running replay(s) in other studies "
-            f"({', '.join(map(str, running))}); stop them first"
+            f"study {study_id}'s sessions have running replay(s) or fitted run(s) in other "
+            f"studies ({', '.join(map(str, running))}); stop them first"
         )
-    advised = _advised_by(db, [*sessions, *replays])
+    advised = _advised_by(db, [*sessions, *made])
     if advised:
         raise Conflict(
             f"study {study_id}'s sessions advise unfinished session(s) "
             f"{', '.join(map(str, advised))} of other studies; delete or finish them first"
         )
-    files = [(s.id, s.checkpoint_path) for s in [*sessions, *replays]]
-    fitted = _fitted_from(db, {s.id for s in [*sessions, *replays]})
-    fitted += [
-        (r.study_id, r.id)
-        for r in db.scalars(
-            select(FittedAdvisorModel).where(FittedAdvisorModel.study_id == study_id)
-        )
-        if (r.study_id, r.id) not in fitted
-    ]
-    # The database deletes its sessions, and their replays anywhere (foreign keys cascade):
-    # the ORM would delete a replay of this study twice.
+    files = [(s.id, s.checkpoint_path) for s in [*sessions, *made]]
+    fitted = [(m.study_id, m.id) for m in models]
+    # Core deletes: the database deletes each study's sessions, and their replays anywhere
+    # (foreign keys cascade), where the ORM would delete a replay of this study twice.
+    db.execute(delete(FittedAdvisorModel).where(FittedAdvisorModel.id.in_([m.id for m in models])))
+    db.execute(delete(StudySession).where(StudySession.id.in_([r.id for r in elsewhere])))
     db.execute(delete(Study).where(Study.id == study_id))
     db.commit()
     remove_fitted_files(data_dir, fitted)
     for session_id, checkpoint in files:
         remove_session_files(data_dir, session_id, checkpoint)
-    for other in {study_id, *(r.study_id for r in replays)}:
+    for other in {study_id, *(r.study_id for r in elsewhere)}:
         remove_study_files(data_dir, other)
 
 

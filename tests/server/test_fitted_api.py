@@ -74,10 +74,22 @@ def _store(server: LiveServer, study: int, session_ids: list[int]) -> int:
     return fitted_id
 
 
+def _fitted_run(api: httpx.Client, study: int, fitted_id: int) -> int:
+    """A `fitted` session advised by the stored model (created, not run)."""
+    body = session_body("fitted", fitted_model=f"fitted:{fitted_id}", advice_budget=10)
+    created = api.post(f"/api/studies/{study}/sessions", json=body)
+    assert created.status_code == 201, created.text
+    return int(created.json()["id"])
+
+
 def test_deleting_a_participants_session_or_the_study_deletes_the_models_fitted_from_them(
     server: LiveServer, api: httpx.Client
 ) -> None:
+    """...and the `fitted` runs those models advised, in any study: a person's advice lives
+    on in them as it does in the model (and their reports would count agents whose model is
+    gone, which no resume can finish)."""
     study = api.post("/api/studies", json={"name": "fitted deletion"}).json()["id"]
+    elsewhere = api.post("/api/studies", json={"name": "fitted deletion, runs"}).json()["id"]
     ids = []
     for person in ("P1", "P2"):
         body = session_body("human", participant=person, advice_budget=10)
@@ -85,11 +97,19 @@ def test_deleting_a_participants_session_or_the_study_deletes_the_models_fitted_
     from_p1 = _store(server, study, [ids[0]])
     from_both = _store(server, study, ids)
     from_p2 = _store(server, study, [ids[1]])
+    p1_runs = [_fitted_run(api, s, m) for s in (study, elsewhere) for m in (from_p1, from_both)]
+    p2_runs = [_fitted_run(api, s, from_p2) for s in (study, elsewhere)]
     assert api.delete(f"/api/sessions/{ids[0]}").status_code == 204  # P1's data goes
     left = [m["id"] for m in api.get(f"/api/studies/{study}/fitted").json()]
     assert left == [from_p2] and from_p1 not in left and from_both not in left
+    for run in p1_runs:
+        assert api.get(f"/api/sessions/{run}").status_code == 404, run
+    for run in p2_runs:
+        assert api.get(f"/api/sessions/{run}").status_code == 200, run
     assert api.delete(f"/api/studies/{study}").status_code == 204
     engine = make_engine(server.database_url)
     with make_session_factory(engine)() as db:
         assert db.get(FittedAdvisorModel, from_p2) is None
     engine.dispose()
+    assert api.get(f"/api/sessions/{p2_runs[1]}").status_code == 404, "P2's run elsewhere"
+    assert api.get(f"/api/studies/{elsewhere}").status_code == 200

@@ -2,8 +2,8 @@
 times stands in for people, `ideeprl fit` recovers exactly what its advisor did from the
 recorded rows, a `fitted` session (as `ideeprl batch --methods fitted` makes them) runs
 advised by the model and logs its advice with decision times, and deleting a session the
-model was fitted from deletes it. Sessions run in this process by the real worker (a
-batch's worker process would add its own start to the suite)."""
+model was fitted from deletes it and the runs it advised. Sessions run in this process by
+the real worker (a batch's worker process would add its own start to the suite)."""
 
 from __future__ import annotations
 
@@ -143,15 +143,17 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
     code, out = run(place, capsys, *fit)
     assert code == 1 and "no oracle session with advice to fit" in out, out
 
-    with Session(engine) as db:  # the pilot's data goes, and the models made from it
+    with Session(engine) as db:  # the pilot's data goes, the models made from it, and
+        # the runs they advised (the pilot's advice lives on in them as in the model)
         db.execute(update(StudySession).where(StudySession.id == oracle.id)
                    .values(status="finished"))  # fmt: skip
         db.commit()
         storage.delete_session(db, place.data_dir, oracle.id, live_here=False)
         left = db.scalars(select(FittedAdvisorModel).where(FittedAdvisorModel.study_id == study))
         assert list(left) == []
-        assert db.get(StudySession, run_by_model.id) is not None
+        assert db.get(StudySession, run_by_model.id) is None
     assert not path.exists()
+    assert not storage.session_dir(place.data_dir, run_by_model.id).exists()
 
 
 def test_fit_says_what_is_missing(place: Place, capsys: pytest.CaptureFixture[str]) -> None:
