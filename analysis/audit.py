@@ -15,6 +15,7 @@ is audited by itself); nothing here reads the database.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass
 from itertools import combinations
 from typing import Any
@@ -113,6 +114,19 @@ class Audit:
                 f"({', '.join(what)}): its mean mixes them."
             )
         return out
+
+    def power_cautions(self, methods: Iterable[str], baseline: str) -> list[str]:
+        """A caution for each method whose baseline ran under other settings: a power
+        analysis plans for the observed effect, which then is not the treatment's alone."""
+        return [
+            f"Caution: {method_name(m)}'s baseline {method_name(baseline)} ran under other "
+            f"settings ({', '.join(what)}): the effect planned for mixes the treatment with "
+            "that difference, so the agents needed are for a comparison that is not "
+            f"comparable as it stands; plan from a baseline run under {method_name(m)}'s "
+            "settings."
+            for m in methods
+            if m != baseline and (what := self.differ(m, baseline))
+        ]
 
 
 def audit(settings: pd.DataFrame, baseline: str | None = None) -> Audit:

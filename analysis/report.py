@@ -951,7 +951,7 @@ def _markdown(
         _tests_table(analysis, alpha),
         "",
         *_intervals_section(analysis),
-        *_power_section(extra.power),
+        *_power_section(extra.power, extra.audit),
         "## Correlation between agents (the paper's Figure 7)",
         "",
         f"![Figure 7: Pearson's correlation between agents]({FIGURE_FILES['correlation']})",
@@ -1069,8 +1069,9 @@ def _power_rows(power: PowerAnalysis) -> pd.DataFrame:
     )
 
 
-def _power_section(power: PowerAnalysis | None) -> list[str]:
-    """Planning information: the agents per arm a future study needs, or why it is left out."""
+def _power_section(power: PowerAnalysis | None, checked: Audit | None = None) -> list[str]:
+    """Planning information: the agents per arm a future study needs, or why it is left out;
+    a caution for each arm whose baseline ran under other settings (`checked`)."""
     head = ["## Power: how many participants a study needs (planning, not a test)", ""]
     if power is None:
         why = "power compares each method with a baseline, and this report has none"
@@ -1106,6 +1107,7 @@ def _power_section(power: PowerAnalysis | None) -> list[str]:
         "",
         table,
         "",
+        *_power_cautions(power, checked),
         *(f"Left out: {s}." for s in power.skipped),
         *([""] if power.skipped else []),
         f"![Power against agents per arm]({FIGURE_FILES['power']}) "
@@ -1113,3 +1115,11 @@ def _power_section(power: PowerAnalysis | None) -> list[str]:
         f"[PDF]({Path(FIGURE_FILES['power']).with_suffix('.pdf')}))",
         "",
     ]
+
+
+def _power_cautions(power: PowerAnalysis, checked: Audit | None) -> list[str]:
+    if checked is None:
+        return []
+    methods = [c.method for c in power.comparisons]
+    cautions = checked.power_cautions(dict.fromkeys(methods), power.comparisons[0].baseline)
+    return [line for caution in cautions for line in (f"**{caution}**", "")]

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from sqlalchemy.orm import Session
 
+from analysis.audit import audit
 from analysis.baseline import AUTO, NO_BASELINE
 from analysis.episodes import (
     EpisodeTableError,
@@ -33,7 +34,7 @@ from analysis.report import FIGURE_FILES, OPTIONAL_TABLE_FILES
 from analysis.report import power_table as _table
 from analysis.stats import agent_totals
 from study.csvsafe import safe_frame
-from study.services.episodes import load_episodes
+from study.services.episodes import load_episodes, session_settings
 from study.services.errors import Conflict, Invalid
 from study.services.reports import ReportRequest, select_sessions
 from study.services.studies import get_study
@@ -101,14 +102,22 @@ class StudyPower:
     n_episodes: int
     """Training episodes per agent in R_T."""
     notes: tuple[str, ...]
-    """What the choice of sessions left out."""
+    """What the choice of sessions left out, and a caution for each arm whose baseline ran
+    under other settings (the report's audit)."""
     analysis: PowerAnalysis
     files: tuple[Path, ...] = ()
     """power.png (with .svg and .pdf) and power.csv, when a folder was given."""
 
 
-def _baseline(methods: set[str], baseline: str) -> str:
+def _baseline(methods: set[str], baseline: str, asked: tuple[str, ...] | None) -> str:
     chosen = "autonomous" if baseline == AUTO else baseline
+    if asked and chosen not in asked:
+        raise Invalid(
+            "baseline",
+            f"the baseline {method_name(chosen)} is not among --methods ({', '.join(asked)}): "
+            f"add it (--methods {' '.join([*asked, chosen])}), or name one of them as the "
+            "baseline (--baseline METHOD)",
+        )
     if chosen not in methods:
         named = "no autonomous DeepRL sessions" if baseline == AUTO else f"no {chosen!r} sessions"
         raise Invalid(
@@ -135,7 +144,7 @@ def study_power(
     get_study(db, study_id)
     chosen = ReportRequest(sessions=request.sessions, methods=request.methods, label=request.label)
     sessions, notes = select_sessions(db, study_id, chosen)
-    baseline = _baseline({s.method for s in sessions}, request.baseline)
+    baseline = _baseline({s.method for s in sessions}, request.baseline, request.methods)
     episodes = load_episodes(db, [s.id for s in sessions])
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
     if empty:
@@ -162,6 +171,9 @@ def study_power(
             f"too few sessions for a power analysis: {why}. Run at least {MIN_AGENTS} "
             "finished sessions of the baseline and of another method"
         )
+    used = set(table["session_id"])
+    checked = audit(session_settings([s for s in sessions if s.id in used]), baseline)
+    notes += checked.power_cautions([c.method for c in analysis.comparisons], baseline)
     files: tuple[Path, ...] = ()
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)

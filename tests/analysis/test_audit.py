@@ -73,6 +73,25 @@ def test_different_schemes_are_flagged_and_their_t_tests_withheld(tmp_path: Path
     assert "Comparability warning" in allowed_text and "--allow-mismatch" in allowed_text
 
 
+def test_the_power_section_cautions_against_a_baseline_run_under_other_settings(
+    tmp_path: Path,
+) -> None:
+    """Power plans for the observed effect; where the baseline ran under other settings that
+    effect is not the treatment's, and the section says so for each such arm."""
+    episodes = study_episodes()
+    settings = settings_for(episodes, autonomous={"reward_scheme": "authors-autonomous"})
+    result = write_report(episodes, tmp_path, settings=settings, power_draws=200)
+    text = result.report.read_text()
+    power = text.split("## Power")[1].split("\n## ")[0]
+    for name in ("agent-IDeepRL", "human-IDeepRL"):
+        assert (
+            f"Caution: {name}'s baseline autonomous DeepRL ran under other settings "
+            "(reward scheme)" in power
+        ), power
+    same = write_report(episodes, tmp_path / "same", settings=settings_for(episodes))
+    assert "Caution" not in same.report.read_text().split("## Power")[1]
+
+
 def test_other_settings_and_mixed_methods_are_flagged() -> None:
     episodes = study_episodes()
     settings = settings_for(episodes, agent={"learner": "authors", "knock_off_rate": 0.05})

@@ -245,7 +245,8 @@ def test_the_command_refuses_what_it_cannot_do(
     assert main(["power", "--study", "pilot", *every, *flags]) == 1
     assert "session(s) 7 have no training episodes yet" in capsys.readouterr().err
     assert main(["power", "--study", "pilot", "--methods", "oracle", *flags]) == 2
-    assert "no autonomous DeepRL sessions" in capsys.readouterr().err
+    error = capsys.readouterr().err
+    assert "the baseline autonomous DeepRL is not among --methods (oracle)" in error, error
     engine = make_engine(f"sqlite:///{data_dir / 'ideeprl.sqlite3'}")
     with make_session_factory(engine)() as db:
         few = create_study(db, "tiny pilot")
@@ -259,3 +260,32 @@ def test_the_command_refuses_what_it_cannot_do(
     error = capsys.readouterr().err
     assert "too few sessions for a power analysis: oracle has 1 agent(s)" in error
     assert not (tmp_path / "p").exists()
+
+
+def test_the_command_cautions_against_a_baseline_run_under_other_settings(
+    data_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The pilot's autonomous sessions scored under the authors' autonomous scheme: the
+    effect is the scheme's as much as the advice's, and the notes say so for the arm."""
+    engine = make_engine(f"sqlite:///{data_dir / 'ideeprl.sqlite3'}")
+    with make_session_factory(engine)() as db:
+        study = create_study(db, "pilot, two schemes")
+        for method, scheme in (("autonomous", "authors-autonomous"), ("oracle", "paper")):
+            for seed in range(3):
+                run = RunSpec(method=method, seed=seed).with_values({"reward_scheme": scheme})
+                session = create_session(db, study.id, run)
+                session.status = Status.finished.value
+                better = 2.0 if method == "oracle" else 0.0
+                for number in range(1, 3):
+                    db.add(_episode(session.id, number, seed + number + better))
+        db.commit()
+    engine.dispose()
+    flags = ["--data-dir", str(data_dir)]
+    assert main(["power", "--study", "pilot, two schemes", "--draws", "200", *flags]) == 0
+    printed = capsys.readouterr().out
+    assert (
+        "note: Caution: oracle-IDeepRL's baseline autonomous DeepRL ran under other settings "
+        "(reward scheme)" in printed
+    ), printed
+    assert main(["power", "--study", "pilot", "--draws", "200", *flags]) == 0
+    assert "Caution" not in capsys.readouterr().out, "the same settings: no caution"
