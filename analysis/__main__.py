@@ -50,11 +50,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--episodes", type=int, dest="n_episodes", help="keep the first N")
     parser.add_argument("--smoothing", type=int, default=1, help="moving average for plots")
-    parser.add_argument("--title", default="IDeepRL study: the paper's analysis")
+    parser.add_argument(
+        "--title", help="the report's title (default: an export's study name, with the paper's)"
+    )
     args = parser.parse_args(argv)
     if args.demo == (args.episodes is not None):
         parser.error("give an episode CSV, or --demo without one")
     extra: dict[str, Any] = {}
+    title = "IDeepRL study"
     if args.demo:
         episodes = demo_episodes()
         notes = ["Made-up curves (analysis.demo_curves): a demonstration, not a result."]
@@ -71,7 +74,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             group = {i: str(run.method) for i, run in export.runs.items()} | export.conditions
             episodes, settings, note = compare_conditions(episodes, settings, group, export.alpha)
             notes.append(note)
-        extra = {"settings": settings, "steps": export.steps, "alpha": export.alpha}
+        extra = {
+            "settings": settings,
+            "steps": export.steps,
+            "alpha": export.alpha,
+            "advice": export.advice,
+        }
+        title = export.name or title
     else:
         episodes = pd.read_csv(args.episodes)
         notes = [f"Episodes from `{args.episodes}`."]
@@ -84,7 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         result = write_report(
             episodes,
             args.out_dir,
-            title=args.title,
+            title=args.title or f"{title}: the paper's analysis",
             baseline=baseline,
             notes=[*notes, *baseline_notes],
             n_episodes=args.n_episodes,

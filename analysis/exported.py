@@ -25,6 +25,7 @@ from typing import Any
 
 import pandas as pd
 
+from analysis.advice import ADVICE_COLUMNS
 from analysis.episodes import EPISODE_TABLE_COLUMNS
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
@@ -55,6 +56,11 @@ class Exported:
     export)."""
     conditions: dict[int, str] = field(default_factory=dict)
     """An online study's condition of each session that has one, by session id."""
+    advice: pd.DataFrame | None = None
+    """The steps whose action came from the advisor, any stage
+    (`analysis.advice.ADVICE_COLUMNS`; `outcome` missing where the export has none)."""
+    name: str | None = None
+    """The study's name (`study.json`; None without one)."""
 
     @property
     def alpha(self) -> float:
@@ -76,8 +82,8 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
     training["method"] = training["session_id"].map({i: r.method for i, r in runs.items()})
     training["seed"] = training["session_id"].map({i: r.seed for i, r in runs.items()})
     training = training.sort_values(["session_id", "episode"])
-    steps = _with_stage(_table(path, "steps"))
-    steps = steps[steps["stage"] == "train"].sort_values(["session_id", "global_step"])
+    every_step = _with_stage(_table(path, "steps"))
+    steps = every_step[every_step["stage"] == "train"].sort_values(["session_id", "global_step"])
     design = _design(path)
     conditions = {}
     if design is not None and "condition" in sessions:
@@ -89,6 +95,8 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
     return Exported(
         design=design,
         conditions=conditions,
+        advice=_advised(every_step),
+        name=_study(path).get("name"),
         runs=runs,
         episodes=training[list(EPISODE_TABLE_COLUMNS)].reset_index(drop=True),
         steps=steps[[*STEP_COLUMNS, *(["outcome"] if "outcome" in steps else [])]].reset_index(
@@ -127,13 +135,29 @@ def _provenance(sessions: pd.DataFrame) -> dict[int, list[Any]] | None:
     }
 
 
+def _study(folder: Path) -> dict[str, Any]:
+    """`study.json` (empty where the export has none)."""
+    file = folder / "study.json"
+    return json.loads(file.read_text()) if file.is_file() else {}
+
+
 def _design(folder: Path) -> dict[str, Any] | None:
     """`study.json`'s design (None where the export has none: a lab study, older ones)."""
-    file = folder / "study.json"
-    if not file.is_file():
-        return None
-    design = json.loads(file.read_text()).get("design")
+    design = _study(folder).get("design")
     return design if isinstance(design, dict) else None
+
+
+def _advised(steps: pd.DataFrame) -> pd.DataFrame | None:
+    """The advised steps of every stage, as the database's report reads them (None where the
+    export names no action sources)."""
+    if "action_source" not in steps or "action" not in steps:
+        return None
+    advised = steps[steps["action_source"] == "advisor"].sort_values(["session_id", "global_step"])
+    advised = advised.assign(
+        action=pd.to_numeric(advised["action"]).astype("int64"),
+        outcome=advised.get("outcome"),
+    )
+    return advised[list(ADVICE_COLUMNS)].reset_index(drop=True)
 
 
 def _table(folder: Path, name: str) -> pd.DataFrame:

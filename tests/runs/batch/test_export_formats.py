@@ -170,7 +170,12 @@ def test_an_export_reads_back_as_the_database_holds_it(
     from sqlalchemy.orm import Session
 
     from analysis.exported import read_export
-    from study.services.episodes import load_episodes, load_training_steps, session_settings
+    from study.services.episodes import (
+        load_advised_steps,
+        load_episodes,
+        load_training_steps,
+        session_settings,
+    )
     from tests.runs.batch.helpers import sessions, study_id
 
     export(place, tmp_path / "parquet", "--format", "parquet")
@@ -184,9 +189,23 @@ def test_an_export_reads_back_as_the_database_holds_it(
             episodes = load_episodes(db, ids)
             steps = load_training_steps(db, ids)
             settings = session_settings(rows)
+            advice = load_advised_steps(db, ids)
+        assert len(advice) > 0, "the agent-advised sessions were advised"
+        pd.testing.assert_frame_equal(exported.advice, advice, check_dtype=False)
         pd.testing.assert_frame_equal(exported.episodes, episodes, check_dtype=False)
         pd.testing.assert_frame_equal(exported.steps, steps, check_dtype=False)
         pd.testing.assert_frame_equal(exported.settings, settings)
+
+
+def test_the_report_of_an_export_has_the_advice_quality_and_the_studys_name(
+    csv_export: Path, tmp_path: Path
+) -> None:
+    from analysis.__main__ import main as analyse
+
+    assert analyse([str(csv_export), str(tmp_path / "report")]) == 0
+    report = (tmp_path / "report" / "report.md").read_text()
+    assert report.startswith("# baselines: the paper's analysis\n"), report[:200]
+    assert "\n## Advice quality\n" in report and "| agent-IDeepRL |" in report
 
 
 def test_every_exported_run_is_accepted_back_unchanged(
