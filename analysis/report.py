@@ -582,6 +582,8 @@ def write_report(
         kept_steps = steps[steps["session_id"].isin(analysis.episodes["session_id"])]
         totals = rescored_totals(kept_steps, schemes, n_episodes=analysis.n_episodes)
         rescored = rescoring_table(totals, methods, baseline)
+        if checked is not None and not allow_mismatch:
+            rescored = _withhold_rescored(rescored, checked, baseline)
         rescored_agents = totals.assign(method=totals["session_id"].map(methods))
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -734,6 +736,23 @@ def _withhold_tests(analysis: Analysis, checked: Audit, allow_mismatch: bool) ->
     return dataclasses.replace(analysis, t_tests=tests, paper=paper)
 
 
+def _withhold_rescored(table: pd.DataFrame, checked: Audit, baseline: str | None) -> pd.DataFrame:
+    """The rescoring table with Welch's p left empty for the methods that differ from the
+    baseline in more than their reward scheme (the reason in `withheld`): scoring every run
+    under one scheme removes that difference and no other."""
+    tested = [c for c in table.columns if c.startswith("p_welch_")]
+    if baseline is None or not tested:
+        return table
+    scheme = label("reward_scheme")
+    reasons = []
+    for method in table["method"]:
+        other = [what for what in checked.differ(method, baseline) if what != scheme]
+        reasons.append("the methods differ in " + " and ".join(other) if other else "")
+    table = table.assign(withheld=reasons)
+    table.loc[table["withheld"] != "", tested] = np.nan
+    return table
+
+
 def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
     """The audit's warning (for the top) and its table; the rescoring and reference tables."""
     out: list[str] = []
@@ -777,14 +796,25 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
                 formats[f"improvement_{scheme}"] = md.signed_pct
                 columns[f"p_welch_{scheme}"] = f"Welch's p under {scheme}"
                 formats[f"p_welch_{scheme}"] = md.p_value
+        rescored, withheld = extra.rescored, ""
+        if "withheld" in rescored and (rescored["withheld"] != "").any():
+            rescored = rescored.assign(
+                withheld=[f"withheld: {w}" if w else "" for w in rescored["withheld"]]
+            )
+            columns["withheld"] = "note"
+            withheld = (
+                " Welch's p is withheld for a method that differs from the baseline in more "
+                "than its reward scheme: one scheme makes their scores alike in that and "
+                "nothing else (`--allow-mismatch` gives it)."
+            )
         out += [
             "## R_T rescored under each reward scheme",
             "",
             "The same logged behaviour scored under each accounting: a placement keeps its "
             "reward, every other step costs what the scheme says (`sim.rewards`). Compare "
-            "methods within one column." + _outcomes_note(extra.by_outcomes),
+            "methods within one column." + _outcomes_note(extra.by_outcomes) + withheld,
             "",
-            md.table(extra.rescored, columns, formats),  # type: ignore[arg-type]
+            md.table(rescored, columns, formats),  # type: ignore[arg-type]
             "",
         ]
     if extra.reference is not None:

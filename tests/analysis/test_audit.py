@@ -11,7 +11,7 @@ from scipy import stats
 
 from analysis import write_report
 from analysis.audit import audit, describe_learner
-from analysis.rescoring import rescored_totals, rescoring_table
+from analysis.rescoring import STEP_COLUMNS, rescored_totals, rescoring_table
 from sim.rewards import REWARD_SCHEMES, step_penalty
 from tests.analysis.test_report import study_episodes
 
@@ -90,6 +90,52 @@ def test_the_power_section_cautions_against_a_baseline_run_under_other_settings(
         ), power
     same = write_report(episodes, tmp_path / "same", settings=settings_for(episodes))
     assert "Caution" not in same.report.read_text().split("## Power")[1]
+
+
+def _steps(episodes: pd.DataFrame, settings: pd.DataFrame) -> pd.DataFrame:
+    """Three training steps an episode, a placement worth the episode's reward last, each
+    other step costing what the session's scheme says."""
+    schemes = dict(zip(settings["session_id"], settings["reward_scheme"], strict=True))
+    rows = []
+    for row in episodes.itertuples():
+        scheme = schemes[row.session_id]
+        for n in (1, 2):
+            rows.append((row.session_id, row.episode, n, step_penalty(scheme, n), False, "none"))
+        rows.append((row.session_id, row.episode, 3, row.collected_reward, True, "placed"))
+    return pd.DataFrame(rows, columns=[*STEP_COLUMNS, "outcome"])
+
+
+def test_the_rescoring_table_withholds_what_one_scheme_does_not_make_comparable(
+    tmp_path: Path,
+) -> None:
+    """Rescoring scores every run under one scheme, which removes a difference of scheme
+    and no other: agent-IDeepRL also ran on another CPU kind than the baseline, so its
+    Welch's p under each scheme is withheld (with the reason); human-IDeepRL keeps its."""
+    episodes = study_episodes()
+    settings = settings_for(
+        episodes,
+        autonomous={"reward_scheme": "authors-autonomous"},
+        agent={"cpu_kind": "another CPU kind"},
+    )
+    settings["cpu_kind"] = settings["cpu_kind"].fillna("this CPU kind")
+    result = write_report(
+        episodes, tmp_path, settings=settings, steps=_steps(episodes, settings), power_draws=200
+    )
+    assert result.rescored is not None
+    table = result.rescored.set_index("method")
+    for scheme in REWARD_SCHEMES:
+        assert np.isnan(table.loc["agent", f"p_welch_{scheme}"])
+        assert table.loc["human", f"p_welch_{scheme}"] < 0.05
+    assert table.loc["agent", "withheld"] == "the methods differ in CPU kind"
+    text = result.report.read_text()
+    rescoring = text.split("## R_T rescored under each reward scheme")[1].split("\n## ")[0]
+    assert "withheld: the methods differ in CPU kind" in rescoring, rescoring
+    allowed = write_report(
+        episodes, tmp_path / "allowed", settings=settings, steps=_steps(episodes, settings),
+        allow_mismatch=True, power_draws=200,
+    )  # fmt: skip
+    assert allowed.rescored is not None
+    assert allowed.rescored.set_index("method")[f"p_welch_{REWARD_SCHEMES[0]}"].notna()["agent"]
 
 
 def test_other_settings_and_mixed_methods_are_flagged() -> None:
