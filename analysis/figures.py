@@ -255,6 +255,8 @@ def plot_individual_agents(
         smooth(rows["collected_reward"], smoothing),
         color="black",
         lw=1.6,
+        ls="--",
+        zorder=1.5,  # beneath the agents (lines draw at 2): they are what the figure shows
         label=f"{reference_label}, reference (R_T = {reference_total:.1f})",
     )
     ax.set_title(

@@ -62,7 +62,10 @@ def test_figure_6_puts_agents_against_the_median_reference_with_their_gain() -> 
         "agent-IDeepRL2 (R_T = 8.0, +100.0 %)",
         "DeepRL3, reference (R_T = 4.0)",
     ]
-    assert figure.axes[0].get_lines()[-1].get_color() == "black"
+    *agents, reference = figure.axes[0].get_lines()
+    assert reference.get_color() == "black"
+    assert reference.get_linestyle() == "--", "the reference reads apart from the agents"
+    assert all(reference.get_zorder() < agent.get_zorder() for agent in agents), "beneath"
     chosen = plot_individual_agents(
         table, method="agent", labels=["agent-IDeepRL2"], reference_label="DeepRL1"
     )
