@@ -62,3 +62,8 @@ def table(
         cells = [formats.get(c, plain)(row[c]) for c in columns]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def count(n: int, noun: str) -> str:
+    """ "1 agent", "3 agents": a number with its noun (the plural by an s)."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"

@@ -10,6 +10,7 @@ from __future__ import annotations
 import pandas as pd
 
 from analysis.episodes import method_name
+from analysis.markdown import count
 from analysis.stats import EPISODE_MEANS
 
 PAPER_EPISODES = 300
@@ -50,7 +51,8 @@ def paper_comparison(
                     "quantity": f"R_T {method_name(method)}",
                     "paper": published,
                     "ours": float(ours["R_T"]),
-                    "sample": f"{int(ours['agents'])} agents × {int(ours['episodes'])} episodes "
+                    "sample": f"{count(int(ours['agents']), 'agent')} × "
+                    f"{count(int(ours['episodes']), 'episode')} "
                     f"(paper: {PAPER_AGENTS} × {PAPER_EPISODES})",
                 }
             )

@@ -299,7 +299,8 @@ def _summary(
         spread = "" if np.isnan(row["R_T_std"]) else f", ± {row['R_T_std']:.2f} across agents"
         head = (
             f"- **{row['name']}** ({'baseline, ' if method == base else ''}"
-            f"{row['agents']} agents × {row['episodes']} episodes): R_T = {row['R_T']:.2f}"
+            f"{md.count(row['agents'], 'agent')} × {md.count(row['episodes'], 'episode')}): "
+            f"R_T = {row['R_T']:.2f}"
             f"{spread}"
         )
         if method == base or base is None:
@@ -911,8 +912,8 @@ def _markdown(
     if notes:
         out += [notes if isinstance(notes, str) else "\n".join(f"- {n}" for n in notes), ""]
     out += [
-        f"{len(agents)} agents in {len(analysis.method_order)} methods, "
-        f"{analysis.n_episodes} episodes each. Baseline: "
+        f"{md.count(len(agents), 'agent')} in {md.count(len(analysis.method_order), 'method')}, "
+        f"{md.count(analysis.n_episodes, 'episode')} each. Baseline: "
         f"{method_name(analysis.baseline) if analysis.baseline else 'none'}. "
         "R_T is the total collected reward over all episodes.",
         "",

@@ -173,6 +173,15 @@ def test_a_single_method_still_gets_a_report_without_figure_6(tmp_path: Path) ->
     assert result.notes[0].startswith("Figure 6 is left out")
 
 
+def test_one_agent_and_one_method_are_counted_in_the_singular(tmp_path: Path) -> None:
+    text = write_report(episodes_from_curves(HAND_CASE), tmp_path / "hand").report.read_text()
+    assert "- **human-IDeepRL** (1 agent × 3 episodes)" in text, text
+    one = {"a": ("autonomous", [1.0, 2.0])}
+    text = write_report(episodes_from_curves(one), tmp_path / "one").report.read_text()
+    assert "1 agent in 1 method, 2 episodes each." in text, text
+    assert "1 agents" not in text and "1 methods" not in text
+
+
 def test_bad_input_writes_nothing(tmp_path: Path) -> None:
     out = tmp_path / "report"
     table = episodes_from_curves(HAND_CASE)
