@@ -200,9 +200,14 @@ def _describe_test(row: pd.Series, alpha: float) -> str:
     return f"t = {row['t']:.2f}, p = {md.p_value(row['p'])}, {verdict} at α = {alpha:g}"
 
 
-def _describe_primary(comparisons: pd.DataFrame | None, method: str, alpha: float) -> str:
-    """The comparison's primary test in words."""
+def _describe_primary(
+    comparisons: pd.DataFrame | None, method: str, alpha: float, against: str | None = None
+) -> str:
+    """The primary test of the method's comparison (against `against`, else its first: the
+    baseline) in words."""
     rows = None if comparisons is None else comparisons[comparisons["method"] == method]
+    if rows is not None and against is not None:
+        rows = rows[rows["baseline"] == against]
     if rows is None or rows.empty:
         return "Primary test: none"
     row = rows.iloc[0]
@@ -314,13 +319,26 @@ def _summary(
             + "; the paper's own test on the average curves: "
             f"{_describe_test(tests.loc[(method, base, EPISODE_MEANS)], alpha)}."
         )
+    planned = set()
+    if comparisons is not None:
+        planned = set(zip(comparisons["method"], comparisons["baseline"], strict=True))
     for (a, b, sample), row in tests.iterrows():
-        if base not in (a, b) and sample == EPISODE_MEANS:
-            per_agent = tests.loc[(a, b, AGENT_TOTALS)]
+        if base in (a, b) or sample != EPISODE_MEANS:
+            continue
+        if (a, b) in planned or (b, a) in planned:  # an advised method and its control
+            method, against = (a, b) if (a, b) in planned else (b, a)
             lines.append(
-                f"- {method_name(a)} vs {method_name(b)}: average curves "
-                f"{_describe_test(row, alpha)}; agents' R_T {_describe_test(per_agent, alpha)}."
+                f"- {method_name(method)} vs {method_name(against)}: "
+                + _describe_primary(comparisons, method, alpha, against)
+                + "; the paper's own test on the average curves: "
+                f"{_describe_test(row, alpha)}."
             )
+            continue
+        per_agent = tests.loc[(a, b, AGENT_TOTALS)]
+        lines.append(
+            f"- {method_name(a)} vs {method_name(b)}: average curves "
+            f"{_describe_test(row, alpha)}; agents' R_T {_describe_test(per_agent, alpha)}."
+        )
     if base is not None and methods.loc[base, "R_T"] <= 0:
         lines.append(
             f"- {method_name(base)}'s R_T is not positive, so percentages relative to it "

@@ -11,6 +11,7 @@ import pytest
 from PIL import Image
 
 from analysis import EpisodeTableError, ReportResult, write_report
+from analysis import markdown as md
 from analysis.__main__ import main
 from analysis.power import normal_sample_size
 from analysis.report import FIGURE_FILES, TABLE_FILES
@@ -180,6 +181,33 @@ def test_one_agent_and_one_method_are_counted_in_the_singular(tmp_path: Path) ->
     text = write_report(episodes_from_curves(one), tmp_path / "one").report.read_text()
     assert "1 agent in 1 method, 2 episodes each." in text, text
     assert "1 agents" not in text and "1 methods" not in text
+
+
+def test_the_summary_reads_advice_against_its_control_by_the_primary_test(
+    tmp_path: Path,
+) -> None:
+    """The comparison that isolates the advice (advised method against its procedure
+    control) is one of the plan's comparisons: the summary quotes its primary test, not the
+    pooled t-test of the paper's table."""
+    rng = np.random.default_rng(4)
+    curves = {}
+    for method, shift, spread in (("autonomous", 0.0, 0.2), ("agent", 1.0, 2.0),
+                                  ("procedure", 0.3, 0.2)):  # fmt: skip
+        for i in range(1, 5):
+            curves[f"{method}-{i}"] = (method, shift + rng.normal(0, spread, 6))
+    table = episodes_from_curves(curves)
+    table["seed"] = table["label"].str[-1].astype(int)
+    result = write_report(table, tmp_path, primary="paired", power_draws=200)
+    comparisons = pd.read_csv(result.tables["comparisons"])
+    control = comparisons[comparisons["baseline"].eq("procedure")].iloc[0]
+    assert control["method"] == "agent" and control["primary"] == "paired"
+    text = result.report.read_text()
+    (line,) = [x for x in text.splitlines() if x.startswith("- agent-IDeepRL vs procedure")]
+    primary = f"t = {control['primary_statistic']:.2f}, p = {md.p_value(control['primary_p'])}"
+    assert f"Primary test (paired t-test over seeds of the agents' R_T): {primary}" in line
+    pooled = result.analysis.t_tests.set_index(["method_a", "method_b", "sample"])
+    student = pooled.loc[("agent", "procedure", "agent_totals"), "t"]
+    assert f"t = {student:.2f}," not in line, "the pooled test is not the plan's"
 
 
 def test_bad_input_writes_nothing(tmp_path: Path) -> None:
