@@ -160,6 +160,11 @@ class SessionPublic(BaseModel):
         default=None,
         description="How the online visit ended: completed, declined, excluded, timed_out.",
     )
+    replay_of: int | None = Field(
+        default=None,
+        description="A replay's source session in this database (method replayed: fed its "
+        "advice by order; deleting the source deletes the replay), else null.",
+    )
 
 
 class SessionCreated(SessionPublic):

@@ -367,3 +367,25 @@ def test_a_persons_session_replays_unchanged_in_physics_and_goes_with_them(
 
     assert api.delete(f"/api/sessions/{created['id']}").status_code in (200, 204)
     assert api.get(f"/api/sessions/{report['session_id']}").status_code == 404
+
+
+def test_a_replay_shows_its_source_through_the_api(server: Any, api: Any) -> None:
+    """`replay_of` is the session a replay derives from (what deleting it takes along):
+    the session says so, as the export's `sessions` table does."""
+    from study.services import replays
+    from tests.server.scale import session_body
+
+    study = api.post("/api/studies", json={"name": "a replay's source"}).json()["id"]
+    body = session_body("oracle", advice_budget=10)
+    created = api.post(f"/api/studies/{study}/sessions", json=body)
+    assert created.status_code == 201, created.text
+    source = created.json()["id"]
+    engine = make_engine(server.database_url)
+    with make_session_factory(engine)() as db:
+        stream = replays.stream_of_session(db, source)
+        replay = replays.create_replay(db, study, stream, replays.replay_run(stream.run, {})).id
+    engine.dispose()
+    assert api.get(f"/api/sessions/{replay}").json()["replay_of"] == source
+    assert api.get(f"/api/sessions/{source}").json()["replay_of"] is None
+    listed = {s["id"]: s["replay_of"] for s in api.get(f"/api/studies/{study}/sessions").json()}
+    assert listed == {source: None, replay: source}
