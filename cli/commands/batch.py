@@ -8,10 +8,16 @@ import dataclasses
 import json
 import shlex
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cli.commands.common import service_exit_code, show_progress, shown_url
+from cli.commands.common import (
+    existing_database,
+    service_exit_code,
+    show_progress,
+    shown_url,
+)
 from learner.cli import add_deprecated, add_set_option, given_values
 from learner.fields import FieldError, leaves, nest, parse_text
 from learner.fields import add_arguments as add_spec_arguments
@@ -200,8 +206,11 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     parser.set_defaults(func=batch, spec_class=spec_class)
 
 
-def spec_from(args: argparse.Namespace) -> BatchSpec:
-    """The batch the arguments describe, every run checked (`BatchError` otherwise)."""
+def spec_from(
+    args: argparse.Namespace, stored_model: Callable[[str], str] | None = None
+) -> BatchSpec:
+    """The batch the arguments describe, every run checked (`BatchError` otherwise); a
+    `fitted_model` given as `fitted:ID` is the file `stored_model` finds for it."""
     from runs.batch import BatchError, BatchSpec
 
     spec_class: type[RunSpec] = getattr(args, "spec_class", RunSpec)
@@ -213,6 +222,9 @@ def spec_from(args: argparse.Namespace) -> BatchSpec:
         else:
             values.setdefault("torch_threads", 1)  # a batch fills the cores with 1-thread runs
             template = spec_class.from_json(nest(values, spec_class))
+        fitted = template.fitted_model
+        if fitted is not None and fitted.startswith("fitted:") and stored_model is not None:
+            template = template.replace(fitted_model=stored_model(fitted))
         per_method: dict[str, dict[str, Any]] = {}
         for method, name, text in args.per_method:
             if name not in by_name or name == "method":
@@ -324,9 +336,11 @@ def batch(args: argparse.Namespace) -> int:
 
     try:
         _check_counts(args)
-        spec = spec_from(args)
+        spec = spec_from(args, lambda name: _stored_model(name, settings_from(args)))
     except BatchError as error:
         return _fail(str(error))
+    except ServiceError as error:
+        return _fail(error.message, service_exit_code(error))
     settings = settings_from(args)
     if args.dry_run:
         return _dry_run(args, spec, settings)
@@ -344,6 +358,16 @@ def batch(args: argparse.Namespace) -> int:
         return _fail(error.message, service_exit_code(error))
     except BatchError as error:
         return _fail(str(error))
+
+
+def _stored_model(name: str, settings: Settings) -> str:
+    """The file of the stored model `fitted:ID` names (written again if gone), as a
+    session's run through the API resolves it."""
+    from study.db.engine import make_session_factory
+    from study.services.fitted_files import resolve
+
+    with make_session_factory(existing_database(settings))() as db:
+        return resolve(db, name, settings.data_dir)
 
 
 def _dry_run(args: argparse.Namespace, spec: BatchSpec, settings: Settings) -> int:

@@ -25,7 +25,7 @@ from study.services import storage
 from study.services.errors import Invalid
 from study.services.sessions import create_session
 from study.services.studies import create_study
-from tests.runs.batch.helpers import SCALE, Place, sessions
+from tests.runs.batch.helpers import SCALE, Place, sessions, study_id
 from tests.runs.batch.helpers import in_process as run
 
 pytestmark = pytest.mark.slow
@@ -105,6 +105,14 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
     advised = ["batch", "--study", "fitted pilot", "--methods", "fitted", *SCALE, *PILOT]
     code, out = run(place, capsys, *advised, "--fitted-model", str(path), "--dry-run")
     assert code == 0 and "fitted #1" in out and "new" in out, out  # the batch takes it
+    stored = f"fitted:{fitted['id']}"  # ... or the stored model by its id, as the API does
+    by_id = ["batch", "--study", "fitted by id", "--methods", "fitted", *SCALE, *PILOT]
+    code, out = run(place, capsys, *by_id, "--fitted-model", stored)
+    assert code == 0, out
+    (batch_run,) = sessions(engine, study_id(engine, "fitted by id"))
+    assert batch_run.status == "finished" and batch_run.spec.fitted_model == str(path)
+    code, out = run(place, capsys, *by_id, "--fitted-model", "fitted:999999", "--dry-run")
+    assert code == 2 and "no stored model" in out, out
     with Session(engine) as db:  # ... and so does a session, run here by a real worker
         spec = RunSpec.from_json({"method": "fitted", "fitted_model": str(path), "config": TINY})
         by_model = create_session(db, study, spec).id
@@ -152,6 +160,7 @@ def test_a_model_fitted_to_an_oracle_pilot_advises_a_session_and_goes_with_its_d
         left = db.scalars(select(FittedAdvisorModel).where(FittedAdvisorModel.study_id == study))
         assert list(left) == []
         assert db.get(StudySession, run_by_model.id) is None
+        assert db.get(StudySession, batch_run.id) is None, "in another study too"
     assert not path.exists()
     assert not storage.session_dir(place.data_dir, run_by_model.id).exists()
 
