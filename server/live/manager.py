@@ -31,6 +31,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from datetime import datetime
 from multiprocessing import forkserver
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
@@ -63,7 +64,14 @@ from runs.worker.worker import WorkerOptions, worker_main
 from server.live import visits
 from server.live.hub import Hub
 from server.live.reaping import join
-from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Advice, Status, StudySession
+from study.db.models import (
+    LIVE_STATUSES,
+    RESUMABLE_STATUSES,
+    Advice,
+    Status,
+    StudySession,
+    utcnow,
+)
 from study.services import learning, numerics
 from study.services.assignment import expire_unopened_everywhere
 from study.services.errors import Conflict
@@ -192,6 +200,29 @@ def worker_context() -> (
     return context
 
 
+RESUME_WITHIN_S = 3600.0
+"""How recent a lab session's last sign of life must be for a restart to resume it (an
+online study's own idle limit decides for its visits)."""
+
+
+def resumes_after_restart(session: StudySession, now: datetime) -> bool:
+    """Whether the server's start resumes this interrupted session by itself: a person's
+    session (not a pool's) that this version's shutdown in order interrupted (its detail),
+    while the person could still be there: its last heartbeat within its idle limit (an
+    online study's visit), else within `RESUME_WITHIN_S`. Older, paused, crashed and machine
+    sessions stay for the researcher: resuming a visit whose person left long ago would only
+    hold a worker until the idle limit ends it as abandoned."""
+    if session.method != "human" or session.pooled:
+        return False
+    if not (session.status_detail or "").startswith(SHUTTING_DOWN):
+        return False
+    last = session.heartbeat_at or session.started_at
+    if last is None:
+        return False
+    limit = session.idle_limit_s or RESUME_WITHIN_S
+    return (now - last).total_seconds() <= limit
+
+
 class SessionManager:
     def __init__(
         self,
@@ -253,11 +284,8 @@ class SessionManager:
                     StudySession.status == Status.interrupted, StudySession.pooled.is_(False)
                 )
             )
-            ids = [
-                s.id
-                for s in interrupted
-                if s.method == "human" and s.status_detail.startswith(SHUTTING_DOWN)
-            ]
+            now = utcnow()
+            ids = [s.id for s in interrupted if resumes_after_restart(s, now)]
         resumed = []
         for session_id in ids:
             try:

@@ -171,7 +171,7 @@ def test_a_restart_resumes_a_participants_session_by_itself(live: LiveServer) ->
     with live.client() as api:
         stayed = [api.get(f"/api/sessions/{s['id']}").json() for s in (machine, paused)]
     assert [s["status"] for s in stayed] == ["interrupted", "interrupted"], stayed
-    assert "shutting down" in stayed[0]["status_detail"]
+    assert "shut down in order" in stayed[0]["status_detail"]
     assert "paused" in stayed[1]["status_detail"]
     participant.close()
     waiting.close()
