@@ -79,9 +79,15 @@ def _is_sqlite(url: URL) -> bool:
     return url.get_backend_name() == "sqlite"
 
 
-def _libpq(url: URL) -> str:
-    """The URL as pg_dump and pg_restore take it (no SQLAlchemy driver name)."""
-    return url.set(drivername="postgresql").render_as_string(hide_password=False)
+def _libpq(url: URL) -> tuple[str, dict[str, str]]:
+    """The URL as pg_dump and pg_restore take it (no SQLAlchemy driver name, no password),
+    and their environment with the password in `PGPASSWORD`: a command line is anyone's to
+    read in the process list while a (nightly) backup runs."""
+    env = dict(os.environ)
+    if url.password is not None:
+        env["PGPASSWORD"] = str(url.password)
+    bare = URL.create("postgresql", url.username, None, url.host, url.port, url.database, url.query)
+    return bare.render_as_string(hide_password=False), env
 
 
 RUN_PATHS = ("advisor_checkpoint", "fitted_model")
@@ -151,10 +157,11 @@ def _snapshot_postgres(url: URL, out: Path) -> list[str]:
             )
             query = PATHS if "run" in columns else PATHS_BEFORE_0007
             paths = _referenced(connection.execute(text(query)).all(), "run" in columns)
+            address, env = _libpq(url)
             done = subprocess.run(
                 ["pg_dump", "--format=custom", f"--snapshot={snapshot}", "--no-owner",
-                 f"--file={out}", _libpq(url)],
-                capture_output=True, text=True,
+                 f"--file={out}", address],
+                capture_output=True, text=True, env=env,
             )  # fmt: skip
             if done.returncode != 0:
                 raise BackupError(f"pg_dump failed: {done.stderr.strip()}")
@@ -178,9 +185,9 @@ def _copy_private(source: Path, target: Path) -> None:
     """Copy `source` to a file only its owner may read (the researcher key), never readable
     by others on the way: a plain copy takes the umask's 0644."""
     fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    os.fchmod(fd, 0o600)  # a file that was there keeps its mode through O_CREAT: not once written
     with os.fdopen(fd, "wb") as f:
         f.write(source.read_bytes())
-    target.chmod(0o600)  # a file that was there keeps its mode through O_CREAT
 
 
 def _make_private_folder(work: Path, out: Path) -> None:
@@ -344,10 +351,11 @@ def restore(folder: Path, database_url: str, data_dir: Path) -> Restored:
         with sqlite3.connect(source) as reading, sqlite3.connect(url.database) as writing:
             reading.backup(writing)
     else:
+        address, env = _libpq(url)
         done = subprocess.run(
-            ["pg_restore", "--no-owner", "--exit-on-error", f"--dbname={_libpq(url)}",
+            ["pg_restore", "--no-owner", "--exit-on-error", f"--dbname={address}",
              str(source)],
-            capture_output=True, text=True,
+            capture_output=True, text=True, env=env,
         )  # fmt: skip
         if done.returncode != 0:
             raise BackupError(f"pg_restore failed: {done.stderr.strip()}")

@@ -386,3 +386,16 @@ def test_sessions_backed_up_while_they_write_resume_to_the_records_of_uninterrup
         assert len(got["advice.csv"]) == (60 if method == "oracle" else 0), method
         for name in got:
             assert got[name] == want[name], (method, name)
+
+
+def test_pg_dump_is_given_its_password_in_its_environment_not_its_command_line() -> None:
+    """A command line is anyone's to read in the process list while a backup runs."""
+    from sqlalchemy.engine import make_url
+
+    from study.db.backup import _libpq
+
+    address, env = _libpq(make_url("postgresql+psycopg://ideeprl:s3cret@db.local:5433/study"))
+    assert "s3cret" not in address
+    assert make_url(address).drivername == "postgresql"
+    assert (make_url(address).host, make_url(address).port) == ("db.local", 5433)
+    assert env["PGPASSWORD"] == "s3cret"
