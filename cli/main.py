@@ -22,7 +22,7 @@ from importlib import metadata
 from sqlalchemy.exc import OperationalError
 
 from cli import commands
-from cli.commands.common import CommandError, database_down, fail
+from cli.commands.common import CommandError, database_down, fail, unreachable
 from learner.run import RunSpec
 
 
@@ -73,6 +73,8 @@ def main(argv: Sequence[str] | None = None, spec_class: type[RunSpec] = RunSpec)
     except CommandError as error:
         return fail(error.message, error.code)
     except OperationalError as error:
+        if not unreachable(error):
+            raise
         return fail(database_down(error))
 
 

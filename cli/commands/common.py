@@ -91,6 +91,29 @@ def database_down(error: OperationalError) -> str:
     )
 
 
+UNREACHABLE = (
+    "connection failed",
+    "connection refused",
+    "could not connect",
+    "could not translate host name",
+    "authentication failed",
+    "timeout expired",
+    "does not exist",
+    "unable to open database file",
+    "no route to host",
+)
+"""What a driver's error says when the database cannot be reached at all (psycopg, and
+SQLite's file that cannot be opened): only these become `database_down`'s one line."""
+
+
+def unreachable(error: OperationalError) -> bool:
+    """The database could not be reached (down, wrong host, password or name), rather than
+    failing in the middle of the work (a lock, a deadlock, a full disk), which keeps its
+    traceback."""
+    text = str(error.orig or error).lower()
+    return any(sign in text for sign in UNREACHABLE)
+
+
 def check_database(url: str) -> None:
     """Connect once, so that a database that is down raises here (`cli.main` says so in one
     line) and not inside uvicorn's start-up, which logs a traceback."""

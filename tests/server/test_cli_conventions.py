@@ -187,6 +187,26 @@ class FakeTerminal:
         return self.tty
 
 
+def test_what_is_printed_of_a_database_and_its_errors() -> None:
+    """Every command prints its database through `shown_url` (a batch's lines, its dry run,
+    its --json, serve's banner); only a database that cannot be reached is one line, other
+    database errors (a lock in the middle of the work) keep their traceback."""
+    from sqlalchemy.exc import OperationalError
+
+    from cli.commands.common import shown_url, unreachable
+
+    assert (
+        shown_url("postgresql+psycopg://u:s3cret@h:5432/d") == "postgresql+psycopg://u:***@h:5432/d"
+    )
+    assert (
+        shown_url("sqlite:///study_data/ideeprl.sqlite3") == "sqlite:///study_data/ideeprl.sqlite3"
+    )
+    down = Exception('connection failed: connection to server at "127.0.0.1", port 1 failed')
+    locked = Exception("database is locked")
+    assert unreachable(OperationalError("SELECT 1", {}, down))
+    assert not unreachable(OperationalError("INSERT ...", {}, locked))
+
+
 def test_progress_bars_only_for_a_terminal() -> None:
     assert show_progress(False, FakeTerminal(True)) is True
     assert show_progress(False, FakeTerminal(False)) is False
