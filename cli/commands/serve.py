@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +47,15 @@ def serve(args: argparse.Namespace) -> int:
     key, new = settings.ensure_api_key()
     app = create_app(settings)
     base = settings.base_url
-    saved = f" (new, saved in {settings.data_dir / 'api_key'})" if new else ""
+    shown, example = key, key
+    shown += f" (new, saved in {settings.data_dir / 'api_key'})" if new else ""
+    if not sys.stdout.isatty():
+        # a service's output goes to its journal, which more people read than the key's
+        # 0600 file: say where the key is, never the key
+        where = settings.data_dir / "api_key"
+        saved = where.exists() and where.read_text().strip() == key
+        shown = f"in {where} (its owner's alone)" if saved else "the IDEEPRL_API_KEY you set"
+        example = "KEY"
     print(
         f"IDeepRL study server\n"
         f"  dashboard:       {base}/dashboard (log in with the researcher key)\n"
@@ -54,9 +63,9 @@ def serve(args: argparse.Namespace) -> int:
         f"  API:             {base}/api\n"
         f"  participant URL: {base}/p/TOKEN (each human session has its own link)\n"
         f"  database:        {shown_url(settings.db_url)}\n"
-        f"  researcher key:  {key}{saved}\n"
+        f"  researcher key:  {shown}\n"
         f"  send it as the X-API-Key header, e.g.\n"
-        f"  curl -H 'X-API-Key: {key}' {base}/api/studies",
+        f"  curl -H 'X-API-Key: {example}' {base}/api/studies",
         flush=True,
     )
     check_database(settings.db_url)

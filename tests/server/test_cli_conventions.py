@@ -164,6 +164,10 @@ def test_printed_database_urls_hide_the_password(tmp_path: Path) -> None:
         "serve", "--port", str(free_port()), cwd=tmp_path, DATABASE_URL=url, IDEEPRL_DATA_DIR=data
     )
     assert f"database:        postgresql+psycopg://ideeprl:***@127.0.0.1:{port}/" in served.stdout
+    # nor the researcher key: where it is, not what it is (at a terminal it is shown)
+    key = (tmp_path / "data" / "api_key").read_text().strip()
+    assert key not in served.stdout
+    assert f"researcher key:  in {tmp_path / 'data' / 'api_key'}" in served.stdout
     commands = [
         served,
         ideeprl("batch", "--study", "pilot", "--methods", "autonomous", "--dry-run", "--json",
