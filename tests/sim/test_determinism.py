@@ -62,10 +62,10 @@ def test_watching_or_recording_the_motion_does_not_change_what_happens(seed: int
     try:
         runs = []
         for env, watch in ((plain, False), (recorded, False), (watched, True)):
-            obs, info = env.reset(seed=seed)
+            obs, _ = env.reset(seed=seed)
             course = [obs.tobytes()]
             for action in actions:
-                obs, reward, terminated, truncated, info = env.step(action)
+                obs, reward, terminated, truncated, _ = env.step(action)
                 if watch:
                     env.unwrapped.body_poses()
                 course.append((obs.tobytes(), reward, terminated))
@@ -76,7 +76,7 @@ def test_watching_or_recording_the_motion_does_not_change_what_happens(seed: int
         for env in (plain, recorded, watched):
             env.close()
     first_difference = [
-        next((i for i, (a, b) in enumerate(zip(runs[0], other)) if a != b), None)
+        next((i for i, (a, b) in enumerate(zip(runs[0], other, strict=False)) if a != b), None)
         for other in runs[1:]
     ]
     assert first_difference == [None, None]
