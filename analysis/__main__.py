@@ -69,6 +69,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         episodes, settings = export.episodes, export.settings
         notes = [f"Sessions from the export `{args.episodes}`."]
+        if export.advisors:
+            notes.append(
+                f"Left out session(s) {', '.join(map(str, export.advisors))}: the trained "
+                "agent(s) advising the agent-IDeepRL sessions, not compared agents."
+            )
         if export.design is not None:  # an online study: its conditions are compared
             # (a session with no condition, a batch run beside the study, keeps its method)
             group = {i: str(run.method) for i, run in export.runs.items()} | export.conditions

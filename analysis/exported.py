@@ -61,6 +61,8 @@ class Exported:
     (`analysis.advice.ADVICE_COLUMNS`; `outcome` missing where the export has none)."""
     name: str | None = None
     """The study's name (`study.json`; None without one)."""
+    advisors: tuple[int, ...] = ()
+    """Sessions left out: trained agents advising others (the export's `advises`)."""
 
     @property
     def alpha(self) -> float:
@@ -76,13 +78,21 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
             archive.extractall(tmp)
             return read_export(Path(tmp), spec_class)
     sessions = _table(path, "sessions")
+    advisors = tuple(
+        int(row["session_id"])
+        for row in _rows(sessions)
+        if "advises" in row and not _missing(row["advises"]) and _boolean(row["advises"])
+    )  # older exports have no such column: their advisors stay in
+    sessions = sessions[~sessions["session_id"].astype(int).isin(advisors)]
     runs = {int(row["session_id"]): run_of(row, spec_class) for row in _rows(sessions)}
     episodes = _with_stage(_table(path, "episodes"))
+    episodes = episodes[episodes["session_id"].isin(list(runs))]
     training = episodes[episodes["stage"] == "train"].copy()
     training["method"] = training["session_id"].map({i: r.method for i, r in runs.items()})
     training["seed"] = training["session_id"].map({i: r.seed for i, r in runs.items()})
     training = training.sort_values(["session_id", "episode"])
     every_step = _with_stage(_table(path, "steps"))
+    every_step = every_step[every_step["session_id"].isin(list(runs))]
     steps = every_step[every_step["stage"] == "train"].sort_values(["session_id", "global_step"])
     design = _design(path)
     conditions = {}
@@ -97,6 +107,7 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
         conditions=conditions,
         advice=_advised(every_step),
         name=_study(path).get("name"),
+        advisors=advisors,
         runs=runs,
         episodes=training[list(EPISODE_TABLE_COLUMNS)].reset_index(drop=True),
         steps=steps[[*STEP_COLUMNS, *(["outcome"] if "outcome" in steps else [])]].reset_index(

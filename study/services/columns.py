@@ -62,6 +62,12 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
         "The session whose recorded advice this one replays (method replayed), when it is in "
         "the same database; empty otherwise. Deleting that session deletes its replays.",
     ),
+    "advises": (
+        "boolean",
+        "True for a trained agent whose checkpoint advises other sessions of the study (the "
+        "agent-IDeepRL method's advisor): not one of the compared agents, and the report "
+        "leaves it out.",
+    ),
     "replay_source": (
         "string",
         "Where a replay's advice stream came from (JSON: study, session, export file); empty "

@@ -48,6 +48,7 @@ from study.db.models import (
 from study.services import learning, visit_export
 from study.services.columns import TEXT_KEYS, table_columns
 from study.services.errors import Conflict
+from study.services.sessions import advisor_sessions
 from study.services.studies import get_study
 from study.services.tables import column, resource, write_csv, write_parquet
 
@@ -95,6 +96,7 @@ def _session_rows(
     sessions: list[StudySession], spec_class: type[RunSpec]
 ) -> Iterator[dict[str, Any]]:
     run_leaves = leaves(spec_class)
+    advisors = advisor_sessions(sessions)
     for s in sessions:
         values = learning.spec_of(s, spec_class).values()
         values["sort_rule"] = plain_sort_rule(values["sort_rule"])
@@ -121,6 +123,7 @@ def _session_rows(
             "condition": s.condition,
             "outcome": s.outcome,
             "outcome_at": s.outcome_at,
+            "advises": s.id in advisors,
             "replay_source": json.dumps(s.replay_stream["source"], sort_keys=True)
             if s.replay_stream
             else None,

@@ -30,7 +30,7 @@ from learner.run import RunSpec, run_flags
 from study.db.models import Status, StudySession
 from study.services.errors import Conflict, Invalid, NotFound
 from study.services.replays import unchanged_replays
-from study.services.sessions import list_sessions
+from study.services.sessions import advisor_sessions, list_sessions
 from study.services.studies import design_of, get_study
 from study.services.tables import iso_z
 from study.settings import Settings
@@ -68,16 +68,6 @@ class ReportRequest:
     """`authors`: draw the authors' published curves on Figure 5."""
     primary: str = "welch"
     """Each comparison's primary test: `welch`, or `paired` over seeds where they pair."""
-
-
-def advisor_sessions(sessions: list[StudySession]) -> set[int]:
-    """Sessions whose checkpoint advises another of these sessions (method `agent`)."""
-    advising = {str(Path(c).resolve()) for s in sessions if (c := s.spec.advisor_checkpoint)}
-    return {
-        s.id
-        for s in sessions
-        if s.checkpoint_path and str(Path(s.checkpoint_path).resolve()) in advising
-    }
 
 
 def _ids(sessions: list[StudySession]) -> str:

@@ -202,3 +202,14 @@ def list_episodes(db: Session, session_id: int) -> list[Episode]:
         select(Episode).where(Episode.session_id == session_id).order_by(Episode.first_global_step)
     )
     return list(db.scalars(query))
+
+
+def advisor_sessions(sessions: list[StudySession]) -> set[int]:
+    """Sessions whose checkpoint advises another of these sessions (method `agent`): the
+    trained advisors, which a report leaves out of the compared agents."""
+    advising = {str(Path(c).resolve()) for s in sessions if (c := s.spec.advisor_checkpoint)}
+    return {
+        s.id
+        for s in sessions
+        if s.checkpoint_path and str(Path(s.checkpoint_path).resolve()) in advising
+    }

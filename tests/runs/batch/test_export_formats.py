@@ -176,14 +176,19 @@ def test_an_export_reads_back_as_the_database_holds_it(
         load_training_steps,
         session_settings,
     )
+    from study.services.sessions import advisor_sessions
     from tests.runs.batch.helpers import sessions, study_id
 
     export(place, tmp_path / "parquet", "--format", "parquet")
     engine = place.engine()
-    rows = sessions(engine, study_id(engine, "baselines"))
+    every = sessions(engine, study_id(engine, "baselines"))
+    advisors = advisor_sessions(every)
+    assert len(advisors) == 1  # the agent method's trained advisor: not a compared agent
+    rows = [s for s in every if s.id not in advisors]
     ids = [s.id for s in rows]
     for folder in (csv_export, tmp_path / "parquet"):
         exported = read_export(folder)
+        assert exported.advisors == tuple(advisors)
         assert exported.runs == {s.id: s.spec for s in rows}
         with Session(engine) as db:
             episodes = load_episodes(db, ids)
@@ -206,6 +211,13 @@ def test_the_report_of_an_export_has_the_advice_quality_and_the_studys_name(
     report = (tmp_path / "report" / "report.md").read_text()
     assert report.startswith("# baselines: the paper's analysis\n"), report[:200]
     assert "\n## Advice quality\n" in report and "| agent-IDeepRL |" in report
+    # the agents compared are the database report's: the trained advisor is left out
+    sessions = pd.read_csv(csv_export / "sessions.csv")
+    advisors = sessions.loc[sessions["advises"], "session_id"].tolist()
+    assert len(advisors) == 1, sessions[["session_id", "method", "advises"]]
+    assert f"Left out session(s) {advisors[0]}: the trained agent(s) advising" in report
+    compared = len(sessions) - 1
+    assert f"{compared} agents in 2 methods" in report, report[:600]
 
 
 def test_every_exported_run_is_accepted_back_unchanged(
