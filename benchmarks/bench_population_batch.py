@@ -102,6 +102,29 @@ def training_rate(url: str, session_ids: list[int]) -> tuple[int, float]:
     return len(stamps), float(max(stamps) - min(stamps)) if stamps else 0.0
 
 
+def busy_rate(url: str, session_ids: list[int]) -> tuple[int, float]:
+    """Training steps, and seconds, while every one of the sessions trained: from the last
+    of their first training steps to the first of their last. Runs of the same episodes end
+    at different times (their episodes differ in length), and after the first ends its slot
+    would, in a queue with people waiting, take the next one at once: the batch's whole
+    span (`training_rate`) counts that idle tail against the slots."""
+    with make_session_factory(make_engine(url))() as db:
+        rows = db.execute(
+            select(Step.session_id, Step.wall_time).where(
+                Step.session_id.in_(session_ids), Step.stage == "train"
+            )
+        ).all()
+    spans: dict[int, list[float]] = {}
+    for session_id, stamp in rows:
+        spans.setdefault(session_id, []).append(float(stamp))
+    if len(spans) < len(session_ids):
+        return 0, 0.0
+    start = max(min(stamps) for stamps in spans.values())
+    end = min(max(stamps) for stamps in spans.values())
+    steps = sum(start < t <= end for stamps in spans.values() for t in stamps)
+    return steps, max(end - start, 0.0)
+
+
 def children_rss(parent: int) -> int:
     """Resident bytes of `parent`'s child processes (the batch's workers), from /proc."""
     total = 0
@@ -158,8 +181,10 @@ def batch_rate(args: argparse.Namespace, size: int, workers: int) -> dict[str, f
         wall = time.perf_counter() - started
         assert result.complete, [r.detail for r in result.runs]
         steps, seconds = training_rate(url, result.session_ids())
+        busy_steps, busy_seconds = busy_rate(url, result.session_ids())
     rate = steps / seconds if seconds else float("nan")
-    return {"rate": rate, "wall": wall, "steps": steps, "rss": memory.peak}
+    busy = busy_steps / busy_seconds if busy_seconds else float("nan")
+    return {"rate": rate, "busy": busy, "wall": wall, "steps": steps, "rss": memory.peak}
 
 
 class _Timed:

@@ -18,11 +18,19 @@ the queue's population worker `population_main` runs), each run the paper's lear
 (one torch thread, fast motion, records in a SQLite file) for `--episodes` training
 episodes after a short pretraining (a human session pretrains before its advice, in its
 own worker, not in a slot: only training steps are counted). Training agent-steps per
-second over all slots, from the step records, extrapolated per agent-step to the
-paper's `PAPER_TRAINING_STEPS` per participant: participants an hour = rate x 3600 /
-PAPER_TRAINING_STEPS. Not counted: a population's start (each session's worker
-checkpoints and exits, the population's worker loads the checkpoints: seconds, against
-minutes of training) and the advising participants' own share of the cores.
+second over all slots, from the step records, while every slot was busy (from the last
+run's first training step to the first run's last: runs of the same episodes end at
+different times, and in a queue with people waiting a slot that frees takes the next at
+once, where the batch's last run would train on alone; the rate over the batch's whole
+span, that idle tail included, is printed beside it, and was the headline before
+2026-12-05 late), extrapolated per agent-step to the paper's `PAPER_TRAINING_STEPS` per
+participant: participants an hour = rate x 3600 / PAPER_TRAINING_STEPS. Not counted: a
+population's start (each session's worker checkpoints and exits, the population's worker
+loads the checkpoints: seconds, against minutes of training), the advising participants'
+own share of the cores, and what a paper-scale run's later checkpoints cost beyond these
+short runs' (every `--checkpoint-every` episodes the replay memory is saved whole: up to
+235 MiB once full, 0.2-1.5 s a save on the EPYC with AVX-512 BF16, against about 8 s of
+training between saves).
 
 Other processes share the CPUs: the CPU kind and the load average are printed with every
 number. The lines also go to a log (`--log`, by default benchmarks/logs/training-queue-*.log).
@@ -81,15 +89,22 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.tiny:
         log("--tiny: a check that the script runs, not a measurement")
     rates: dict[int, float] = {}
+    spans: dict[int, float] = {}
     for size in sizes:
         result = batch_rate(args, size, args.slots)
-        rates[size] = result["rate"]
+        rates[size], spans[size] = result["busy"], result["rate"]
         log(
             f"N={size}: {args.slots} x {size} sessions, {result['steps']} training steps, "
-            f"{result['rate']:.1f} agent-steps/s in all, {result['wall']:.0f} s, workers' "
-            f"peak resident memory {result['rss'] / 2**20:.0f} MiB; {load()}"
+            f"{result['busy']:.1f} agent-steps/s in all while every slot was busy "
+            f"({result['rate']:.1f} over the batch's whole span, its idle tail included), "
+            f"{result['wall']:.0f} s, workers' peak resident memory "
+            f"{result['rss'] / 2**20:.0f} MiB; {load()}"
         )
-    log(f"\nparticipants an hour the training queue sustains ({args.slots} slots, paper scale)")
+    log(
+        f"\nparticipants an hour the training queue sustains ({args.slots} slots, paper scale; "
+        "while every slot is busy, as with people waiting: a slot that frees takes the next "
+        "at once)"
+    )
     for size in sizes:
         per_hour = rates[size] * 3600 / PAPER_TRAINING_STEPS
         minutes = PAPER_TRAINING_STEPS * size / (rates[size] / args.slots) / 60
@@ -98,7 +113,8 @@ def main(argv: Sequence[str] | None = None) -> None:
             f"  population {size:2}{' (default)' if size == default else ''}: "
             f"{per_hour:5.1f} participants/hour ({rates[size] / rates[sizes[0]]:.2f}x "
             f"population {sizes[0]}; a slot trains {size} in about {minutes:.1f} min); "
-            f"{verdict} {ARRIVALS_PER_HOUR} an hour"
+            f"{verdict} {ARRIVALS_PER_HOUR} an hour (over the batch's whole span: "
+            f"{spans[size] * 3600 / PAPER_TRAINING_STEPS:.1f})"
         )
     log(f"{machine.cpu_kind()}; {load()}")
     # Its own slots make a load of about `slots`: more than one process beyond them (or
