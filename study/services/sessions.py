@@ -207,7 +207,11 @@ def list_episodes(db: Session, session_id: int) -> list[Episode]:
 def advisor_sessions(sessions: list[StudySession]) -> set[int]:
     """Sessions whose checkpoint advises another of these sessions (method `agent`): the
     trained advisors, which a report leaves out of the compared agents."""
-    advising = {str(Path(c).resolve()) for s in sessions if (c := s.spec.advisor_checkpoint)}
+    # read from the stored run, not `s.spec`: a run declared with fields of its own
+    # (`create_app(spec_class=...)`) is not the default RunSpec's to read back
+    advising = {
+        str(Path(c).resolve()) for s in sessions if (c := (s.run or {}).get("advisor_checkpoint"))
+    }
     return {
         s.id
         for s in sessions
