@@ -27,10 +27,9 @@ span, that idle tail included, is printed beside it, and was the headline before
 participant: participants an hour = rate x 3600 / PAPER_TRAINING_STEPS. Not counted: a
 population's start (each session's worker checkpoints and exits, the population's worker
 loads the checkpoints: seconds, against minutes of training), the advising participants'
-own share of the cores, and what a paper-scale run's later checkpoints cost beyond these
-short runs' (every `--checkpoint-every` episodes the replay memory is saved whole: up to
-235 MiB once full, 0.2-1.5 s a save on the EPYC with AVX-512 BF16, against about 8 s of
-training between saves).
+own share of the cores, and, in short runs, what a paper-scale run's later checkpoints
+cost (every `--checkpoint-every` episodes the replay memory is saved whole, about 90 MiB
+by a paper-scale run's end): `--episodes 300` measures whole paper-scale runs.
 
 Other processes share the CPUs: the CPU kind and the load average are printed with every
 number. The lines also go to a log (`--log`, by default benchmarks/logs/training-queue-*.log).
