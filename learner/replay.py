@@ -155,13 +155,16 @@ class ReplayMemory:
         return state, int(self.actions[row]), float(self.rewards[row]), next_state, terminated
 
     def state_dict(self) -> dict[str, Any]:
-        """Everything needed to continue exactly; only the filled frame slots are kept."""
+        """Everything needed to continue exactly; only the filled frame slots are kept.
+        They are copied out: `torch.save` writes a view's whole storage, so slices of
+        `frames` wrote the full capacity (246 MB at the paper's scale) at every checkpoint,
+        however few frames were filled."""
         used = min(self.added + 1, self._ring)
         return {
             "capacity": self.capacity,
             "frame_shape": list(self.frame_shape),
-            "frames": self.frames[:used].cpu(),
-            "spares": self.frames[self._ring :].cpu(),
+            "frames": self.frames[:used].to("cpu", copy=True),
+            "spares": self.frames[self._ring :].to("cpu", copy=True),
             "state_slot": torch.from_numpy(self.state_slot.copy()),
             "next_slot": torch.from_numpy(self.next_slot.copy()),
             "actions": torch.from_numpy(self.actions.copy()),
