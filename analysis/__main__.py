@@ -21,6 +21,7 @@ from analysis.baseline import (
     AUTO,
     NO_BASELINE,
     BaselineError,
+    advisors_left_out,
     choose_baseline,
     compare_conditions,
 )
@@ -70,10 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         episodes, settings = export.episodes, export.settings
         notes = [f"Sessions from the export `{args.episodes}`."]
         if export.advisors:
-            notes.append(
-                f"Left out session(s) {', '.join(map(str, export.advisors))}: the trained "
-                "agent(s) advising the agent-IDeepRL sessions, not compared agents."
-            )
+            notes.append(advisors_left_out(export.advisors))
         if export.design is not None:  # an online study: its conditions are compared
             # (a session with no condition, a batch run beside the study, keeps its method)
             group = {i: str(run.method) for i, run in export.runs.items()} | export.conditions

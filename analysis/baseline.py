@@ -22,6 +22,14 @@ NO_BASELINE = "none"
 """No baseline: the methods are compared with each other, no improvement in percent."""
 
 
+def advisors_left_out(session_ids: Iterable[int]) -> str:
+    """The note on the trained advisors a report leaves out, for both report paths."""
+    return (
+        f"Left out session(s) {', '.join(map(str, sorted(session_ids)))}: the trained "
+        "agent(s) advising the agent-IDeepRL sessions, not compared agents."
+    )
+
+
 class BaselineError(ValueError):
     """A named baseline with no sessions in the report."""
 

@@ -93,8 +93,11 @@ def describe_run_field(spec_class: type[RunSpec]) -> Describe:
 def run_field_home(spec_class: type[RunSpec]) -> Home:
     """Where a run's field of a given name belongs (`run.config.advice_budget`), for the
     422 on an unknown field: a run's field sent beside its `run` or in the wrong group."""
-    homes = {leaf.path[-1]: ".".join(("run", *leaf.path)) for leaf in leaves(spec_class)}
-    assert len(homes) == len(leaves(spec_class)), "a run's field names are unique"
+    places: dict[str, list[str]] = {}
+    for leaf in leaves(spec_class):
+        places.setdefault(leaf.path[-1], []).append(".".join(("run", *leaf.path)))
+    # a name that two groups share has no one home: it is named without one
+    homes = {name: where[0] for name, where in places.items() if len(where) == 1}
     return homes.get
 
 

@@ -47,12 +47,12 @@ def serve(args: argparse.Namespace) -> int:
     key, new = settings.ensure_api_key()
     app = create_app(settings)
     base = settings.base_url
-    shown, example = key, key
-    shown += f" (new, saved in {settings.data_dir / 'api_key'})" if new else ""
-    if not sys.stdout.isatty():
+    where = settings.data_dir / "api_key"
+    if sys.stdout.isatty():
+        shown, example = key + (f" (new, saved in {where})" if new else ""), key
+    else:
         # a service's output goes to its journal, which more people read than the key's
         # 0600 file: say where the key is, never the key
-        where = settings.data_dir / "api_key"
         saved = where.exists() and where.read_text().strip() == key
         shown = f"in {where} (its owner's alone)" if saved else "the IDEEPRL_API_KEY you set"
         example = "KEY"

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, TypedDict
 import pandas as pd
 from sqlalchemy.orm import Session
 
-from analysis.baseline import AUTO, BaselineError, compare_conditions
+from analysis.baseline import AUTO, BaselineError, advisors_left_out, compare_conditions
 from analysis.baseline import choose_baseline as baseline_rule
 from analysis.episodes import EpisodeTableError, method_name
 from learner.run import RunSpec, run_flags
@@ -97,10 +97,7 @@ def select_sessions(
         others = [s for s in everything if s.id not in advisors and s.id not in checks]
         chosen = [s for s in others if s.status == Status.finished.value]
         if advisors:
-            notes.append(
-                f"Left out session(s) {', '.join(map(str, sorted(advisors)))}: the trained "
-                "agent(s) advising the agent-IDeepRL sessions, not compared agents."
-            )
+            notes.append(advisors_left_out(advisors))
         if checks:
             notes.append(
                 f"Left out session(s) {', '.join(map(str, sorted(checks)))}: unchanged "
