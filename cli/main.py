@@ -46,9 +46,8 @@ def build_parser(
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    modules = ["learner.cli"] + [
-        f"{commands.__name__}.{info.name}" for info in pkgutil.iter_modules(commands.__path__)
-    ]
+    found = pkgutil.iter_modules(commands.__path__)
+    modules = [f"{commands.__name__}.{info.name}" for info in found]
     own = f"{commands.__name__}.{command}"
     if own in modules and command != "common":
         modules = [own]

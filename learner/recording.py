@@ -10,7 +10,7 @@ import csv
 import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -79,16 +79,23 @@ def _keep_rows(path: Path, column: str, last_step: int) -> None:
         writer.writerows(rows)
 
 
-def read_episodes(path: str | Path) -> list[dict[str, Any]]:
-    """Rows of an episodes.csv, numbers parsed."""
+@dataclasses.dataclass(frozen=True)
+class TrainingCurve:
+    """The training episodes of an episodes.csv, in order: what the learning curve plots."""
+
+    rewards: list[float]
+    """Each training episode's collected reward."""
+    epsilons: list[float]
+    """The exploration rate each began with."""
+
+
+def training_curve(path: str | Path) -> TrainingCurve:
+    """The training episodes (stage `train`) of an episodes.csv, numbers parsed."""
     with Path(path).open(newline="") as handle:
-        rows = list(csv.DictReader(handle))
-    for row in rows:
-        for key in ("episode", "steps"):
-            row[key] = int(row[key])
-        for key in ("collected_reward", "epsilon"):
-            row[key] = float(row[key])
-    return rows
+        rows = [row for row in csv.DictReader(handle) if row["stage"] == "train"]
+    return TrainingCurve(
+        [float(row["collected_reward"]) for row in rows], [float(row["epsilon"]) for row in rows]
+    )
 
 
 def learning_curve_figure(

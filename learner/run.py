@@ -25,6 +25,7 @@ import dataclasses
 import inspect
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, cast
 
 from learner import machine
@@ -255,6 +256,22 @@ class RunSpec:
         if isinstance(preset, str) and preset in PRESET_FIELDS and isinstance(config, Mapping):
             data["config"] = {**PRESET_FIELDS[preset], **config}  # else `build` names the field
         return build(cls, data)
+
+    @classmethod
+    def from_checkpoint(cls, path: str | Path) -> tuple[RunSpec, int]:
+        """The run a checkpoint of `Trainer.save_checkpoint` continues, read from its
+        metadata (an older checkpoint's through `from_old_settings`), and the global step it
+        stands at. `ValueError` for a file that is no such checkpoint."""
+        from learner.checkpoint import read_checkpoint  # torch: only when resuming
+
+        state = read_checkpoint(path)
+        settings = dict(state["metadata"])
+        if "advisor" not in settings and "method" not in settings:
+            raise ValueError(f"{path} was not written by ideeprl train")
+        config = DQNConfig.from_dict(state["config"])
+        if "version" in settings:
+            return cls.from_json(settings), int(state["global_step"])
+        return from_old_settings(settings, config), int(state["global_step"])
 
     def to_json(self) -> dict[str, Any]:
         """The stored document: every field spelled out, with its `version`."""

@@ -273,7 +273,7 @@ RECORDS_ALLOWED: dict[str, str] = {
     "learner.fitted.FittedAdvisor.advise": GYM_INFO,
     "learner.strategies.AdviceMoment.__init__": GYM_INFO + " where the advice is asked",
     "runs.worker.messages.AdviceRequest.__init__": GYM_INFO + " shown to the advisor",
-    "learner.cli.given_values": LEAF_VALUES,
+    "learner.fields.given_arguments": LEAF_VALUES,
     "learner.fields.nest": LEAF_VALUES,
     "learner.run.RunSpec.values": LEAF_VALUES,
     "learner.run.RunSpec.with_values": LEAF_VALUES,

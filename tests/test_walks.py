@@ -56,7 +56,7 @@ TRACER = ROOT / "tests" / "walks"
 DOC = ROOT / "docs" / "architecture.md"
 BEGIN, END = "<!-- walks: begin (python tests/test_walks.py --update) -->", "<!-- walks: end -->"
 
-LIMITS = {"a": (47, 0), "b": (19, 0), "c": (52, 0)}
+LIMITS = {"a": (47, 0), "b": (19, 0), "c": (51, 0)}
 """Walk: (most files, most climbs back) the code meets today, bounds that may only go down;
 the issue asks 10, 12 and 15 files and no climb back (docs/architecture.md says what blocks
 it)."""

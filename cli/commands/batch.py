@@ -13,12 +13,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cli.commands.common import (
+    add_deprecated,
+    add_set_option,
     existing_database,
+    given_values,
     service_exit_code,
     show_progress,
     shown_url,
 )
-from learner.cli import add_deprecated, add_set_option, given_values
 from learner.fields import FieldError, leaves, nest, parse_text
 from learner.fields import add_arguments as add_spec_arguments
 from learner.run import RunSpec, run_flags

@@ -1,5 +1,5 @@
 """What every `ideeprl` command shares: exit codes, finding the data folder and a study,
-and whether to draw progress bars.
+whether to draw progress bars, and the flags of a run (train, batch, replay).
 
 Commands whose result a script reads take `--json`: one JSON object on stdout and nothing
 else there (messages and warnings go to stderr), with the same exit codes.
@@ -12,19 +12,21 @@ sense, or a value the database refuses as invalid; argparse's own errors are 2 t
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from typing import TYPE_CHECKING, Any, TextIO
 
 from sqlalchemy.engine import make_url
 
-if TYPE_CHECKING:
-    import argparse
+from learner.fields import FieldError, given_arguments, leaves, parse_text
 
+if TYPE_CHECKING:
     from sqlalchemy.engine import Engine
     from sqlalchemy.exc import OperationalError
     from sqlalchemy.orm import Session
 
+    from learner.run import RunSpec
     from study.settings import Settings
 
 EXIT_RUNTIME = 1
@@ -166,3 +168,75 @@ def find_study(db: Session, study: str) -> tuple[int, str]:
         what = "id" if text.isdigit() else "name"
         raise CommandError(f"no study with {what} {text}{known}")
     return found.id, f"study {found.id} ({found.name})"
+
+
+# --- a run's flags, shared by the commands that take a run (train, batch, replay) ---------
+DEPRECATED = {
+    "--threads": "torch_threads",
+    "--budget": "advice_budget",
+    "--oracle-error-rate": "error_rate",
+}
+"""Older names of some flags, still read (each prints that it is deprecated)."""
+
+
+def add_deprecated(parser: argparse.ArgumentParser, skip: tuple[str, ...] = ()) -> None:
+    """The older names of generated flags (`DEPRECATED`), hidden from --help."""
+    for flag, name in DEPRECATED.items():
+        if name not in skip:
+            parser.add_argument(flag, dest=f"deprecated__{name}", help=argparse.SUPPRESS)
+    if "method" not in skip:  # the advisor was a flag before the method was the run's
+        parser.add_argument("--advisor", dest="deprecated_advisor", help=argparse.SUPPRESS)
+
+
+def add_set_option(group: argparse._ActionsContainer, help: str) -> None:
+    """`--set FIELD=VALUE`, repeatable: any field of the run by its leaf name (read by
+    `given_values`, which checks the name and the value)."""
+    group.add_argument(
+        "--set",
+        dest="assignments",
+        action="append",
+        type=_parse_assignment,
+        default=[],
+        metavar="FIELD=VALUE",
+        help=f"{help} (VALUE as JSON, else a string); repeatable",
+    )
+
+
+def given_values(args: argparse.Namespace, spec_class: type[RunSpec]) -> dict[str, Any]:
+    """The run's leaves the flags gave (generated flags, `--set FIELD=VALUE`, deprecated
+    names), by leaf name, each checked; `FieldError` for a bad one."""
+    by_name = {leaf.name: leaf for leaf in leaves(spec_class)}
+    values: dict[str, Any] = {}
+    for name, text in getattr(args, "assignments", None) or []:
+        if name not in by_name:
+            raise FieldError(
+                name, f"--set: unknown field {name[:64]}; valid: {', '.join(sorted(by_name))}"
+            )
+        values[name] = parse_text(by_name[name], text)
+    for key, text in vars(args).items():
+        if key.startswith("deprecated__") and text is not None:
+            name = key.removeprefix("deprecated__")
+            print(
+                f"warning: {_old_flag(name)} is deprecated; use {by_name[name].flag}",
+                file=sys.stderr,
+            )
+            values[name] = parse_text(by_name[name], text)
+    advisor = getattr(args, "deprecated_advisor", None)
+    if advisor is not None:
+        print("warning: --advisor is deprecated; use --method", file=sys.stderr)
+        values["method"] = parse_text(
+            by_name["method"], "autonomous" if advisor == "none" else advisor
+        )
+    values.update(given_arguments(args))
+    return values
+
+
+def _old_flag(name: str) -> str:
+    return next(flag for flag, leaf in DEPRECATED.items() if leaf == name)
+
+
+def _parse_assignment(item: str) -> tuple[str, str]:
+    name, sep, value = item.partition("=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError("--set takes FIELD=VALUE")
+    return name.strip(), value

@@ -17,10 +17,11 @@ from cli.commands.common import (
     EXIT_USAGE,
     CommandError,
     add_json_option,
+    add_set_option,
+    given_values,
     print_json,
     service_exit_code,
 )
-from learner.cli import add_set_option, given_values
 from learner.fields import FieldError
 from learner.fields import add_arguments as add_spec_arguments
 from learner.run import RunSpec

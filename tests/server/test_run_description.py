@@ -113,7 +113,7 @@ def test_a_field_added_to_the_run_reaches_every_entry_point_and_every_view(
     args = parser.parse_args(["train", "--out", str(out), "--probe", "45", "--no-progress", *TINY])
     assert args.func(args) == 0
     resumed = parser.parse_args(["train", "--resume", str(out / "checkpoint.pt")])
-    from learner.cli import run_spec
+    from cli.commands.train import run_spec
 
     assert run_spec(resumed)[0].probe == 45  # type: ignore[attr-defined]
 

@@ -1,4 +1,4 @@
-"""`ideeprl train` (and `python -m learner train`): train one learner from the command line.
+"""`ideeprl train`: train one learner from the command line.
 
 Writes into --out: steps.csv and episodes.csv (the records, columns as documented in
 `learner.records`), learning_curve.png, config.json, and checkpoint.pt (every
@@ -13,17 +13,17 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from cli.commands.common import add_deprecated, add_set_option, given_values
 from learner.config import DQNConfig
-from learner.fields import FieldError, given_arguments, leaves, nest, parse_text
 from learner.fields import add_arguments as add_spec_arguments
+from learner.fields import nest
 from learner.records import EpisodeRecord, StepRecord
-from learner.run import RunSpec, from_old_settings
+from learner.run import RunSpec
 
 
 def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
@@ -35,70 +35,6 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     )
     add_arguments(parser, spec_class)
     parser.set_defaults(func=train, spec_class=spec_class)
-
-
-DEPRECATED = {
-    "--threads": "torch_threads",
-    "--budget": "advice_budget",
-    "--oracle-error-rate": "error_rate",
-}
-"""Older names of some flags, still read (each prints that it is deprecated)."""
-
-
-def add_deprecated(parser: argparse.ArgumentParser, skip: tuple[str, ...] = ()) -> None:
-    """The older names of generated flags (`DEPRECATED`), hidden from --help."""
-    for flag, name in DEPRECATED.items():
-        if name not in skip:
-            parser.add_argument(flag, dest=f"deprecated__{name}", help=argparse.SUPPRESS)
-    if "method" not in skip:  # the advisor was a flag before the method was the run's
-        parser.add_argument("--advisor", dest="deprecated_advisor", help=argparse.SUPPRESS)
-
-
-def add_set_option(group: argparse._ActionsContainer, help: str) -> None:
-    """`--set FIELD=VALUE`, repeatable: any field of the run by its leaf name (read by
-    `given_values`, which checks the name and the value)."""
-    group.add_argument(
-        "--set",
-        dest="assignments",
-        action="append",
-        type=_parse_assignment,
-        default=[],
-        metavar="FIELD=VALUE",
-        help=f"{help} (VALUE as JSON, else a string); repeatable",
-    )
-
-
-def given_values(args: argparse.Namespace, spec_class: type[RunSpec]) -> dict[str, Any]:
-    """The run's leaves the flags gave (generated flags, `--set FIELD=VALUE`, deprecated
-    names), by leaf name, each checked; `FieldError` for a bad one."""
-    by_name = {leaf.name: leaf for leaf in leaves(spec_class)}
-    values: dict[str, Any] = {}
-    for name, text in getattr(args, "assignments", None) or []:
-        if name not in by_name:
-            raise FieldError(
-                name, f"--set: unknown field {name[:64]}; valid: {', '.join(sorted(by_name))}"
-            )
-        values[name] = parse_text(by_name[name], text)
-    for key, text in vars(args).items():
-        if key.startswith("deprecated__") and text is not None:
-            name = key.removeprefix("deprecated__")
-            print(
-                f"warning: {_old_flag(name)} is deprecated; use {by_name[name].flag}",
-                file=sys.stderr,
-            )
-            values[name] = parse_text(by_name[name], text)
-    advisor = getattr(args, "deprecated_advisor", None)
-    if advisor is not None:
-        print("warning: --advisor is deprecated; use --method", file=sys.stderr)
-        values["method"] = parse_text(
-            by_name["method"], "autonomous" if advisor == "none" else advisor
-        )
-    values.update(given_arguments(args))
-    return values
-
-
-def _old_flag(name: str) -> str:
-    return next(flag for flag, leaf in DEPRECATED.items() if leaf == name)
 
 
 def add_arguments(parser: argparse.ArgumentParser, spec_class: type[RunSpec] = RunSpec) -> None:
@@ -130,7 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser, spec_class: type[RunSpec] = R
 
 def train(args: argparse.Namespace) -> int:
     try:
-        spec, resume_state = run_spec(args)
+        spec, resumed_step = run_spec(args)
         spec = spec.validate()
     except (ValueError, FileNotFoundError) as error:
         print(f"ideeprl train: error: {error}", file=sys.stderr)
@@ -138,14 +74,13 @@ def train(args: argparse.Namespace) -> int:
     if spec.method == "human":
         print("ideeprl train: error: a human run needs the server (ideeprl serve)", file=sys.stderr)
         return 2
-    from learner.recording import CsvRecorder, plot_learning_curve, read_episodes
+    from learner.recording import CsvRecorder, plot_learning_curve, training_curve
 
     config, settings = spec.config, spec.to_json()
     out = args.out or (args.resume.parent if args.resume else _default_out())
-    resumed_step = resume_state["global_step"] if resume_state else None
     recorder = CsvRecorder(out, resume_from_step=resumed_step)
     # Bars only for a person at a terminal, never into a pipe or a log file.
-    progress = Progress(config, resume_state, disable=args.no_progress or not sys.stderr.isatty())
+    progress = Progress(config, resumed_step, disable=args.no_progress or not sys.stderr.isatty())
     trainer, _env = spec.build([recorder, progress])
     if args.resume:
         trainer.load_checkpoint(args.resume)
@@ -167,12 +102,10 @@ def train(args: argparse.Namespace) -> int:
         progress.close()
         recorder.close()
     trainer.save_checkpoint(checkpoint, settings)
-    rows = [row for row in read_episodes(recorder.episodes_path) if row["stage"] == "train"]
-    rewards = [row["collected_reward"] for row in rows]
+    curve = training_curve(recorder.episodes_path)
+    rewards = curve.rewards
     label = "DeepRL" if not spec.advised else f"{spec.method}-IDeepRL"
-    plot = plot_learning_curve(
-        rewards, [row["epsilon"] for row in rows], out / "learning_curve.png", label
-    )
+    plot = plot_learning_curve(rewards, curve.epsilons, out / "learning_curve.png", label)
     print(
         f"{len(rewards)} training episodes, {trainer.global_step} steps in "
         f"{time.perf_counter() - started:.0f} s; R_T = {sum(rewards):.2f}, "
@@ -182,25 +115,15 @@ def train(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_spec(args: argparse.Namespace) -> tuple[RunSpec, dict[str, Any] | None]:
+def run_spec(args: argparse.Namespace) -> tuple[RunSpec, int | None]:
     """The run the arguments describe, validated and pinned on this machine; or the
     checkpoint's when resuming (then only --episodes may change, and numerics this machine
-    cannot honour are refused unless --override-numerics), and where a resumed run stands."""
+    cannot honour are refused unless --override-numerics), and the global step a resumed run
+    stands at."""
     spec_class: type[RunSpec] = getattr(args, "spec_class", RunSpec)
     values = given_values(args, spec_class)
     if args.resume:
-        from learner.checkpoint import read_checkpoint  # torch: only when resuming
-
-        state = read_checkpoint(args.resume)
-        settings = dict(state["metadata"])
-        if "advisor" not in settings and "method" not in settings:
-            raise ValueError(f"{args.resume} was not written by ideeprl train")
-        config = DQNConfig.from_dict(state["config"])
-        spec = (
-            spec_class.from_json(settings)
-            if "version" in settings
-            else from_old_settings(settings, config)
-        )
+        spec, global_step = spec_class.from_checkpoint(args.resume)
         changed = sorted(set(values) - {"episodes"})
         if changed:
             raise ValueError(
@@ -216,7 +139,7 @@ def run_spec(args: argparse.Namespace) -> tuple[RunSpec, dict[str, Any] | None]:
             config = spec.config.replace(device="auto", precision="auto")
             spec = spec.replace(config=config).pinned(spec.config.torch_threads)
             print(f"warning: numerics overridden ({problem})", file=sys.stderr)
-        return spec.validate().pinned(), {"global_step": int(state["global_step"])}
+        return spec.validate().pinned(), global_step
     return spec_class.from_json(nest(values, spec_class)).validate().pinned(), None
 
 
@@ -227,13 +150,6 @@ def _checkpoint_due(finished: EpisodeRecord | None, every: int) -> bool:
     return finished.episode % every == 0
 
 
-def _parse_assignment(item: str) -> tuple[str, str]:
-    name, sep, value = item.partition("=")
-    if not sep or not name.strip():
-        raise argparse.ArgumentTypeError("--set takes FIELD=VALUE")
-    return name.strip(), value
-
-
 def _default_out() -> Path:
     return Path("study_data") / "runs" / time.strftime("train-%Y%m%d-%H%M%S")
 
@@ -241,12 +157,10 @@ def _default_out() -> Path:
 class Progress:
     """Progress bars: pretraining steps, then training episodes with epsilon and reward."""
 
-    def __init__(
-        self, config: DQNConfig, resume_state: dict[str, Any] | None, disable: bool = False
-    ) -> None:
+    def __init__(self, config: DQNConfig, resumed_step: int | None, disable: bool = False) -> None:
         self.config = config
         self.disable = disable
-        done = resume_state["global_step"] if resume_state else 0
+        done = resumed_step or 0
         self.pretraining: Any = tqdm(
             total=config.pretraining_steps,
             initial=min(done, config.pretraining_steps),
@@ -287,11 +201,3 @@ class Progress:
         self.pretraining.close()
         if self.training is not None:
             self.training.close()
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m learner")
-    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    register(subparsers)
-    args = parser.parse_args(argv)
-    return int(args.func(args) or 0)

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from cli.main import main
 from learner.checkpoint import read_checkpoint
-from learner.cli import main
 
 SMALL = [
     "--set", "pretraining_steps=60", "--set", "batch_size=16", "--set", "memory_size=500",
@@ -17,7 +17,7 @@ SMALL = [
 
 
 def train(*args: str) -> subprocess.CompletedProcess[str]:
-    command = [sys.executable, "-m", "learner", "train", *args]
+    command = [sys.executable, "-m", "cli", "train", *args]
     return subprocess.run(command, capture_output=True, text=True, timeout=300)
 
 
@@ -91,5 +91,5 @@ def test_ideeprl_lists_the_train_command() -> None:
     from cli.main import build_parser
 
     args = build_parser().parse_args(["train", "--episodes", "5", "--method", "random"])
-    assert args.command == "train" and args.func.__module__ == "learner.cli"
+    assert args.command == "train" and args.func.__module__ == "cli.commands.train"
     assert args.spec__episodes == 5 and args.spec__method == "random"
