@@ -16,7 +16,7 @@ from typing import Any
 import pandas as pd
 
 from analysis.audit import describe_learner
-from learner import sb3_dqn
+from learner import sb3_spec
 from learner.config import PRESETS, DQNConfig
 from learner.fields import leaves
 from learner.run import RunSpec
@@ -45,7 +45,7 @@ def settings_table(
         spec = run.normalized()
         config = spec.config.to_dict()
         learner = (
-            sb3_dqn.describe(spec.sb3, config)  # another learner altogether: the audit flags it
+            sb3_spec.describe(spec.sb3, config)  # another learner altogether: the audit flags it
             if spec.learner == "sb3-dqn"
             else describe_learner(config, presets)
         )

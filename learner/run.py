@@ -32,6 +32,7 @@ from learner import machine
 from learner.advisors import ADVISOR_KINDS, Advisor, make_advisor
 from learner.config import PRESET_FIELDS, DQNConfig, Preset
 from learner.fields import FieldError, bounded, build, checked, flatten, group, nest, to_json
+from learner.sb3_spec import sb3_hyperparameters
 from learner.strategies import (
     _STRATEGIES,
     STRATEGY_NAMES,
@@ -230,8 +231,6 @@ class RunSpec:
         """sb3-dqn only: SB3's hyperparameters, mapped from the config."""
         if self.learner != "sb3-dqn":
             return {}
-        from learner.sb3_dqn import sb3_hyperparameters
-
         return sb3_hyperparameters(self.config)
 
     def replace(self, **changes: Any) -> RunSpec:
@@ -344,8 +343,6 @@ class RunSpec:
         normalized spec. Raises `RunSpecError` (a `ValueError`) naming the field."""
         spec = self.normalized()
         if spec.learner == "sb3-dqn":
-            from learner.sb3_dqn import sb3_hyperparameters
-
             try:
                 sb3_hyperparameters(spec.config)
             except ValueError as error:

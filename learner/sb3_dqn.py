@@ -12,7 +12,8 @@ out here (one environment, no VecEnv), as `OffPolicyAlgorithm.collect_rollouts` 
 `learn` do it, so that every step can be recorded and the run paused between steps.
 
 The paper's hyperparameters become SB3's where SB3 has the same knob
-(`sb3_hyperparameters`); the session stores them, and the report's audit shows them.
+(`learner.sb3_spec.sb3_hyperparameters`, torch-free); the session stores them, and the
+report's audit shows them.
 Stable-Baselines3 is an optional extra (`pip install 'ideeprl[sb3]'`), imported only when
 a trainer is made.
 """
@@ -20,7 +21,6 @@ a trainer is made.
 from __future__ import annotations
 
 import importlib.util
-import math
 import random
 from collections.abc import Iterable
 from pathlib import Path
@@ -30,11 +30,10 @@ import numpy as np
 
 from learner.config import DQNConfig
 from learner.records import EpisodeRecord, StepRecord, stage_of
+from learner.sb3_spec import PREFIX, sb3_hyperparameters
 from learner.seeding import run_streams
 from learner.staged import EpisodeInProgress, StagedRun, StepTaken
 
-METHOD = "sb3-dqn"
-PREFIX = "sb3_"
 FORMAT = "ideeprl-sb3-dqn-checkpoint"
 VERSION = 1
 N_ACTIONS = 4
@@ -42,34 +41,6 @@ MISSING = (
     "the sb3-dqn baseline needs Stable-Baselines3: pip install 'ideeprl[sb3]' "
     "(or pip install stable-baselines3 --no-deps, keeping this torch)"
 )
-
-FIELDS: dict[str, str] = {
-    "sb3_policy": "Stable-Baselines3 policy: CnnPolicy, SB3's standard for images (NatureCNN: "
-    "convolutions of 32, 64 and 64 filters, a dense layer of 512; pixels divided by 255).",
-    "sb3_learning_rate": "SB3 DQN learning_rate (the config's learning_rate).",
-    "sb3_gamma": "SB3 DQN gamma (the config's gamma).",
-    "sb3_batch_size": "SB3 DQN batch_size (the config's batch_size).",
-    "sb3_buffer_size": "SB3 DQN buffer_size, replay transitions kept (the config's memory_size).",
-    "sb3_learning_starts": "SB3 DQN learning_starts: random actions before the first update "
-    "(the config's pretraining_steps).",
-    "sb3_train_freq": "SB3 DQN train_freq in steps: 1, an update after every action as the "
-    "paper's Algorithm 2.",
-    "sb3_gradient_steps": "SB3 DQN gradient_steps per update: 1.",
-    "sb3_target_update_interval": "SB3 DQN target_update_interval in steps: 1 without the "
-    "config's target_network (the target is the network itself, as in the paper's learner), "
-    "else the config's target_update_interval.",
-    "sb3_tau": "SB3 DQN tau: 1.0, the target is copied, not averaged.",
-    "sb3_exploration_initial_eps": "SB3 DQN exploration_initial_eps (the config's epsilon_start).",
-    "sb3_exploration_final_eps": "SB3 DQN exploration_final_eps (the config's epsilon_min).",
-    "sb3_exploration_steps": "Training steps over which SB3's linear schedule goes from the "
-    "initial to the final epsilon: as many as the config's multiplicative decay takes to reach "
-    "its floor (9,209 at the paper's 0.9995 and 1 %); SB3's exploration_fraction of a total of "
-    "this many training steps.",
-    "sb3_loss": "SB3 DQN's loss: huber (smooth L1), fixed by SB3.",
-    "sb3_optimizer": "SB3 DQN's optimizer: adam (PyTorch's defaults), fixed by SB3.",
-    "sb3_max_grad_norm": "SB3 DQN max_grad_norm: its default 10, or the config's grad_clip_norm.",
-}
-"""The `sb3_*` fields of an `sb3-dqn` session's config: the export's column dictionary."""
 
 RUNTIME_FIELDS = ("device", "torch_threads", "episodes")
 
@@ -79,57 +50,11 @@ def available() -> bool:
     return importlib.util.find_spec("stable_baselines3") is not None
 
 
-def exploration_steps(config: DQNConfig) -> int:
-    """Training steps the config's `epsilon_decay` takes from `epsilon_start` to
-    `epsilon_min` (0: epsilon does not move)."""
-    start, floor, decay = config.epsilon_start, config.epsilon_min, config.epsilon_decay
-    if decay >= 1.0 or start <= floor:
-        return 0
-    if floor <= 0.0:
-        raise ValueError("sb3-dqn needs epsilon_min above 0 to map the decay onto SB3's schedule")
-    return math.ceil(math.log(floor / start) / math.log(decay))
-
-
-def sb3_hyperparameters(config: DQNConfig) -> dict[str, Any]:
-    """SB3 DQN's arguments for the paper's config: its numbers where SB3 has the same knob,
-    SB3's own choices (network, loss, optimizer) where the paper's learner is its own."""
-    return {
-        "sb3_policy": "CnnPolicy",
-        "sb3_learning_rate": config.learning_rate,
-        "sb3_gamma": config.gamma,
-        "sb3_batch_size": config.batch_size,
-        "sb3_buffer_size": config.memory_size,
-        "sb3_learning_starts": config.pretraining_steps,
-        "sb3_train_freq": 1,
-        "sb3_gradient_steps": 1,
-        "sb3_target_update_interval": (
-            config.target_update_interval if config.target_network else 1
-        ),
-        "sb3_tau": 1.0,
-        "sb3_exploration_initial_eps": config.epsilon_start,
-        "sb3_exploration_final_eps": config.epsilon_min,
-        "sb3_exploration_steps": exploration_steps(config),
-        "sb3_loss": "huber",
-        "sb3_optimizer": "adam",
-        "sb3_max_grad_norm": (
-            float(config.grad_clip_norm) if config.grad_clip_norm is not None else 10.0
-        ),
-    }
-
-
 def split_config(stored: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """A stored session config as (the learner config it was mapped from, the `sb3_*`
     fields); the second is empty for the paper's learner."""
     base = {k: v for k, v in stored.items() if not k.startswith(PREFIX)}
     return base, {k: v for k, v in stored.items() if k.startswith(PREFIX)}
-
-
-def describe(hyper: dict[str, Any], config: dict[str, Any]) -> str:
-    """The learner in one line, for the report's audit: SB3's hyperparameters and the
-    episode limit its stages share with the paper's learner."""
-    items = ", ".join(f"{k.removeprefix(PREFIX)}={v}" for k, v in sorted(hyper.items()))
-    limit = config.get("max_episode_steps")
-    return f"{METHOD} (Stable-Baselines3 DQN: {items}; max_episode_steps={limit})"
 
 
 class _Exploration:

@@ -286,7 +286,8 @@ RECORDS_ALLOWED: dict[str, str] = {
     "runs.worker.messages.EpisodeDone.__init__": "`EpisodeRecord.to_dict()`, relayed as-is to "
     "the pages as JSON",
     "learner.run.RunSpec.sb3": "keyword arguments of Stable-Baselines3's DQN, passed on as-is",
-    "learner.sb3_dqn.describe": "Stable-Baselines3's hyperparameters and config, as SB3 names them",
+    "learner.sb3_spec.describe": "Stable-Baselines3's hyperparameters and config, as SB3 names "
+    "them",
     "learner.fitted.FittedModel.summary": "JSON stored as-is (`fitted_advisors.summary`) and "
     "served as-is (`FittedAdvisorPublic.summary`)",
     "learner.population.Population.numerics": "the numerics a checkpoint records, as JSON",

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from learner import DQNConfig
-from learner.sb3_dqn import exploration_steps, sb3_hyperparameters
+from learner.sb3_spec import exploration_steps, sb3_hyperparameters
 from tests.learner.conftest import Recorder, small_config
 
 pytest.importorskip("stable_baselines3")

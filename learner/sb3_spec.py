@@ -1,0 +1,91 @@
+"""The SB3 baseline's hyperparameters, without Stable-Baselines3 or torch.
+
+What a run, a stored session and the report's audit need of the `sb3-dqn` baseline (its
+`sb3_*` fields, their values for a config, the learner in one line) without the trainer
+(`learner.sb3_dqn`), which drives SB3: `RunSpec.sb3` maps a config here, and the analysis,
+which must import nothing of the runtime, describes the learner from here.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from learner.config import DQNConfig
+
+METHOD = "sb3-dqn"
+PREFIX = "sb3_"
+
+FIELDS: dict[str, str] = {
+    "sb3_policy": "Stable-Baselines3 policy: CnnPolicy, SB3's standard for images (NatureCNN: "
+    "convolutions of 32, 64 and 64 filters, a dense layer of 512; pixels divided by 255).",
+    "sb3_learning_rate": "SB3 DQN learning_rate (the config's learning_rate).",
+    "sb3_gamma": "SB3 DQN gamma (the config's gamma).",
+    "sb3_batch_size": "SB3 DQN batch_size (the config's batch_size).",
+    "sb3_buffer_size": "SB3 DQN buffer_size, replay transitions kept (the config's memory_size).",
+    "sb3_learning_starts": "SB3 DQN learning_starts: random actions before the first update "
+    "(the config's pretraining_steps).",
+    "sb3_train_freq": "SB3 DQN train_freq in steps: 1, an update after every action as the "
+    "paper's Algorithm 2.",
+    "sb3_gradient_steps": "SB3 DQN gradient_steps per update: 1.",
+    "sb3_target_update_interval": "SB3 DQN target_update_interval in steps: 1 without the "
+    "config's target_network (the target is the network itself, as in the paper's learner), "
+    "else the config's target_update_interval.",
+    "sb3_tau": "SB3 DQN tau: 1.0, the target is copied, not averaged.",
+    "sb3_exploration_initial_eps": "SB3 DQN exploration_initial_eps (the config's epsilon_start).",
+    "sb3_exploration_final_eps": "SB3 DQN exploration_final_eps (the config's epsilon_min).",
+    "sb3_exploration_steps": "Training steps over which SB3's linear schedule goes from the "
+    "initial to the final epsilon: as many as the config's multiplicative decay takes to reach "
+    "its floor (9,209 at the paper's 0.9995 and 1 %); SB3's exploration_fraction of a total of "
+    "this many training steps.",
+    "sb3_loss": "SB3 DQN's loss: huber (smooth L1), fixed by SB3.",
+    "sb3_optimizer": "SB3 DQN's optimizer: adam (PyTorch's defaults), fixed by SB3.",
+    "sb3_max_grad_norm": "SB3 DQN max_grad_norm: its default 10, or the config's grad_clip_norm.",
+}
+"""The `sb3_*` fields of an `sb3-dqn` session's config: the export's column dictionary."""
+
+
+def exploration_steps(config: DQNConfig) -> int:
+    """Training steps the config's `epsilon_decay` takes from `epsilon_start` to
+    `epsilon_min` (0: epsilon does not move)."""
+    start, floor, decay = config.epsilon_start, config.epsilon_min, config.epsilon_decay
+    if decay >= 1.0 or start <= floor:
+        return 0
+    if floor <= 0.0:
+        raise ValueError("sb3-dqn needs epsilon_min above 0 to map the decay onto SB3's schedule")
+    return math.ceil(math.log(floor / start) / math.log(decay))
+
+
+def sb3_hyperparameters(config: DQNConfig) -> dict[str, Any]:
+    """SB3 DQN's arguments for the paper's config: its numbers where SB3 has the same knob,
+    SB3's own choices (network, loss, optimizer) where the paper's learner is its own."""
+    return {
+        "sb3_policy": "CnnPolicy",
+        "sb3_learning_rate": config.learning_rate,
+        "sb3_gamma": config.gamma,
+        "sb3_batch_size": config.batch_size,
+        "sb3_buffer_size": config.memory_size,
+        "sb3_learning_starts": config.pretraining_steps,
+        "sb3_train_freq": 1,
+        "sb3_gradient_steps": 1,
+        "sb3_target_update_interval": (
+            config.target_update_interval if config.target_network else 1
+        ),
+        "sb3_tau": 1.0,
+        "sb3_exploration_initial_eps": config.epsilon_start,
+        "sb3_exploration_final_eps": config.epsilon_min,
+        "sb3_exploration_steps": exploration_steps(config),
+        "sb3_loss": "huber",
+        "sb3_optimizer": "adam",
+        "sb3_max_grad_norm": (
+            float(config.grad_clip_norm) if config.grad_clip_norm is not None else 10.0
+        ),
+    }
+
+
+def describe(hyper: dict[str, Any], config: dict[str, Any]) -> str:
+    """The learner in one line, for the report's audit: SB3's hyperparameters and the
+    episode limit its stages share with the paper's learner."""
+    items = ", ".join(f"{k.removeprefix(PREFIX)}={v}" for k, v in sorted(hyper.items()))
+    limit = config.get("max_episode_steps")
+    return f"{METHOD} (Stable-Baselines3 DQN: {items}; max_episode_steps={limit})"
