@@ -30,7 +30,7 @@ import numpy as np
 
 from learner.config import DQNConfig
 from learner.records import EpisodeRecord, StepRecord, stage_of
-from learner.sb3_spec import PREFIX, sb3_hyperparameters
+from learner.sb3_spec import sb3_hyperparameters
 from learner.seeding import run_streams
 from learner.staged import EpisodeInProgress, StagedRun, StepTaken
 
@@ -48,13 +48,6 @@ RUNTIME_FIELDS = ("device", "torch_threads", "episodes")
 def available() -> bool:
     """Whether Stable-Baselines3 can be imported here (without importing it)."""
     return importlib.util.find_spec("stable_baselines3") is not None
-
-
-def split_config(stored: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """A stored session config as (the learner config it was mapped from, the `sb3_*`
-    fields); the second is empty for the paper's learner."""
-    base = {k: v for k, v in stored.items() if not k.startswith(PREFIX)}
-    return base, {k: v for k, v in stored.items() if k.startswith(PREFIX)}
 
 
 class _Exploration:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Any
 
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
@@ -98,14 +97,3 @@ def finish_induction(db: Session, session: StudySession) -> StudySession:
         session.induction_done_at = utcnow()
         db.commit()
     return session
-
-
-def consent_public(session: StudySession) -> dict[str, Any]:
-    """What the researcher's API says about a session's consent."""
-    version = session.texts_version
-    return {
-        "consented_at": session.consented_at,
-        "declined_at": session.declined_at,
-        "induction_done_at": session.induction_done_at,
-        "texts_version": version.version if version is not None else None,
-    }
