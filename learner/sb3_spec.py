@@ -16,34 +16,6 @@ from learner.config import DQNConfig
 METHOD = "sb3-dqn"
 PREFIX = "sb3_"
 
-FIELDS: dict[str, str] = {
-    "sb3_policy": "Stable-Baselines3 policy: CnnPolicy, SB3's standard for images (NatureCNN: "
-    "convolutions of 32, 64 and 64 filters, a dense layer of 512; pixels divided by 255).",
-    "sb3_learning_rate": "SB3 DQN learning_rate (the config's learning_rate).",
-    "sb3_gamma": "SB3 DQN gamma (the config's gamma).",
-    "sb3_batch_size": "SB3 DQN batch_size (the config's batch_size).",
-    "sb3_buffer_size": "SB3 DQN buffer_size, replay transitions kept (the config's memory_size).",
-    "sb3_learning_starts": "SB3 DQN learning_starts: random actions before the first update "
-    "(the config's pretraining_steps).",
-    "sb3_train_freq": "SB3 DQN train_freq in steps: 1, an update after every action as the "
-    "paper's Algorithm 2.",
-    "sb3_gradient_steps": "SB3 DQN gradient_steps per update: 1.",
-    "sb3_target_update_interval": "SB3 DQN target_update_interval in steps: 1 without the "
-    "config's target_network (the target is the network itself, as in the paper's learner), "
-    "else the config's target_update_interval.",
-    "sb3_tau": "SB3 DQN tau: 1.0, the target is copied, not averaged.",
-    "sb3_exploration_initial_eps": "SB3 DQN exploration_initial_eps (the config's epsilon_start).",
-    "sb3_exploration_final_eps": "SB3 DQN exploration_final_eps (the config's epsilon_min).",
-    "sb3_exploration_steps": "Training steps over which SB3's linear schedule goes from the "
-    "initial to the final epsilon: as many as the config's multiplicative decay takes to reach "
-    "its floor (9,209 at the paper's 0.9995 and 1 %); SB3's exploration_fraction of a total of "
-    "this many training steps.",
-    "sb3_loss": "SB3 DQN's loss: huber (smooth L1), fixed by SB3.",
-    "sb3_optimizer": "SB3 DQN's optimizer: adam (PyTorch's defaults), fixed by SB3.",
-    "sb3_max_grad_norm": "SB3 DQN max_grad_norm: its default 10, or the config's grad_clip_norm.",
-}
-"""The `sb3_*` fields of an `sb3-dqn` session's config: the export's column dictionary."""
-
 
 def exploration_steps(config: DQNConfig) -> int:
     """Training steps the config's `epsilon_decay` takes from `epsilon_start` to
