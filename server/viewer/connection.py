@@ -12,6 +12,8 @@ private attributes is here, so a viser upgrade breaks this file, loudly, and not
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import io
 import re
 from collections.abc import Awaitable, Callable
 from typing import Any, TypeVar
@@ -49,7 +51,10 @@ def guarded_server(
     """A viser server for views opened by token: no logo, no share button, its panel
     minimised; `admit` runs on every raw websocket before any message, `forget` when one
     closes, `connected` once viser knows the client."""
-    server = viser.ViserServer(host=host, port=port, verbose=False)
+    with contextlib.redirect_stdout(io.StringIO()):
+        # viser prints a banner with its own address whatever `verbose` says: an internal
+        # port the relay reaches, never a page for people (they use the platform's port)
+        server = viser.ViserServer(host=host, port=port, verbose=False)
     server.gui.configure_theme(show_logo=False, show_share_button=False)
     server.gui.main_panel.minimize()
     refuse_share_requests(server)

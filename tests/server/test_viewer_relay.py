@@ -41,3 +41,11 @@ def test_the_viewer_client_is_sent_once_then_revalidated(server: LiveServer) -> 
         assert again.status_code == 304 and again.content == b""
         stale = client.get("/viewer/", headers={"If-None-Match": '"another"'})
         assert stale.status_code == 200 and stale.headers["etag"] == etag
+
+
+def test_serve_prints_no_address_of_viser_s_own(server: LiveServer) -> None:
+    """viser prints a banner with its internal port (an empty scene stuck on "Connecting"
+    when opened); people are told the platform's port alone."""
+    printed = server.log.read_text()
+    assert "IDeepRL study server" in printed, printed
+    assert "ws://" not in printed and "viser" not in printed, printed
