@@ -202,9 +202,15 @@ def test_an_online_study_runs_through_its_link(
     editor = section.locator(".design-json")
     shown = json.loads(editor.input_value())
     assert shown["panel"]["codes"] == CODES and shown["capacity"] == 6
+    editor.fill(json.dumps({**shown, "capacity": "lots"}))
+    section.locator(".save-design").click()
+    refused = section.locator(".design-error")
+    expect(refused).to_be_visible()
+    expect(refused).to_contain_text("design.capacity: Input should be a valid integer")
     editor.fill(json.dumps({**shown, "capacity": 8}))
     section.locator(".save-design").click()
     expect(editor).to_have_value(re.compile(r'"capacity": 8'))
+    expect(refused).to_be_hidden()
     with live.api() as api:
         stored = api.get(f"/api/studies/{study['id']}").json()["design"]
     assert stored == {**shown, "capacity": 8}, "the design edited on the dashboard, stored"

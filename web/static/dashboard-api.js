@@ -1,6 +1,7 @@
 // The dashboard's calls to its own API: the session cookie, the header that marks a
 // request as the dashboard's (changes without it are refused), the login page when the
-// session has ended, and the API's error detail as the thrown message.
+// session has ended, and the API's error detail, with the fields it names, as the thrown
+// message.
 "use strict";
 window.dashboardCall = async (path, options = {}) => {
   const response = await fetch(path, {
@@ -14,7 +15,11 @@ window.dashboardCall = async (path, options = {}) => {
   }
   const body = response.status === 204 ? {} : await response.json().catch(() => ({}));
   if (!response.ok) {
-    const detail = Array.isArray(body.detail) ? body.detail.map((d) => d.msg).join("; ") : body.detail;
+    // a 422 names each field it refuses (`design.capacity: ...`), as the API's `loc` does
+    const where = (d) => (Array.isArray(d.loc) ? d.loc.filter((p) => p !== "body").join(".") : "");
+    const detail = Array.isArray(body.detail)
+      ? body.detail.map((d) => (where(d) ? `${where(d)}: ${d.msg}` : d.msg)).join("; ")
+      : body.detail;
     throw new Error(detail || `error ${response.status}`);
   }
   return body;

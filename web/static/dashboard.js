@@ -167,16 +167,25 @@
     });
     section.querySelector(".save-design").addEventListener("click", async () => {
       const box = section.querySelector(".design-json");
+      const said = section.querySelector(".design-error");
       try {
+        let design;
+        try {
+          design = JSON.parse(box.value);
+        } catch (e) {
+          throw new Error(`not JSON (${e.message})`);
+        }
         const saved = await call(`/dashboard/api/studies/${study.id}/design`, {
           method: "POST",
-          body: JSON.stringify({ design: JSON.parse(box.value) }),
+          body: JSON.stringify({ design }),
         });
         box.value = JSON.stringify(saved.design, null, 2); // every default written out
         box.dataset.edited = "";
-        showError("");
+        said.hidden = true;
       } catch (e) {
-        showError(`Design of study ${study.id}: ${e.message}`);
+        // beside the editor, where the researcher is looking, not at the top of the page
+        said.textContent = `Not saved: ${e.message}`;
+        said.hidden = false;
       }
       refresh();
     });
