@@ -45,7 +45,7 @@ async def open_link(request: Request, key: str) -> Response:
     try:
         linked = await run_in_threadpool(_linked, request, key)
     except NotFound:
-        return _not_a_link()
+        return _not_a_link(request)
     _, design, title = linked
     panel_id = request.query_params.get(design.panel.params[0], "").strip()
     if not panel_id and request.cookies.get(COOKIE) is None:
@@ -77,7 +77,7 @@ async def _join(request: Request, key: str, linked: Linked | None) -> Response:
         try:
             linked = await run_in_threadpool(_linked, request, key)
         except NotFound:
-            return _not_a_link()
+            return _not_a_link(request)
     study_id, design, title = linked
     per_study = settings.join_per_place_per_minute * design.capacity
     if not request.app.state.arrivals_by_study.allow(key, per_study):
@@ -108,8 +108,11 @@ async def _join(request: Request, key: str, linked: Linked | None) -> Response:
     return response
 
 
-def _not_a_link() -> Response:
-    return Response("This study link is not valid.", status_code=404, media_type="text/plain")
+def _not_a_link(request: Request) -> Response:
+    """The participant's page for a link that is not valid, as for a session's link."""
+    response = participant_page(request, "participant/error.html", None, looked_for="a study")
+    response.status_code = 404
+    return response
 
 
 def _linked(request: Request, key: str) -> Linked:

@@ -411,7 +411,11 @@ def test_bad_panel_parameters_are_a_400_not_a_session(
     assert api.delete(f"/api/studies/{study['id']}/panel/a%00b").status_code == 422
     assert api.delete(f"/api/studies/{study['id']}/panel/{'x' * 201}").status_code == 422
     unknown = urlsplit(study["join_url"]).path[:-3] + "zzz"
-    assert httpx.get(server.url + unknown).status_code == 404
+    for method in ("GET", "POST"):
+        page = httpx.request(method, server.url + unknown)
+        assert page.status_code == 404, page.text
+        assert page.headers["content-type"].startswith("text/html"), "the participant's page"
+        assert "We could not find a study for this link" in page.text
 
 
 def test_a_link_never_opened_times_out_and_frees_its_place(
