@@ -116,6 +116,7 @@ def test_design_is_stored_with_every_default_written_out(api: httpx.Client) -> N
         {"conditions": {"a": {}}, "capacity": 0},
         {"conditions": {"a": {}}, "panel": {"kind": "custom"}},
         {"conditions": {"a": {}}, "panel": {"urls": {"completed": "javascript:alert(1)"}}},
+        {"conditions": {"a": {}}, "panel": {"codes": {"completed": "a b<script>"}}},
     ],
 )
 def test_a_bad_design_is_a_422(api: httpx.Client, bad: dict[str, Any]) -> None:
