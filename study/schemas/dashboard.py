@@ -8,7 +8,7 @@ from typing import Any
 from pydantic import BaseModel, Field
 
 from analysis.baseline import AUTO
-from study.schemas.design import StudyDesign
+from study.schemas.design import NewStudyDesign
 from study.schemas.studies import ConditionCounts
 from study.schemas.types import Text
 
@@ -45,7 +45,7 @@ class StudyRow(BaseModel):
 
 
 class NewDesign(BaseModel):
-    design: StudyDesign
+    design: NewStudyDesign
 
 
 class NewStudy(BaseModel):

@@ -19,7 +19,7 @@ from pydantic import (
     model_validator,
 )
 
-from study.schemas.types import Key, Number, Texts, plain_text
+from study.schemas.types import Key, Number, Text, Texts, plain_text
 from study.schemas.visit import CheckSpec, QuestionnaireSpec
 
 PANEL_PARAMS: dict[str, tuple[str, ...]] = {
@@ -38,9 +38,6 @@ OutcomeName = Literal["completed", "declined", "excluded", "timed_out", "full"]
 """`study.db.models.Outcome`'s values, each with its own code and return URL."""
 OUTCOMES: tuple[OutcomeName, ...] = get_args(OutcomeName)
 ParamName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
-Code = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
-"""An outcome's code: what a participant copies into the panel, so letters, digits, `_`,
-`.` and `-` only (as Prolific's and MTurk's codes are), no spaces or markup."""
 Url = Annotated[
     str,
     StringConstraints(max_length=2000, pattern=r"^(https?://|\{turkSubmitTo\}/)"),
@@ -79,7 +76,9 @@ class Panel(BaseModel):
     kind: Literal["prolific", "mturk", "custom"] = "prolific"
     params: list[ParamName] = Field(default_factory=list, max_length=16)
     """The URL parameters kept (the first is the person's panel id); default: the panel's."""
-    codes: dict[OutcomeName, Code] = Field(default_factory=dict)
+    codes: dict[OutcomeName, Annotated[Text, Field(min_length=1, max_length=64)]] = Field(
+        default_factory=dict
+    )
     """A code per outcome; random ones are made for those not given."""
     urls: dict[OutcomeName, Url] = Field(default_factory=dict)
     """The return URL per outcome; Prolific's completion URL by default on Prolific."""
@@ -144,3 +143,23 @@ class StudyDesign(BaseModel):
         url = url.replace("{turkSubmitTo}", submit, 1) if url.startswith("{") else url
         values = {"code": self.code(outcome), **given}
         return re.sub(r"\{([A-Za-z0-9_.-]+)\}", lambda m: quote(values.get(m[1], ""), safe=""), url)
+
+
+CODE = re.compile(r"[A-Za-z0-9_.-]+")
+"""An outcome's code as a new design may give it: what a participant copies into the panel,
+so letters, digits, `_`, `.` and `-` only (as Prolific's and MTurk's codes are)."""
+
+
+def _copyable_codes(design: StudyDesign) -> StudyDesign:
+    for outcome, code in design.panel.codes.items():
+        if not CODE.fullmatch(code):
+            raise ValueError(
+                f"panel.codes.{outcome}: {code[:64]!r} is not a code a participant can copy "
+                "into the panel; use letters, digits, _ . and - only"
+            )
+    return design
+
+
+NewStudyDesign = Annotated[StudyDesign, AfterValidator(_copyable_codes)]
+"""A design as a request gives it: its codes checked as well. Designs stored before the
+check are read as `StudyDesign`, so a study under way is never refused its own design."""

@@ -7,7 +7,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from study.schemas.design import StudyDesign
+from study.schemas.design import NewStudyDesign, StudyDesign
 from study.schemas.types import StudyName, Text, Texts
 
 
@@ -24,7 +24,7 @@ class StudyBase(BaseModel):
 
 class StudyCreate(StudyBase):
     name: StudyName = Field(description="Unique name of the study (not blank).")
-    design: StudyDesign | None = Field(
+    design: NewStudyDesign | None = Field(
         default=None,
         description="An online study's design (conditions, targets, capacity, panel, check, "
         "questionnaire): the study gets a public link `/join/KEY` that assigns arrivals. "
@@ -38,7 +38,7 @@ class StudyUpdate(BaseModel):
     name: StudyName | None = None
     description: Text | None = Field(default=None, max_length=10_000)
     texts: Texts | None = Field(default=None, max_length=32)
-    design: StudyDesign | None = Field(
+    design: NewStudyDesign | None = Field(
         default=None, description="A new design, whole; a lab study becomes an online one."
     )
 
