@@ -136,6 +136,22 @@ class Visit:
             f"{minutes} minute{'s' if minutes != 1 else ''} does the study end early."
         )
 
+    def after_advice(self) -> str:
+        """What follows the last choice (`{after_advice}`): in a lab study the robot's
+        progress to watch; in an online study its questions, if it asks any, and the
+        completion code (the visit ends there: no progress page)."""
+        if self.design is None:
+            return (
+                "After your last choice, the robot carries on learning on its own, and you "
+                "can watch its progress."
+            )
+        if self.design.get("questionnaire"):
+            return (
+                "After your last choice, you answer a few questions about the study, and then "
+                "you receive your completion code."
+            )
+        return "After your last choice, you receive your completion code."
+
     def resolved_texts(self) -> dict[str, str]:
         """Every page text as it is shown now: the study's or the default, filled in."""
         fill = {
@@ -143,6 +159,7 @@ class Visit:
             "{sorting_rule}": describe_rule(self.sort_rule),
             "{advice_plan}": self.advice_plan(),
             "{time_rule}": self.time_rule(),
+            "{after_advice}": self.after_advice(),
         }
         out = {}
         for key in TEXT_KEYS:

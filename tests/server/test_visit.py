@@ -301,19 +301,24 @@ def test_the_texts_say_when_this_participant_advises_and_how_long_they_may_take(
     server: LiveServer, api: httpx.Client, online: dict[str, Any]
 ) -> None:
     """The induction's plan follows the session's strategy (the first N actions, or one in
-    every k with moves of its own between), and the time rule the study's: no limit in a lab
-    study, the design's idle limit in an online one."""
+    every k with moves of its own between), the time rule the study's (no limit in a lab
+    study, the design's idle limit in an online one), and what follows the last choice the
+    visit's (a lab study's progress page; an online study's questions and code: its visit
+    ends there, so it promises no progress to watch)."""
     lab = api.post("/api/studies", json={"name": "lab texts"}).json()
     design = StudyDesign(conditions=ONE_CONDITION, idle_limit_s=300).model_dump(mode="json")
     set_design(server, online["id"], design)
     made = []
-    for study, run, plan, limit in (
-        (lab, {}, "For its first 2 actions", "<strong>no time limit</strong>"),
+    watch, code = "you can watch its progress", "you receive your completion code"
+    for study, run, plan, limit, after, not_after in (
+        (lab, {}, "For its first 2 actions", "<strong>no time limit</strong>", watch, code),
         (
             online,
             {"strategy": "alternating", "interval": 3, "advice_budget": 4},
             "choose 4 of its actions, one action in every 3",
             "Only if you give no answer for 5 minutes does the study end early",
+            "you answer a few questions about the study, and then " + code,
+            watch,
         ),
     ):
         created, participant = new_participant(server, api, study["id"], **run)
@@ -322,7 +327,8 @@ def test_the_texts_say_when_this_participant_advises_and_how_long_they_may_take(
         assert limit in httpx.get(f"{page}/consent").text
         participant.consent()
         assert plan in httpx.get(f"{page}/induction/1").text
-        assert limit in httpx.get(f"{page}/induction/3").text
+        last = httpx.get(f"{page}/induction/3").text
+        assert limit in last and after in last and not_after not in last
         participant.client.close()
     for session_id in made:
         assert api.post(f"/api/sessions/{session_id}/stop").status_code == 200
