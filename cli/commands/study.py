@@ -63,6 +63,7 @@ def read_body(source: Path, name: str | None) -> Any:
 def create_study(args: argparse.Namespace) -> int:
     from study.db.engine import make_engine, make_session_factory
     from study.db.migrate import BACKUPS, upgrade
+    from study.schemas.studies import StudyPublic
     from study.services import studies
     from study.services.errors import Invalid, ServiceError
 
@@ -80,7 +81,13 @@ def create_study(args: argparse.Namespace) -> int:
             if isinstance(error, Invalid):
                 raise CommandError(f"{error.field}: {error.message}", EXIT_USAGE) from None
             raise CommandError(error.message) from None
-        public = studies.public(db, study, args.public_url or settings.base_url)
+        # what GET /api/studies/ID answers (`server.routes.studies.study_public`), built
+        # here: one command need not load the web process's modules
+        update = {
+            "session_count": studies.session_count(db, study.id),
+            "join_url": studies.join_url(study, args.public_url or settings.base_url),
+        }
+        public = StudyPublic.model_validate(study).model_copy(update=update)
     engine.dispose()
     if args.json:
         print_json(public.model_dump(mode="json"))

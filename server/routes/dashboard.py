@@ -131,7 +131,7 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
     for study in studies.list_studies(db):
         found = []
         for session in sessions.list_sessions(db, study.id):
-            public = sessions.session_public(session, settings.base_url)
+            public = session_routes.session_public(session, settings.base_url)
             progress = session_routes.get_progress(db, manager, session.id)
             fields = public.model_dump(include=set(SessionRow.model_fields))
             fields.update(
@@ -140,7 +140,6 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
                 declined=session.declined_at is not None and session.consented_at is None,
             )
             found.append(SessionRow(**fields))
-        study_public = studies.public(db, study, settings.base_url)
         counts = study_routes.condition_counts(db, study.id) if study.design else []
         rows.append(
             StudyRow(
@@ -149,7 +148,7 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
                 description=study.description,
                 sessions=found,
                 design=study.design,
-                join_url=study_public.join_url,
+                join_url=studies.join_url(study, settings.base_url),
                 conditions=counts,
                 report_built_at=reports.report_built_at(reports.reports_dir(settings), study.id),
             )
@@ -236,7 +235,7 @@ def new_participant(
     created = sessions.create_session(
         db, study_id, RunSpec(method="human"), options, settings.data_dir, settings.worker_threads
     )
-    public = sessions.session_public(created, settings.base_url)
+    public = session_routes.session_public(created, settings.base_url)
     if body.pretrain:
         background.add_task(manager.welcome, created.id)
     return {"id": created.id, "participant_url": public.participant_url}

@@ -1,4 +1,6 @@
-"""Sessions of a study: create, read, start/pause/resume/stop, progress, learning curve."""
+"""Sessions of a study: create, read, start/pause/resume/stop, progress, learning curve.
+The services return the session rows; `session_public` makes them the API's response
+(the dashboard's too)."""
 
 from typing import Literal
 
@@ -10,7 +12,7 @@ from learner.run import RunSpec
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
-from study.db.models import LIVE_STATUSES, Advice
+from study.db.models import LIVE_STATUSES, Advice, StudySession
 from study.schemas.runs import given
 from study.schemas.sessions import (
     AdvicePublic,
@@ -25,6 +27,23 @@ from study.services import learning, sessions, storage
 from study.services.errors import NotFound
 
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
+
+
+def session_public(session: StudySession, base_url: str) -> SessionPublic:
+    """A session as the API shows it; its participant's link under `base_url`."""
+    data = {
+        name: getattr(session, name)
+        for name in SessionPublic.model_fields
+        if name not in ("participant", "participant_url", "texts_version")
+        and hasattr(session, name)
+    }
+    if session.texts_version is not None:
+        data["texts_version"] = session.texts_version.version
+    if session.participant is not None:
+        data["participant"] = session.participant.pseudonym
+    if session.participant_token:
+        data["participant_url"] = sessions.participant_url(base_url, session.participant_token)
+    return SessionPublic(**data)
 
 
 def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
@@ -62,7 +81,7 @@ def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
             db, study_id, spec, options, settings.data_dir, settings.worker_threads
         )
         storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
-        public = sessions.session_public(session, settings.base_url)
+        public = session_public(session, settings.base_url)
         if pretrain and session.participant_token:
             background.add_task(manager.welcome, session.id)
         return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
@@ -75,12 +94,12 @@ def list_sessions(
     db: DbDep, settings: SettingsDep, study_id: StudyId, page: PageDep
 ) -> list[SessionPublic]:
     found = page.of(sessions.list_sessions(db, study_id))
-    return [sessions.session_public(s, settings.base_url) for s in found]
+    return [session_public(s, settings.base_url) for s in found]
 
 
 @router.get("/sessions/{session_id}")
 def get_session(db: DbDep, settings: SettingsDep, session_id: SessionId) -> SessionPublic:
-    return sessions.session_public(sessions.get_session(db, session_id), settings.base_url)
+    return session_public(sessions.get_session(db, session_id), settings.base_url)
 
 
 @router.delete("/sessions/{session_id}", status_code=204)
@@ -99,7 +118,7 @@ def delete_session(
 
 def _fresh(db: DbDep, settings: SettingsDep, session_id: int) -> SessionPublic:
     db.expire_all()
-    return sessions.session_public(sessions.get_session(db, session_id), settings.base_url)
+    return session_public(sessions.get_session(db, session_id), settings.base_url)
 
 
 @router.post("/sessions/{session_id}/start")

@@ -1,18 +1,21 @@
-"""Studies (researcher key required)."""
+"""Studies (researcher key required). The services return rows and domain values; the
+functions before the routes make them the API's responses (the dashboard's too)."""
 
 from fastapi import APIRouter, Path, Request, Response
 from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
+from learner.fitted import FittedModel
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
-from study.db.models import LIVE_STATUSES, Status, Study, StudySession
+from study.db.models import LIVE_STATUSES, FittedAdvisorModel, Status, Study, StudySession
 from study.schemas.design import StudyDesign
 from study.schemas.studies import (
     ConditionCounts,
     FittedAdvisorPublic,
     Preview,
+    SessionDisk,
     StudyCreate,
     StudyDisk,
     StudyPublic,
@@ -24,23 +27,59 @@ from study.services.errors import Conflict
 router = APIRouter(prefix="/api/studies", tags=["studies"], dependencies=[ResearcherDep])
 
 
+def study_public(study: Study, session_count: int, base_url: str) -> StudyPublic:
+    """A study as the API shows it, with its number of sessions and its public link
+    under `base_url` (online studies)."""
+    update = {"session_count": session_count, "join_url": studies.join_url(study, base_url)}
+    return StudyPublic.model_validate(study).model_copy(update=update)
+
+
+def _public(db: DbDep, study: Study, base_url: str) -> StudyPublic:
+    return study_public(study, studies.session_count(db, study.id), base_url)
+
+
+def fitted_public(row: FittedAdvisorModel) -> FittedAdvisorPublic:
+    """A fitted advisor model, whole, with its summary."""
+    return FittedAdvisorPublic(
+        id=row.id,
+        study_id=row.study_id,
+        created_at=row.created_at,
+        session_ids=[int(i) for i in row.session_ids],
+        summary=FittedModel.from_json(row.model).summary(),
+        model=row.model,
+    )
+
+
+def disk_public(use: storage.DiskUse) -> StudyDisk:
+    """What a study keeps on disk (`storage.study_disk`), with its totals."""
+    found = [SessionDisk(session_id=i, checkpoint_bytes=b) for i, b in use.session_bytes.items()]
+    checkpoints = sum(use.session_bytes.values())
+    return StudyDisk(
+        study_id=use.study_id,
+        total_bytes=checkpoints + use.report_bytes,
+        checkpoint_bytes=checkpoints,
+        report_bytes=use.report_bytes,
+        sessions=found,
+    )
+
+
 @router.post("", status_code=201)
 def create_study(db: DbDep, settings: SettingsDep, body: StudyCreate) -> StudyPublic:
     study = studies.create_study(
         db, body.name, description=body.description, texts=body.texts, design=body.design
     )
     storage.remove_study_files(settings.data_dir, study.id)  # left by a database reusing ids
-    return studies.public(db, study, settings.base_url)
+    return _public(db, study, settings.base_url)
 
 
 @router.get("")
 def list_studies(db: DbDep, settings: SettingsDep, page: PageDep) -> list[StudyPublic]:
-    return [studies.public(db, s, settings.base_url) for s in page.of(studies.list_studies(db))]
+    return [_public(db, s, settings.base_url) for s in page.of(studies.list_studies(db))]
 
 
 @router.get("/{study_id}")
 def get_study(db: DbDep, settings: SettingsDep, study_id: StudyId) -> StudyPublic:
-    return studies.public(db, studies.get_study(db, study_id), settings.base_url)
+    return _public(db, studies.get_study(db, study_id), settings.base_url)
 
 
 @router.patch("/{study_id}")
@@ -49,7 +88,7 @@ def update_study(
 ) -> StudyPublic:
     changes = body.model_dump(exclude_unset=True, exclude={"design"})
     study = studies.update_study(db, study_id, **changes, design=body.design)
-    return studies.public(db, study, settings.base_url)
+    return _public(db, study, settings.base_url)
 
 
 @router.delete("/{study_id}", status_code=204)
@@ -68,18 +107,18 @@ def delete_study(
 @router.get("/{study_id}/disk")
 def study_disk(db: DbDep, settings: SettingsDep, study_id: StudyId) -> StudyDisk:
     """Bytes the study keeps on disk (checkpoints per session, report), beside its rows."""
-    return storage.study_disk(db, settings.data_dir, study_id)
+    return disk_public(storage.study_disk(db, settings.data_dir, study_id))
 
 
 @router.get("/{study_id}/fitted")
 def list_fitted_advisors(db: DbDep, study_id: StudyId) -> list[FittedAdvisorPublic]:
     """The advisor models fitted to the study's people (`ideeprl fit`), oldest first."""
-    return [fitting.public(row) for row in fitting.list_models(db, study_id)]
+    return [fitted_public(row) for row in fitting.list_models(db, study_id)]
 
 
 @router.get("/{study_id}/fitted/{fitted_id}")
 def get_fitted_advisor(db: DbDep, study_id: StudyId, fitted_id: FittedId) -> FittedAdvisorPublic:
-    return fitting.public(fitting.get_model(db, study_id, fitted_id))
+    return fitted_public(fitting.get_model(db, study_id, fitted_id))
 
 
 def _online(db: DbDep, study_id: int) -> tuple[Study, StudyDesign]:

@@ -30,7 +30,6 @@ from study.db.models import (
     Step,
     StudySession,
 )
-from study.schemas.studies import FittedAdvisorPublic
 from study.services import learning
 from study.services.errors import Invalid, NotFound
 from study.services.fitted_files import write_model_file
@@ -217,14 +216,3 @@ def get_model(db: Session, study_id: int, model_id: int) -> FittedAdvisorModel:
             f"GET /api/studies/{study_id}/fitted lists them"
         )
     return row
-
-
-def public(row: FittedAdvisorModel) -> FittedAdvisorPublic:
-    return FittedAdvisorPublic(
-        id=row.id,
-        study_id=row.study_id,
-        created_at=row.created_at,
-        session_ids=[int(i) for i in row.session_ids],
-        summary=FittedModel.from_json(row.model).summary(),
-        model=row.model,
-    )

@@ -16,7 +16,7 @@ from study.db.models import (
     Participant,
     StudySession,
 )
-from study.schemas.sessions import SessionOptions, SessionPublic
+from study.schemas.sessions import SessionOptions
 from study.services import learning
 from study.services.errors import Invalid, NotFound
 from study.services.fitted_files import resolve
@@ -165,22 +165,6 @@ def list_sessions(db: Session, study_id: int) -> list[StudySession]:
     get_study(db, study_id)
     query = select(StudySession).where(StudySession.study_id == study_id)
     return list(db.scalars(query.order_by(StudySession.id)))
-
-
-def session_public(session: StudySession, base_url: str) -> SessionPublic:
-    data = {
-        name: getattr(session, name)
-        for name in SessionPublic.model_fields
-        if name not in ("participant", "participant_url", "texts_version")
-        and hasattr(session, name)
-    }
-    if session.texts_version is not None:
-        data["texts_version"] = session.texts_version.version
-    if session.participant is not None:
-        data["participant"] = session.participant.pseudonym
-    if session.participant_token:
-        data["participant_url"] = participant_url(base_url, session.participant_token)
-    return SessionPublic(**data)
 
 
 def session_for_token(db: Session, token: str) -> StudySession | None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 from sqlalchemy import delete, func, select
@@ -29,7 +30,6 @@ from study.db.models import (
     Study,
     StudySession,
 )
-from study.schemas.studies import SessionDisk, StudyDisk
 from study.services.errors import Conflict, NotFound
 from study.services.fitted_files import fitted_model_path
 from study.services.replays import replays_of
@@ -245,21 +245,25 @@ def _size(path: Path) -> int:
     return 0
 
 
-def study_disk(db: Session, data_dir: Path, study_id: int) -> StudyDisk:
+@dataclass(frozen=True)
+class DiskUse:
+    """What a study keeps on disk beside its rows, in bytes."""
+
+    study_id: int
+    session_bytes: dict[int, int]
+    """Each session's folder (and its checkpoint kept elsewhere), by session id, in order."""
+    report_bytes: int
+    """Its report and any export being packed."""
+
+
+def study_disk(db: Session, data_dir: Path, study_id: int) -> DiskUse:
     study = get_study(db, study_id)
-    found = []
+    found = {}
     for session in sorted(study.sessions, key=lambda s: s.id):
         size = _size(session_dir(data_dir, session.id))
         checkpoint = Path(session.checkpoint_path) if session.checkpoint_path else None
         if checkpoint is not None and not _inside(checkpoint, session_dir(data_dir, session.id)):
             size += _size(checkpoint)
-        found.append(SessionDisk(session_id=session.id, checkpoint_bytes=size))
-    checkpoints = sum(s.checkpoint_bytes for s in found)
+        found[session.id] = size
     reports = sum(_size(p) for p in _report_paths(data_dir, study_id))
-    return StudyDisk(
-        study_id=study_id,
-        total_bytes=checkpoints + reports,
-        checkpoint_bytes=checkpoints,
-        report_bytes=reports,
-        sessions=found,
-    )
+    return DiskUse(study_id, found, reports)

@@ -17,7 +17,6 @@ from sqlalchemy.orm import Session
 
 from study.db.models import Study, StudySession
 from study.schemas.design import StudyDesign
-from study.schemas.studies import StudyPublic
 from study.schemas.types import StudyName
 from study.services import learning
 from study.services.errors import Conflict, Invalid, NotFound
@@ -30,15 +29,13 @@ def get_study(db: Session, study_id: int) -> Study:
     return study
 
 
-def join_url(base_url: str, key: str) -> str:
-    return f"{base_url}/join/{key}"
+def join_url(study: Study, base_url: str) -> str | None:
+    """An online study's public link under `base_url`; None for a lab study."""
+    return f"{base_url}/join/{study.join_key}" if study.join_key else None
 
 
-def public(db: Session, study: Study, base_url: str = "") -> StudyPublic:
-    count = db.scalar(select(func.count()).where(StudySession.study_id == study.id)) or 0
-    link = join_url(base_url, study.join_key) if study.join_key else None
-    update = {"session_count": count, "join_url": link}
-    return StudyPublic.model_validate(study).model_copy(update=update)
+def session_count(db: Session, study_id: int) -> int:
+    return db.scalar(select(func.count()).where(StudySession.study_id == study_id)) or 0
 
 
 def stored_design(design: StudyDesign) -> dict[str, object]:
