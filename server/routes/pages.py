@@ -33,12 +33,13 @@ from server.viewer.camera import viser_camera_params
 from study.db.models import Advice, Outcome, PanelId, Status
 from study.schemas.design import StudyDesign
 from study.schemas.instruments import PREFER_NOT_TO_SAY
-from study.schemas.participant import CheckState
+from study.schemas.participant import CheckChoice, CheckQuestionShown, CheckState
 from study.schemas.visit import Section
 from study.services import consent as consent_service
 from study.services import visit as visit_service
 from study.services.errors import Conflict, Invalid
 from study.services.sessions import session_for_token
+from study.services.visit import CheckProgress
 
 WEB_DIR = Path(__file__).resolve().parents[2] / "web"
 templates = Jinja2Templates(directory=WEB_DIR / "templates")
@@ -51,6 +52,30 @@ INDUCTION_TITLES = ("The robot and the experiment", "The task, and how to solve 
 
 def static_files() -> StaticFiles:
     return StaticFiles(directory=WEB_DIR / "static")
+
+
+def check_state(progress: CheckProgress) -> CheckState:
+    """The comprehension check as the participant sees it (this page and
+    `GET /api/participant/check`): its questions and choices, never their answers, and
+    their tries."""
+    spec = progress.spec
+    if spec is None:
+        return CheckState(required=False)
+    return CheckState(
+        required=True,
+        questions=[
+            CheckQuestionShown(
+                id=q.id,
+                text=q.text,
+                choices=[CheckChoice(value=c.value, label=c.label) for c in q.choices],
+            )
+            for q in spec.questions
+        ],
+        tries=spec.tries,
+        tries_used=progress.tries_used,
+        passed=progress.passed,
+        excluded=progress.excluded,
+    )
 
 
 @dataclass(frozen=True)
@@ -183,7 +208,7 @@ def _visit(request: Request, token: str) -> Visit | None:
             return None
         given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
         version = session.texts_version
-        questionnaire = visit_service.questionnaire_state(db, session)
+        questionnaire = visit_service.questionnaire_progress(db, session)
         return Visit(
             token=token,
             session_id=session.id,
@@ -200,7 +225,7 @@ def _visit(request: Request, token: str) -> Visit | None:
                 if version is not None and session.consented_at is not None
                 else None
             ),
-            check=visit_service.check_state(db, session),
+            check=check_state(visit_service.check_progress(db, session)),
             questionnaire_due=questionnaire.required and questionnaire.submitted_at is None,
             outcome=session.outcome,
             design=session.study.design,
@@ -439,7 +464,7 @@ def _sections(request: Request, token: str) -> list[Section]:
     with request.app.state.session_factory() as db:
         session = session_for_token(db, token)
         assert session is not None, "the visit was just read"
-        return visit_service.questionnaire_state(db, session).sections
+        return visit_service.questionnaire_progress(db, session).sections
 
 
 END_PAGES = {

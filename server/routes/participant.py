@@ -11,7 +11,7 @@ from starlette.concurrency import run_in_threadpool
 from server.deps import ManagerDep, ParticipantDep
 from server.live import advising
 from server.live.visits import end_visit
-from server.routes.pages import visit_for_token
+from server.routes.pages import check_state, visit_for_token
 from study.db.models import Outcome, StudySession
 from study.schemas.participant import (
     AdviceCreate,
@@ -29,6 +29,7 @@ from study.schemas.participant import (
 from study.services import consent as consent_service
 from study.services import visit as visit_service
 from study.services.errors import Conflict, NotFound
+from study.services.visit import CheckGraded, QuestionnaireProgress
 
 router = APIRouter(prefix="/api/participant", tags=["participant"])
 MAX_WAIT_S = 30.0
@@ -189,11 +190,29 @@ def _with_session(
         return act(db, row)
 
 
+def check_result(graded: CheckGraded) -> CheckResult:
+    """A graded try: the check after it, and the ids of the questions answered wrong."""
+    state = check_state(graded.progress)
+    return CheckResult(**state.model_dump(), correct=graded.correct, wrong=graded.wrong)
+
+
+def questionnaire_state(progress: QuestionnaireProgress) -> QuestionnaireState:
+    return QuestionnaireState(
+        required=progress.required,
+        sections=progress.sections,
+        available=progress.available,
+        submitted_at=progress.submitted_at,
+    )
+
+
 @router.get("/check")
 async def get_check(session: ParticipantDep, manager: ManagerDep) -> CheckState:
     """An online study's comprehension check (questions and choices, never the answers)
     and this participant's tries; `required` False for a lab study."""
-    return await run_in_threadpool(_with_session, manager, session.id, visit_service.check_state)
+    progress = await run_in_threadpool(
+        _with_session, manager, session.id, visit_service.check_progress
+    )
+    return check_state(progress)
 
 
 @router.post("/check")
@@ -202,24 +221,25 @@ async def answer_check(
 ) -> CheckResult:
     """One try at the check, graded under the session's sort rule. The last try wrong ends
     the visit as `excluded` (its worker stops); a pass lets `POST /start` go on."""
-    result = await run_in_threadpool(
+    graded = await run_in_threadpool(
         _with_session,
         manager,
         session.id,
         lambda db, row: visit_service.answer_check(db, row, body.answers),
     )
-    if result.excluded:
+    if graded.progress.excluded:
         await end_visit(manager, session.id, Outcome.excluded)
-    return result
+    return check_result(graded)
 
 
 @router.get("/questionnaire")
 async def get_questionnaire(session: ParticipantDep, manager: ManagerDep) -> QuestionnaireState:
     """An online study's questionnaire (its sections and items), whether it may be
     answered yet (after the advice) and whether it was; `required` False for a lab study."""
-    return await run_in_threadpool(
-        _with_session, manager, session.id, visit_service.questionnaire_state
+    progress = await run_in_threadpool(
+        _with_session, manager, session.id, visit_service.questionnaire_progress
     )
+    return questionnaire_state(progress)
 
 
 @router.post("/questionnaire")
@@ -228,11 +248,11 @@ async def submit_questionnaire(
 ) -> QuestionnaireState:
     """The questionnaire, once, after the advice: it completes the visit (the learner
     trains on; the completion never waits for it)."""
-    state = await run_in_threadpool(
+    progress = await run_in_threadpool(
         _with_session,
         manager,
         session.id,
         lambda db, row: visit_service.submit_questionnaire(db, row, body.answers),
     )
     await end_visit(manager, session.id, Outcome.completed)
-    return state
+    return questionnaire_state(progress)

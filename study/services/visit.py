@@ -4,13 +4,15 @@ and the questionnaire after the advice, over a session (`study.schemas.visit`).
 A study without a design (a lab study) asks neither: every function here says so
 (`required` False) and changes nothing. The check's right answers come from the session's
 own sort rule when it is answered, and are stored beside the answers; each questionnaire
-answer is stored with the item's text as shown.
+answer is stored with the item's text as shown. These answer with the dataclasses below;
+the participant's routes build their responses from them (`server/routes/participant.py`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from datetime import datetime
 
 from sqlalchemy import func, select
@@ -21,20 +23,57 @@ from sim.rules import SortRule
 from study.db.models import Advice, CheckAttempt, QuestionnaireAnswer, Status, StudySession
 from study.schemas.design import StudyDesign
 from study.schemas.instruments import PREFER_NOT_TO_SAY
-from study.schemas.participant import (
-    Answer,
-    CheckChoice,
-    CheckQuestionShown,
-    CheckResult,
-    CheckState,
-    QuestionnaireState,
-)
-from study.schemas.visit import CheckQuestion, CheckSpec, Item, QuestionnaireSpec
+from study.schemas.participant import Answer
+from study.schemas.visit import CheckQuestion, CheckSpec, Item, QuestionnaireSpec, Section
 from study.services.errors import Conflict, Invalid
 
 NOT_CONSENTED = "consent first: the check comes after the consent and the induction"
 MAX_TEXT = 2000
 """Longest free-text answer when an item sets no `max_length`."""
+
+
+@dataclass(frozen=True)
+class CheckProgress:
+    """A session's comprehension check (`spec`, answers and all; None: the study asks none)
+    and how far the participant is with it."""
+
+    spec: CheckSpec | None
+    tries_used: int = 0
+    passed: bool = False
+
+    @property
+    def required(self) -> bool:
+        return self.spec is not None
+
+    @property
+    def excluded(self) -> bool:
+        """Every try failed: the visit has ended."""
+        return self.spec is not None and not self.passed and self.tries_used >= self.spec.tries
+
+
+@dataclass(frozen=True)
+class CheckGraded:
+    """One try at the check, graded: the check after it, and the ids of the questions it
+    got wrong (none: every answer right)."""
+
+    progress: CheckProgress
+    wrong: list[str]
+
+    @property
+    def correct(self) -> bool:
+        return not self.wrong
+
+
+@dataclass(frozen=True)
+class QuestionnaireProgress:
+    """A session's questionnaire (its sections as the design has them; none asked:
+    `required` False) and whether the participant may answer it, or did."""
+
+    required: bool
+    sections: list[Section] = field(default_factory=list)
+    available: bool = False
+    """The advice is done: it may be answered."""
+    submitted_at: datetime | None = None
 
 
 def design_of(session: StudySession) -> StudyDesign | None:
@@ -75,30 +114,15 @@ def check_passed(db: Session, session: StudySession) -> bool:
     return any(a.correct for a in _attempts(db, session.id))
 
 
-def check_state(db: Session, session: StudySession) -> CheckState:
+def check_progress(db: Session, session: StudySession) -> CheckProgress:
     spec = check_of(session)
     if spec is None:
-        return CheckState(required=False)
+        return CheckProgress(None)
     attempts = _attempts(db, session.id)
-    passed = any(a.correct for a in attempts)
-    return CheckState(
-        required=True,
-        questions=[
-            CheckQuestionShown(
-                id=q.id,
-                text=q.text,
-                choices=[CheckChoice(value=c.value, label=c.label) for c in q.choices],
-            )
-            for q in spec.questions
-        ],
-        tries=spec.tries,
-        tries_used=len(attempts),
-        passed=passed,
-        excluded=not passed and len(attempts) >= spec.tries,
-    )
+    return CheckProgress(spec, len(attempts), any(a.correct for a in attempts))
 
 
-def answer_check(db: Session, session: StudySession, answers: Mapping[str, str]) -> CheckResult:
+def answer_check(db: Session, session: StudySession, answers: Mapping[str, str]) -> CheckGraded:
     """Grade one try and store it. 409 without a check, before consent, after a pass or
     once every try is spent; 422 for a missing answer, an unknown question or choice."""
     spec = check_of(session)
@@ -106,7 +130,7 @@ def answer_check(db: Session, session: StudySession, answers: Mapping[str, str])
         raise Conflict("this study asks no comprehension check")
     if session.consented_at is None:
         raise Conflict(NOT_CONSENTED)
-    state = check_state(db, session)
+    state = check_progress(db, session)
     if state.passed:
         raise Conflict("the check was already passed; go on to the robot")
     if state.excluded:
@@ -130,8 +154,7 @@ def answer_check(db: Session, session: StudySession, answers: Mapping[str, str])
     except IntegrityError:  # the same try sent twice at once: the first one counts
         db.rollback()
         raise Conflict("this try was sent twice at once; reload the page") from None
-    after = check_state(db, session)
-    return CheckResult(**after.model_dump(), correct=not wrong, wrong=wrong)
+    return CheckGraded(check_progress(db, session), wrong)
 
 
 def _validate_check_answers(spec: CheckSpec, answers: Mapping[str, str]) -> None:
@@ -159,11 +182,11 @@ def _submitted_at(db: Session, session_id: int) -> datetime | None:
     return db.scalar(query.where(QuestionnaireAnswer.session_id == session_id))
 
 
-def questionnaire_state(db: Session, session: StudySession) -> QuestionnaireState:
+def questionnaire_progress(db: Session, session: StudySession) -> QuestionnaireProgress:
     spec = questionnaire_of(session)
     if spec is None:
-        return QuestionnaireState(required=False)
-    return QuestionnaireState(
+        return QuestionnaireProgress(required=False)
+    return QuestionnaireProgress(
         required=True,
         sections=spec.sections(),
         available=advice_done(db, session),
@@ -173,11 +196,11 @@ def questionnaire_state(db: Session, session: StudySession) -> QuestionnaireStat
 
 def submit_questionnaire(
     db: Session, session: StudySession, answers: Mapping[str, Mapping[str, Answer]]
-) -> QuestionnaireState:
+) -> QuestionnaireProgress:
     """Store one row per item shown (an item skipped has no value). 409 without a
     questionnaire, before the advice is done, or a second time; 422 for an unknown item,
     a required item left out, or an answer the item does not take."""
-    state = questionnaire_state(db, session)
+    state = questionnaire_progress(db, session)
     if not state.required:
         raise Conflict("this study asks no questionnaire")
     if not state.available:
@@ -211,7 +234,7 @@ def submit_questionnaire(
     except IntegrityError:  # the same form sent twice at once: the first stands
         db.rollback()
         raise Conflict("the questionnaire was already submitted") from None
-    return questionnaire_state(db, session)
+    return questionnaire_progress(db, session)
 
 
 def _checked(item: Item, value: Answer, field: str) -> tuple[float | None, str | None]:
