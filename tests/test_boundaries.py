@@ -73,18 +73,23 @@ def _qualified(module: str, tree: ast.Module, base: ast.expr) -> str:
     return f"{head}.{rest}" if rest else head
 
 
-def defined_models(trees: dict[str, ast.Module]) -> set[str]:
-    """`module.Class` of every class whose bases lead to a pydantic model."""
+def _with_subclasses(trees: dict[str, ast.Module], roots: set[str]) -> set[str]:
+    """`roots` and `module.Class` of every class whose bases lead to one of them."""
     classes = {
         f"{module}.{node.name}": {_qualified(module, tree, b) for b in node.bases}
         for module, tree in trees.items()
         for node in tree.body
         if isinstance(node, ast.ClassDef)
     }
-    models = set(PYDANTIC_BASES)
-    while more := {name for name, bases in classes.items() if bases & models} - models:
-        models |= more
-    return models - PYDANTIC_BASES
+    found = set(roots)
+    while more := {name for name, bases in classes.items() if bases & found} - found:
+        found |= more
+    return found
+
+
+def defined_models(trees: dict[str, ast.Module]) -> set[str]:
+    """`module.Class` of every class whose bases lead to a pydantic model."""
+    return _with_subclasses(trees, PYDANTIC_BASES) - PYDANTIC_BASES
 
 
 def test_every_pydantic_model_is_in_the_schemas_package() -> None:
@@ -390,4 +395,122 @@ def test_the_body_check_sees_a_service_taking_a_body() -> None:
     assert bodies == {"study.schemas.studies.StudyCreate"}
     assert bodies_taken(trees, bodies, "study.services.") == [
         "study.services.y.make(body: studies.StudyCreate | None)"
+    ]
+
+
+# --- a service returns domain values, never a REST response ------------------------------
+def response_models(trees: dict[str, ast.Module]) -> set[str]:
+    """The models a route answers with: a pydantic model named in the return annotation of
+    a route (`-> StudyPublic`, `-> list[SessionPublic]`, `-> X | None`) or in its
+    decorator's `response_model=`, which FastAPI serializes as the response body; and their
+    subclasses (a `CheckResult` is a `CheckState`)."""
+    models = defined_models(trees)
+    found = set()
+    for module, tree in trees.items():
+        if not module.startswith("server.routes."):
+            continue
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and _route(node)):
+                continue
+            named = [node.returns] if node.returns is not None else []
+            named += [
+                k.value
+                for d in node.decorator_list
+                if isinstance(d, ast.Call)
+                for k in d.keywords
+                if k.arg == "response_model"
+            ]
+            for annotation in named:
+                for part in ast.walk(annotation):
+                    if isinstance(part, ast.Name | ast.Attribute):
+                        name = _qualified(module, tree, part)
+                        if name in models:
+                            found.add(name)
+    return _with_subclasses(trees, found)
+
+
+def responses_built(trees: dict[str, ast.Module], responses: set[str], package: str) -> list[str]:
+    """`module.function -> Annotation` for every function of `package` whose return
+    annotation names one of `responses` (alone, in a list, a tuple, a union)."""
+    found = []
+    for module, tree in trees.items():
+        if not module.startswith(package):
+            continue
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                continue
+            if node.returns is None:
+                continue
+            for part in ast.walk(node.returns):
+                named = isinstance(part, ast.Name | ast.Attribute)
+                if named and _qualified(module, tree, part) in responses:
+                    found.append(f"{module}.{node.name} -> {ast.unparse(node.returns)}")
+    return sorted(set(found))
+
+
+RESPONSES_ALLOWED: dict[str, str] = {}
+"""Service functions that may return a route's response model, with why."""
+
+
+def test_no_service_returns_a_rest_response() -> None:
+    """The services answer with domain values (ORM rows, dataclasses, the design's own
+    models); the routes build the REST responses from them, as they read their own bodies.
+
+    The rule: a service's return annotation names no REST response model, alone or inside
+    a list, tuple or union. A REST response model is a pydantic model that a route returns
+    (its return annotation or `response_model=`), or a subclass of one: what FastAPI writes
+    as a response body and the OpenAPI document describes. It is read from the routes, not
+    from a name's ending (`...Public`, `...State`), so a new response is covered whatever it
+    is called, and a model that is only nested inside one (a study's `StudyDesign`, a
+    questionnaire's `Section`) is not one: the design is stored, validated and read by the
+    core. An exception needs an entry in RESPONSES_ALLOWED saying why."""
+    trees = _trees()
+    responses = response_models(trees)
+    assert {
+        "study.schemas.studies.StudyPublic",
+        "study.schemas.sessions.SessionPublic",
+    } <= responses
+    built = responses_built(trees, responses, "study.services.")
+    bad = [b for b in built if b.partition(" ")[0] not in RESPONSES_ALLOWED]
+    assert not bad, f"return the rows or domain values; build the response on the web side: {bad}"
+    stale = set(RESPONSES_ALLOWED) - {b.partition(" ")[0] for b in built}
+    assert not stale, f"gone: drop them from RESPONSES_ALLOWED: {sorted(stale)}"
+
+
+def test_the_response_check_sees_a_service_returning_a_response() -> None:
+    route = ast.parse(
+        "from study.schemas import studies as s\nfrom study.schemas.studies import Listed\n"
+        "@router.get('')\ndef one(db) -> s.StudyPublic: pass\n"
+        "@router.get('/all')\ndef every(db) -> list[Listed]: pass\n"
+        "@router.get('/raw', response_model=s.Raw)\ndef raw(db) -> Response: pass\n"
+        "def helper(db) -> s.Other: pass\n"
+    )
+    schemas = ast.parse(
+        "import pydantic as p\nclass StudyPublic(p.BaseModel): pass\n"
+        "class Listed(p.BaseModel): pass\nclass Raw(p.BaseModel): pass\n"
+        "class Other(p.BaseModel): pass\nclass More(StudyPublic): pass\n"
+    )
+    service = ast.parse(
+        "from study.schemas.studies import StudyPublic, Listed, Other, More\n"
+        "def public(db) -> StudyPublic: pass\n"
+        "def more(db) -> tuple[More, int]: pass\n"
+        "def many(db) -> list[Listed] | None: pass\n"
+        "def fine(db) -> Other: pass\n"
+        "def plain(db) -> int: pass\n"
+    )
+    trees = {
+        "server.routes.x": route,
+        "study.schemas.studies": schemas,
+        "study.services.y": service,
+    }
+    assert response_models(trees) == {
+        "study.schemas.studies.StudyPublic",
+        "study.schemas.studies.Listed",
+        "study.schemas.studies.Raw",
+        "study.schemas.studies.More",
+    }
+    assert responses_built(trees, response_models(trees), "study.services.") == [
+        "study.services.y.many -> list[Listed] | None",
+        "study.services.y.more -> tuple[More, int]",
+        "study.services.y.public -> StudyPublic",
     ]
