@@ -92,16 +92,43 @@ def update_study(
 
 
 @router.delete("/{study_id}", status_code=204)
-def delete_study(
+async def delete_study(
     request: Request, db: DbDep, settings: SettingsDep, manager: ManagerDep, study_id: StudyId
 ) -> Response:
     """The study, its sessions and participants, their records, checkpoints, its report
-    and exports; refused while a session runs. Its id is never given again."""
-    live = {i for i, h in manager.handles.items() if h.status in LIVE_STATUSES}
-    storage.delete_study(db, settings.data_dir, study_id, live)
+    and exports; refused while a session runs, but for its pools' sessions, which nobody
+    has yet: they end with their study. Its id is never given again."""
+    studies.get_study(db, study_id)
+    for tries_left in reversed(range(3)):  # the pools' keeper may start one meanwhile
+        pooled = _live_pooled(db, manager, study_id)
+        for session_id in pooled:
+            await manager.end(session_id, Status.stopped, "its study was deleted")
+        db.expire_all()
+        live = {i for i, h in manager.handles.items() if h.status in LIVE_STATUSES}
+        try:
+            await run_in_threadpool(storage.delete_study, db, settings.data_dir, study_id, live)
+            break
+        except Conflict:
+            db.rollback()
+            if not tries_left or not _live_pooled(db, manager, study_id):
+                raise
     request.app.state.participant_tokens.clear()
     request.app.state.playbacks.close_deleted(db)
     return Response(status_code=204)
+
+
+def _live_pooled(db: DbDep, manager: ManagerDep, study_id: int) -> list[int]:
+    """The study's pooled sessions (kept for the next arrival) whose worker runs."""
+    pooled = db.scalars(
+        select(StudySession.id).where(
+            StudySession.study_id == study_id, StudySession.pooled.is_(True)
+        )
+    )
+    return [
+        i
+        for i in pooled
+        if (handle := manager.handles.get(i)) is not None and handle.status in LIVE_STATUSES
+    ]
 
 
 @router.get("/{study_id}/disk")

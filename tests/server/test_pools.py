@@ -111,6 +111,19 @@ def test_an_arrival_takes_a_practised_session_of_its_condition(
     assert [int(r["session_id"]) for r in table(folder, "sessions")] == [mine["id"]]
     assert len(table(folder, "assignments")) == 1
 
+    with server.client() as api:  # the pools' sessions, nobody's yet, end with their study
+        kept = [s["id"] for s in sessions_of(api, study) if s["pooled"]]
+        assert kept and all(server_has_worker(server, i) for i in kept), "the pool runs"
+        gone = api.delete(f"/api/studies/{study['id']}")
+        assert gone.status_code == 204, gone.text
+        assert api.get(f"/api/studies/{study['id']}").status_code == 404
+        assert all(api.get(f"/api/sessions/{i}").status_code == 404 for i in kept)
+
+
+def server_has_worker(server: LiveServer, session_id: int) -> bool:
+    with server.client() as api:
+        return api.get(f"/api/sessions/{session_id}").json()["status"] == "running"
+
 
 def test_the_pools_are_off_at_limit_zero(server: LiveServer, api: httpx.Client) -> None:
     design = {"conditions": {"a": {"run": TINY_RUN}}, "pool": 2, "panel": {"kind": "prolific"}}
