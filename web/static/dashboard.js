@@ -29,11 +29,14 @@
     const parts = [];
     if (s.method !== "autonomous" && p.advice_budget) parts.push(`advice ${p.advice_given}/${p.advice_budget}`);
     if (s.condition) {
-      const kind = s.preview ? "preview of " : s.pooled ? "ready in the pool of " : "";
+      // a pool's session practises for the next arrival: nobody has it yet
+      const kind = s.preview ? "preview of " : s.pooled ? "kept for the next arrival in " : "";
       parts.push(`${kind}${s.condition}`);
     }
     if (s.outcome === "completed") parts.push("visit completed");
-    if (s.method === "human" && !p.consented && !s.outcome) parts.push(s.declined ? "declined" : "not consented yet");
+    if (s.method === "human" && !p.consented && !s.outcome && !s.pooled) {
+      parts.push(s.declined ? "declined" : "not consented yet");
+    }
     if (p.advice_wanted) parts.push("waiting for the participant");
     if (p.queued) parts.push("advice done, queued for a trainer");
     if (p.stage === "train" || p.episode) parts.push(`episode ${p.episode}/${p.episodes}`);
@@ -64,7 +67,12 @@
     cells[2].firstChild.dataset.status = shown;
     if (s.status_detail) cells[2].firstChild.title = s.status_detail;
     cells[3].textContent = progressText(s);
-    if (s.participant_url) {
+    if (s.pooled) {
+      // its link goes to the next arrival at the study link, as the study's blocks assign:
+      // handed out by hand, it would take a place outside the randomization
+      cells[4].innerHTML = `<span class="muted">the study link's</span>`;
+      cells[4].title = "The next arrival at the study link gets this session";
+    } else if (s.participant_url) {
       cells[4].innerHTML = `<a class="link" target="_blank" rel="noopener"></a> <button class="copy" type="button">Copy</button>`;
       cells[4].firstChild.href = s.participant_url;
       cells[4].firstChild.textContent = "open";
