@@ -262,7 +262,10 @@ def build_report(
     unless `n_episodes`."""
     body = body or DashboardReport()
     request = reports.ReportRequest(
-        n_episodes=body.n_episodes, common_length=body.n_episodes is None, baseline=body.baseline
+        n_episodes=body.n_episodes,
+        common_length=body.n_episodes is None,
+        baseline=body.baseline,
+        choose=reports.dashboard_choice(study_id),
     )
     description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
     return report_routes.public_report(description, study_id, DASHBOARD_STUDIES)

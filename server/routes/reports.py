@@ -74,6 +74,7 @@ def build_report(
         allow_mismatch=body.allow_mismatch,
         reference=body.reference,
         primary=body.primary,
+        choose=reports.API_CHOICE,
     )
     description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
     return public_report(description, study_id)

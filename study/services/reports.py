@@ -26,8 +26,15 @@ from sqlalchemy.orm import Session
 from analysis.baseline import AUTO, BaselineError, advisors_left_out, compare_conditions
 from analysis.baseline import choose_baseline as baseline_rule
 from analysis.episodes import EpisodeTableError, method_name
+from analysis.finished import (
+    is_finished,
+    left_out_notes,
+    not_finished,
+    nothing_finished,
+    status_of,
+)
 from learner.run import RunSpec, run_flags
-from study.db.models import Status, StudySession
+from study.db.models import StudySession
 from study.services.errors import Conflict, Invalid, NotFound
 from study.services.replays import unchanged_replays
 from study.services.sessions import advisor_sessions, list_sessions
@@ -39,6 +46,21 @@ if TYPE_CHECKING:
     from analysis.report import ReportResult
 
 _publishing = threading.Lock()
+
+CLI_CHOICE = "`--sessions ID ...` and `--n-episodes N`"
+"""How `ideeprl report` (and `ideeprl power`) choose sessions by id and cut them to a length."""
+API_CHOICE = "the body's `sessions` (their ids) and `n_episodes`"
+"""How `POST /api/studies/{id}/report` does."""
+
+
+def dashboard_choice(study_id: int) -> str:
+    """Where the dashboard's researcher chooses sessions (its Build report takes the
+    finished ones): the REST API, or the command line."""
+    return (
+        f"`POST /api/studies/{study_id}/report` (the body's `sessions` and `n_episodes`) or "
+        f"`ideeprl report --study {study_id} --sessions ID ... --n-episodes N`; the "
+        "dashboard's Build report takes the finished sessions"
+    )
 
 
 @dataclass(frozen=True)
@@ -68,6 +90,18 @@ class ReportRequest:
     """`authors`: draw the authors' published curves on Figure 5."""
     primary: str = "welch"
     """Each comparison's primary test: `welch`, or `paired` over seeds where they pair."""
+    choose: str = CLI_CHOICE
+    """How the caller chooses sessions by id with a number of episodes, in its own terms: what
+    the report suggests for sessions not finished yet (`CLI_CHOICE`, `API_CHOICE`,
+    `dashboard_choice`)."""
+
+
+def _statuses(sessions: list[StudySession]) -> dict[int, str]:
+    """Each session's status as a report names it (`analysis.finished.status_of`)."""
+    return {
+        s.id: status_of(s.status, s.declined_at is not None and s.consented_at is None)
+        for s in sessions
+    }
 
 
 def _ids(sessions: list[StudySession]) -> str:
@@ -95,7 +129,7 @@ def select_sessions(
         advisors = advisor_sessions(everything)
         checks = unchanged_replays(db, everything)
         others = [s for s in everything if s.id not in advisors and s.id not in checks]
-        chosen = [s for s in others if s.status == Status.finished.value]
+        chosen = [s for s in others if is_finished(s.status)]
         if advisors:
             notes.append(advisors_left_out(advisors))
         if checks:
@@ -105,12 +139,7 @@ def select_sessions(
                 "(a check that the platform reproduces a run, the same agent again, not one "
                 "of its own); choose sessions by id to include them."
             )
-        unfinished = [s for s in others if s.status != Status.finished.value]
-        if unfinished:
-            notes.append(
-                f"Left out {len(unfinished)} unfinished session(s) ({_ids(unfinished)}); "
-                "choose sessions explicitly, with a number of episodes, to include them."
-            )
+        notes += left_out_notes(not_finished(_statuses(others)), request.choose)
     if request.label is not None:
         chosen = [s for s in chosen if s.label == request.label]
         notes.append(f"Sessions labelled {request.label!r} only.")
@@ -131,13 +160,9 @@ def _nothing_chosen(study_id: int, everything: list[StudySession], request: Repo
             f"study {study_id} has no sessions yet: run some first (`ideeprl batch --study "
             f"{study_id} ...`, or participants' sessions)"
         )
-    finished = [s for s in everything if s.status == Status.finished.value]
+    finished = [s for s in everything if is_finished(s.status)]
     if not finished:
-        return (
-            f"study {study_id} has no finished session yet ({len(everything)} unfinished: "
-            f"{_ids(everything)}); wait until they finish, or choose sessions explicitly, with "
-            "a number of episodes"
-        )
+        return nothing_finished(f"study {study_id}", _statuses(everything), request.choose)
     labels = sorted({s.label for s in finished if s.label}, key=str)
     methods = sorted({s.method for s in finished})
     problems = []
@@ -170,7 +195,7 @@ def baseline_next_step(db: Session, study_id: int, chosen: list[StudySession]) -
     left_out = [
         s
         for s in everything
-        if s.method == "autonomous" and s.status == Status.finished.value and s.id not in advisors
+        if s.method == "autonomous" and is_finished(s.status) and s.id not in advisors
     ]
     if left_out:
         return (

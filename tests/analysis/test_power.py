@@ -191,7 +191,7 @@ def test_the_command_prints_the_table_and_writes_the_figure(
     # d = 4.333 / sqrt((0.0833 + 0.3333) / 2) = 9.49.
     assert "oracle-IDeepRL vs autonomous DeepRL: effect +4.33 R_T (d = 9.49)" in printed
     assert "sd 0.29 / 0.58; pilot 3 + 3 agents" in printed
-    assert "Left out 1 unfinished session(s)" in printed
+    assert "Left out 1 session not finished yet: session 7 (not started); wait until" in printed
     assert "Planning information, not a test." in printed
     assert "2000 simulated studies per size, seed 7" in printed
     rows = [
