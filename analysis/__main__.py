@@ -3,7 +3,9 @@ zip `ideeprl export` writes, this version's or an older one's), with the compara
 audit and the rescoring; or from a CSV that follows the episode contract; or `--demo` for
 made-up curves.
 
-The `ideeprl report --study ID` command reads the database; this one needs only the files.
+The `ideeprl report --study ID` command reads the database; this one needs only the files,
+and chooses an export's sessions as that one does: the finished ones, except trained
+advisors (the export's `status` and `advises`), or those given with `--sessions`.
 """
 
 from __future__ import annotations
@@ -28,7 +30,12 @@ from analysis.baseline import (
 from analysis.demo_curves import demo_episodes
 from analysis.episodes import CONTRACT, EpisodeTableError
 from analysis.exported import ExportError, read_export
+from analysis.finished import left_out_notes, nothing_finished
 from analysis.report import write_report
+
+CHOOSE = "`--sessions ID ...` and `--episodes N`"
+"""How this command includes sessions not finished yet."""
+AFTER = " (and export the study again)"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -50,6 +57,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "methods with each other",
     )
     parser.add_argument("--episodes", type=int, dest="n_episodes", help="keep the first N")
+    parser.add_argument(
+        "--sessions",
+        type=int,
+        nargs="+",
+        metavar="ID",
+        help="an export's sessions to compare, any status (default: the finished ones, "
+        "except trained advisors)",
+    )
     parser.add_argument("--smoothing", type=int, default=1, help="moving average for plots")
     parser.add_argument(
         "--title", help="the report's title (default: an export's study name, with the paper's)"
@@ -57,21 +72,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.demo == (args.episodes is not None):
         parser.error("give an episode CSV, or --demo without one")
+    is_export = not args.demo and (
+        Path(args.episodes).is_dir() or zipfile.is_zipfile(args.episodes)
+    )
+    if args.sessions and not is_export:
+        parser.error("--sessions chooses an export's sessions; give a study's export")
     extra: dict[str, Any] = {}
     title = "IDeepRL study"
     if args.demo:
         episodes = demo_episodes()
         notes = ["Made-up curves (analysis.demo_curves): a demonstration, not a result."]
-    elif Path(args.episodes).is_dir() or zipfile.is_zipfile(args.episodes):
+    elif is_export:
         try:
-            export = read_export(Path(args.episodes))
+            export = read_export(Path(args.episodes), sessions=args.sessions)
         except ExportError as error:
             print(f"error: {error}", file=sys.stderr)
             return 2
+        if not export.runs and export.not_finished:
+            message = nothing_finished("the export", export.not_finished, CHOOSE, AFTER)
+            print(f"error: {message}", file=sys.stderr)
+            return 2
         episodes, settings = export.episodes, export.settings
         notes = [f"Sessions from the export `{args.episodes}`."]
-        if export.advisors:
-            notes.append(advisors_left_out(export.advisors))
+        left_out = [advisors_left_out(export.advisors)] if export.advisors else []
+        left_out += left_out_notes(export.not_finished, CHOOSE, AFTER)
+        for note in left_out:
+            print(f"note: {note}", file=sys.stderr)
+        notes += left_out
         if export.design is not None:  # an online study: its conditions are compared
             # (a session with no condition, a batch run beside the study, keeps its method)
             group = {i: str(run.method) for i, run in export.runs.items()} | export.conditions

@@ -18,7 +18,7 @@ import json
 import math
 import tempfile
 import zipfile
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +27,7 @@ import pandas as pd
 
 from analysis.advice import ADVICE_COLUMNS
 from analysis.episodes import EPISODE_TABLE_COLUMNS
+from analysis.finished import not_finished, status_of
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.fields import FieldError, leaves, nest
@@ -63,6 +64,9 @@ class Exported:
     """The study's name (`study.json`; None without one)."""
     advisors: tuple[int, ...] = ()
     """Sessions left out: trained agents advising others (the export's `advises`)."""
+    not_finished: dict[int, str] = field(default_factory=dict)
+    """Sessions left out for not being finished (`analysis.finished`), by id: their status
+    (the export's `status`)."""
 
     @property
     def alpha(self) -> float:
@@ -70,21 +74,41 @@ class Exported:
         return float((self.design or {}).get("alpha", 0.05))
 
 
-def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
-    """The export at `path` (a folder, or the zip the API serves)."""
+def read_export(
+    path: Path, spec_class: type[RunSpec] = RunSpec, sessions: Collection[int] | None = None
+) -> Exported:
+    """The export at `path` (a folder, or the zip the API serves): the sessions a report
+    takes by default, as the database's report chooses them (trained advisors and, where the
+    export has their status, sessions not finished are left out), or else `sessions`, by
+    id (any status)."""
     path = Path(path)
     if path.is_file() and zipfile.is_zipfile(path):
         with tempfile.TemporaryDirectory() as tmp, zipfile.ZipFile(path) as archive:
             archive.extractall(tmp)
-            return read_export(Path(tmp), spec_class)
-    sessions = _table(path, "sessions")
-    advisors = tuple(
-        int(row["session_id"])
-        for row in _rows(sessions)
-        if "advises" in row and not _missing(row["advises"]) and _boolean(row["advises"])
-    )  # older exports have no such column: their advisors stay in
-    sessions = sessions[~sessions["session_id"].astype(int).isin(advisors)]
-    runs = {int(row["session_id"]): run_of(row, spec_class) for row in _rows(sessions)}
+            return read_export(Path(tmp), spec_class, sessions)
+    table = _table(path, "sessions")
+    ids = table["session_id"].astype(int)
+    advisors: tuple[int, ...] = ()
+    left_out: dict[int, str] = {}
+    if sessions is not None:
+        missing = sorted(set(sessions) - set(ids))
+        if missing:
+            raise ExportError(
+                f"session(s) {', '.join(map(str, missing))} are not in the export; its "
+                f"sessions are {', '.join(map(str, sorted(ids))) or 'none'}"
+            )
+        table = table[ids.isin(list(sessions))]
+    else:
+        advisors = tuple(
+            int(row["session_id"])
+            for row in _rows(table)
+            if "advises" in row and not _missing(row["advises"]) and _boolean(row["advises"])
+        )  # older exports have no such column: their advisors stay in
+        table = table[~ids.isin(advisors)]
+        if "status" in table:  # (a table without it keeps every session)
+            left_out = not_finished({int(row["session_id"]): _status(row) for row in _rows(table)})
+            table = table[~table["session_id"].astype(int).isin(list(left_out))]
+    runs = {int(row["session_id"]): run_of(row, spec_class) for row in _rows(table)}
     episodes = _with_stage(_table(path, "episodes"))
     episodes = episodes[episodes["session_id"].isin(list(runs))]
     training = episodes[episodes["stage"] == "train"].copy()
@@ -96,10 +120,10 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
     steps = every_step[every_step["stage"] == "train"].sort_values(["session_id", "global_step"])
     design = _design(path)
     conditions = {}
-    if design is not None and "condition" in sessions:
+    if design is not None and "condition" in table:
         conditions = {
             int(row["session_id"]): str(row["condition"])
-            for row in _rows(sessions)
+            for row in _rows(table)
             if not _missing(row["condition"])
         }
     return Exported(
@@ -108,13 +132,20 @@ def read_export(path: Path, spec_class: type[RunSpec] = RunSpec) -> Exported:
         advice=_advised(every_step),
         name=_study(path).get("name"),
         advisors=advisors,
+        not_finished=left_out,
         runs=runs,
         episodes=training[list(EPISODE_TABLE_COLUMNS)].reset_index(drop=True),
         steps=steps[[*STEP_COLUMNS, *(["outcome"] if "outcome" in steps else [])]].reset_index(
             drop=True
         ),
-        settings=settings_table(sorted(runs.items()), spec_class, _provenance(sessions)),
+        settings=settings_table(sorted(runs.items()), spec_class, _provenance(table)),
     )
+
+
+def _status(row: Mapping[str, Any]) -> str:
+    """A session row's status as a report names it (`analysis.finished.status_of`)."""
+    declined = not _missing(row.get("declined_at")) and _missing(row.get("consented_at"))
+    return status_of(str(row["status"]), declined)
 
 
 def run_of(row: Mapping[str, Any], spec_class: type[RunSpec] = RunSpec) -> RunSpec:

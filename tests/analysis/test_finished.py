@@ -1,0 +1,133 @@
+"""The analysis of a study's export (`python -m analysis EXPORT OUT`) chooses its sessions as
+`ideeprl report` chooses them in the database: the finished ones, saying which others it
+left out and why (still under way, or ended without finishing), unless chosen by id."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from analysis.__main__ import main as analyse
+from analysis.finished import ENDED, FINISHED, UNDER_WAY
+from cli.main import main
+from learner.records import TRAINING
+from learner.run import RunSpec
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Episode, Status
+from study.services.sessions import create_session
+from study.services.studies import create_study
+
+FINISHED_RUNS = {("autonomous", 1): [0.5, 1.0, 0.0, 1.5], ("autonomous", 2): [1.0, 0.5, 1.0, 0.5]}
+"""Two finished sessions, four training episodes each."""
+
+
+def _episode(session_id: int, number: int, reward: float) -> Episode:
+    return Episode(
+        session_id=session_id, stage=TRAINING, episode=number, collected_reward=reward,
+        steps=20, placed_correct=1, misplaced=0, lost=0, success=False, terminated=False,
+        truncated=True, advised_steps=0, epsilon=0.5, mean_loss=None, first_global_step=0,
+        last_global_step=19, wall_time=0.1, reset_seed=number,
+    )  # fmt: skip
+
+
+@pytest.fixture
+def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A data folder whose database has two studies: `training` (the new user's: one
+    session still training, 2 of its episodes run) and `mixed` (two finished sessions, one
+    running with 2 episodes, one whose online participant declined)."""
+    monkeypatch.delenv("DATABASE_URL", raising=False)
+    monkeypatch.delenv("IDEEPRL_DATABASE_URL", raising=False)
+    folder = tmp_path / "data"
+    folder.mkdir()
+    engine = make_engine(f"sqlite:///{folder / 'ideeprl.sqlite3'}")
+    upgrade(engine)
+    with make_session_factory(engine)() as db:
+        alone = create_study(db, "training")
+        running = create_session(db, alone.id, RunSpec(method="autonomous", seed=1))
+        running.status = Status.running.value
+        db.add_all([_episode(running.id, 1, 2.0), _episode(running.id, 2, 3.0)])
+        mixed = create_study(db, "mixed")
+        for (method, seed), rewards in FINISHED_RUNS.items():
+            session = create_session(db, mixed.id, RunSpec(method=method, seed=seed))
+            session.status = Status.finished.value
+            db.add_all(_episode(session.id, i, r) for i, r in enumerate(rewards, start=1))
+        running = create_session(db, mixed.id, RunSpec(method="autonomous", seed=3))
+        running.status = Status.running.value
+        db.add_all([_episode(running.id, 1, 2.0), _episode(running.id, 2, 3.0)])
+        declined = create_session(db, mixed.id, RunSpec(method="autonomous", seed=4))
+        declined.status = Status.declined.value
+        db.commit()
+    engine.dispose()
+    return folder
+
+
+def _export(data_dir: Path, study: str, out: Path) -> Path:
+    assert main(["export", "--study", study, "--out", str(out), "--data-dir", str(data_dir)]) == 0
+    return out
+
+
+def test_every_status_is_finished_under_way_or_ended() -> None:
+    assert {FINISHED, *UNDER_WAY, *ENDED} == {s.value for s in Status}
+    assert not set(UNDER_WAY) & set(ENDED)
+
+
+def test_an_export_of_a_session_still_training_has_nothing_to_report(
+    data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    export = _export(data_dir, "training", tmp_path / "export")
+    capsys.readouterr()
+    out = tmp_path / "report"
+    assert analyse([str(export), str(out)]) == 2
+    error = capsys.readouterr().err
+    assert error.startswith("error: the export has no finished session. Not finished yet: ")
+    assert "session 1 (running); wait until it finishes (and export the study again), " in error
+    assert "or include it as it is with `--sessions ID ...` and `--episodes N`" in error
+    assert not (out / "report.md").exists()
+    # chosen by id, it is analysed as it is
+    assert analyse([str(export), str(out), "--sessions", "1"]) == 0
+    assert "1 agent in 1 method, 2 episodes each" in (out / "report.md").read_text()
+
+
+def test_an_exports_analysis_leaves_out_what_the_databases_report_leaves_out(
+    data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    flags = ["--study", "mixed", "--data-dir", str(data_dir)]
+    assert main(["report", *flags, "--out", str(tmp_path / "database")]) == 0
+    from_database = [n[6:] for n in capsys.readouterr().out.splitlines() if n.startswith("note: ")]
+    export = _export(data_dir, "mixed", tmp_path / "export")
+    capsys.readouterr()
+    out = tmp_path / "from-export"
+    assert analyse([str(export), str(out)]) == 0
+    stderr = capsys.readouterr().err
+    report = (out / "report.md").read_text()
+    ids = {s: i for i, s in enumerate(["a", "b", "running", "declined"], start=2)}
+    under_way = (
+        f"Left out 1 session not finished yet: session {ids['running']} (running); wait until "
+        "it finishes{after}, or include it as it is with `--sessions ID ...` and {episodes}."
+    )
+    ended = (
+        f"Left out 1 session that ended without finishing: session {ids['declined']} "
+        "(declined consent)."
+    )
+    for text in (stderr, report):
+        after = " (and export the study again)"
+        assert under_way.format(after=after, episodes="`--episodes N`") in text
+        assert ended in text
+    assert (
+        ended in from_database
+        and under_way.format(after="", episodes="`--n-episodes N`") in from_database
+    )
+    assert "2 agents in 1 method, 4 episodes each" in report, (
+        "the finished ones, as the database's report"
+    )
+    assert (out / "r_t_per_agent.csv").read_text() == (
+        tmp_path / "database" / "r_t_per_agent.csv"
+    ).read_text()
+    # chosen by id: the running one too, over the episodes every session has
+    chosen = tmp_path / "chosen"
+    assert analyse([str(export), str(chosen), "--sessions", "2", "3", "4", "--episodes", "2"]) == 0
+    assert "3 agents in 1 method, 2 episodes each" in (chosen / "report.md").read_text()
+    assert analyse([str(export), str(chosen), "--sessions", "99"]) == 2
+    assert "session(s) 99 are not in the export" in capsys.readouterr().err
