@@ -162,3 +162,55 @@ def test_a_researcher_runs_a_study_from_the_dashboard(live: Live, browser) -> No
     expect(report).to_be_hidden(timeout=15_000)
     expect(section.locator("button.build-report")).to_have_text("Build report")
     context.close()
+
+
+def test_a_failed_build_leaves_the_button_as_it_was(live: Live, browser) -> None:
+    """A build refused (nothing finished yet) shows why and keeps "Build report": there is
+    nothing to rebuild; "Rebuild report" once one is built."""
+    from study.db.engine import make_engine, make_session_factory
+    from study.db.models import Episode, Status, StudySession
+
+    with live.api() as api:
+        study = api.post("/api/studies", json={"name": "Nothing finished yet"}).json()
+        body = rest_body(method="autonomous", seed=1, episodes=2, max_episode_steps=30)
+        ids = [api.post(f"/api/studies/{study['id']}/sessions", json=body).json()["id"]]
+        body = rest_body(method="autonomous", seed=2, episodes=2, max_episode_steps=30)
+        ids.append(api.post(f"/api/studies/{study['id']}/sessions", json=body).json()["id"])
+    context = browser.new_context(viewport=VIEWPORT)
+    page = context.new_page()
+    page.goto(f"{live.url}/dashboard/login")
+    page.fill("#key", API_KEY)
+    page.click("button[type=submit]")
+    section = page.locator(f"section.study[data-study='{study['id']}']")
+    button = section.locator("button.build-report")
+    expect(button).to_have_text("Build report")
+    button.click()
+    expect(page.locator("#dashboard-error")).to_contain_text(
+        f"study {study['id']} has no finished session. Not finished yet:", timeout=60_000
+    )
+    expect(button).to_be_enabled()
+    expect(button).to_have_text("Build report")
+    expect(section.locator(".report")).to_be_hidden()
+
+    engine = make_engine(f"sqlite:///{live.data_dir / 'study.sqlite3'}")
+    with make_session_factory(engine)() as db:
+        for session_id in ids:
+            session = db.get(StudySession, session_id)
+            assert session is not None
+            session.status = Status.finished.value
+            for i in (1, 2):
+                db.add(
+                    Episode(
+                        session_id=session_id, stage="train", episode=i,
+                        collected_reward=float(i + session_id), steps=30, placed_correct=1,
+                        misplaced=0, lost=0, success=False, terminated=False, truncated=True,
+                        advised_steps=0, epsilon=0.5, first_global_step=(i - 1) * 30 + 1,
+                        last_global_step=i * 30, wall_time=0.0,
+                    )
+                )  # fmt: skip
+        db.commit()
+    engine.dispose()
+    button.click()
+    expect(section.locator(".report")).to_be_visible(timeout=120_000)
+    expect(button).to_have_text("Rebuild report")
+    context.close()

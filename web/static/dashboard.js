@@ -232,7 +232,8 @@
         showError(`Report of study ${study.id}: ${e.message}`);
       } finally {
         buildButton.disabled = false;
-        buildButton.textContent = "Rebuild report";
+        // "Rebuild" only once there is a report to rebuild: a failed build made none.
+        buildButton.textContent = section.querySelector(".report").dataset.builtAt ? "Rebuild report" : "Build report";
       }
     });
     sections.set(study.id, section);
