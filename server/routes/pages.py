@@ -130,7 +130,9 @@ class Visit:
         n = self.advice_budget
         if self.strategy == "early" or (self.strategy == "alternating" and self.interval == 1):
             return (
-                f"For {'its first' if self.strategy == 'early' else 'the next'} {n} actions, "
+                # the next, not its first: early advice ends the random practice, which
+                # the robot has mostly done before the person's first turn
+                f"For the next {n} actions, "
                 "**you** choose what it does. After that it continues on its own"
             )
         if self.strategy == "alternating":

@@ -311,7 +311,7 @@ def test_the_texts_say_when_this_participant_advises_and_how_long_they_may_take(
     made = []
     watch, code = "you can watch its progress", "you receive your completion code"
     for study, run, plan, limit, after, not_after in (
-        (lab, {}, "For its first 2 actions", "<strong>no time limit</strong>", watch, code),
+        (lab, {}, "For the next 2 actions", "<strong>no time limit</strong>", watch, code),
         (
             online,
             {"strategy": "alternating", "interval": 3, "advice_budget": 4},
