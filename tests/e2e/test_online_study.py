@@ -255,3 +255,34 @@ def test_an_idle_visit_times_out_and_its_place_is_refilled(
     expect(refill.locator("[data-page=consent]")).to_be_visible()
     now = sessions_by_token(live, study)
     assert now[token(refill)]["condition"] == now[left]["condition"], "the freed place"
+
+
+def test_a_pools_session_is_nobodys_on_the_dashboard(live: Live, browser: Any) -> None:
+    """A pool's session practises for the next arrival: its row says so, asks no consent of
+    anyone and offers no link to hand out (the study link gives it, as the blocks assign);
+    deleting the study ends it rather than being refused."""
+    study = make_study(live, "Online: with a pool", target=2, capacity=2, idle_limit_s=600)
+    with live.api() as api:
+        pooled = api.patch(
+            f"/api/studies/{study['id']}",
+            json={"design": {**design(target=2, capacity=2, idle_limit_s=600), "pool": 1}},
+        )
+        assert pooled.status_code == 200, pooled.text
+    context = browser.new_context(viewport=VIEWPORT)
+    page = context.new_page()
+    page.goto(f"{live.url}/dashboard/login")
+    page.fill("#key", API_KEY)
+    page.click("button[type=submit]")
+    section = page.locator(f"section.study[data-study='{study['id']}']")
+    rows = section.locator("table.sessions tbody tr")
+    expect(rows).to_have_count(2, timeout=60_000)
+    for condition in ("early", "alternating"):
+        row = rows.filter(has_text=f"kept for the next arrival in {condition}")
+        expect(row).to_have_count(1)
+        expect(row).not_to_contain_text("not consented")
+        expect(row.locator("td").nth(4)).to_have_text("the study link's")
+        expect(row.locator("td").nth(4).locator("a")).to_have_count(0)
+    context.close()
+    with live.api() as api:
+        gone = api.delete(f"/api/studies/{study['id']}")
+        assert gone.status_code == 204, gone.text
