@@ -51,8 +51,12 @@ def table(
     frame: pd.DataFrame,
     columns: Mapping[str, str],
     formats: Mapping[str, Formatter] | None = None,
+    empty: str | None = None,
 ) -> str:
-    """A Markdown table of `frame`: `columns` maps column -> header, in the order shown."""
+    """A Markdown table of `frame`: `columns` maps column -> header, in the order shown;
+    `empty`, a sentence said instead of a table with no rows (a header alone says nothing)."""
+    if empty is not None and frame.empty:
+        return f"*{empty}*"
     formats = formats or {}
     lines = [
         "| " + " | ".join(columns.values()) + " |",

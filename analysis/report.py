@@ -409,7 +409,14 @@ def _tests_table(analysis: Analysis, alpha: float) -> str:
         "df_welch": md.fixed(1),
         "p_welch": md.p_value,
     }
-    return md.table(frame, columns, formats)
+    return md.table(frame, columns, formats, empty=_nothing_to_compare(analysis))
+
+
+def _nothing_to_compare(analysis: Analysis) -> str:
+    """What an empty comparison table says instead: why there is no pair."""
+    if len(analysis.methods) < 2:
+        return "No pair of methods to compare: the report has one method."
+    return "No pair of methods to compare: each method needs at least two agents."
 
 
 def _interval(low: float, high: float, digits: int = 2) -> str:
@@ -455,6 +462,7 @@ def _intervals_section(analysis: Analysis) -> list[str]:
             "iqm_ci": f"{level} CI",
         },
         {"difference": md.fixed(2), "IQM_difference": md.fixed(2)},
+        empty=_nothing_to_compare(analysis),
     )
     return [
         "## Confidence intervals and interquartile mean",

@@ -174,6 +174,18 @@ def test_a_single_method_still_gets_a_report_without_figure_6(tmp_path: Path) ->
     assert result.notes[0].startswith("Figure 6 is left out")
 
 
+def test_a_single_method_says_why_it_has_no_comparison_table(tmp_path: Path) -> None:
+    """A table of tests or differences with no row would be a header alone: the report
+    says there is no pair to compare instead."""
+    table = episodes_from_curves({"a": ("autonomous", [1.0, 2.0]), "b": ("autonomous", [2.0, 2.0])})
+    text = write_report(table, tmp_path).report.read_text(encoding="utf-8")
+    assert "No pair of methods to compare: the report has one method." in text
+    lines = text.splitlines()
+    for i, line in enumerate(lines[:-1]):
+        if line.startswith("|---") or line.startswith("|--"):
+            assert lines[i + 1].startswith("|"), f"a table with no rows: {lines[i - 1]}"
+
+
 def test_one_agent_and_one_method_are_counted_in_the_singular(tmp_path: Path) -> None:
     text = write_report(episodes_from_curves(HAND_CASE), tmp_path / "hand").report.read_text()
     assert "- **human-IDeepRL** (1 agent × 3 episodes)" in text, text
