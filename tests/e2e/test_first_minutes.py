@@ -154,6 +154,8 @@ def test_a_phone_visit_keeps_scene_sentence_budget_and_buttons_in_view(
     seen = set()
     for index in range(budget):
         expect(page.locator("button.action").first).to_be_enabled(timeout=120_000)
+        # a lit turn shows no choice made: the last one's green mark read as chosen already
+        assert page.evaluate("document.querySelectorAll('button.action.chosen').length") == 0
         info = request_info(live, session["id"])
         action = phone_action(PHONE_PLAN[index], info)
         button = page.locator(f"button.action[data-action='{action}']")

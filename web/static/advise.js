@@ -36,7 +36,12 @@
   }
 
   function setButtons(on) {
-    for (const b of buttons) b.disabled = !on;
+    for (const b of buttons) {
+      b.disabled = !on;
+      // a new turn shows no choice made yet: the last one's green mark (kept 900 ms) would
+      // read as a button already chosen when the turn comes sooner
+      if (on) b.classList.remove("chosen");
+    }
     document.body.classList.toggle("your-turn", on);
     clearTimeout(idleWarning);
     if (on && config.idleLimitS) idleWarning = setTimeout(warnIdle, warnAfterS(config.idleLimitS) * 1000);
