@@ -288,8 +288,6 @@ RECORDS_ALLOWED: dict[str, str] = {
     "study.services.learning.identity": RUN_JSON + ", normalized",
     "study.services.learning.same_run": RUN_JSON + ", normalized (`identity`)",
     "runs.worker.rerun.RerunOrder.__init__": RUN_JSON + ": the rerun's process reads it",
-    "runs.worker.messages.EpisodeDone.__init__": "`EpisodeRecord.to_dict()`, relayed as-is to "
-    "the pages as JSON",
     "learner.run.RunSpec.sb3": "keyword arguments of Stable-Baselines3's DQN, passed on as-is",
     "learner.sb3_spec.describe": "Stable-Baselines3's hyperparameters and config, as SB3 names "
     "them",

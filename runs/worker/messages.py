@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:  # the web process reads these without loading the simulator
+    from learner.records import EpisodeRecord
     from sim.bodies import BodySpec, MotionFrame, Pose
 
 
@@ -75,8 +76,8 @@ class AdviceResult:
 
 @dataclass(frozen=True)
 class EpisodeDone:
-    record: dict[str, Any]
-    """The learner's `EpisodeRecord.to_dict()`."""
+    record: EpisodeRecord
+    """The episode's record, as the learner wrote it."""
 
 
 @dataclass(frozen=True)

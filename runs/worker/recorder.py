@@ -244,7 +244,7 @@ class Reporter:
             self.send_progress()
 
     def on_episode(self, record: EpisodeRecord) -> None:
-        self.send(EpisodeDone(record.to_dict()))
+        self.send(EpisodeDone(record))
         if record.stage != TRAINING:
             return
         self.last_episode_reward = float(record.collected_reward)
