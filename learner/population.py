@@ -34,7 +34,7 @@ from collections.abc import Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NotRequired, TypedDict
 
 import gymnasium as gym
 import numpy as np
@@ -62,6 +62,26 @@ class Member:
     advisor: Advisor | None = None
     strategy: AdvisingStrategy | str | None = None
     callbacks: Iterable[Any] = field(default_factory=tuple)
+
+
+class PopulationNumerics(TypedDict):
+    """How a population computes, as stored (JSON) with each agent's checkpoint and in its
+    session's provenance (`Population.numerics`)."""
+
+    population_size: int
+    layout: str
+    conv: str
+    """`per-agent` (the loop layout) or the stacked layout's convolution."""
+    conv_dtype: str
+    device: str
+    torch_threads: int
+    workers: int
+    torch: str
+    """torch's version."""
+    population_index: NotRequired[int]
+    """Which agent (a checkpoint's)."""
+    seed: NotRequired[int]
+    """That agent's seed."""
 
 
 class Population:
@@ -159,12 +179,12 @@ class Population:
     def done(self) -> bool:
         return not self.active
 
-    def numerics(self, index: int | None = None) -> dict[str, Any]:
+    def numerics(self, index: int | None = None) -> PopulationNumerics:
         """How this population computes (plain JSON, recorded with each agent's checkpoint):
         its size and layout, the convolutions' dtype, device and threads; with `index`,
         also which agent."""
         agent = self.trainers[0].agent
-        numerics: dict[str, Any] = {
+        numerics: PopulationNumerics = {
             "population_size": self.size,
             "layout": self.layout,
             "conv": "per-agent" if self.layout == "loop" else self.conv,

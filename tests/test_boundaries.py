@@ -293,7 +293,6 @@ RECORDS_ALLOWED: dict[str, str] = {
     "them",
     "learner.fitted.FittedModel.summary": "JSON stored as-is (`fitted_advisors.summary`) and "
     "served as-is (`FittedAdvisorPublic.summary`)",
-    "learner.population.Population.numerics": "the numerics a checkpoint records, as JSON",
     "learner.population.Population.save_checkpoint": "`metadata`: JSON the checkpoint keeps as-is",
     "learner.trainer.Trainer.save_checkpoint": "`metadata`: JSON the checkpoint keeps as-is",
     "analysis.exported.run_of": "a row of an exported CSV table, by column",

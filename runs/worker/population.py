@@ -39,7 +39,7 @@ from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from sqlalchemy import update
 
@@ -54,7 +54,7 @@ from study.db.engine import make_engine, make_session_factory
 from study.db.models import Status, StudySession
 
 if TYPE_CHECKING:
-    from learner.population import Population
+    from learner.population import Population, PopulationNumerics
 
 log = logging.getLogger(__name__)
 NOT_RUN = "not run: "
@@ -225,7 +225,7 @@ def _between_steps(run: _Run) -> bool:
     return True
 
 
-def _record_numerics(run: _Run, numerics: dict[str, Any]) -> None:
+def _record_numerics(run: _Run, numerics: PopulationNumerics) -> None:
     """The population's size and layout in the provenance entry this start added."""
     with run.factory() as db:
         row = db.get(StudySession, run.session_id)
