@@ -33,6 +33,7 @@ from urllib.parse import urlsplit
 from fastapi import HTTPException
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -469,13 +470,90 @@ _PLAIN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,39}")
 """A field name the 422 may repeat: what a field's name looks like, and no longer."""
 
 
-def _unknown_field(body: Any, where: Sequence[Any], home: Home | None) -> tuple[str, str]:
+LISTED = 40
+"""Valid fields a 422 names at most; an object with more points to the API document."""
+_DOCUMENT = "the API document (/openapi.json) lists the valid ones"
+
+
+_SCHEMAS: dict[int, tuple[Any, dict[str, Any] | None]] = {}
+"""Each route's body schema, by the route's id (an `APIRoute` is not hashable); the route is
+kept with it, so an id is not reused while its entry stands."""
+
+
+def _body_schema(route: Any) -> dict[str, Any] | None:
+    """The JSON schema of the body `route` validates (its `loc` after "body"), or None: the
+    route's own type, so routes left out of the API document (the dashboard's) have one."""
+    kept = _SCHEMAS.get(id(route))
+    if kept is not None and kept[0] is route:
+        return kept[1]
+    field = getattr(route, "body_field", None)
+    annotation = getattr(getattr(field, "field_info", None), "annotation", None)
+    try:
+        schema = None if annotation is None else TypeAdapter(annotation).json_schema()
+    except Exception:  # a type without a JSON schema: the message points to the document
+        schema = None
+    if len(_SCHEMAS) >= 512:
+        _SCHEMAS.clear()
+    _SCHEMAS[id(route)] = (route, schema)
+    return schema
+
+
+def _resolved(root: dict[str, Any], nodes: list[Any]) -> list[dict[str, Any]]:
+    """The schemas `nodes` stand for: references followed, unions and `allOf` opened."""
+    out: list[dict[str, Any]] = []
+    stack = list(reversed(nodes))
+    while stack and len(out) < 64:
+        node = stack.pop()
+        if not isinstance(node, dict):
+            continue
+        ref = node.get("$ref")
+        if isinstance(ref, str) and ref.startswith("#/"):
+            target: Any = root
+            for key in ref[2:].split("/"):
+                target = target.get(key) if isinstance(target, dict) else None
+            stack.append(target)
+            continue
+        members = [m for k in ("anyOf", "oneOf", "allOf") for m in node.get(k, [])]
+        if members:
+            stack.extend(reversed(members))
+        else:
+            out.append(node)
+    return out
+
+
+def _valid_fields(schema: dict[str, Any], path: Sequence[Any]) -> list[str] | None:
+    """The fields of the object at `path` (a `loc` after "body") in the body's `schema`;
+    None where the path leads to no one object (a union of objects that differ)."""
+    nodes = _resolved(schema, [schema])
+    for part in path:
+        tagged = [n for n in nodes if n.get("title") == part and "properties" in n]
+        if tagged:  # a union's member, named by its model
+            nodes = tagged
+            continue
+        ahead: list[Any] = []
+        for node in nodes:
+            properties = node.get("properties", {})
+            if isinstance(part, str) and part in properties:
+                ahead.append(properties[part])
+            elif isinstance(part, str) and isinstance(node.get("additionalProperties"), dict):
+                ahead.append(node["additionalProperties"])
+            elif isinstance(part, int) and isinstance(node.get("items"), dict):
+                ahead.append(node["items"])
+        nodes = _resolved(schema, ahead)
+    kinds = {tuple(n["properties"]) for n in nodes if isinstance(n.get("properties"), dict)}
+    return list(kinds.pop()) if len(kinds) == 1 else None
+
+
+def _unknown_field(
+    body: Any, where: Sequence[Any], home: Home | None, valid: list[str] | None
+) -> tuple[str, str]:
     """The last `loc` step and the message for an unknown field. A plain identifier is
     named, since it is what the sender has to fix, and a run's field sent in the wrong
     place (in or beside a `run`) says where it belongs; any other name is the sender's
-    text and is not repeated."""
+    text and is not repeated. `valid`: the object's fields, named when there are at most
+    `LISTED` (else the API document is where to look)."""
     name = where[-1]
-    listed = "the API document (/openapi.json) lists the valid ones"
+    listed = f"valid fields: {', '.join(valid)}" if valid and len(valid) <= LISTED else _DOCUMENT
     if not (isinstance(name, str) and _PLAIN_NAME.fullmatch(name)):
         return "(unknown field)", f"an unknown field; {listed}"
     parent = _value_at(body, where[:-1])
@@ -506,7 +584,10 @@ def validation_error(
             quoted = everything if sent is _NOTHING else _leaves(sent)
             msg = _hidden(_printable(e.get("msg", "")), quoted)
             if e.get("type") == "extra_forbidden" and loc:
-                loc[-1], msg = _unknown_field(body, where, home)
+                schema = _body_schema(request.scope.get("route"))
+                on_body = schema is not None and where[:1] == ("body",)
+                valid = _valid_fields(schema, where[1:-1]) if on_body else None
+                loc[-1], msg = _unknown_field(body, where, home, valid)
             kind = _printable(e.get("type", "value_error"))
             detail.append({"loc": loc, "msg": msg, "type": kind})
         return JSONResponse({"detail": detail}, status_code=422)

@@ -246,20 +246,33 @@ def test_a_422_names_an_unknown_field_and_says_where_a_runs_field_belongs(
     server: LiveServer, participant_token: tuple[int, str]
 ) -> None:
     """A field name that is a plain identifier is named (it is what the sender must fix);
-    one that a run has elsewhere says where. Other names the sender wrote are not echoed."""
+    one that a run has elsewhere says where, and any other says which fields the object
+    has, wherever it is: beside `run`, in it, in its groups, in a study's design. Other
+    names the sender wrote are not echoed."""
     study, _ = participant_token
     long_name = "echo_me_" + "x" * 60
-    cases: list[tuple[str, dict[str, object], list[str], str | None]] = [
+    cases: list[tuple[str, dict[str, object], list[str], str]] = [
         ("sessions", {"run": {"method": "oracle", "advice_budget": 5}},
-         ["body", "run", "advice_budget"], "belongs in run.config.advice_budget"),
+         ["body", "run", "advice_budget"], " here: it belongs in run.config.advice_budget"),
         ("sessions", {"advice_budget": 5, "run": {"method": "oracle"}},
-         ["body", "advice_budget"], "belongs in run.config.advice_budget"),
+         ["body", "advice_budget"], " here: it belongs in run.config.advice_budget"),
         ("sessions", {"run": {"method": "oracle", "config": {"reward_scheme": "paper"}}},
-         ["body", "run", "config", "reward_scheme"], "belongs in run.scenario.reward_scheme"),
+         ["body", "run", "config", "reward_scheme"],
+         " here: it belongs in run.scenario.reward_scheme"),
+        ("sessions", {"colour": 1, "run": {"method": "oracle"}},
+         ["body", "colour"], "; valid fields: label, participant, keep_replay_memory, "),
+        ("sessions", {"run": {"method": "oracle", "colour": 1}},
+         ["body", "run", "colour"], "; valid fields: method, seed, preset, config, "),
         ("sessions", {"run": {"method": "oracle", "config": {"colour": 1}}},
-         ["body", "run", "config", "colour"], None),
+         ["body", "run", "config", "colour"], "; valid fields: episodes, max_episode_steps, "),
+        ("sessions", {"run": {"method": "oracle", "scenario": {"colour": 1}}},
+         ["body", "run", "scenario", "colour"],
+         "; valid fields: reward_scheme, grasp_failure_rate, knock_off_rate"),
         ("studies", {"name": f"unknown-{uuid.uuid4().hex}", "seed": 3},
-         ["body", "seed"], None),  # no run here: a run's field is not the hint
+         ["body", "seed"], "; valid fields: description, texts, name, design"),  # no run here
+        ("studies", {"name": f"unknown-{uuid.uuid4().hex}", "design": {
+            "conditions": {"a": {"run": {"method": "human"}}}, "colour": 1}},
+         ["body", "design", "colour"], "; valid fields: conditions, capacity, alpha, "),
     ]  # fmt: skip
     with server.client() as api:
         for endpoint, body, loc, hint in cases:
@@ -267,14 +280,16 @@ def test_a_422_names_an_unknown_field_and_says_where_a_runs_field_belongs(
             response = api.post(path, json=body)
             assert response.status_code == 422, response.text
             error = response.json()["detail"][0]
-            assert error["loc"] == loc and f"unknown field '{loc[-1]}'" in error["msg"], error
-            assert (hint in error["msg"]) if hint else ("belongs in" not in error["msg"]), error
+            assert error["loc"] == loc and f"unknown field '{loc[-1]}'{hint}" in error["msg"]
+            assert "openapi.json" not in error["msg"], error
         response = api.post(
             f"/api/studies/{study}/sessions", json={"run": {"method": "oracle", long_name: 1}}
         )
     assert response.status_code == 422, response.text
     assert long_name not in response.text
-    assert response.json()["detail"][0]["loc"][-1] == "(unknown field)"
+    (error,) = response.json()["detail"]
+    assert error["loc"][-1] == "(unknown field)"
+    assert error["msg"].startswith("an unknown field; valid fields: method, seed, "), error
 
 
 def test_a_422_reads_as_a_person_would_and_hides_only_the_value_it_is_about(
