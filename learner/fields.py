@@ -362,7 +362,7 @@ def build(cls: type, data: Any, path: str = "", base: Any = None) -> Any:
         first = f"{path}.{unknown[0]}" if path else unknown[0]
         raise FieldError(
             first,
-            f"unknown field {first if len(first) <= 64 else first[:64] + '...'}; valid "
+            f"unknown field '{first if len(first) <= 64 else first[:64] + '...'}'; valid "
             f"fields{' of ' + path if path else ''}: {', '.join(names)}",
         )
     values: dict[str, Any] = {}
