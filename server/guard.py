@@ -38,6 +38,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from study.schemas.errors import readable, unknown_field, valid_fields, valid_listed
 from study.schemas.types import SURROGATE_MESSAGE
 
 BODY_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
@@ -442,22 +443,6 @@ async def without_input(request: Request, message: str) -> str:
     return message if body is _NOTHING else _hidden(message, _leaves(body))
 
 
-_UNION_MEMBER = re.compile(
-    r"^(function-(after|before|wrap|plain)|constrained-\w+|json-or-python)\["
-)
-_BASE_TYPE = re.compile(r"(?<![\w.])(str|int|float|bool|list|dict|bytes)(?![\w(])")
-
-
-def _readable(part: Any) -> Any:
-    """A `loc` step as a person reads it: pydantic names a union's member by its validator
-    chain (with a function's address, `functools.partial(<function ...> at 0x...)`); say
-    the type it takes instead."""
-    if not isinstance(part, str) or not (_UNION_MEMBER.match(part) or " at 0x" in part):
-        return part
-    kinds = _BASE_TYPE.findall(part)
-    return kinds[-1] if kinds else "(one of the allowed kinds)"
-
-
 def _printable(value: Any) -> Any:
     if isinstance(value, int | float) and not isinstance(value, bool):
         return value
@@ -468,11 +453,6 @@ Home = Callable[[str], str | None]
 """Where a run's field of this name belongs (e.g. `run.config.advice_budget`), or None."""
 _PLAIN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,39}")
 """A field name the 422 may repeat: what a field's name looks like, and no longer."""
-
-
-LISTED = 40
-"""Valid fields a 422 names at most; an object with more points to the API document."""
-_DOCUMENT = "the API document (/openapi.json) lists the valid ones"
 
 
 _SCHEMAS: dict[int, tuple[Any, dict[str, Any] | None]] = {}
@@ -498,52 +478,6 @@ def _body_schema(route: Any) -> dict[str, Any] | None:
     return schema
 
 
-def _resolved(root: dict[str, Any], nodes: list[Any]) -> list[dict[str, Any]]:
-    """The schemas `nodes` stand for: references followed, unions and `allOf` opened."""
-    out: list[dict[str, Any]] = []
-    stack = list(reversed(nodes))
-    while stack and len(out) < 64:
-        node = stack.pop()
-        if not isinstance(node, dict):
-            continue
-        ref = node.get("$ref")
-        if isinstance(ref, str) and ref.startswith("#/"):
-            target: Any = root
-            for key in ref[2:].split("/"):
-                target = target.get(key) if isinstance(target, dict) else None
-            stack.append(target)
-            continue
-        members = [m for k in ("anyOf", "oneOf", "allOf") for m in node.get(k, [])]
-        if members:
-            stack.extend(reversed(members))
-        else:
-            out.append(node)
-    return out
-
-
-def _valid_fields(schema: dict[str, Any], path: Sequence[Any]) -> list[str] | None:
-    """The fields of the object at `path` (a `loc` after "body") in the body's `schema`;
-    None where the path leads to no one object (a union of objects that differ)."""
-    nodes = _resolved(schema, [schema])
-    for part in path:
-        tagged = [n for n in nodes if n.get("title") == part and "properties" in n]
-        if tagged:  # a union's member, named by its model
-            nodes = tagged
-            continue
-        ahead: list[Any] = []
-        for node in nodes:
-            properties = node.get("properties", {})
-            if isinstance(part, str) and part in properties:
-                ahead.append(properties[part])
-            elif isinstance(part, str) and isinstance(node.get("additionalProperties"), dict):
-                ahead.append(node["additionalProperties"])
-            elif isinstance(part, int) and isinstance(node.get("items"), dict):
-                ahead.append(node["items"])
-        nodes = _resolved(schema, ahead)
-    kinds = {tuple(n["properties"]) for n in nodes if isinstance(n.get("properties"), dict)}
-    return list(kinds.pop()) if len(kinds) == 1 else None
-
-
 def _unknown_field(
     body: Any, where: Sequence[Any], home: Home | None, valid: list[str] | None
 ) -> tuple[str, str]:
@@ -553,7 +487,7 @@ def _unknown_field(
     text and is not repeated. `valid`: the object's fields, named when there are at most
     `LISTED` (else the API document is where to look)."""
     name = where[-1]
-    listed = f"valid fields: {', '.join(valid)}" if valid and len(valid) <= LISTED else _DOCUMENT
+    listed = valid_listed(valid)
     if not (isinstance(name, str) and _PLAIN_NAME.fullmatch(name)):
         return "(unknown field)", f"an unknown field; {listed}"
     parent = _value_at(body, where[:-1])
@@ -561,7 +495,7 @@ def _unknown_field(
     belongs = home(name) if home is not None and by_a_run else None
     if belongs is not None:
         return name, f"unknown field '{name}' here: it belongs in {belongs}"
-    return name, f"unknown field '{name}'; {listed}"
+    return name, unknown_field(name, valid)
 
 
 def validation_error(
@@ -577,7 +511,7 @@ def validation_error(
         detail = []
         for e in error.errors():
             where = e.get("loc", ())
-            loc = [_printable(_readable(part)) for part in where]
+            loc = [_printable(readable(part)) for part in where]
             # only the value this error is about is hidden: the message may rightly name
             # other text the body also holds (an allowed option sent in another field)
             sent = _value_at(body, where)
@@ -585,8 +519,8 @@ def validation_error(
             msg = _hidden(_printable(e.get("msg", "")), quoted)
             if e.get("type") == "extra_forbidden" and loc:
                 schema = _body_schema(request.scope.get("route"))
-                on_body = schema is not None and where[:1] == ("body",)
-                valid = _valid_fields(schema, where[1:-1]) if on_body else None
+                on_body = tuple(where[:1]) == ("body",)
+                valid = valid_fields(schema, where[1:-1]) if schema and on_body else None
                 loc[-1], msg = _unknown_field(body, where, home, valid)
             kind = _printable(e.get("type", "value_error"))
             detail.append({"loc": loc, "msg": msg, "type": kind})
