@@ -38,7 +38,9 @@ def register(subparsers: Any) -> None:
 
 
 def read_body(source: Path, name: str | None) -> Any:
-    """The file as a `StudyCreate` body; a bad file is a usage error naming the field."""
+    """The file as a `StudyCreate` body; a bad file is a usage error naming every bad value
+    by its field (as the API's 422 does), one a line: pydantic's, and each condition's run's
+    (checked as the study is made, so a file is not fixed one value at a time)."""
     import yaml
     from pydantic import ValidationError
 
@@ -52,12 +54,51 @@ def read_body(source: Path, name: str | None) -> Any:
         raise CommandError(f"{source} must hold a mapping (name:, design:, ...)", EXIT_USAGE)
     if name:
         data["name"] = name
+    body = None
+    problems: list[str] = []
     try:
-        return StudyCreate.model_validate(data)
+        body = StudyCreate.model_validate(data)
     except ValidationError as error:
-        first = error.errors()[0]
-        where = ".".join(map(str, first["loc"]))
-        raise CommandError(f"{source}: {where}: {first['msg']}", EXIT_USAGE) from None
+        schema = StudyCreate.model_json_schema()
+        problems = [_problem(schema, e) for e in error.errors()]
+    problems += _run_problems(data)
+    if len(problems) == 1:
+        raise CommandError(f"{source}: {problems[0]}", EXIT_USAGE)
+    if problems:
+        lines = "".join(f"\n  {problem}" for problem in problems)
+        raise CommandError(f"{source}: {len(problems)} bad values:{lines}", EXIT_USAGE)
+    return body
+
+
+def _problem(schema: dict[str, Any], error: Any) -> str:
+    """One of pydantic's errors as the API's 422 words it: `design.capacity: ...`."""
+    from study.schemas.errors import readable, unknown_field, valid_fields
+
+    loc = error["loc"]
+    message = error["msg"]
+    if error["type"] == "extra_forbidden" and loc:
+        message = unknown_field(str(loc[-1]), valid_fields(schema, loc[:-1]))
+    where = ".".join(str(readable(part)) for part in loc)
+    return f"{where}: {message}" if where else message
+
+
+def _run_problems(data: dict[str, Any]) -> list[str]:
+    """What is wrong with each condition's run (a mapping of the run's fields, which the
+    service checks, not pydantic), named `design.conditions.NAME.run.FIELD`."""
+    from study.services.errors import Invalid
+    from study.services.studies import condition_run
+
+    design = data.get("design")
+    conditions = design.get("conditions") if isinstance(design, dict) else None
+    problems = []
+    for name, condition in (conditions if isinstance(conditions, dict) else {}).items():
+        run = condition.get("run") if isinstance(condition, dict) else None
+        if isinstance(run, dict):
+            try:
+                condition_run(str(name), run)
+            except Invalid as error:
+                problems.append(f"{error.field}: {error.message}")
+    return problems
 
 
 def create_study(args: argparse.Namespace) -> int:

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import secrets
 from collections.abc import Mapping
+from typing import Any
 
 from pydantic import TypeAdapter, ValidationError
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from learner.run import RunSpec
 from study.db.models import Study, StudySession
 from study.schemas.design import StudyDesign
 from study.schemas.types import StudyName
@@ -38,18 +40,24 @@ def session_count(db: Session, study_id: int) -> int:
     return db.scalar(select(func.count()).where(StudySession.study_id == study_id)) or 0
 
 
+def condition_run(name: str, run: Any) -> RunSpec:
+    """Condition `name`'s run checked as a study stores it: a human run, every value valid
+    (a bad one is `Invalid` naming `design.conditions.NAME.run.FIELD`)."""
+    try:
+        spec = learning.parse(run)
+        if spec.method != "human":
+            raise Invalid("run.method", "a condition's run is method human: people advise")
+        learning.checked(spec)
+    except Invalid as error:
+        raise Invalid(f"design.conditions.{name}.{error.field}", error.message) from None
+    return spec
+
+
 def stored_design(design: StudyDesign) -> dict[str, object]:
-    """The design as stored: each condition's run checked and spelled out whole (a bad one
-    is a 422 naming `design.conditions.NAME.run.FIELD`), every default written out."""
+    """The design as stored: each condition's run checked (`condition_run`) and spelled out
+    whole, every default written out."""
     for name, condition in design.conditions.items():
-        try:
-            spec = learning.parse(condition.run)
-            if spec.method != "human":
-                raise Invalid("run.method", "a condition's run is method human: people advise")
-            learning.checked(spec)
-        except Invalid as error:
-            raise Invalid(f"design.conditions.{name}.{error.field}", error.message) from None
-        condition.run = spec.to_json()
+        condition.run = condition_run(name, condition.run).to_json()
     return design.model_dump(mode="json")
 
 

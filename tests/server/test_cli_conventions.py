@@ -127,6 +127,55 @@ def test_unknown_studies_are_runtime_errors_and_bad_options_usage_errors(
     assert not Path(out).exists()
 
 
+BAD_DESIGN = """\
+name: several bad values
+design:
+  capacity: lots
+  colour: blue
+  conditions:
+    early:
+      run: {method: human, config: {batch_size: 0}}
+    late:
+      run: {method: human, strategy: late, config: {advice_budget: 5}}
+"""
+
+
+def test_a_design_file_with_several_bad_values_names_each_one_a_line(
+    data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Every bad value of a design file, pydantic's and the conditions' runs', by its field
+    as the API's 422 names it, one a line; a usage error, and no study made. One bad value
+    keeps the one-line form."""
+    source = tmp_path / "design.yaml"
+    source.write_text(BAD_DESIGN)
+    flags = ["--data-dir", str(data_dir)]
+    assert main(["study", "create", "--from", str(source), *flags]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.splitlines() == [
+        f"error: {source}: 4 bad values:",
+        "  design.capacity: Input should be a valid integer",
+        "  design.colour: unknown field 'colour'; valid fields: conditions, capacity, alpha, "
+        "idle_limit_s, pool, panel, check, questionnaire",
+        "  design.conditions.early.run.config.batch_size: config.batch_size must be an "
+        "integer from 1 to 4096",
+        '  design.conditions.late.run.strategy: strategy must be one of "early", '
+        '"alternating", "importance", "mistake_correcting"',
+    ]
+    source.write_text(BAD_DESIGN.replace("capacity: lots", "capacity: 4").replace(
+        "  colour: blue\n", "").replace("batch_size: 0", "batch_size: 8").replace(
+        "strategy: late, ", ""))  # fmt: skip
+    assert main(["study", "create", "--from", str(source), *flags]) == 0
+    source.write_text(BAD_DESIGN.replace("name: several", "name: one").replace(
+        "capacity: lots", "capacity: 4").replace("  colour: blue\n", "").replace(
+        "strategy: late, ", ""))  # fmt: skip
+    assert main(["study", "create", "--from", str(source), *flags]) == 2
+    assert capsys.readouterr().err == (
+        f"error: {source}: design.conditions.early.run.config.batch_size: "
+        "config.batch_size must be an integer from 1 to 4096\n"
+    )
+
+
 def test_json_output_is_all_of_stdout_and_keeps_the_exit_codes(
     data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
