@@ -285,6 +285,8 @@ RECORDS_ALLOWED: dict[str, str] = {
     "runs.batch.spec.BatchSpec.__init__": LEAF_VALUES + ", per method",
     "study.services.replays.replay_run": LEAF_VALUES,
     "study.schemas.runs.given": "a body's set values as JSON, read by `RunSpec.from_json`",
+    "study.schemas.errors.valid_fields": "a JSON Schema document (pydantic's "
+    "`model_json_schema()`), walked as JSON to name an object's fields",
     "study.services.learning.identity": RUN_JSON + ", normalized",
     "study.services.learning.same_run": RUN_JSON + ", normalized (`identity`)",
     "runs.worker.rerun.RerunOrder.__init__": RUN_JSON + ": the rerun's process reads it",
