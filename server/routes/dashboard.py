@@ -39,7 +39,7 @@ from study.schemas.dashboard import (
 from study.schemas.reports import ReportPublic
 from study.schemas.sessions import SessionOptions
 from study.schemas.studies import Preview
-from study.services import reports, sessions, studies
+from study.services import assignment, reports, sessions, studies
 
 COOKIE = "ideeprl_dashboard"
 CSRF_HEADER = "X-Requested-With"
@@ -232,8 +232,9 @@ def new_participant(
         options = SessionOptions(participant=body.participant or None)
     except FieldError as error:
         raise HTTPException(422, f"pseudonym: {error}") from None
+    spec = assignment.numbered_seed(db, study_id, RunSpec(method="human"))
     created = sessions.create_session(
-        db, study_id, RunSpec(method="human"), options, settings.data_dir, settings.worker_threads
+        db, study_id, spec, options, settings.data_dir, settings.worker_threads
     )
     public = session_routes.session_public(created, settings.base_url)
     if body.pretrain:

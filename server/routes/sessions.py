@@ -23,7 +23,7 @@ from study.schemas.sessions import (
     SessionPublic,
     session_create_model,
 )
-from study.services import learning, sessions, storage
+from study.services import assignment, learning, sessions, storage
 from study.services.errors import NotFound
 
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
@@ -75,7 +75,10 @@ def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
         field and what it allows. The run is stored validated and with its numerics pinned
         on this machine (device, precision, threads)."""
         values = given(body)
-        spec = learning.parse(values.pop("run"), spec_class)
+        run = values.pop("run")
+        spec = learning.parse(run, spec_class)
+        if spec.method == "human" and "seed" not in run:
+            spec = assignment.numbered_seed(db, study_id, spec)
         options = SessionOptions(**values)
         session = sessions.create_session(
             db, study_id, spec, options, settings.data_dir, settings.worker_threads

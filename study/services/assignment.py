@@ -307,6 +307,17 @@ def arrive(
     return Arrival(session.participant_token, params=kept, session_id=session.id)
 
 
+def numbered_seed(db: Session, study_id: int, spec: RunSpec) -> RunSpec:
+    """A human session whose run gives no seed, made by hand (the REST API, the dashboard):
+    the study's next number added to the run's seed, as an online arrival's is, so each
+    participant's learner differs (its first weights, its random practice) and every one is
+    reproducible; a run that gives its seed keeps it."""
+    study = db.get(Study, study_id)
+    if study is None:
+        raise NotFound(f"no study {study_id}")
+    return spec.replace(seed=(spec.seed + _next_number(study)) % SEEDS)
+
+
 def _next_number(study: Study) -> int:
     """The number of the study's next session (its seed adds it), never given twice."""
     number = study.sessions_made or 0

@@ -7,7 +7,7 @@ import base64
 import httpx
 import pytest
 
-from tests.server.live import LiveServer
+from tests.server.live import API_KEY, LiveServer
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import decode_png, session_body, wait_for_status
 
@@ -94,3 +94,27 @@ def test_a_token_reaches_only_its_own_session(server: LiveServer, api: httpx.Cli
     api.post(f"/api/sessions/{first['id']}/stop")
     a.close()
     b.close()
+
+
+def test_people_made_by_hand_get_a_seed_each_unless_the_run_gives_one(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    """Each participant's learner differs (its first weights, its random practice), as an
+    online arrival's does: a human run without a seed takes the study's next number, on the
+    REST API and the dashboard alike; a run that gives its seed keeps it."""
+    study = api.post("/api/studies", json={"name": "seeds by hand"}).json()["id"]
+    made = [
+        api.post(f"/api/studies/{study}/sessions", json=body).json()["run"]["seed"]
+        for body in (
+            {"run": {"method": "human"}, "participant": "P01"},
+            {"run": {"method": "human"}, "participant": "P02"},
+            {"run": {"method": "human", "seed": 7}, "participant": "P03"},
+        )
+    ]
+    assert made == [0, 1, 7], made
+    with httpx.Client(base_url=server.url, headers={"X-Requested-With": "test"}) as browser:
+        assert browser.post("/dashboard/login", data={"key": API_KEY}).status_code == 303
+        created = browser.post(f"/dashboard/api/studies/{study}/participants", json={})
+        assert created.status_code == 201, created.text
+    seed = api.get(f"/api/sessions/{created.json()['id']}").json()["run"]["seed"]
+    assert seed == 2, "the dashboard's participant: the next number"
