@@ -78,6 +78,14 @@ OPTIONAL_TABLE_FILES: dict[str, str] = {
 }
 """Tables written when their input is given: the sessions' settings (the audit), the step
 logs (rescoring), a reference, two agents per arm and a baseline (power)."""
+REPORT_FILES = (
+    "report.md",
+    *FIGURE_FILES.values(),
+    *TABLE_FILES.values(),
+    *OPTIONAL_TABLE_FILES.values(),
+)
+"""Every file a report may write: a new report into the same folder removes an earlier
+one's first, so a table or figure this report has no input for is not the earlier one's."""
 MAX_HEATMAP_AGENTS = 24
 """Above this many agents Figure 7 shows the paper's selection; the CSV keeps them all."""
 
@@ -576,8 +584,9 @@ def write_report(
     under the title. `n_episodes` cuts every agent to its first N episodes;
     `individual_method`, `individual_labels` and `reference_label` choose Figure 6's
     agents (by default up to three human-IDeepRL examples against the median autonomous
-    agent); `smoothing` is a moving-average window for Figures 5 and 6 only. Existing
-    files of the same names are replaced; nothing is written if the table is invalid.
+    agent); `smoothing` is a moving-average window for Figures 5 and 6 only. An earlier
+    report's files in `out_dir` are removed first (`REPORT_FILES`), other files are left;
+    nothing is written if the table is invalid.
 
     `settings` (one row per session: `analysis.audit.FIXED_COLUMNS` and one column
     per setting) adds the comparability audit: the settings per method, a warning at the
@@ -622,6 +631,8 @@ def write_report(
     report_notes = [*plan_notes, *heatmap_notes]
     power = _power(analysis, alpha, power_draws, power_seed)
     out.mkdir(parents=True, exist_ok=True)
+    for name in REPORT_FILES:  # an earlier report's: none of its files may outlive it
+        (out / name).unlink(missing_ok=True)
 
     tables = {
         "methods": analysis.methods,

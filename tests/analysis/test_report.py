@@ -248,3 +248,17 @@ def test_the_command_line_writes_a_report_from_a_csv(
     assert main([str(broken), str(tmp_path / "none")]) == 2
     assert "lacks column(s) episode" in capsys.readouterr().err
     assert not (tmp_path / "none").exists()
+
+
+def test_a_new_report_leaves_none_of_an_earlier_ones_files(tmp_path: Path) -> None:
+    """A report of two methods writes Figure 6; one of a single method into the same folder
+    has none: the earlier figure must not stay beside it, read as this report's. Files
+    that are not a report's stay."""
+    two = {"a": ("autonomous", [1.0, 2.0]), "b": ("human", [2.0, 2.0])}
+    first = write_report(episodes_from_curves(two), tmp_path)
+    assert "individual_agents" in first.figures
+    (tmp_path / "notes.txt").write_text("mine")
+    one = {"a": ("autonomous", [1.0, 2.0]), "b": ("autonomous", [2.0, 2.0])}
+    write_report(episodes_from_curves(one), tmp_path)
+    assert not (tmp_path / FIGURE_FILES["individual_agents"]).exists()
+    assert (tmp_path / "notes.txt").read_text() == "mine"
