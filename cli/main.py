@@ -1,10 +1,10 @@
 """The `ideeprl` command line: one entry point, a sub-command per task.
 
-`train` comes from the learner; every module in `cli/commands/` that defines
-`register(subparsers)` adds its own sub-commands, so a new command is a new file. A
-command named like its module (`ideeprl batch` is `cli/commands/batch.py`) loads that
-module alone; anything else (`--help`, `train`, `restore`, a typo) loads them all, so the
-listing and argparse's messages are whole. Exit
+Every module in `cli/commands/` that defines `register(subparsers)` adds its own
+sub-commands, so a new command is a new file. A command named like its module (`ideeprl
+batch` is `cli/commands/batch.py`) loads that module alone; anything else (`--help`,
+`restore`, a typo) loads them all, so the listing and argparse's messages are whole. A
+usage error is two lines, the error and where the usage is. Exit
 codes: 0 done, 1 a runtime error, 2 a usage error, 130 interrupted
 (`cli.commands.common`).
 """
@@ -18,12 +18,22 @@ import pkgutil
 import sys
 from collections.abc import Sequence
 from importlib import metadata
+from typing import NoReturn
 
 from sqlalchemy.exc import OperationalError
 
 from cli import commands
 from cli.commands.common import CommandError, database_down, fail, unreachable
 from learner.run import RunSpec
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser (its sub-commands' too), a usage error in two lines: the error and
+    where the usage is. A run's command has some 60 flags: the whole usage printed before
+    the error buried it."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n(see {self.prog} --help)\n")
 
 
 def version() -> str:
@@ -40,7 +50,7 @@ def build_parser(
     """Every command's parser, or only `command`'s where a module of `cli/commands/` is
     named after it; the commands that take a run (`train`, `batch`) make their flags from
     `spec_class`, the run's declaration."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="ideeprl",
         description="Human advising studies in interactive deep reinforcement learning.",
     )

@@ -450,7 +450,11 @@ def parse_text(leaf: Leaf, text: str) -> Any:
             value = json.loads(stripped)
         except json.JSONDecodeError:
             raise FieldError(leaf.dotted, f"{leaf.dotted} is not valid JSON") from None
-    return check(leaf, value)
+    try:
+        return check(leaf, value)
+    except FieldError as error:  # a flag's text: say what was given, as typed
+        shown = text if len(text) <= 40 else text[:40] + "..."
+        raise FieldError(error.field, f"{error} (given: {shown!r})") from None
 
 
 def add_arguments(

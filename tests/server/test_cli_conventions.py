@@ -308,3 +308,23 @@ def test_train_draws_bars_in_a_terminal_and_none_into_a_pipe(tmp_path: Path) -> 
     assert "%|" not in piped and "\r" not in piped
     shown = train_output(tmp_path / "tty", terminal=True)
     assert "%|" in shown, "the same run at a terminal shows its bars"
+
+
+def test_a_usage_error_is_the_error_and_where_the_usage_is(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A run's command has some 60 flags: its whole usage before the error buried it. A bad
+    flag's value is said as it was typed."""
+    db = ["--database-url", f"sqlite:///{tmp_path / 'x.sqlite3'}"]
+    with pytest.raises(SystemExit) as exited:
+        main(["batch", "--study", "s", "--methods", "autonomous", "--episodes", "0", *db])
+    assert exited.value.code == 2
+    err = capsys.readouterr().err
+    assert err.splitlines() == [
+        "ideeprl batch: error: argument --episodes: config.episodes must be an integer from 1 "
+        "to 100000 (given: '0')",
+        "(see ideeprl batch --help)",
+    ], err
+    flags = ["--set", "batch_size=abc", "--dry-run", *db]
+    assert main(["batch", "--study", "s", "--methods", "autonomous", *flags]) == 2
+    assert "(given: 'abc')" in capsys.readouterr().err
