@@ -50,21 +50,32 @@ DEFAULT_MAX_N = 1000
 def welch_rejects(a: np.ndarray, b: np.ndarray, alpha: float) -> np.ndarray:
     """Whether Welch's two-sided test rejects, for each row of two (studies, n) arrays.
 
-    Two constant arms with different means reject (t is infinite) and with equal means do
-    not, where scipy would give NaN: a bootstrap from a small pilot draws such studies.
+    A study whose two arms are both constant is never a rejection: Welch's statistic is
+    then 0/0 or d/0, undefined, and counting it as significant (t infinite) made the
+    bootstrap from a small pilot report a false power spike at n = 2, where both arms
+    often resample one value each (a pilot of 3 agents per arm: 1 study in 9). A real R_T
+    is continuous and never gives such a study; the resampled population is discrete, so
+    these draws say nothing about the test's power. "Constant" means every value of the
+    row is equal (max == min), not a zero variance: the mean of equal floats can be off by
+    an ulp, and the tiny variance left would give a huge t.
+    A single constant arm beside a varying one is an ordinary Welch test (its variance is
+    taken as exactly 0).
     """
     na, nb = a.shape[1], b.shape[1]
-    va, vb = a.var(axis=1, ddof=1) / na, b.var(axis=1, ddof=1) / nb
+    flat_a = a.max(axis=1) == a.min(axis=1)
+    flat_b = b.max(axis=1) == b.min(axis=1)
+    va = np.where(flat_a, 0.0, a.var(axis=1, ddof=1)) / na
+    vb = np.where(flat_b, 0.0, b.var(axis=1, ddof=1)) / nb
     diff = a.mean(axis=1) - b.mean(axis=1)
     se2 = va + vb
-    spread = se2 > 0
-    safe = np.where(spread, se2, 1.0)
+    defined = ~(flat_a & flat_b)
+    safe = np.where(defined, se2, 1.0)
     t = diff / np.sqrt(safe)
     with np.errstate(divide="ignore", invalid="ignore"):
         dof = safe**2 / (va**2 / (na - 1) + vb**2 / (nb - 1))
     dof = np.where(np.isfinite(dof) & (dof > 0), dof, 1.0)
     p = 2.0 * stats.t.sf(np.abs(t), dof)
-    return np.where(spread, p < alpha, diff != 0)
+    return defined & (p < alpha)
 
 
 def _draw(
@@ -87,7 +98,13 @@ def simulated_power(
 ) -> float:
     """Share of `draws` simulated studies, n agents per arm drawn from the observed R_T
     `a` and `b` (`model`: resampled, or a normal with each arm's mean and sd), in which
-    Welch's two-sided test at `alpha` rejects equal means."""
+    Welch's two-sided test at `alpha` rejects equal means.
+
+    A simulated study whose arms are both constant (likely at small n with `bootstrap`
+    from a small pilot) counts as not significant: the test is undefined there
+    (`welch_rejects`). Such studies stay in the denominator, so the power at n = 2 from a
+    pilot of a few agents is low, as it should be, not a spike above alpha.
+    """
     if n < MIN_N:
         raise ValueError(f"Welch's test needs at least {MIN_N} agents per arm, got n={n}")
     if draws < 1:
