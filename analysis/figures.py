@@ -9,6 +9,7 @@ to the statistics.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -16,9 +17,11 @@ import matplotlib
 import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
+from matplotlib.backend_bases import RendererBase
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import FuncFormatter
+from matplotlib.text import Text
+from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from analysis.episodes import (
     EpisodeTableError,
@@ -85,6 +88,50 @@ def _new_figure(width: float = 9.0, height: float = 5.0) -> tuple[Figure, Axes]:
     return figure, figure.add_subplot()
 
 
+def _integer_ticks(ax: Axes) -> None:
+    """Whole-number ticks on an x axis that counts episodes or agents: a 3-episode run
+    would otherwise be ticked at 1.25, 1.50, ..."""
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+
+
+_TITLE_SHARE = 0.94
+"""The share of its width (the figure's, or one panel's) a title may take: the rest is
+the layout's padding."""
+
+
+def _wrap_to(text: Text, width: float, renderer: RendererBase) -> None:
+    """Break `text` into lines (textwrap, at spaces) until it is at most `width` pixels
+    wide; a single word wider than that is left as it is."""
+    lines = text.get_text().split("\n")
+    chars = max(len(line) for line in lines)
+    while chars > 8 and text.get_window_extent(renderer).width > width:
+        # the next try: shrink the line length in proportion to the overflow, at least 1
+        estimate = int(chars * width / text.get_window_extent(renderer).width)
+        chars = max(8, min(chars - 1, estimate))
+        text.set_text("\n".join(textwrap.fill(line, chars) for line in lines))
+
+
+def fit_titles(figure: Figure, suptitle: Text | None = None) -> Figure:
+    """Wrap every axes title, and `suptitle` (the figure's, as `Figure.suptitle` returned
+    it), onto more lines where one line is wider than its space, so no title is clipped at
+    the figure's edges: a title is centred on its axes and a line wider than the figure is
+    cut on both sides, which constrained layout does not prevent. An axes title gets its
+    grid cell's width (a panel of a several-panel figure), a suptitle the figure's.
+    Returns the figure."""
+    canvas = figure.canvas if isinstance(figure.canvas, FigureCanvasAgg) else None
+    renderer = (canvas or FigureCanvasAgg(figure)).get_renderer()
+    full = figure.bbox.width
+    for ax in figure.axes:
+        spec = ax.get_subplotspec()
+        share = 1.0 if spec is None else spec.colspan.stop - spec.colspan.start
+        columns = 1 if spec is None else spec.get_gridspec().ncols
+        if ax.title.get_text():
+            _wrap_to(ax.title, _TITLE_SHARE * full * share / columns, renderer)
+    if suptitle is not None and suptitle.get_text():
+        _wrap_to(suptitle, _TITLE_SHARE * full, renderer)
+    return figure
+
+
 VECTOR_FORMATS = ("svg", "pdf")
 """Besides each PNG: the formats a paper's figures are set in."""
 
@@ -130,38 +177,63 @@ def plot_method_curves(
     )
     ax.set_xlabel("episode")
     ax.set_ylabel("collected reward per episode (sum of step rewards)")
+    _integer_ticks(ax)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
-    return figure
+    return fit_titles(figure)
+
+
+BANDS_WINDOW = 10
+"""The moving average of the bootstrap-band figure on a long run, in episodes."""
+
+
+def bands_window(n_episodes: int, window: int = BANDS_WINDOW) -> int:
+    """The moving average the bootstrap-band figure uses on a run of `n_episodes`: `window`,
+    but at most half the episodes (at least 1, the raw curve), so the smoothed curve keeps
+    more than half its points. A full window on a short run leaves one point per method,
+    a line that draws nothing."""
+    if window < 1:
+        raise ValueError(f"smoothing window must be at least 1 episode, got {window}")
+    return max(1, min(window, n_episodes // 2))
 
 
 def plot_confidence_bands(
     episodes: pd.DataFrame,
     *,
     baseline: str | None = "autonomous",
-    window: int = 10,
+    window: int = BANDS_WINDOW,
     resamples: int = 2000,
     seed: int = 0,
 ) -> Figure:
     """Each method's mean collected reward per episode (a moving average over `window`
     episodes) with a 95 % percentile bootstrap band over its agents, as `rliable` draws
     sample-efficiency curves: the band says how sure the mean is, where Figure 5's ±1
-    standard deviation says how much agents differ."""
+    standard deviation says how much agents differ.
+
+    On a short run the window shrinks to half the episodes (`bands_window`; the title says
+    which); a run of one episode is drawn as points, with no band to draw between them."""
     table = validate_episodes(episodes)
     figure, ax = _new_figure()
     methods = order_methods(table["method"], baseline)
     rng = np.random.default_rng(seed)
+    shortest = int(table.groupby("method")["episode"].nunique().min())
+    window = bands_window(shortest, window)
+    kernel = np.ones(window) / window
     for method in methods:
         rows = table[table["method"] == method]
         curves = rows.pivot(index="session_id", columns="episode", values="collected_reward")
         values = curves.to_numpy(dtype=float)
-        kernel = np.ones(min(window, values.shape[1])) / min(window, values.shape[1])
         smoothed = np.array([np.convolve(v, kernel, mode="valid") for v in values])
         x = curves.columns.to_numpy()[len(kernel) - 1 :]
         color = method_color(method, methods)
         n = len(values)
         ax.plot(
-            x, smoothed.mean(axis=0), color=color, lw=1.6, label=f"{method_name(method)} (n={n})"
+            x,
+            smoothed.mean(axis=0),
+            color=color,
+            lw=1.6,
+            marker="o" if len(x) == 1 else None,
+            label=f"{method_name(method)} (n={n})",
         )
         if n > 1:
             picks = rng.integers(0, n, size=(resamples, n))
@@ -169,14 +241,16 @@ def plot_confidence_bands(
             low, high = np.percentile(means, [2.5, 97.5], axis=0)
             ax.fill_between(x, low, high, color=color, alpha=0.22, lw=0)
     ax.set_title(
-        f"Mean collected reward per episode (moving average over {window}), "
-        "shaded: 95 % bootstrap interval of the mean over agents"
+        "Mean collected reward per episode"
+        + (f" (moving average over {window} episodes)" if window > 1 else "")
+        + ", shaded: 95 % bootstrap interval of the mean over agents"
     )
     ax.set_xlabel("episode")
     ax.set_ylabel("collected reward per episode")
+    _integer_ticks(ax)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
-    return figure
+    return fit_titles(figure)
 
 
 def pick_reference_agent(episodes: pd.DataFrame, method: str = "autonomous") -> str:
@@ -265,9 +339,10 @@ def plot_individual_agents(
     )
     ax.set_xlabel("episode")
     ax.set_ylabel("collected reward per episode (sum of step rewards)")
+    _integer_ticks(ax)
     ax.grid(alpha=0.3)
     figure.legend(loc="outside lower center", fontsize="small", ncols=2 if len(labels) > 1 else 1)
-    return figure
+    return fit_titles(figure)
 
 
 def plot_correlation(matrix: pd.DataFrame, *, annotate: bool | None = None) -> Figure:
@@ -292,7 +367,7 @@ def plot_correlation(matrix: pd.DataFrame, *, annotate: bool | None = None) -> F
     ax.set_xlabel("agent")
     ax.set_ylabel("agent")
     figure.colorbar(image, ax=ax, shrink=0.8, label="Pearson's r (unitless, -1 to 1)")
-    return figure
+    return fit_titles(figure)
 
 
 def plot_cumulative_reward(
@@ -321,9 +396,10 @@ def plot_cumulative_reward(
     ax.set_title("Cumulative collected reward, mean ±1 std across agents (last point = R_T)")
     ax.set_xlabel("episode")
     ax.set_ylabel("cumulative collected reward (sum over episodes)")
+    _integer_ticks(ax)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left")
-    return figure
+    return fit_titles(figure)
 
 
 def epsilon_reaches(episodes: pd.DataFrame, level: float = 0.01) -> pd.Series:
@@ -360,9 +436,10 @@ def plot_epsilon(episodes: pd.DataFrame, *, baseline: str | None = "autonomous")
     ax.set_title("Exploration: epsilon at the end of each episode (mean across agents)")
     ax.set_xlabel("episode")
     ax.set_ylabel("epsilon (% random actions, log scale)")
+    _integer_ticks(ax)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right")
-    return figure
+    return fit_titles(figure)
 
 
 def plot_power(analysis: PowerAnalysis) -> Figure:
@@ -405,13 +482,14 @@ def plot_power(analysis: PowerAnalysis) -> Figure:
         )
         ax.set_xlabel("agents (participants) per arm")
         ax.set_ylabel("power (%)")
+        _integer_ticks(ax)
         ax.grid(alpha=0.3)
         ax.legend(loc="lower right", fontsize=8)
     for ax in axes[count:]:
         ax.set_visible(False)
-    figure.suptitle(
+    suptitle = figure.suptitle(
         f"Planning: power of Welch's two-sided t-test on R_T at α = {analysis.alpha:g} "
         f"({analysis.draws} simulated studies per size)",
         fontsize=11,
     )
-    return figure
+    return fit_titles(figure, suptitle)

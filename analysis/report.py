@@ -24,6 +24,7 @@ from analysis.audit import Audit, audit, label
 from analysis.comparisons import compare
 from analysis.episodes import EpisodeTableError, agents_of, method_name
 from analysis.figures import (
+    bands_window,
     example_agents,
     pick_reference_agent,
     plot_confidence_bands,
@@ -628,7 +629,7 @@ def write_report(
         analysis, individual_method, reference_label, individual_labels
     )
     heatmap_labels, heatmap_notes = _heatmap_labels(analysis, plan[0] if plan else "")
-    report_notes = [*plan_notes, *heatmap_notes]
+    report_notes = [*plan_notes, *heatmap_notes, *_bands_notes(analysis)]
     power = _power(analysis, alpha, power_draws, power_seed)
     out.mkdir(parents=True, exist_ok=True)
     for name in REPORT_FILES:  # an earlier report's: none of its files may outlive it
@@ -685,8 +686,9 @@ def write_report(
         "reward_per_method": figure5,
         "correlation": plot_correlation(analysis.correlation.loc[heatmap_labels, heatmap_labels]),
         "cumulative_reward": plot_cumulative_reward(analysis.episodes, baseline=baseline),
-        "confidence_bands": plot_confidence_bands(analysis.episodes, baseline=baseline),
     }
+    if not _bands_notes(analysis):
+        figures["confidence_bands"] = plot_confidence_bands(analysis.episodes, baseline=baseline)
     if plan is not None:
         figures["individual_agents"] = plot_individual_agents(
             analysis.episodes,
@@ -724,6 +726,37 @@ def write_report(
         out, report, figure_paths, table_paths, (*warnings, *report_notes), analysis,
         checked, rescored, power,
     )  # fmt: skip
+
+
+def _bands_notes(analysis: Analysis) -> list[str]:
+    """Why the bootstrap-band figure is left out, if it is: a one-episode run has no
+    curve to draw a band along."""
+    if analysis.n_episodes >= 2:
+        return []
+    return [
+        "The bootstrap-band figure is left out: the run has "
+        f"{md.count(analysis.n_episodes, 'episode')}, no curve to draw a band along."
+    ]
+
+
+def _bands_section(analysis: Analysis) -> list[str]:
+    """The bootstrap-band figure and what it shows, or why it is left out."""
+    if notes := _bands_notes(analysis):
+        return [*notes, ""]
+    window = bands_window(analysis.n_episodes)
+    smoothing = (
+        f"moving average over {window} episodes"
+        if window > 1
+        else "no moving average: the run is too short for one"
+    )
+    return [
+        f"![Mean collected reward with 95 % bootstrap bands]({FIGURE_FILES['confidence_bands']})",
+        "",
+        f"The same curves as a mean with a 95 % bootstrap interval over agents ({smoothing}), "
+        "as `rliable` draws them: where the bands of two methods part, the difference is "
+        "larger than the agents' spread explains.",
+        "",
+    ]
 
 
 @dataclass(frozen=True)
@@ -976,12 +1009,8 @@ def _markdown(
         "",
         f"![Cumulative collected reward per method]({FIGURE_FILES['cumulative_reward']})",
         "",
-        f"![Mean collected reward with 95 % bootstrap bands]({FIGURE_FILES['confidence_bands']})",
-        "",
-        "The same curves as a mean with a 95 % bootstrap interval over agents (moving "
-        "average over 10 episodes), as `rliable` draws them: where the bands of two methods "
-        "part, the difference is larger than the agents' spread explains. Every figure is "
-        "also written as SVG and PDF beside its PNG.",
+        *_bands_section(analysis),
+        "Every figure is also written as SVG and PDF beside its PNG.",
         "",
     ]
     if plan is not None:

@@ -5,8 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from matplotlib.collections import PolyCollection
+from matplotlib.figure import Figure
+from matplotlib.text import Text
 from PIL import Image
 
 from analysis import (
@@ -18,7 +21,17 @@ from analysis import (
     plot_method_curves,
     save_figure,
 )
-from analysis.figures import epsilon_reaches, example_agents, pick_reference_agent, smooth
+from analysis.figures import (
+    bands_window,
+    epsilon_reaches,
+    example_agents,
+    pick_reference_agent,
+    plot_confidence_bands,
+    plot_cumulative_reward,
+    plot_power,
+    smooth,
+)
+from analysis.power import power_analysis
 from tests.analysis.helpers import HAND_CASE, episodes_from_curves
 
 
@@ -48,7 +61,8 @@ def test_smoothing_is_a_trailing_mean_for_the_eye_only() -> None:
     figure = plot_method_curves(episodes_from_curves(HAND_CASE), smoothing=2)
     agent = figure.axes[0].get_lines()[1]
     assert list(agent.get_ydata()) == [1.5, 2.0, 2.75]
-    assert "moving average over 2 episodes" in figure.axes[0].get_title()
+    title = " ".join(figure.axes[0].get_title().split())  # long titles wrap onto lines
+    assert "moving average over 2 episodes" in title
 
 
 def test_figure_6_puts_agents_against_the_median_reference_with_their_gain() -> None:
@@ -120,3 +134,81 @@ def test_save_figure_writes_a_png(tmp_path: Path) -> None:
     with Image.open(path) as image:
         assert image.format == "PNG"
         assert image.size == (450, 250)  # 9 x 5 inches at 50 dpi
+
+
+def short_run() -> pd.DataFrame:
+    """HAND_CASE, 3 episodes per agent, with an epsilon column."""
+    epsilon = {label: [0.5, 0.1, 0.01] for label in HAND_CASE}
+    return episodes_from_curves(HAND_CASE, epsilon=epsilon)
+
+
+def short_run_figures() -> dict[str, Figure]:
+    table = short_run()
+    pilot = {"autonomous": np.array([3.0, 5.0, 4.0]), "agent": np.array([6.0, 8.0, 7.5])}
+    return {
+        "figure 5": plot_method_curves(table, smoothing=2),
+        "figure 6": plot_individual_agents(table, method="agent"),
+        "cumulative": plot_cumulative_reward(table),
+        "bands": plot_confidence_bands(table),
+        "epsilon": plot_epsilon(table),
+        "power, one panel": plot_power(power_analysis(pilot, "autonomous", draws=100)),
+    }
+
+
+def titles(figure: Figure) -> list[Text]:
+    found = [ax.title for ax in figure.axes if ax.title.get_text()]
+    return found + [t for t in figure.texts if t.get_text()]  # a suptitle is a figure text
+
+
+def test_every_title_fits_within_the_figure_width() -> None:
+    """The bands figure's title and the one-panel power figure's suptitle used to be one
+    line wider than the figure, cut off on both sides."""
+    for name, figure in short_run_figures().items():
+        figure.canvas.draw()
+        renderer = figure.canvas.get_renderer()  # type: ignore[attr-defined]
+        assert titles(figure), name
+        for title in titles(figure):
+            extent = title.get_window_extent(renderer)
+            assert extent.x0 >= 0 and extent.x1 <= figure.bbox.width, (name, title.get_text())
+    power = titles(short_run_figures()["power, one panel"])
+    assert any("\n" in t.get_text() for t in power), "the one-panel suptitle is wrapped"
+
+
+def test_a_short_title_stays_on_one_line() -> None:
+    figure = plot_correlation(correlation_matrix(episodes_from_curves(HAND_CASE)))
+    assert "\n" not in figure.axes[0].get_title()
+
+
+def test_episode_axes_have_whole_number_ticks_on_a_short_run() -> None:
+    """A 3-episode run was ticked at 1.25, 1.50, ... on Figures 5, 6 and epsilon."""
+    for name, figure in short_run_figures().items():
+        figure.canvas.draw()
+        ticks = figure.axes[0].get_xticks()
+        assert len(ticks) >= 2, name
+        assert all(float(t).is_integer() for t in ticks), (name, list(ticks))
+
+
+def test_the_bands_figure_draws_a_curve_on_a_run_shorter_than_its_window() -> None:
+    """Three episodes under a 10-episode moving average left one point per method: no
+    line, an x axis from 2.85 to 3.15. The window shrinks to half the run (here 1, the raw
+    curve) and the title says so."""
+    assert [bands_window(n) for n in (1, 2, 3, 5, 12, 20, 300)] == [1, 1, 1, 2, 6, 10, 10]
+    ax = plot_confidence_bands(short_run()).axes[0]
+    lines = ax.get_lines()
+    assert len(lines) == 3
+    for line in lines:
+        assert list(line.get_xdata()) == [1, 2, 3]
+    assert list(lines[1].get_ydata()) == [1.5, 2.5, 3.0]  # the agent arm's raw mean
+    low, high = ax.get_xlim()
+    assert low <= 1 and high >= 3
+    assert "moving average" not in ax.get_title()
+    long = plot_confidence_bands(episodes_from_curves({"a": ("autonomous", [1.0] * 30)}))
+    assert len(long.axes[0].get_lines()[0].get_xdata()) == 21
+    assert "moving average over 10 episodes" in " ".join(long.axes[0].get_title().split())
+
+
+def test_the_bands_figure_marks_a_one_episode_run_as_points() -> None:
+    one = {"a": ("autonomous", [1.0]), "b": ("autonomous", [2.0])}
+    ax = plot_confidence_bands(episodes_from_curves(one)).axes[0]
+    assert ax.get_lines()[0].get_marker() == "o"
+    assert list(ax.get_lines()[0].get_ydata()) == [1.5]

@@ -262,3 +262,25 @@ def test_a_new_report_leaves_none_of_an_earlier_ones_files(tmp_path: Path) -> No
     write_report(episodes_from_curves(one), tmp_path)
     assert not (tmp_path / FIGURE_FILES["individual_agents"]).exists()
     assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_a_run_shorter_than_the_band_window_still_gets_a_band_figure(tmp_path: Path) -> None:
+    """3 episodes under the 10-episode moving average drew an empty figure that the report
+    embedded; the window now shrinks to the run (here: none) and the text says so."""
+    result = write_report(episodes_from_curves(HAND_CASE), tmp_path)
+    text = result.report.read_text(encoding="utf-8")
+    assert "confidence_bands" in result.figures
+    assert f"]({FIGURE_FILES['confidence_bands']})" in text
+    assert "no moving average: the run is too short for one" in text
+    assert "moving average over 10 episodes" not in text
+
+
+def test_a_one_episode_run_leaves_the_band_figure_out_with_the_reason(tmp_path: Path) -> None:
+    table = episodes_from_curves({"a": ("autonomous", [1.0]), "b": ("agent", [2.0])})
+    result = write_report(table, tmp_path)
+    text = result.report.read_text(encoding="utf-8")
+    assert "confidence_bands" not in result.figures
+    assert not (tmp_path / FIGURE_FILES["confidence_bands"]).exists()
+    assert FIGURE_FILES["confidence_bands"] not in text
+    assert "The bootstrap-band figure is left out: the run has 1 episode" in text
+    assert any(n.startswith("The bootstrap-band figure is left out") for n in result.notes)
