@@ -21,7 +21,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
-from learner.advisor_check import AdvisorCheck, checked_advisor
+from learner.advisor_check import AdvisorCheck, checked_advisor, last_check
 from learner.run import RunSpec
 from runs.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from runs.batch.progress import BatchProgress, MachineShare
@@ -31,7 +31,7 @@ from runs.worker.population import default_population, next_group, population_ke
 from runs.worker.worker import WorkerOptions
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import BACKUPS, upgrade
-from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
+from study.db.models import ADVISOR_ROLE, LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
 from study.services import learning, numerics
 from study.services.errors import Invalid
 from study.services.ownership import set_status, take_back
@@ -219,6 +219,9 @@ class BatchRunner:
             )
         except Invalid as error:
             raise BatchError(error.message) from None
+        if state.run.is_advisor and session.role != ADVISOR_ROLE:
+            session.role = ADVISOR_ROLE  # every attempt: never one of a report's agents
+            db.commit()
         state.session_id, state.status = session.id, session.status
         state.done_before = session.status == Status.finished.value
         if session.status in TO_RUN and session.status != Status.created.value:
@@ -334,11 +337,42 @@ class BatchRunner:
                     db, self.study_id, self._run_spec(state, checkpoint), self.spec_class,
                     run.source,
                 )  # fmt: skip
-                if run.is_advisor and found is not None and found.status == Status.finished:
-                    checkpoint = found.checkpoint_path
                 if found is not None:
                     row.session, row.status = found.id, found.status
+                if run.is_advisor and found is not None and found.status == Status.finished:
+                    checkpoint = self._preview_advisor(db, state, found, rows)
         return rows
+
+    def _preview_advisor(
+        self, db: Session, state: RunState, found: StudySession, rows: list[PreviewRow]
+    ) -> str | None:
+        """The checkpoint that would advise, from this finished advisor or the attempts
+        after it (each attempt's stored check said in its row); None: none would yet."""
+        while True:
+            row = rows[-1]
+            check = last_check(found.checkpoint_path) if found.checkpoint_path else None
+            failed = check is not None and not check.passed
+            if failed:
+                assert check is not None
+                row.status += f"; failed its check ({'; '.join(check.problems)})"
+            if not failed or self.options.advisor_check != "require":
+                return found.checkpoint_path
+            attempt = state.run.seed - self.spec.advisor_seed + 1
+            if attempt >= self.options.advisor_attempts:
+                row.status += f"; {attempt} attempts failed: the batch stops here"
+                return None
+            state = RunState(Run("autonomous", -1, state.run.seed + 1))
+            next_row = PreviewRow(f"advisor (attempt {attempt + 1})", "autonomous", state.run.seed)
+            rows.append(next_row)
+            retry = find_session(
+                db, self.study_id, self._run_spec(state, None), self.spec_class, None
+            )
+            if retry is None:
+                return None
+            next_row.session, next_row.status = retry.id, retry.status
+            if retry.status != Status.finished:
+                return None
+            found = retry
 
     def prepare(self) -> None:
         """Find or create every run's session; take back the ones whose worker died. (Every

@@ -98,6 +98,10 @@ LIVE_STATUSES = (Status.running, Status.paused)
 RESUMABLE_STATUSES = (Status.stopped, Status.interrupted, Status.abandoned, Status.failed)
 
 
+ADVISOR_ROLE = "advisor"
+"""`StudySession.role` of the advisors a batch trains for its `agent` runs."""
+
+
 class Study(Base):
     __tablename__ = "studies"
     __table_args__ = {"sqlite_autoincrement": True}  # noqa: RUF012 (as SQLAlchemy declares it); ids never return
@@ -236,6 +240,10 @@ class StudySession(Base):
     """A replay's recorded advice stream, copied when it was made so that it resumes and
     reads the same without its source: `source` (study, session, export file or None),
     `actions` and `observation_hashes` (of the images the advisor saw), in advice order."""
+    role: Mapped[str | None] = mapped_column(String(20))
+    """`advisor`: trained by a batch as the agent method's advisor (`ADVISOR_ROLE`), each
+    attempt, passed its check or not, used or not; never one of a report's compared agents.
+    None: any other session."""
 
     study: Mapped[Study] = relationship(back_populates="sessions")
     participant: Mapped[Participant | None] = relationship()

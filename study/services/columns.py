@@ -64,8 +64,9 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     ),
     "advises": (
         "boolean",
-        "True for a trained agent whose checkpoint advises other sessions of the study (the "
-        "agent-IDeepRL method's advisor): not one of the compared agents, and the report "
+        "True for an advisor: a session a batch trained as the agent-IDeepRL method's "
+        "advisor (each attempt, passed its check or not, used or not), or whose checkpoint "
+        "advises other sessions of the study: not one of the compared agents, and the report "
         "leaves it out.",
     ),
     "replay_source": (

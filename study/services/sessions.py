@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session
 
 from learner.run import RunSpec
 from study.db.models import (
+    ADVISOR_ROLE,
     Episode,
     Participant,
     StudySession,
@@ -189,8 +190,10 @@ def list_episodes(db: Session, session_id: int) -> list[Episode]:
 
 
 def advisor_sessions(sessions: list[StudySession]) -> set[int]:
-    """Sessions whose checkpoint advises another of these sessions (method `agent`): the
-    trained advisors, which a report leaves out of the compared agents."""
+    """The advisors among these sessions, which a report leaves out of the compared agents:
+    every advisor a batch trained for its `agent` runs (`role` advisor, each attempt, passed
+    its check or not, used or not), and any session whose checkpoint advises another of
+    these sessions (method `agent`)."""
     # read from the stored run, not `s.spec`: a run declared with fields of its own
     # (`create_app(spec_class=...)`) is not the default RunSpec's to read back
     advising = {
@@ -199,5 +202,6 @@ def advisor_sessions(sessions: list[StudySession]) -> set[int]:
     return {
         s.id
         for s in sessions
-        if s.checkpoint_path and str(Path(s.checkpoint_path).resolve()) in advising
+        if s.role == ADVISOR_ROLE
+        or (s.checkpoint_path and str(Path(s.checkpoint_path).resolve()) in advising)
     }
