@@ -22,11 +22,20 @@ NO_BASELINE = "none"
 """No baseline: the methods are compared with each other, no improvement in percent."""
 
 
-def advisors_left_out(session_ids: Iterable[int]) -> str:
-    """The note on the trained advisors a report leaves out, for both report paths."""
+def advisors_left_out(session_ids: Iterable[int], failed: Iterable[int] = ()) -> str:
+    """The note on the trained advisors a report leaves out, for both report paths: every
+    advisor a batch trained for the agent method (each attempt, used or not); `failed`: those
+    whose stored check failed (known from the database, not from an export)."""
+    ids = sorted(session_ids)
+    failed = sorted(failed)
+    checks = (
+        f" ({len(failed)} failed their check: session(s) {', '.join(map(str, failed))})"
+        if failed
+        else ""
+    )
     return (
-        f"Left out session(s) {', '.join(map(str, sorted(session_ids)))}: the trained "
-        "agent(s) advising the agent-IDeepRL sessions, not compared agents."
+        f"Left out session(s) {', '.join(map(str, ids))}: advisor(s) trained for the "
+        f"agent-IDeepRL method{checks}, not compared agents."
     )
 
 

@@ -189,6 +189,16 @@ def stored_check(
     return next((c for c in checks if c.checkpoint_sha256 == digest and c.run_key == key), None)
 
 
+def last_check(checkpoint: str | Path) -> AdvisorCheck | None:
+    """The check last stored beside `checkpoint` (for whichever run), None if there is none
+    (or it cannot be read): whether the advisor there passed or failed when last checked."""
+    try:
+        checks = json.loads(check_path(checkpoint).read_text()).get("checks", [])
+        return AdvisorCheck.from_json(checks[-1]) if checks else None
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return None
+
+
 def save_check(checkpoint: str | Path, check: AdvisorCheck) -> Path:
     """Add `check` to the checks stored beside `checkpoint` (one per run key)."""
     path = check_path(checkpoint)

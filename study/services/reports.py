@@ -33,6 +33,7 @@ from analysis.finished import (
     nothing_finished,
     status_of,
 )
+from learner.advisor_check import last_check
 from learner.run import RunSpec, run_flags
 from study.db.models import StudySession
 from study.services.errors import Conflict, Invalid, NotFound
@@ -109,6 +110,18 @@ def _ids(sessions: list[StudySession]) -> str:
     return shown + (f" and {len(sessions) - 12} more" if len(sessions) > 12 else "")
 
 
+def failed_advisors(sessions: list[StudySession], advisors: set[int]) -> list[int]:
+    """The advisors whose check, stored beside their checkpoint, failed (as last checked)."""
+    return [
+        s.id
+        for s in sessions
+        if s.id in advisors
+        and s.checkpoint_path
+        and (check := last_check(s.checkpoint_path)) is not None
+        and not check.passed
+    ]
+
+
 def select_sessions(
     db: Session, study_id: int, request: ReportRequest
 ) -> tuple[list[StudySession], list[str]]:
@@ -131,7 +144,7 @@ def select_sessions(
         others = [s for s in everything if s.id not in advisors and s.id not in checks]
         chosen = [s for s in others if is_finished(s.status)]
         if advisors:
-            notes.append(advisors_left_out(advisors))
+            notes.append(advisors_left_out(advisors, failed_advisors(everything, advisors)))
         if checks:
             notes.append(
                 f"Left out session(s) {', '.join(map(str, sorted(checks)))}: unchanged "

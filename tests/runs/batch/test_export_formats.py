@@ -215,7 +215,7 @@ def test_the_report_of_an_export_has_the_advice_quality_and_the_studys_name(
     sessions = pd.read_csv(csv_export / "sessions.csv")
     advisors = sessions.loc[sessions["advises"], "session_id"].tolist()
     assert len(advisors) == 1, sessions[["session_id", "method", "advises"]]
-    assert f"Left out session(s) {advisors[0]}: the trained agent(s) advising" in report
+    assert f"Left out session(s) {advisors[0]}: advisor(s) trained for the agent" in report
     compared = len(sessions) - 1
     assert f"{compared} agents in 2 methods" in report, report[:600]
 
