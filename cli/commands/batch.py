@@ -188,7 +188,10 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         help="the agent runs' advisor is checked first (greedy on 10 fresh episodes and from "
         "the states where it advises: mean reward >= 2.5, no action more than 10 times in a "
         "row); require (default): a given advisor that fails is refused and a trained one is "
-        "trained again from the next seed; record: checked, used anyway; skip",
+        "trained again from the next seed (at most --advisor-attempts); record: checked, used "
+        "anyway (needed for the agent method at reduced scales, where an advisor trained so "
+        "briefly never passes); skip. Every advisor trained is left out of the report's "
+        "agents",
     )
     how.add_argument(
         "--advisor-attempts",
