@@ -5,7 +5,10 @@ made-up curves.
 
 The `ideeprl report --study ID` command reads the database; this one needs only the files,
 and chooses an export's sessions as that one does: the finished ones, except trained
-advisors (the export's `status` and `advises`), or those given with `--sessions`.
+advisors (the export's `status` and `advises`) and unchanged replays (`replay_of`), or those
+given with `--sessions`. Its exit status is that one's: 0 done, 1 nothing to analyse (no
+finished session, sessions that cannot be compared as they are), 2 a usage error (no such
+file, not an export or an episode CSV, an option or a value that is not acceptable).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from typing import Any
 
 import pandas as pd
 
+from analysis.advice import replayed_advice_notes
 from analysis.baseline import (
     AUTO,
     NO_BASELINE,
@@ -28,14 +32,45 @@ from analysis.baseline import (
     compare_conditions,
 )
 from analysis.demo_curves import demo_episodes
-from analysis.episodes import CONTRACT, EpisodeTableError
-from analysis.exported import ExportError, read_export
-from analysis.finished import left_out_notes, nothing_finished
+from analysis.episodes import CONTRACT, REQUIRED_COLUMNS, EpisodeTableError
+from analysis.exported import ExportError, export_of_table, read_export
+from analysis.finished import Choice, left_out_notes, nothing_finished
+from analysis.replays import REPLAYED, unchanged_replays_note
 from analysis.report import write_report
 
-CHOOSE = "`--sessions ID ...` and `--episodes N`"
-"""How this command includes sessions not finished yet."""
+CHOOSE = Choice("`--sessions ID ...` and `--episodes N`", "`--episodes {n}`")
+"""How this command includes sessions not finished yet, and cuts sessions to a length."""
 AFTER = " (and export the study again)"
+EXIT_RUNTIME = 1
+"""Nothing to analyse: `ideeprl report`'s runtime error."""
+EXIT_USAGE = 2
+"""No such file, not an export or episode CSV, a value that is not acceptable."""
+
+
+def _fail(message: str, code: int = EXIT_USAGE) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return code
+
+
+def _read_csv(path: Path) -> pd.DataFrame | str:
+    """The episode CSV at `path`, or what is wrong with it (a usage error)."""
+    folder = export_of_table(path)
+    if folder is not None:
+        return (
+            f"{path} is a table of the export {folder}; pass the export's folder ({folder}), "
+            "not one of its tables"
+        )
+    try:
+        episodes = pd.read_csv(path)
+    except (ValueError, UnicodeDecodeError) as error:  # pandas' ParserError is a ValueError
+        return f"{path} is not a CSV ({error}); pass a study's export or an episode CSV"
+    missing = [c for c in REQUIRED_COLUMNS if c not in episodes.columns]
+    if missing:
+        return (
+            f"{path} is not an episode table: it lacks column(s) {', '.join(missing)}; pass "
+            f"a study's export (its folder or zip) or a CSV of {CONTRACT}"
+        )
+    return episodes
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -72,6 +107,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.demo == (args.episodes is not None):
         parser.error("give an episode CSV, or --demo without one")
+    if not args.demo and not Path(args.episodes).exists():
+        return _fail(
+            f"no such file or folder: {args.episodes}; pass a study's export (its folder or "
+            "zip) or an episode CSV"
+        )
+    if Path(args.out_dir).exists() and not Path(args.out_dir).is_dir():
+        return _fail(f"{args.out_dir} is a file; pass a folder for the report")
     is_export = not args.demo and (
         Path(args.episodes).is_dir() or zipfile.is_zipfile(args.episodes)
     )
@@ -86,16 +128,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             export = read_export(Path(args.episodes), sessions=args.sessions)
         except ExportError as error:
-            print(f"error: {error}", file=sys.stderr)
-            return 2
+            return _fail(str(error))
         if not export.runs and export.not_finished:
-            message = nothing_finished("the export", export.not_finished, CHOOSE, AFTER)
-            print(f"error: {message}", file=sys.stderr)
-            return 2
+            message = nothing_finished("the export", export.not_finished, CHOOSE.sessions, AFTER)
+            return _fail(message, EXIT_RUNTIME)
         episodes, settings = export.episodes, export.settings
         notes = [f"Sessions from the export `{args.episodes}`."]
         left_out = [advisors_left_out(export.advisors)] if export.advisors else []
-        left_out += left_out_notes(export.not_finished, CHOOSE, AFTER)
+        if export.unchanged_replays:
+            left_out.append(unchanged_replays_note(export.unchanged_replays))
+        left_out += left_out_notes(export.not_finished, CHOOSE.sessions, AFTER)
         for note in left_out:
             print(f"note: {note}", file=sys.stderr)
         notes += left_out
@@ -104,6 +146,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             group = {i: str(run.method) for i, run in export.runs.items()} | export.conditions
             episodes, settings, note = compare_conditions(episodes, settings, group, export.alpha)
             notes.append(note)
+        if export.replayed_advice is not None:  # each replayed arm: how much advice met its image
+            arms = {i: export.conditions.get(i, str(run.method)) for i, run in export.runs.items()}
+            replayed = {i: arms[i] for i, run in export.runs.items() if run.method == REPLAYED}
+            notes += replayed_advice_notes(export.replayed_advice, replayed)
         extra = {
             "settings": settings,
             "steps": export.steps,
@@ -112,13 +158,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         }
         title = export.name or title
     else:
-        episodes = pd.read_csv(args.episodes)
+        read = _read_csv(Path(args.episodes))
+        if isinstance(read, str):
+            return _fail(read)
+        episodes = read
         notes = [f"Episodes from `{args.episodes}`."]
     try:
         baseline, baseline_notes = choose_baseline(episodes["method"].unique(), args.baseline)
     except BaselineError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+        return _fail(str(error))
     try:
         result = write_report(
             episodes,
@@ -130,9 +178,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             smoothing=args.smoothing,
             **extra,
         )
-    except EpisodeTableError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    except EpisodeTableError as error:  # an export's sessions: as `ideeprl report` says it
+        if is_export:
+            reason = error.worded(CHOOSE.length)
+            return _fail(f"these sessions cannot be compared as they are: {reason}", EXIT_RUNTIME)
+        return _fail(error.worded(CHOOSE.length))
     for path in result.files:
         print(path)
     return 0

@@ -71,8 +71,31 @@ CONTRACT = (
 )
 
 
+PYTHON_LENGTH = "n_episodes={n}"
+"""How the Python API (`validate_episodes`, `write_report`) is told to keep the first N
+episodes: the default wording of `EpisodeTableError.worded`."""
+
+
 class EpisodeTableError(ValueError):
-    """The episode table breaks the contract; the message says what to change."""
+    """The episode table breaks the contract; the message says what to change.
+
+    Where the fix is a number of episodes to keep (`n_episodes`), the message names it in
+    the Python API's terms (`n_episodes=9`); `worded` names it in a caller's own (the
+    command line's `--n-episodes 9`, the REST body's `n_episodes`)."""
+
+    def __init__(self, message: str, n_episodes: int | None = None) -> None:
+        self.text = message
+        """The message, `{n_episodes}` where it names the number of episodes to keep."""
+        self.n_episodes = n_episodes
+        """That number (None: the message names none)."""
+        super().__init__(self.worded(PYTHON_LENGTH))
+
+    def worded(self, length: str) -> str:
+        """The message, its number of episodes to keep in the caller's terms: `length`, a
+        template with `{n}` (e.g. "`--n-episodes {n}`")."""
+        if self.n_episodes is None:
+            return self.text
+        return self.text.replace("{n_episodes}", length.format(n=self.n_episodes))
 
 
 def method_name(method: str) -> str:
@@ -97,8 +120,9 @@ def natural_key(label: str) -> tuple[object, ...]:
     return tuple(int(p) if i % 2 else p for i, p in enumerate(parts))
 
 
-def _fail(problem: str, fix: str) -> EpisodeTableError:
-    return EpisodeTableError(f"{problem}. {fix}")
+def _fail(problem: str, fix: str, n_episodes: int | None = None) -> EpisodeTableError:
+    """`fix` may hold `{n_episodes}`: the number `n_episodes` in the caller's terms."""
+    return EpisodeTableError(f"{problem}. {fix}", n_episodes)
 
 
 def _some(values: Iterable[object], limit: int = 5) -> str:
@@ -219,9 +243,11 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
         short = counts[counts["count"] < n_episodes]
         if len(short):
             raise _fail(
-                f"n_episodes={n_episodes} but sessions {_some(short.index)} have only "
-                f"{_some(sorted(short['count'].unique()))} episodes",
-                f"Pass n_episodes={int(counts['count'].min())} or less, or drop those sessions",
+                f"sessions {_some(short.index)} have only "
+                f"{_some(sorted(short['count'].unique()))} episodes, fewer than the "
+                f"{n_episodes} asked for",
+                "Pass {n_episodes} or less, or drop those sessions.",
+                int(counts["count"].min()),
             )
         table = table[table["episode"] <= n_episodes]
     elif counts["count"].nunique() > 1:
@@ -232,8 +258,9 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
         raise _fail(
             f"agents have unequal numbers of episodes ({summary}; "
             f"the shortest: session(s) {shortest})",
-            f"R_T and the curves compare equal runs: pass n_episodes={fewest} to keep the "
-            "first episodes of every agent, or drop the unfinished sessions",
+            "R_T and the curves compare equal runs: pass {n_episodes} to keep the first "
+            "episodes of every agent, or drop the unfinished sessions.",
+            fewest,
         )
 
     method_rank = {m: i for i, m in enumerate(order_methods(table["method"]))}

@@ -25,9 +25,10 @@ from typing import Any
 
 import pandas as pd
 
-from analysis.advice import ADVICE_COLUMNS
+from analysis.advice import ADVICE_COLUMNS, REPLAYED_ADVICE_COLUMNS
 from analysis.episodes import EPISODE_TABLE_COLUMNS
 from analysis.finished import not_finished, status_of
+from analysis.replays import REPLAYED, unchanged_replays
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.fields import FieldError, leaves, nest
@@ -67,6 +68,12 @@ class Exported:
     not_finished: dict[int, str] = field(default_factory=dict)
     """Sessions left out for not being finished (`analysis.finished`), by id: their status
     (the export's `status`)."""
+    unchanged_replays: dict[int, int] = field(default_factory=dict)
+    """Sessions left out: unchanged replays (`analysis.replays`), by id, with the session
+    each replays (the export's `replay_of`, its source's run in the export)."""
+    replayed_advice: pd.DataFrame | None = None
+    """The advice rows of the replays compared (`analysis.advice.REPLAYED_ADVICE_COLUMNS`,
+    from the export's advice table; None without replays or without the table)."""
 
     @property
     def alpha(self) -> float:
@@ -78,18 +85,19 @@ def read_export(
     path: Path, spec_class: type[RunSpec] = RunSpec, sessions: Collection[int] | None = None
 ) -> Exported:
     """The export at `path` (a folder, or the zip the API serves): the sessions a report
-    takes by default, as the database's report chooses them (trained advisors and, where the
-    export has their status, sessions not finished are left out), or else `sessions`, by
-    id (any status)."""
+    takes by default, as the database's report chooses them (trained advisors, unchanged
+    replays and, where the export has their status, sessions not finished are left out), or
+    else `sessions`, by id (any status)."""
     path = Path(path)
     if path.is_file() and zipfile.is_zipfile(path):
         with tempfile.TemporaryDirectory() as tmp, zipfile.ZipFile(path) as archive:
             archive.extractall(tmp)
             return read_export(Path(tmp), spec_class, sessions)
-    table = _table(path, "sessions")
+    table = every = _table(path, "sessions")
     ids = table["session_id"].astype(int)
     advisors: tuple[int, ...] = ()
     left_out: dict[int, str] = {}
+    checks: dict[int, int] = {}
     if sessions is not None:
         missing = sorted(set(sessions) - set(ids))
         if missing:
@@ -105,6 +113,8 @@ def read_export(
             if "advises" in row and not _missing(row["advises"]) and _boolean(row["advises"])
         )  # older exports have no such column: their advisors stay in
         table = table[~ids.isin(advisors)]
+        checks = _unchanged_replays(every, table, spec_class)
+        table = table[~table["session_id"].astype(int).isin(list(checks))]
         if "status" in table:  # (a table without it keeps every session)
             left_out = not_finished({int(row["session_id"]): _status(row) for row in _rows(table)})
             table = table[~table["session_id"].astype(int).isin(list(left_out))]
@@ -133,6 +143,10 @@ def read_export(
         name=_study(path).get("name"),
         advisors=advisors,
         not_finished=left_out,
+        unchanged_replays=checks,
+        replayed_advice=_replayed_advice(
+            path, [i for i, r in runs.items() if r.method == REPLAYED]
+        ),
         runs=runs,
         episodes=training[list(EPISODE_TABLE_COLUMNS)].reset_index(drop=True),
         steps=steps[[*STEP_COLUMNS, *(["outcome"] if "outcome" in steps else [])]].reset_index(
@@ -140,6 +154,58 @@ def read_export(
         ),
         settings=settings_table(sorted(runs.items()), spec_class, _provenance(table)),
     )
+
+
+def export_of_table(path: Path) -> Path | None:
+    """The export folder whose table `path` is (its episodes.csv, steps.parquet, ...), or
+    None: a file beside an export's `sessions` table."""
+    if not path.is_file() or path.suffix not in (".csv", ".parquet"):
+        return None
+    folder = path.parent
+    if any((folder / f"sessions{suffix}").is_file() for suffix in (".csv", ".parquet")):
+        return folder
+    return None
+
+
+def _unchanged_replays(
+    every: pd.DataFrame, chosen: pd.DataFrame, spec_class: type[RunSpec]
+) -> dict[int, int]:
+    """Of the `chosen` sessions, the unchanged replays of a session in the export (`every`
+    session, any status): an export without `replay_of` has none."""
+    if "replay_of" not in chosen:
+        return {}
+    replay_of = {
+        int(row["session_id"]): int(float(row["replay_of"]))
+        for row in _rows(chosen)
+        if not _missing(row["replay_of"]) and str(row.get("method", REPLAYED)) == REPLAYED
+    }
+    if not replay_of:
+        return {}
+    rows = {int(row["session_id"]): row for row in _rows(every)}
+    runs = {i: run_of(rows[i], spec_class) for i in replay_of}
+    sources = {i: run_of(rows[i], spec_class) for i in set(replay_of.values()) if i in rows}
+    return unchanged_replays(runs, replay_of, sources)
+
+
+def _replayed_advice(path: Path, replays: list[int]) -> pd.DataFrame | None:
+    """The advice rows of these replays, as the database's report reads them."""
+    if not replays:
+        return None
+    try:
+        advice = _table(path, "advice")
+    except ExportError:  # an export without the advice table
+        return None
+    if "same_observation" not in advice:
+        return None
+    advice["session_id"] = pd.to_numeric(advice["session_id"]).astype("int64")
+    advice = advice[advice["session_id"].isin(replays)]
+    if "advice_index" in advice:
+        advice = advice.assign(_i=pd.to_numeric(advice["advice_index"]))
+        advice = advice.sort_values(["session_id", "_i"])
+    same = advice["same_observation"].map(lambda v: None if _missing(v) else _boolean(v))
+    action = advice["action"].map(lambda v: None if _missing(v) else int(float(v)))
+    rows = advice.assign(same_observation=same, action=action)
+    return rows[list(REPLAYED_ADVICE_COLUMNS)].reset_index(drop=True)
 
 
 def _status(row: Mapping[str, Any]) -> str:

@@ -19,6 +19,7 @@ declined consent stays `created` (they may still consent): a report names it as 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 FINISHED = "finished"
 
@@ -35,6 +36,21 @@ ENDED = {
     "timed_out": "timed out",
 }
 """Statuses of sessions that ended without finishing, as a report names them."""
+
+
+@dataclass(frozen=True)
+class Choice:
+    """How a report's caller chooses sessions and their length, in its own terms (the
+    command line's flags, the REST body's fields): what its messages suggest."""
+
+    sessions: str
+    """Choosing sessions by id with a number of episodes, e.g. "`--sessions ID ...` and
+    `--n-episodes N`": how to include sessions not finished yet."""
+    length: str
+    """Keeping the first N episodes of every session, a template with `{n}`, e.g.
+    "`--n-episodes {n}`": how to compare sessions of different lengths
+    (`analysis.episodes.EpisodeTableError.worded`)."""
+
 
 SHOWN = 12
 """Session ids named per status before the rest are counted."""

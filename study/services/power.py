@@ -36,7 +36,7 @@ from analysis.stats import agent_totals
 from study.csvsafe import safe_frame
 from study.services.episodes import load_episodes, session_settings
 from study.services.errors import Conflict, Invalid
-from study.services.reports import ReportRequest, select_sessions
+from study.services.reports import CLI_CHOICE, ReportRequest, select_sessions
 from study.services.studies import get_study
 
 MIN_DRAWS = 100
@@ -155,7 +155,8 @@ def study_power(
     try:
         table = validate_episodes(episodes, n_episodes=request.n_episodes)
     except EpisodeTableError as error:
-        raise Conflict(f"these sessions cannot be compared as they are: {error}") from None
+        reason = error.worded(CLI_CHOICE.length)  # `ideeprl power` is its one caller
+        raise Conflict(f"these sessions cannot be compared as they are: {reason}") from None
     agents = agent_totals(table, baseline=None)
     r_t = {
         m: agents.loc[agents["method"] == m, "R_T"].to_numpy(dtype=float)

@@ -28,6 +28,8 @@ from typing import Any, TypedDict, cast
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from analysis.replays import same_run
+from analysis.replays import unchanged_replays as unchanged_replays_rule
 from learner import provenance as provenance_
 from learner.config import DQNConfig
 from learner.fields import FieldError
@@ -239,26 +241,19 @@ def replay_run(original: RunSpec, values: Mapping[str, Any]) -> RunSpec:
 
 def unchanged(stream: Stream, run: RunSpec) -> bool:
     """Whether `run` is the source's own run (only its method differs)."""
-    return _same_run(stream.run, run)
-
-
-def _same_run(original: RunSpec, run: RunSpec) -> bool:
-    as_replay = original.replace(method="replayed", advisor_checkpoint=None, error_rate=0.0)
-    return as_replay.normalized() == run.normalized()
+    return same_run(stream.run, run)
 
 
 def unchanged_replays(db: Session, sessions: Iterable[StudySession]) -> dict[int, int]:
     """Of these sessions, the replays that run their source's own run (the determinism
-    check), by id, with their source's id: the same agent again, not one of its own. Only a
-    source in this database is known; a replay of an export counts as changed."""
-    found = {}
-    for session in sessions:
-        if session.method != "replayed" or session.replay_of is None:
-            continue
-        source = db.get(StudySession, session.replay_of)
-        if source is not None and _same_run(source.spec, session.spec):
-            found[session.id] = source.id
-    return found
+    check, `analysis.replays.unchanged_replays`), by id, with their source's id: the same
+    agent again, not one of its own. Only a source in this database is known; a replay of
+    an export counts as changed."""
+    replays = [s for s in sessions if s.method == "replayed" and s.replay_of is not None]
+    replay_of = {s.id: s.replay_of for s in replays if s.replay_of is not None}
+    sources = {i: db.get(StudySession, i) for i in set(replay_of.values())}
+    known = {i: source.spec for i, source in sources.items() if source is not None}
+    return unchanged_replays_rule({s.id: s.spec for s in replays}, replay_of, known)
 
 
 def create_replay(

@@ -27,12 +27,14 @@ from analysis.baseline import AUTO, BaselineError, advisors_left_out, compare_co
 from analysis.baseline import choose_baseline as baseline_rule
 from analysis.episodes import EpisodeTableError, method_name
 from analysis.finished import (
+    Choice,
     is_finished,
     left_out_notes,
     not_finished,
     nothing_finished,
     status_of,
 )
+from analysis.replays import unchanged_replays_note
 from learner.advisor_check import last_check
 from learner.run import RunSpec, run_flags
 from study.db.models import StudySession
@@ -48,19 +50,23 @@ if TYPE_CHECKING:
 
 _publishing = threading.Lock()
 
-CLI_CHOICE = "`--sessions ID ...` and `--n-episodes N`"
+CLI_CHOICE = Choice("`--sessions ID ...` and `--n-episodes N`", "`--n-episodes {n}`")
 """How `ideeprl report` (and `ideeprl power`) choose sessions by id and cut them to a length."""
-API_CHOICE = "the body's `sessions` (their ids) and `n_episodes`"
+API_CHOICE = Choice(
+    "the body's `sessions` (their ids) and `n_episodes`", '`"n_episodes": {n}` in the body'
+)
 """How `POST /api/studies/{id}/report` does."""
 
 
-def dashboard_choice(study_id: int) -> str:
+def dashboard_choice(study_id: int) -> Choice:
     """Where the dashboard's researcher chooses sessions (its Build report takes the
     finished ones): the REST API, or the command line."""
-    return (
+    return Choice(
         f"`POST /api/studies/{study_id}/report` (the body's `sessions` and `n_episodes`) or "
         f"`ideeprl report --study {study_id} --sessions ID ... --n-episodes N`; the "
-        "dashboard's Build report takes the finished sessions"
+        "dashboard's Build report takes the finished sessions",
+        f'`"n_episodes": {{n}}` to `POST /api/studies/{study_id}/report` (or '
+        f"`ideeprl report --study {study_id} --n-episodes {{n}}`)",
     )
 
 
@@ -91,10 +97,10 @@ class ReportRequest:
     """`authors`: draw the authors' published curves on Figure 5."""
     primary: str = "welch"
     """Each comparison's primary test: `welch`, or `paired` over seeds where they pair."""
-    choose: str = CLI_CHOICE
-    """How the caller chooses sessions by id with a number of episodes, in its own terms: what
-    the report suggests for sessions not finished yet (`CLI_CHOICE`, `API_CHOICE`,
-    `dashboard_choice`)."""
+    choose: Choice = CLI_CHOICE
+    """How the caller chooses sessions by id and a number of episodes, in its own terms: what
+    the report suggests for sessions not finished yet, and for sessions of different lengths
+    (`CLI_CHOICE`, `API_CHOICE`, `dashboard_choice`)."""
 
 
 def _statuses(sessions: list[StudySession]) -> dict[int, str]:
@@ -146,13 +152,8 @@ def select_sessions(
         if advisors:
             notes.append(advisors_left_out(advisors, failed_advisors(everything, advisors)))
         if checks:
-            notes.append(
-                f"Left out session(s) {', '.join(map(str, sorted(checks)))}: unchanged "
-                f"replay(s) of session(s) {', '.join(map(str, sorted(set(checks.values()))))} "
-                "(a check that the platform reproduces a run, the same agent again, not one "
-                "of its own); choose sessions by id to include them."
-            )
-        notes += left_out_notes(not_finished(_statuses(others)), request.choose)
+            notes.append(unchanged_replays_note(checks))
+        notes += left_out_notes(not_finished(_statuses(others)), request.choose.sessions)
     if request.label is not None:
         chosen = [s for s in chosen if s.label == request.label]
         notes.append(f"Sessions labelled {request.label!r} only.")
@@ -175,7 +176,7 @@ def _nothing_chosen(study_id: int, everything: list[StudySession], request: Repo
         )
     finished = [s for s in everything if is_finished(s.status)]
     if not finished:
-        return nothing_finished(f"study {study_id}", _statuses(everything), request.choose)
+        return nothing_finished(f"study {study_id}", _statuses(everything), request.choose.sessions)
     labels = sorted({s.label for s in finished if s.label}, key=str)
     methods = sorted({s.method for s in finished})
     problems = []
@@ -323,7 +324,8 @@ def build_report(
             alpha=design.alpha if design is not None else 0.05,  # write_report's default
         )
     except EpisodeTableError as error:
-        raise Conflict(f"these sessions cannot be compared as they are: {error}") from None
+        reason = error.worded(request.choose.length)
+        raise Conflict(f"these sessions cannot be compared as they are: {reason}") from None
     return StudyReport(result, (*notes, *baseline_notes, *result.notes))
 
 

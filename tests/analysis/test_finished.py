@@ -79,7 +79,7 @@ def test_an_export_of_a_session_still_training_has_nothing_to_report(
     export = _export(data_dir, "training", tmp_path / "export")
     capsys.readouterr()
     out = tmp_path / "report"
-    assert analyse([str(export), str(out)]) == 2
+    assert analyse([str(export), str(out)]) == 1, "nothing to analyse, as `ideeprl report`"
     error = capsys.readouterr().err
     assert error.startswith("error: the export has no finished session. Not finished yet: ")
     assert "session 1 (running); wait until it finishes (and export the study again), " in error
@@ -131,3 +131,53 @@ def test_an_exports_analysis_leaves_out_what_the_databases_report_leaves_out(
     assert "3 agents in 1 method, 2 episodes each" in (chosen / "report.md").read_text()
     assert analyse([str(export), str(chosen), "--sessions", "99"]) == 2
     assert "session(s) 99 are not in the export" in capsys.readouterr().err
+
+
+def test_an_exports_table_or_a_missing_path_is_a_usage_error_of_one_line(
+    data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    export = _export(data_dir, "mixed", tmp_path / "export")
+    (tmp_path / "other.csv").write_text("a,b\n1,2\n")
+    capsys.readouterr()
+    out = str(tmp_path / "report")
+    cases = {
+        export / "episodes.csv": f"is a table of the export {export}; pass the export's folder",
+        tmp_path / "nonexist": f"no such file or folder: {tmp_path / 'nonexist'}; pass a study's",
+        tmp_path / "other.csv": "is not an episode table: it lacks column(s) session_id, method",
+    }
+    for path, expected in cases.items():
+        assert analyse([str(path), out]) == 2, path
+        error = capsys.readouterr().err
+        assert error.startswith("error: ") and expected in error, error
+        assert error.count("\n") == 1 and "Traceback" not in error, error
+
+
+def test_sessions_of_different_lengths_are_told_the_callers_own_option(
+    data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Sessions 2 (finished, 4 episodes) and 4 (running, 2 episodes): each caller is told
+    how to cut them to 2 episodes in its own terms, as a runtime error (exit 1)."""
+    from study.services.errors import Conflict
+    from study.services.reports import API_CHOICE, ReportRequest, build_report
+
+    flags = ["--study", "mixed", "--data-dir", str(data_dir), "--sessions", "2", "4"]
+    assert main(["report", *flags, "--out", str(tmp_path / "report")]) == 1
+    error = capsys.readouterr().err
+    assert "pass `--n-episodes 2` to keep the first episodes of every agent, or drop the " in (
+        error
+    )
+    assert error.endswith("unfinished sessions.\n") and "n_episodes" not in error, error
+    assert main(["report", *flags, "--n-episodes", "3", "--out", str(tmp_path / "r")]) == 1
+    error = capsys.readouterr().err
+    assert "fewer than the 3 asked for. Pass `--n-episodes 2` or less" in error, error
+    export = _export(data_dir, "mixed", tmp_path / "export")
+    capsys.readouterr()
+    assert analyse([str(export), str(tmp_path / "from-export"), "--sessions", "2", "4"]) == 1
+    error = capsys.readouterr().err
+    assert "pass `--episodes 2` to keep the first episodes" in error, error
+    engine = make_engine(f"sqlite:///{data_dir / 'ideeprl.sqlite3'}")
+    with make_session_factory(engine)() as db, pytest.raises(Conflict) as refused:
+        request = ReportRequest(sessions=(2, 4), choose=API_CHOICE)
+        build_report(db, 2, tmp_path / "api", request)
+    engine.dispose()
+    assert 'pass `"n_episodes": 2` in the body to keep the first episodes' in refused.value.message
