@@ -139,6 +139,8 @@ def student_t_test(a: np.ndarray, b: np.ndarray, *, equal_var: bool = True) -> t
     """
     if len(a) < 2 or len(b) < 2:
         return float("nan"), float("nan")
+    if np.ptp(a) == 0 and np.ptp(b) == 0:  # every value equal in each (as the power's
+        return float("nan"), float("nan")  # welch_rejects: scipy gives t = ±inf, p = 0)
     with warnings.catch_warnings(), np.errstate(divide="ignore", invalid="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)  # a constant sample is legitimate
         result = stats.ttest_ind(a, b, equal_var=equal_var)

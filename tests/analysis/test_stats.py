@@ -220,3 +220,12 @@ def test_method_correlations_average_the_pairs_between_methods() -> None:
     # a1 and a2 against g1, g2: +1, +1, -1, -1
     assert summary.loc[("autonomous", "agent"), "mean_r"] == pytest.approx(0.0)
     assert summary.loc[("autonomous", "agent"), "pairs"] == 4
+
+
+def test_two_constant_samples_are_no_test() -> None:
+    """Every value equal in each: t is d/0, undefined, as its docstring says (scipy gives
+    t = -inf, p = 0: 'significant'), and as the power simulation counts such a study."""
+    t, p = student_t_test(np.array([0.1, 0.1, 0.1]), np.array([0.2, 0.2, 0.2]))
+    assert math.isnan(t) and math.isnan(p)
+    t, p = student_t_test(np.array([0.1, 0.1, 0.1]), np.array([0.2, 0.3, 0.2]))
+    assert not math.isnan(p), "one constant sample beside a varying one is a test"
