@@ -172,8 +172,8 @@ class RunSpec:
     strategy_options: StrategyOptions = group(StrategyOptions, prefix="strategy_")
     """The strategy's options besides its budget."""
     advisor_checkpoint: str | None = bounded(None, role="treatment", max_length=1000)
-    """The trained learner whose checkpoint advises (method agent): `session:ID` through the
-    API, or a checkpoint file's path."""
+    """The trained learner whose checkpoint advises (method agent): `session:ID` (a session
+    of this installation), or a checkpoint file's path."""
     schedule: str | None = bounded(None, role="treatment", max_length=1000)
     """The advised run whose advising procedure this control follows (method procedure): a
     schedule file (`learner.procedure.Schedule`; the batch writes one per paired run)."""

@@ -215,7 +215,8 @@ def spec_from(
     args: argparse.Namespace, stored_model: Callable[[str], str] | None = None
 ) -> BatchSpec:
     """The batch the arguments describe, every run checked (`BatchError` otherwise); a
-    `fitted_model` given as `fitted:ID` is the file `stored_model` finds for it."""
+    `fitted_model` given as `fitted:ID` or an `advisor_checkpoint` as `session:ID` is the
+    file `stored_model` finds for it."""
     from runs.batch import BatchError, BatchSpec
 
     spec_class: type[RunSpec] = getattr(args, "spec_class", RunSpec)
@@ -227,9 +228,11 @@ def spec_from(
         else:
             values.setdefault("torch_threads", 1)  # a batch fills the cores with 1-thread runs
             template = spec_class.from_json(nest(values, spec_class))
-        fitted = template.fitted_model
+        fitted, advisor = template.fitted_model, template.advisor_checkpoint
         if fitted is not None and fitted.startswith("fitted:") and stored_model is not None:
             template = template.replace(fitted_model=stored_model(fitted))
+        if advisor is not None and advisor.startswith("session:") and stored_model is not None:
+            template = template.replace(advisor_checkpoint=stored_model(advisor))
         per_method: dict[str, dict[str, Any]] = {}
         for method, name, text in args.per_method:
             if name not in by_name or name == "method":
@@ -366,12 +369,16 @@ def batch(args: argparse.Namespace) -> int:
 
 
 def _stored_model(name: str, settings: Settings) -> str:
-    """The file of the stored model `fitted:ID` names (written again if gone), as a
-    session's run through the API resolves it."""
+    """The file `fitted:ID` (a stored fitted model, written again if gone) or `session:ID`
+    (a session's checkpoint, its advisor) names, as a session's run through the API
+    resolves it."""
     from study.db.engine import make_session_factory
     from study.services.fitted_files import resolve
+    from study.services.sessions import advisor_path
 
     with make_session_factory(existing_database(settings))() as db:
+        if name.startswith("session:"):
+            return advisor_path(db, name, None)
         return resolve(db, name, settings.data_dir)
 
 

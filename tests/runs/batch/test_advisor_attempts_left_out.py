@@ -64,3 +64,11 @@ def test_failed_advisor_attempts_are_not_counted_as_autonomous_agents(
     assert analyse([str(tmp_path / "x"), str(tmp_path / "a")]) == 0
     analysed = (tmp_path / "a" / "report.md").read_text()
     assert "4 agents in 2 methods" in analysed and note in analysed, analysed[:1500]
+
+    # an advisor named as the API names it, session:ID, from the command line too
+    named = ["batch", "--study", "again", "--methods", "agent", "--agents", "1", *SCALE]
+    code, out = in_process(place, capsys, *named, "--advisor-checkpoint", f"session:{advisors[0]}",
+                           "--dry-run")  # fmt: skip
+    assert code == 0, out
+    code, out = in_process(place, capsys, *named, "--advisor-checkpoint", "session:999999")
+    assert code == 2 and "names no session of this installation" in out, out
