@@ -122,6 +122,8 @@ class BatchSpec:
         fitted = self.template.fitted_model
         if fitted is not None and "fitted" not in self.methods:
             raise BatchError("a fitted model is only used by the 'fitted' method")
+        if self.template.error_rate and "oracle" not in self.methods:
+            raise BatchError("an error rate is only used by the 'oracle' method")
         if "fitted" in self.methods:
             from learner.fitted import read_model
 

@@ -40,6 +40,10 @@ from tests.runs.batch.helpers import in_process as run
             "config.memory_size must be an integer from 1 to 10000000",
         ),
         (["--advisor-checkpoint", "/no/such.pt"], "no advisor checkpoint at the path given"),
+        (
+            ["--methods", "autonomous", "--error-rate", "0.3"],
+            "an error rate is only used by the 'oracle' method",
+        ),
         (["--set", "no_such_field=1"], "--set: unknown field no_such_field"),
         (["--per-method", "agent:no_such=1"], "--per-method: unknown field no_such"),
         (["--per-method", "random:reward_scheme=paper"], "settings are given for random"),
