@@ -14,6 +14,8 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
+from analysis.markdown import some
+
 REQUIRED_COLUMNS: tuple[str, ...] = ("session_id", "method", "episode", "collected_reward")
 """Columns every episode table must have."""
 
@@ -125,18 +127,12 @@ def _fail(problem: str, fix: str, n_episodes: int | None = None) -> EpisodeTable
     return EpisodeTableError(f"{problem}. {fix}", n_episodes)
 
 
-def _some(values: Iterable[object], limit: int = 5) -> str:
-    items = [str(v) for v in values]
-    more = f" and {len(items) - limit} more" if len(items) > limit else ""
-    return ", ".join(items[:limit]) + more
-
-
 def _one_per_session(table: pd.DataFrame, column: str) -> None:
     counts = table.groupby("session_id", sort=False)[column].nunique(dropna=False)
     mixed = counts[counts > 1].index
     if len(mixed):
         raise _fail(
-            f"column {column!r} changes within sessions {_some(mixed)}",
+            f"column {column!r} changes within sessions {some(mixed)}",
             f"A session is one agent: give every row of a session the same {column}",
         )
 
@@ -184,7 +180,7 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
     bad = table.loc[episode.isna() | (episode < 1) | (episode % 1 != 0), "episode"]
     if len(bad):
         raise _fail(
-            f"episode must be a whole number from 1, found {_some(bad.unique())}",
+            f"episode must be a whole number from 1, found {some(bad.unique())}",
             "Number each session's episodes 1, 2, ..., N",
         )
     table["episode"] = episode.astype(np.int64)
@@ -192,9 +188,7 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
     reward = pd.to_numeric(table["collected_reward"], errors="coerce")
     bad_rows = table.loc[~np.isfinite(reward.to_numpy(dtype=float))]
     if len(bad_rows):
-        where = _some(
-            f"{s}/{e}" for s, e in zip(bad_rows.session_id, bad_rows.episode, strict=True)
-        )
+        where = some(f"{s}/{e}" for s, e in zip(bad_rows.session_id, bad_rows.episode, strict=True))
         raise _fail(
             f"collected_reward is missing or not a finite number at session/episode {where}",
             "Drop those episodes (and use n_episodes= to keep agents equal) or fix the values",
@@ -204,7 +198,7 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
     duplicated = table.duplicated(["session_id", "episode"], keep=False)
     if duplicated.any():
         rows = table.loc[duplicated]
-        where = _some(
+        where = some(
             sorted({f"{s}/{e}" for s, e in zip(rows.session_id, rows.episode, strict=True)})
         )
         raise _fail(
@@ -224,7 +218,7 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
     labels = table.drop_duplicates("session_id")
     shared = labels[labels.duplicated("label", keep=False)]
     if len(shared):
-        names = _some(sorted(shared["label"].unique()))
+        names = some(sorted(shared["label"].unique()))
         raise _fail(
             f"label(s) {names} name more than one session",
             "Give each session its own label, or drop the label column to derive them",
@@ -234,7 +228,7 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
     gaps = counts[counts["count"] != counts["max"]].index
     if len(gaps):
         raise _fail(
-            f"sessions {_some(gaps)} skip episodes (their episodes are not 1..N)",
+            f"sessions {some(gaps)} skip episodes (their episodes are not 1..N)",
             "Export every episode of those sessions, or drop them",
         )
     if n_episodes is not None:
@@ -243,8 +237,8 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
         short = counts[counts["count"] < n_episodes]
         if len(short):
             raise _fail(
-                f"sessions {_some(short.index)} have only "
-                f"{_some(sorted(short['count'].unique()))} episodes, fewer than the "
+                f"sessions {some(short.index)} have only "
+                f"{some(sorted(short['count'].unique()))} episodes, fewer than the "
                 f"{n_episodes} asked for",
                 "Pass {n_episodes} or less, or drop those sessions.",
                 int(counts["count"].min()),
@@ -254,7 +248,7 @@ def validate_episodes(episodes: pd.DataFrame, *, n_episodes: int | None = None) 
         sizes = counts.groupby("count").size().sort_index()
         summary = "; ".join(f"{n} session(s) with {k} episodes" for k, n in sizes.items())
         fewest = int(sizes.index.min())
-        shortest = _some(counts[counts["count"] == fewest].index)
+        shortest = some(counts[counts["count"] == fewest].index)
         raise _fail(
             f"agents have unequal numbers of episodes ({summary}; "
             f"the shortest: session(s) {shortest})",

@@ -21,6 +21,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from analysis.markdown import count, some
+
 FINISHED = "finished"
 
 UNDER_WAY = {"created": "not started", "running": "running", "paused": "paused"}
@@ -81,11 +83,14 @@ def left_out_notes(left_out: Mapping[int, str], choose: str, after: str = "") ->
     notes = []
     if under_way:
         notes.append(
-            f"Left out {_count(under_way)} not finished yet: {_listing(under_way)}; "
-            f"{_wait(under_way, choose, after)}."
+            f"Left out {count(len(under_way), 'session')} not finished yet: "
+            f"{_listing(under_way)}; {_wait(under_way, choose, after)}."
         )
     if ended:
-        notes.append(f"Left out {_count(ended)} that ended without finishing: {_listing(ended)}.")
+        notes.append(
+            f"Left out {count(len(ended), 'session')} that ended without finishing: "
+            f"{_listing(ended)}."
+        )
     return notes
 
 
@@ -117,10 +122,6 @@ def _wait(sessions: Mapping[int, str], choose: str, after: str) -> str:
     )
 
 
-def _count(sessions: Mapping[int, str]) -> str:
-    return f"{len(sessions)} session{'' if len(sessions) == 1 else 's'}"
-
-
 def _listing(sessions: Mapping[int, str]) -> str:
     """`session 4 (running), sessions 5, 6 (not started)`: ids grouped by status."""
     by_status: dict[str, list[int]] = {}
@@ -128,9 +129,6 @@ def _listing(sessions: Mapping[int, str]) -> str:
         by_status.setdefault(status, []).append(session_id)
     groups = []
     for status, ids in by_status.items():
-        shown = ", ".join(map(str, ids[:SHOWN]))
-        if len(ids) > SHOWN:
-            shown += f" and {len(ids) - SHOWN} more"
         name = UNDER_WAY.get(status) or ENDED.get(status) or f"status {status}"
-        groups.append(f"session{'' if len(ids) == 1 else 's'} {shown} ({name})")
+        groups.append(f"session{'' if len(ids) == 1 else 's'} {some(ids, SHOWN)} ({name})")
     return ", ".join(groups)

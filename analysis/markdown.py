@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 import pandas as pd
 
@@ -71,3 +71,10 @@ def table(
 def count(n: int, noun: str) -> str:
     """ "1 agent", "3 agents": a number with its noun (the plural by an s)."""
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def some(values: Iterable[object], limit: int = 5) -> str:
+    """ "4, 5, 6 and 2 more": the first `limit` values, then how many are left."""
+    items = [str(v) for v in values]
+    more = f" and {len(items) - limit} more" if len(items) > limit else ""
+    return ", ".join(items[:limit]) + more

@@ -455,27 +455,21 @@ _PLAIN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,39}")
 """A field name the 422 may repeat: what a field's name looks like, and no longer."""
 
 
-_SCHEMAS: dict[int, tuple[Any, dict[str, Any] | None]] = {}
-"""Each route's body schema, by the route's id (an `APIRoute` is not hashable); the route is
-kept with it, so an id is not reused while its entry stands."""
-
-
 def _body_schema(route: Any) -> dict[str, Any] | None:
     """The JSON schema of the body `route` validates (its `loc` after "body"), or None: the
-    route's own type, so routes left out of the API document (the dashboard's) have one."""
-    kept = _SCHEMAS.get(id(route))
-    if kept is not None and kept[0] is route:
-        return kept[1]
-    field = getattr(route, "body_field", None)
-    annotation = getattr(getattr(field, "field_info", None), "annotation", None)
-    try:
-        schema = None if annotation is None else TypeAdapter(annotation).json_schema()
-    except Exception:  # a type without a JSON schema: the message points to the document
-        schema = None
-    if len(_SCHEMAS) >= 512:
-        _SCHEMAS.clear()
-    _SCHEMAS[id(route)] = (route, schema)
-    return schema
+    route's own type, so routes left out of the API document (the dashboard's) have one.
+    Made at a route's first such 422 and kept on the route."""
+    if route is None:
+        return None
+    if not hasattr(route, "ideeprl_body_schema"):
+        field = getattr(route, "body_field", None)
+        annotation = getattr(getattr(field, "field_info", None), "annotation", None)
+        try:
+            schema = None if annotation is None else TypeAdapter(annotation).json_schema()
+        except Exception:  # a type without a JSON schema: the message points to the document
+            schema = None
+        route.ideeprl_body_schema = schema
+    return route.ideeprl_body_schema
 
 
 def _unknown_field(

@@ -34,6 +34,7 @@ from analysis.finished import (
     nothing_finished,
     status_of,
 )
+from analysis.markdown import some
 from analysis.replays import unchanged_replays_note
 from learner.advisor_check import last_check
 from learner.run import RunSpec, run_flags
@@ -112,8 +113,7 @@ def _statuses(sessions: list[StudySession]) -> dict[int, str]:
 
 
 def _ids(sessions: list[StudySession]) -> str:
-    shown = ", ".join(str(s.id) for s in sessions[:12])
-    return shown + (f" and {len(sessions) - 12} more" if len(sessions) > 12 else "")
+    return some((s.id for s in sessions), 12)
 
 
 def failed_advisors(sessions: list[StudySession], advisors: set[int]) -> list[int]:

@@ -11,25 +11,15 @@ import pytest
 from analysis.__main__ import main as analyse
 from analysis.finished import ENDED, FINISHED, UNDER_WAY
 from cli.main import main
-from learner.records import TRAINING
 from learner.run import RunSpec
 from study.db.engine import make_engine, make_session_factory
-from study.db.migrate import upgrade
-from study.db.models import Episode, Status
+from study.db.models import Status
 from study.services.sessions import create_session
 from study.services.studies import create_study
+from tests.analysis.stored import migrated_folder, training_episode
 
 FINISHED_RUNS = {("autonomous", 1): [0.5, 1.0, 0.0, 1.5], ("autonomous", 2): [1.0, 0.5, 1.0, 0.5]}
 """Two finished sessions, four training episodes each."""
-
-
-def _episode(session_id: int, number: int, reward: float) -> Episode:
-    return Episode(
-        session_id=session_id, stage=TRAINING, episode=number, collected_reward=reward,
-        steps=20, placed_correct=1, misplaced=0, lost=0, success=False, terminated=False,
-        truncated=True, advised_steps=0, epsilon=0.5, mean_loss=None, first_global_step=0,
-        last_global_step=19, wall_time=0.1, reset_seed=number,
-    )  # fmt: skip
 
 
 @pytest.fixture
@@ -37,25 +27,20 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """A data folder whose database has two studies: `training` (the new user's: one
     session still training, 2 of its episodes run) and `mixed` (two finished sessions, one
     running with 2 episodes, one whose online participant declined)."""
-    monkeypatch.delenv("DATABASE_URL", raising=False)
-    monkeypatch.delenv("IDEEPRL_DATABASE_URL", raising=False)
-    folder = tmp_path / "data"
-    folder.mkdir()
-    engine = make_engine(f"sqlite:///{folder / 'ideeprl.sqlite3'}")
-    upgrade(engine)
+    folder, engine = migrated_folder(tmp_path, monkeypatch)
     with make_session_factory(engine)() as db:
         alone = create_study(db, "training")
         running = create_session(db, alone.id, RunSpec(method="autonomous", seed=1))
         running.status = Status.running.value
-        db.add_all([_episode(running.id, 1, 2.0), _episode(running.id, 2, 3.0)])
+        db.add_all([training_episode(running.id, 1, 2.0), training_episode(running.id, 2, 3.0)])
         mixed = create_study(db, "mixed")
         for (method, seed), rewards in FINISHED_RUNS.items():
             session = create_session(db, mixed.id, RunSpec(method=method, seed=seed))
             session.status = Status.finished.value
-            db.add_all(_episode(session.id, i, r) for i, r in enumerate(rewards, start=1))
+            db.add_all(training_episode(session.id, i, r) for i, r in enumerate(rewards, start=1))
         running = create_session(db, mixed.id, RunSpec(method="autonomous", seed=3))
         running.status = Status.running.value
-        db.add_all([_episode(running.id, 1, 2.0), _episode(running.id, 2, 3.0)])
+        db.add_all([training_episode(running.id, 1, 2.0), training_episode(running.id, 2, 3.0)])
         declined = create_session(db, mixed.id, RunSpec(method="autonomous", seed=4))
         declined.status = Status.declined.value
         db.commit()

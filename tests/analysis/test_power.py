@@ -21,13 +21,12 @@ from analysis.power import (
     welch_rejects,
 )
 from cli.main import main
-from learner.records import TRAINING
 from learner.run import RunSpec
 from study.db.engine import make_engine, make_session_factory
-from study.db.migrate import upgrade
-from study.db.models import Episode, Status
+from study.db.models import Status
 from study.services.sessions import create_session
 from study.services.studies import create_study
+from tests.analysis.stored import migrated_folder, training_episode
 
 
 def exact_power(d: float, n: int, alpha: float = 0.05) -> float:
@@ -179,12 +178,7 @@ def test_a_study_analysis_leaves_out_arms_too_small_and_says_why() -> None:
 def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """A data folder whose database holds a finished pilot: 3 autonomous and 3 oracle-advised
     sessions with 4 recorded training episodes each, and one unfinished session."""
-    monkeypatch.delenv("DATABASE_URL", raising=False)
-    monkeypatch.delenv("IDEEPRL_DATABASE_URL", raising=False)
-    folder = tmp_path / "data"
-    folder.mkdir()
-    engine = make_engine(f"sqlite:///{folder / 'ideeprl.sqlite3'}")
-    upgrade(engine)
+    folder, engine = migrated_folder(tmp_path, monkeypatch)
     rewards = {
         "autonomous": [[0.5, 1.0, 0.0, 1.5], [1.0, 0.5, 1.0, 0.5], [0.0, 1.5, 1.5, 1.0]],
         "oracle": [[1.5, 2.0, 1.5, 2.5], [2.0, 2.5, 2.0, 1.0], [1.0, 2.5, 2.5, 2.0]],
@@ -196,20 +190,11 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
                 session = create_session(db, study.id, RunSpec(method=method, seed=seed))
                 session.status = Status.finished.value
                 for number, reward in enumerate(episodes, start=1):
-                    db.add(_episode(session.id, number, reward))
+                    db.add(training_episode(session.id, number, reward))
         create_session(db, study.id, RunSpec(method="oracle", seed=9))  # not finished: left out
         db.commit()
     engine.dispose()
     return folder
-
-
-def _episode(session_id: int, number: int, reward: float) -> Episode:
-    return Episode(
-        session_id=session_id, stage=TRAINING, episode=number, collected_reward=reward,
-        steps=20, placed_correct=1, misplaced=0, lost=0, success=False, terminated=False,
-        truncated=True, advised_steps=0, epsilon=0.5, mean_loss=None, first_global_step=0,
-        last_global_step=19, wall_time=0.1, reset_seed=number,
-    )  # fmt: skip
 
 
 def test_the_command_prints_the_table_and_writes_the_figure(
@@ -285,7 +270,7 @@ def test_the_command_refuses_what_it_cannot_do(
         for method in ("autonomous", "autonomous", "oracle"):
             session = create_session(db, few.id, RunSpec(method=method))
             session.status = Status.finished.value
-            db.add(_episode(session.id, 1, 1.0))
+            db.add(training_episode(session.id, 1, 1.0))
         db.commit()
     engine.dispose()
     assert main(["power", "--study", "tiny pilot", "--out", str(tmp_path / "p"), *flags]) == 1
@@ -309,7 +294,7 @@ def test_the_command_cautions_against_a_baseline_run_under_other_settings(
                 session.status = Status.finished.value
                 better = 2.0 if method == "oracle" else 0.0
                 for number in range(1, 3):
-                    db.add(_episode(session.id, number, seed + number + better))
+                    db.add(training_episode(session.id, number, seed + number + better))
         db.commit()
     engine.dispose()
     flags = ["--data-dir", str(data_dir)]

@@ -11,12 +11,11 @@ import pytest
 from analysis.__main__ import main as analyse
 from cli.main import main
 from learner.run import RunSpec
-from study.db.engine import make_engine, make_session_factory
-from study.db.migrate import upgrade
+from study.db.engine import make_session_factory
 from study.db.models import Advice, Status
 from study.services.sessions import Replay, ReplayStream, create_session
 from study.services.studies import create_study
-from tests.analysis.test_finished import _episode
+from tests.analysis.stored import migrated_folder, training_episode
 
 REWARDS = {1: [0.5, 1.0, 0.0, 1.5], 2: [1.0, 0.5, 1.0, 0.5]}
 """Two finished oracle-advised sessions, by seed, four training episodes each."""
@@ -35,12 +34,7 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """Study `checked`: sessions 1 and 2 (oracle, finished), 3 an unchanged replay of 1
     (finished: 2 of its 3 advice met the image, a fourth request came past the stream) and
     4 a replay of 2 under another seed (changed: an agent of its own)."""
-    monkeypatch.delenv("DATABASE_URL", raising=False)
-    monkeypatch.delenv("IDEEPRL_DATABASE_URL", raising=False)
-    folder = tmp_path / "data"
-    folder.mkdir()
-    engine = make_engine(f"sqlite:///{folder / 'ideeprl.sqlite3'}")
-    upgrade(engine)
+    folder, engine = migrated_folder(tmp_path, monkeypatch)
     stream = ReplayStream(source={"study": "checked", "session": 1, "export": None},
                           actions=[1, 1, 1], observation_hashes=["a", "b", "c"])  # fmt: skip
     with make_session_factory(engine)() as db:
@@ -48,7 +42,8 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
         runs = [RunSpec(method="oracle", seed=seed) for seed in REWARDS]
         sources = [create_session(db, study, run) for run in runs]
         for source in sources:
-            db.add_all(_episode(source.id, i, r) for i, r in enumerate(REWARDS[source.seed], 1))
+            rewards = enumerate(REWARDS[source.seed], 1)
+            db.add_all(training_episode(source.id, i, r) for i, r in rewards)
         replays = [
             create_session(db, study, run.replace(method="replayed", seed=seed),
                            replay=Replay(source.id, stream))
@@ -57,7 +52,8 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
         for session in [*sources, *replays]:
             session.status = Status.finished.value
         for replay, source in zip(replays, sources, strict=True):
-            db.add_all(_episode(replay.id, i, r) for i, r in enumerate(REWARDS[source.seed], 1))
+            rewards = enumerate(REWARDS[source.seed], 1)
+            db.add_all(training_episode(replay.id, i, r) for i, r in rewards)
         advice = [True, False, True, None]
         db.add_all(_advice(replays[1].id, i, same) for i, same in enumerate(advice))
         db.commit()

@@ -152,6 +152,16 @@ def browser() -> Iterator[Any]:
             chromium.close()
 
 
+def dashboard_page(browser: Any, live: Live) -> tuple[Any, Any]:
+    """A new browser context logged in to the dashboard, and its page (close the context)."""
+    context = browser.new_context(viewport=VIEWPORT)
+    page = context.new_page()
+    page.goto(f"{live.url}/dashboard/login")
+    page.fill("#key", API_KEY)
+    page.click("button[type=submit]")
+    return context, page
+
+
 def save_screenshot(page: Any, name: str, **options: Any) -> Path:
     """Save a page's screenshot as a test artifact (and under docs/screenshots when
     IDEEPRL_SCREENSHOTS_TO_DOCS=1, to refresh the README's pictures)."""

@@ -11,7 +11,7 @@ import zipfile
 import pytest
 from playwright.sync_api import expect
 
-from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
+from tests.e2e.conftest import VIEWPORT, Live, dashboard_page, save_screenshot
 from tests.server.live import API_KEY
 from tests.server.scale import rest_body
 
@@ -176,11 +176,7 @@ def test_a_failed_build_leaves_the_button_as_it_was(live: Live, browser) -> None
         ids = [api.post(f"/api/studies/{study['id']}/sessions", json=body).json()["id"]]
         body = rest_body(method="autonomous", seed=2, episodes=2, max_episode_steps=30)
         ids.append(api.post(f"/api/studies/{study['id']}/sessions", json=body).json()["id"])
-    context = browser.new_context(viewport=VIEWPORT)
-    page = context.new_page()
-    page.goto(f"{live.url}/dashboard/login")
-    page.fill("#key", API_KEY)
-    page.click("button[type=submit]")
+    context, page = dashboard_page(browser, live)
     section = page.locator(f"section.study[data-study='{study['id']}']")
     button = section.locator("button.build-report")
     expect(button).to_have_text("Build report")

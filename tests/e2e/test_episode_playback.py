@@ -19,8 +19,7 @@ from sqlalchemy import select
 
 import sim
 from study.db.models import Advice, Episode, Step
-from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
-from tests.server.live import API_KEY
+from tests.e2e.conftest import Live, dashboard_page, save_screenshot
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import wait_for_status
 
@@ -135,11 +134,7 @@ def test_a_researcher_plays_back_a_participants_episode(live: Live, browser: Any
     episode, steps, advice = recorded(live, session["id"])
     assert len(advice) >= 2 and len(steps) >= 3
 
-    context = browser.new_context(viewport=VIEWPORT)
-    page = context.new_page()
-    page.goto(f"{live.url}/dashboard/login")
-    page.fill("#key", API_KEY)
-    page.click("button[type=submit]")
+    context, page = dashboard_page(browser, live)
     expect(page).to_have_url(re.compile(r"/dashboard$"))
     page.locator(f"tr[data-session='{session['id']}'] a.playback-link").click()
     expect(page).to_have_url(re.compile(rf"/dashboard/sessions/{session['id']}/playback$"))

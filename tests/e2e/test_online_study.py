@@ -26,8 +26,7 @@ from playwright.sync_api import expect
 
 from study.db.models import Study
 from study.services.assignment import block_order
-from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
-from tests.server.live import API_KEY
+from tests.e2e.conftest import VIEWPORT, Live, dashboard_page, save_screenshot
 from tests.server.test_export_types import check_frictionless
 from tests.server.test_online_study import table
 
@@ -186,11 +185,7 @@ def test_an_online_study_runs_through_its_link(
     now = sessions_by_token(live, study)
     assert now[token(refill)]["condition"] == now[tokens[0]]["condition"], "the freed place"
 
-    dashboard = browser.new_context(viewport=VIEWPORT)
-    page = dashboard.new_page()
-    page.goto(f"{live.url}/dashboard/login")
-    page.fill("#key", API_KEY)
-    page.click("button[type=submit]")
+    dashboard, page = dashboard_page(browser, live)
     section = page.locator(f"section.study[data-study='{study['id']}']")
     declined_in = now[tokens[0]]["condition"]
     row = section.locator(f".conditions tr[data-condition='{declined_in}'] td")
@@ -268,11 +263,7 @@ def test_a_pools_session_is_nobodys_on_the_dashboard(live: Live, browser: Any) -
             json={"design": {**design(target=2, capacity=2, idle_limit_s=600), "pool": 1}},
         )
         assert pooled.status_code == 200, pooled.text
-    context = browser.new_context(viewport=VIEWPORT)
-    page = context.new_page()
-    page.goto(f"{live.url}/dashboard/login")
-    page.fill("#key", API_KEY)
-    page.click("button[type=submit]")
+    context, page = dashboard_page(browser, live)
     section = page.locator(f"section.study[data-study='{study['id']}']")
     rows = section.locator("table.sessions tbody tr")
     expect(rows).to_have_count(2, timeout=60_000)
