@@ -45,7 +45,7 @@ from analysis.rescoring import rescored_totals, rescoring_table
 from analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
 from analysis.summary import Analysis, analyze
 from sim.rewards import REWARD_SCHEMES
-from study.csvsafe import safe_frame
+from analysis.csvsafe import safe_frame
 
 FIGURE_FILES: dict[str, str] = {
     "reward_per_method": "figure5_reward_per_method.png",

@@ -103,8 +103,8 @@ def cell(value: Any) -> Any:
 
 def write_csv(path: Path, columns: list[Column], rows: Iterable[dict[str, Any]]) -> int:
     """The rows as CSV; text cells a spreadsheet would run as a formula are neutralised
-    (`study.csvsafe`), numbers are written as they are."""
-    from study.csvsafe import safe_cell
+    (`analysis.csvsafe`), numbers are written as they are."""
+    from analysis.csvsafe import safe_cell
 
     count = 0
     with path.open("w", newline="", encoding="utf-8") as f:

@@ -14,7 +14,7 @@ import httpx
 import pandas as pd
 import pytest
 
-from study.csvsafe import safe_frame
+from analysis.csvsafe import safe_frame
 from tests.server.live import API_KEY, LiveServer
 from tests.server.scale import export
 
