@@ -76,6 +76,8 @@ def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
         on this machine (device, precision, threads)."""
         values = given(body)
         run = values.pop("run")
+        if run.get("version", 0) is None:  # the document allows null: the current version
+            del run["version"]
         spec = learning.parse(run, spec_class)
         if spec.method == "human" and "seed" not in run:
             spec = assignment.numbered_seed(db, study_id, spec)

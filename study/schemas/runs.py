@@ -15,6 +15,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, create_model
 
 from learner.fields import FieldError, Leaf, check, leaves
+from study.schemas.types import NO_NUL, plain_text
 
 
 def leaf_schema(leaf: Leaf) -> dict[str, Any]:
@@ -47,6 +48,8 @@ def leaf_schema(leaf: Leaf) -> dict[str, Any]:
         schema = {"type": "string"}
         if leaf.max_length:
             schema["maxLength"] = leaf.max_length
+        # checked whole (re.fullmatch), and without NUL; a JSON Schema pattern is a search
+        schema["pattern"] = f"^(?:{leaf.pattern})$" if leaf.pattern else NO_NUL
     if leaf.optional:
         schema = {"anyOf": [schema, {"type": "null"}]}
     return {**schema, "description": f"{leaf.doc} [{leaf.allowed()}]"}
@@ -54,6 +57,10 @@ def leaf_schema(leaf: Leaf) -> dict[str, Any]:
 
 def _validator(leaf: Leaf) -> Any:
     def validate(value: Any) -> Any:
+        texts = [*value, *value.values()] if isinstance(value, dict) else [value]
+        for text in texts:  # NUL: the same 422 as every other text field of a body
+            if isinstance(text, str):
+                plain_text(text)
         try:
             return check(leaf, value)
         except FieldError as error:

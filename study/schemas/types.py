@@ -28,7 +28,9 @@ def plain_text(value: str) -> str:
 
 Int = Annotated[int, Field(strict=True)]
 Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
-Text = Annotated[str, AfterValidator(plain_text)]
+NO_NUL = r"^[^\x00]*$"
+"""JSON Schema's `pattern` for text without the NUL character."""
+Text = Annotated[str, AfterValidator(plain_text), Field(json_schema_extra={"pattern": NO_NUL})]
 """A text field of a body (a name, a description, a page text): same 422 on every database."""
 Key = Annotated[Text, StringConstraints(min_length=1, max_length=64)]
 """A key of a body's map (a config field, a text's name)."""
@@ -45,5 +47,18 @@ def _not_blank(value: str) -> str:
     return value
 
 
-StudyName = Annotated[Text, StringConstraints(max_length=200), AfterValidator(_not_blank)]
+NAME_PATTERN = (
+    r"^[^\x00]*"
+    r"[^\x00\t-\r\x1c-\x20\x85\xa0\u1680\u2000-\u200a\u2028\u2029\u202f\u205f\u3000]"
+    r"[^\x00]*$"
+)
+"""JSON Schema's `pattern` for a name: no NUL, and a character `str.strip` keeps (what
+Python counts as whitespace spelled out: `\\S` differs between Python's reading and
+JSON Schema's)."""
+StudyName = Annotated[
+    Text,
+    StringConstraints(max_length=200),
+    AfterValidator(_not_blank),
+    Field(json_schema_extra={"pattern": NAME_PATTERN}),
+]
 """A study's name: spaces around it dropped, then at least one character."""
