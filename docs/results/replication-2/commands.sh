@@ -4,7 +4,7 @@
 #   git worktree add /work/rep2 replication-2      # the fixed code version
 #   docs/results/replication-2/commands.sh restore # a fresh machine: the committed state back
 #   docs/results/replication-2/commands.sh all     # this CPU kind's arms (plan.md, amendment 3)
-#   docs/results/replication-2/commands.sh save    # the state to commit (database, advisors)
+#   docs/results/replication-2/commands.sh save    # the state to commit (database parts, advisors)
 #   POPULATION=1 docs/results/replication-2/commands.sh paper   # its runs alone, in pairs
 #   WORKERS=1 ...                                                # one run at a time
 #
@@ -115,52 +115,10 @@ paper_agent_alone() {
     --reward-scheme paper --advisor-checkpoint "$advisor" --population 1 "$@"
 }
 
-save() {  # finished runs and the advisors they used, into state/ (committed)
-  mkdir -p "$STATE/advisors"
-  "$PY" - "$DATA" "$STATE" <<'PY'
-import sqlite3, sys
-from pathlib import Path
-from learner.checkpoint import read_checkpoint, write_checkpoint
-data, state = Path(sys.argv[1]), Path(sys.argv[2])
-src = sqlite3.connect(data / "ideeprl.sqlite3")
-out = state / "ideeprl.sqlite3"
-out.unlink(missing_ok=True)
-dst = sqlite3.connect(out)
-src.backup(dst)
-# Unfinished runs' checkpoints stay behind: drop those runs, the batch makes them anew.
-gone = "select id from sessions where status != 'finished'"
-for (table,) in dst.execute("select name from sqlite_master where type = 'table'").fetchall():
-    columns = [c[1] for c in dst.execute(f"pragma table_info({table})")]
-    if "session_id" in columns:
-        dst.execute(f"delete from {table} where session_id in ({gone})")
-dst.execute(f"delete from sessions where id in ({gone})")
-dst.commit()
-dst.execute("vacuum")
-# What an agent advisor reads (config and network), at its path under DATA.
-paths = {p for (p,) in dst.execute(
-    "select distinct json_extract(run, '$.advisor_checkpoint') from sessions "
-    "where json_extract(run, '$.advisor_checkpoint') is not null "
-    "union select checkpoint_path from sessions where label like '% advisor' "
-    "and checkpoint_path is not null")}
-dst.close()
-for path in sorted(paths):
-    relative = Path(path).relative_to(data)
-    target = state / "advisors" / relative
-    target.parent.mkdir(parents=True, exist_ok=True)
-    s = read_checkpoint(path)
-    write_checkpoint(target, {"config": s["config"], "seed": s["seed"],
-                              "metadata": s["metadata"], "agent": {"network": s["agent"]["network"]}})
-    print("advisor", relative)
-PY
-  gzip -f -9 "$STATE/ideeprl.sqlite3"
-}
-
-restore() {  # a fresh DATA from state/
-  [ -f "$DATA/ideeprl.sqlite3" ] || gunzip -c "$STATE/ideeprl.sqlite3.gz" > "$DATA/ideeprl.sqlite3"
-  (cd "$STATE/advisors" && find . -type f) | while read -r f; do
-    [ -f "$DATA/$f" ] || { mkdir -p "$(dirname "$DATA/$f")"; cp "$STATE/advisors/$f" "$DATA/$f"; }
-  done
-}
+# The saved state (state/): the database in parts of one study and label each, every part
+# under 50 MB, and the advisors with the checks stored beside them (state.py).
+save() { (cd "$CODE" && PYTHONPATH="$CODE" "$PY" "$HERE/state.py" save "$DATA" "$STATE"); }
+restore() { (cd "$CODE" && PYTHONPATH="$CODE" "$PY" "$HERE/state.py" restore "$STATE" "$DATA"); }
 
 case "${1:-all}" in
   save) save ;;
