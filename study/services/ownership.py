@@ -85,6 +85,8 @@ def set_status(
     if token is not None:
         query = query.where(StudySession.worker_token == token)
     values: dict[str, object] = {"status": status.value, "status_detail": detail}
+    if status not in LIVE_STATUSES:
+        values["worker_pid"] = None  # no process runs it now (its worker writes this last)
     if status == Status.finished:
         values["finished_at"] = utcnow()
     result = db.execute(query.values(**values))
@@ -141,6 +143,7 @@ def mark_dead_interrupted(db: Session, stale_after_s: float, owned: set[int]) ->
         if session.id not in owned and worker_gone(session, stale_after_s):
             session.status = Status.interrupted.value
             session.status_detail = "its worker stopped without finishing; resume it"
+            session.worker_pid = None
             marked.append(session.id)
     db.commit()
     return marked

@@ -91,10 +91,11 @@ def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveSe
         _until(lambda: _progress(api, second["id"])["global_step"] > moved + 5)
         assert _progress(api, third["id"])["queued"], "training_population=1: one after another"
         assert _curve(c)["queue_place"] == 1
+        pids = [api.get(f"/api/sessions/{second['id']}").json()["worker_pid"]]
         api.post(f"/api/sessions/{second['id']}/stop")
         _until(lambda: not _progress(api, third["id"])["queued"])
-        pids = [api.get(f"/api/sessions/{s['id']}").json()["worker_pid"] for s in (second, third)]
-        assert pids[0] != pids[1], "each trained in its own worker"
+        pids.append(api.get(f"/api/sessions/{third['id']}").json()["worker_pid"])
+        assert None not in pids and pids[0] != pids[1], "each trained in its own worker"
         api.post(f"/api/sessions/{third['id']}/stop")
         for participant in (a, b, c):
             participant.close()
@@ -131,13 +132,15 @@ def test_queued_sessions_of_one_configuration_train_together(
         api.post(f"/api/sessions/{first['id']}/stop")
         _until(lambda: _progress(api, fourth["id"])["episode"] >= 1)
         assert not _progress(api, fourth["id"])["queued"]
+        running = [api.get(f"/api/sessions/{s['id']}").json() for s in (second, third, fourth)]
+        pids = {row["worker_pid"] for row in running}
+        assert len(pids) == 1 and None not in pids and alone not in pids, "one process for three"
         stopped = api.post(f"/api/sessions/{fourth['id']}/stop")
         assert stopped.status_code == 200 and stopped.json()["status"] == "stopped", stopped.text
         rows = [wait_for_status(api, s["id"], {"finished"}) for s in (second, third)]
         rows.append(api.get(f"/api/sessions/{fourth['id']}").json())
         assert rows[2]["status"] == "stopped", "the one stopped stays stopped"
-        pids = {row["worker_pid"] for row in rows}
-        assert len(pids) == 1 and alone not in pids, "one process for the three"
+        assert {row["worker_pid"] for row in rows} == {None}, "no worker runs them now"
         together = [row["provenance"][-1]["population"] for row in rows]
         assert [p["population_size"] for p in together] == [3, 3, 3]
         assert sorted(p["population_index"] for p in together) == [0, 1, 2]
