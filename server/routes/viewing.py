@@ -19,6 +19,7 @@ def playback(session: ParticipantDep, request: Request) -> Playback:
     return Playback(
         remaining_s=round(viewer.playback_remaining_s(session.id), 3),
         viewers=len(viewer.views(session.id)),
+        scene_shown=viewer.scene_shown(session.id),
     )
 
 

@@ -165,6 +165,11 @@ class ParticipantViewer:
         with self._lock:
             return [v for v in self._views.values() if session_id in (None, v.session_id)]
 
+    def scene_shown(self, session_id: int) -> bool:
+        """Whether a view of the session has its scene's bodies: viser's client has drawn
+        (it knows a client after its first camera message) and has the scene to draw."""
+        return any(v.mirror.handles for v in self.views(session_id))
+
     def playback_remaining_s(self, session_id: int) -> float:
         """Real seconds until every view of the session has shown all it received."""
         return max((v.player.remaining_s() for v in self.views(session_id)), default=0.0)

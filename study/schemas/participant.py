@@ -194,6 +194,9 @@ class QuestionnaireState(BaseModel):
 class Playback(BaseModel):
     remaining_s: float = Field(description="Seconds until the 3-D view has shown the last move.")
     viewers: int = Field(description="Open 3-D views of this session.")
+    scene_shown: bool = Field(
+        default=False, description="A 3-D view of this session has drawn the robot's scene."
+    )
 
 
 class CurvePoint(BaseModel):

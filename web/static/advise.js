@@ -9,6 +9,7 @@
   const buttons = [...document.querySelectorAll("button.action")];
   const KEYS = { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
   const LAST_MOVE_MS = 4000;
+  const FIRST_VIEW_WAIT_MS = 2000; // the longest a turn waits for the 3-D view's first frame
   const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
   const capital = (name) => name.charAt(0).toUpperCase() + name.slice(1); // as on the buttons
 
@@ -23,6 +24,7 @@
   let readinessPolling = false;
   let beforeFirstTurn = false; // the latest state: no advice asked yet, robot practising
   let idleWarning = null; // the timer of an online study's warning before its idle limit
+  let sceneShown = false; // the 3-D view has drawn the robot's scene
 
   function api(path, options = {}) {
     const headers = { Authorization: `Bearer ${config.token}` };
@@ -141,6 +143,25 @@
     }
   }
 
+  // Until the 3-D view has drawn its first frame (viser's client loading, software WebGL
+  // starting) its panel is blank: the page says so until it has.
+  async function watchView() {
+    $("scene-loading").hidden = false;
+    while (!sceneShown && !leaving) {
+      const response = await api("/api/participant/playback").catch(() => null);
+      if (response && response.ok) sceneShown = (await response.json()).scene_shown === true;
+      if (!sceneShown) await sleep(500);
+    }
+    $("scene-loading").hidden = true;
+  }
+
+  // A turn waits a moment for that first frame, never long: the camera image and the
+  // sentence say where the robot is meanwhile.
+  async function waitForView(gen) {
+    const until = performance.now() + FIRST_VIEW_WAIT_MS;
+    while (!sceneShown && gen === generation && performance.now() < until) await sleep(100);
+  }
+
   const VISIT_ENDED = ["declined", "excluded", "timed_out"];
   async function render(s) {
     if (finished && !s.history.length) return; // the session is over: keep what is shown
@@ -170,11 +191,18 @@
     setButtons(false);
     setStatus("The robot is moving…", "busy");
     await waitForPlayback(gen);
+    if (!sceneShown) {
+      setStatus("The 3-D view is loading…", "busy");
+      await waitForView(gen);
+    }
     if (gen !== generation) return;
     showObservation(s);
     showArm(s, true);
     enabledFor = s.advice_index;
     sentIndex = null;
+    // a new turn: the last choice's line ("✓ Sent: Move left") would read as this turn's
+    $("feedback").textContent = "";
+    delete $("feedback").dataset.mood;
     setButtons(true);
     activeSince = performance.now();
     setStatus("Your turn: what should the robot do?", "turn");
@@ -318,5 +346,6 @@
   const scene = $("scene");
   scene.src = window.sceneUrl(scene);
   window.keepKeysOnPage(scene);
+  watchView();
   follow();
 })();
