@@ -156,9 +156,9 @@ class ReplayMemory:
 
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to continue exactly; only the filled frame slots are kept.
-        They are copied out: `torch.save` writes a view's whole storage, so slices of
-        `frames` wrote the full capacity (246 MB at the paper's scale) at every checkpoint,
-        however few frames were filled."""
+        They are copied out: `torch.save` writes a view's whole storage, so a slice of
+        `frames` would write the full capacity (246 MB at the paper's scale) at every
+        checkpoint, however few frames were filled."""
         used = min(self.added + 1, self._ring)
         return {
             "capacity": self.capacity,

@@ -97,11 +97,11 @@ def link_mesh_path(link: int) -> Path:
 def model_folder() -> Path:
     """This user's folder for the generated model files: `ideeprl-sim-UID`, mode 0700.
 
-    One folder for every user held files that only their first writer could read: after
-    root had run the platform, a service running as its own user failed every session with
-    "Cannot load URDF file". A folder of that name that is not this user's own directory, or
-    that others may write to (and so may have changed the robot), is passed over for a new
-    one.
+    One folder per user, because a folder shared by every user holds files that only their
+    first writer can read: once root has run the platform, a service running as its own user
+    fails every session with "Cannot load URDF file". A folder of that name that is not this
+    user's own directory, or that others may write to (and so may have changed the robot), is
+    passed over for a new one.
     """
     base = Path(tempfile.gettempdir())
     folder = base / f"ideeprl-sim-{os.getuid()}"

@@ -323,7 +323,7 @@ class SuctionArm:
     def _attach_physics(self, body: int) -> None:
         # The cup's pose computed here, never PyBullet's cached link state: recording the
         # motion (or a viewer reading poses) refreshes that cache, and a grasp made from a
-        # stale one held the object differently in an unrecorded run.
+        # stale one would hold the object differently in an unrecorded run.
         cup_pos, cup_orn = self._cup_pose()
         pos, orn = self.p.getBasePositionAndOrientation(body)
         inv_pos, inv_orn = self.p.invertTransform(cup_pos, cup_orn)
