@@ -1,7 +1,7 @@
 """episodes keep their environment reset seed (an episode can be replayed from the export)
 
 Revision ID: 0002_reset_seed
-Revises: 0004 (the scenario options came first on main)
+Revises: 0004 (the scenario options: the chain, not the numbers, gives the order)
 Create Date: 2026-12-01 20:45:00
 """
 

@@ -3,10 +3,11 @@
 Revision ID: 0012
 Revises: 0011
 
-`ideeprl replay` re-runs a recorded session (issue 23). An unchanged replay is checked step
-by step against its original, observations included: `steps.observation_hash` (NULL in rows
-stored before). A replay names its source (`sessions.replay_of`, deleted with it: the
-advice is a person's data) and keeps a copy of the stream it feeds (`sessions.replay_stream`).
+`ideeprl replay` re-runs a recorded session (SPEC section 5, "Replay"). An unchanged replay
+is checked step by step against its original, observations included:
+`steps.observation_hash` (NULL in rows stored before). A replay names its source
+(`sessions.replay_of`, deleted with it: the advice is a person's data) and keeps a copy of
+the stream it feeds (`sessions.replay_stream`).
 Each replayed advice records whether it met the image its advisor saw
 (`advice.same_observation`); a request beyond the recorded stream is an advice row without
 an action, so `advice.action` becomes nullable (no existing row changes).

@@ -4,17 +4,17 @@ Revision ID: 0013
 Revises: 0012
 
 A study may carry a design (`studies.design`: conditions, targets, capacity, alpha, panel
-setting, check, questionnaire, outcome codes; NULL for a lab study as before), the key of
-its public link (`studies.join_key`, unguessable, unique) and the seed of its block
-randomization (`studies.assignment_seed`). A session made through the link records its
-condition (`sessions.condition`), whether it waits pretrained in its condition's pool for
-an arrival (`sessions.pooled`; the study counts the sessions it made, `studies.sessions_made`,
-for their seeds), whether it is a researcher's preview (`sessions.preview`,
-kept out of exports and reports) and how the visit ended (`sessions.outcome`: completed,
-declined, excluded, timed_out; with `sessions.outcome_at`). Each arrival's assignment
-(`assignments`: condition, block, position, seed, time, the early-ended place it refills)
-and the panel's ids of a participant (`panel_ids`, apart from the sessions; deleted with
-the participant) are tables of their own.
+setting, check, questionnaire, outcome codes; NULL for a lab study, as are those already
+stored), the key of its public link (`studies.join_key`, unguessable, unique) and the seed
+of its block randomization (`studies.assignment_seed`). A session made through the link
+records its condition (`sessions.condition`), whether it waits pretrained in its condition's
+pool for an arrival (`sessions.pooled`; the study counts the sessions it made,
+`studies.sessions_made`, for their seeds), whether it is a researcher's preview
+(`sessions.preview`, kept out of exports and reports) and how the visit ended
+(`sessions.outcome`: completed, declined, excluded, timed_out; with `sessions.outcome_at`).
+Each arrival's assignment (`assignments`: condition, block, position, seed, time, the
+early-ended place it refills) and the panel's ids of a participant (`panel_ids`, apart from
+the sessions; deleted with the participant) are tables of their own.
 """
 
 from collections.abc import Sequence
