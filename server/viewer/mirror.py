@@ -29,8 +29,8 @@ SHADOWS = False
 SKY_RGB, GROUND_RGB, HEMISPHERE_INTENSITY = (255, 255, 255), (140, 140, 150), 2.6
 """The scene's light besides viser's default directional lights: a hemisphere light, white
 from above and grey from below, in place of viser's image-based environment map. The map
-made every pixel sample a prefiltered HDR image: on a browser without a GPU (software
-WebGL) an advice page waiting for advice kept 0.77 of a core busy with it, 0.24 without
+makes every pixel sample a prefiltered HDR image: on a browser without a GPU (software
+WebGL) an advice page waiting for advice keeps 0.77 of a core busy with it, 0.24 without
 (AVX2-only EPYC, benchmarks/logs/idle-page-2026-12-04-avx2.log), for a look that hardly
 differs (docs/screenshots). The same light for every participant, with a GPU or without:
 what they see does not depend on their device."""

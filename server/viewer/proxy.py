@@ -5,8 +5,8 @@ viser listens on loopback only, on a port nobody outside needs to know. `GET /vi
 viser's one-file client, with a stylesheet that hides what only a developer wants (the
 control panel with its connection state, websocket URL and scene tree; the notices such as
 "Software WebGL rendering detected"); `/viewer/p/TOKEN` relays the participant's websocket
-to viser's `/p/TOKEN`, byte for byte, so viser checks the token as before
-(`connection.py`), and its close codes (4003) reach the browser.
+to viser's `/p/TOKEN`, byte for byte, so viser itself checks the token (`connection.py`),
+and its close codes (4003) reach the browser.
 """
 
 from __future__ import annotations
