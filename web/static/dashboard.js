@@ -4,6 +4,9 @@
 "use strict";
 (() => {
   const COLORS = ["#2f6f8f", "#c8572d", "#2e7d4f", "#7a4fb3", "#a0711b", "#b3412e", "#3d8f8a", "#8f2f6f"];
+  // Past the palette, hues a golden angle apart: every session's curve its own colour.
+  const colorOf = (i) =>
+    i < COLORS.length ? COLORS[i] : `hsl(${((i * 137.508) % 360).toFixed(1)}, 60%, ${i % 2 ? 34 : 46}%)`;
   const COMMANDS = {
     created: ["start", "stop"],
     running: ["pause", "stop"],
@@ -52,7 +55,8 @@
     tr.dataset.session = s.id;
     const cells = Array.from({ length: 6 }, () => tr.appendChild(document.createElement("td")));
     cells[0].innerHTML = `<span class="swatch"></span><span class="session-id"></span><span class="muted small session-label"></span>`;
-    cells[0].querySelector(".swatch").style.background = color;
+    if (color) cells[0].querySelector(".swatch").style.background = color;
+    else cells[0].querySelector(".swatch").remove();
     cells[0].querySelector(".session-id").textContent = `#${s.id}`;
     cells[0].querySelector(".session-label").textContent = s.participant || s.label || `seed ${s.seed}`;
     const playback = cells[0].appendChild(document.createElement("a"));
@@ -84,7 +88,8 @@
     } else {
       cells[4].innerHTML = `<span class="muted">—</span>`;
     }
-    for (const command of COMMANDS[s.status] || []) {
+    // a pool's session is nobody's yet: the pools start and end it, not the researcher
+    for (const command of s.pooled ? [] : COMMANDS[s.status] || []) {
       const button = document.createElement("button");
       button.type = "button";
       button.className = `command ${command}`;
@@ -240,13 +245,17 @@
     return section;
   }
 
-  // The baseline's choices: auto, none, and each method (an online study: each condition)
-  // the study's sessions have; the researcher's choice is kept across polls.
+  // The baseline's choices: auto (saying what it takes in this study), none, and each method
+  // (an online study: each condition) the study's sessions have; the researcher's choice is
+  // kept across polls.
   function showBaselines(study, section) {
     const select = section.querySelector(".report-baseline");
     const groups = study.design
       ? study.conditions.map((c) => c.condition)
-      : [...new Set(study.sessions.map((s) => s.method))].sort();
+      : [...new Set(study.sessions.filter((s) => !s.pooled).map((s) => s.method))].sort();
+    select.options[0].textContent = groups.includes("autonomous")
+      ? "auto (autonomous)"
+      : "auto (none: no autonomous sessions)";
     const wanted = ["auto", "none", ...groups];
     const have = [...select.options].map((o) => o.value);
     if (wanted.join("\n") === have.join("\n")) return;
@@ -341,10 +350,13 @@
       section.querySelector(".study-name").textContent = study.name;
       section.querySelector(".study-description").textContent = study.description;
       showDesign(study, section);
+      // the participants' sessions, then those a pool keeps for the next arrivals
+      const people = study.sessions.filter((s) => !s.pooled);
+      const pooled = study.sessions.filter((s) => s.pooled);
       const colors = {};
-      study.sessions.forEach((s, i) => (colors[s.id] = COLORS[i % COLORS.length]));
+      people.forEach((s, i) => (colors[s.id] = colorOf(i)));
       const tbody = section.querySelector("table.sessions tbody");
-      tbody.replaceChildren(...study.sessions.map((s) => sessionRow(s, colors[s.id])));
+      tbody.replaceChildren(...[...people, ...pooled].map((s) => sessionRow(s, colors[s.id])));
       if (!study.sessions.length) {
         tbody.innerHTML = `<tr><td colspan="6" class="muted">No session yet. “New participant link” makes a human session.</td></tr>`;
       }
