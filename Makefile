@@ -30,11 +30,16 @@ browser:
 serve: setup
 	$(VENV)/bin/ideeprl serve
 
+# The suite's modules run in WORKERS processes (pytest-xdist; a module's tests stay together,
+# each process starts its own live server); test-fast is the inner loop between edits: no
+# browser, no live server, no learning run.
+WORKERS ?= 2
+
 test: setup browser
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(WORKERS) --dist loadfile
 
 test-fast: setup
-	$(PY) -m pytest -m "not slow and not browser"
+	$(PY) -m pytest -n $(WORKERS) --dist loadfile -q -m "not slow and not browser and not live"
 
 lint: setup
 	$(VENV)/bin/ruff check .

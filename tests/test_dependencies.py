@@ -1,12 +1,10 @@
 """What `pip install ideeprl` brings is what the programs import: test-only packages are
-in the `dev` extra, and an extra whose API we reach into has an upper bound we tested; and
-the packages import each other only as the contracts in pyproject.toml allow."""
+in the `dev` extra, and an extra whose API we reach into has an upper bound we tested. (The
+import contracts in pyproject.toml are checked by `make lint`.)"""
 
 from __future__ import annotations
 
 import ast
-import subprocess
-import sys
 import tomllib
 from importlib import metadata
 from pathlib import Path
@@ -54,15 +52,3 @@ def test_the_sb3_baseline_is_bounded_to_the_versions_it_was_tested_with() -> Non
     except metadata.PackageNotFoundError:
         pytest.skip("stable-baselines3 is not installed here")
     assert sb3.specifier.contains(installed), (str(sb3), installed)
-
-
-def test_imports_keep_the_contracts() -> None:
-    """`lint-imports` (import-linter): imports run down the layers, no package's modules
-    import each other in a cycle, and the analysis imports nothing of the runtime."""
-    linter = Path(sys.executable).parent / "lint-imports"
-    done = subprocess.run(
-        [str(linter), "--no-cache"], cwd=ROOT, capture_output=True, text=True, check=False
-    )
-    assert done.returncode == 0, done.stdout[done.stdout.find("Broken contracts") :]
-    contracts = len(PYPROJECT["tool"]["importlinter"]["contracts"])
-    assert f"{contracts} kept, 0 broken" in done.stdout, done.stdout

@@ -13,6 +13,8 @@ import pytest
 from server.routes.dashboard import COOKIE
 from tests.server.live import API_KEY, LiveServer, serving
 
+pytestmark = pytest.mark.live
+
 LIFETIME_S = 3
 
 

@@ -19,7 +19,7 @@ import pytest
 
 from study.services.assignment import block_order
 from tests.server.live import LiveServer
-from tests.server.test_export_types import check_frictionless
+from tests.study.test_export_types import check_frictionless
 
 TINY_RUN = {
     "method": "human",

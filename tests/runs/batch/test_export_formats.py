@@ -14,7 +14,7 @@ import pytest
 import sim
 from cli.main import main
 from tests.runs.batch.helpers import Place
-from tests.server.test_export_types import ARROW_TYPES
+from tests.study.test_export_types import ARROW_TYPES
 
 PANDAS_TYPES = {"integer": "Int64", "number": "float64", "boolean": "boolean", "string": "string"}
 

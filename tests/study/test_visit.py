@@ -27,7 +27,7 @@ from study.services.visit import expected_answer
 from tests.server.live import LiveServer
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import export, session_body, wait_for_status
-from tests.server.test_export_types import check_frictionless
+from tests.study.test_export_types import check_frictionless
 
 ONE_CONDITION = {"a": Condition()}
 """A design's one condition (human advice, defaults); these sessions are made by hand."""
