@@ -12,8 +12,8 @@ PENDING = {
     ("runs/worker/worker.py", "(issue 6)"),
     ("server/live/manager.py", "granted as before"),
 }
-"""Hits in files that other work of issue 40 is rewriting at the same time (path, words of
-the line): they go with that work, and then from here."""
+"""Hits in files that another change is rewriting at the same time (path, words of the
+line): they go with that change, and then from here."""
 
 
 def pending(hit: history_words.Hit) -> bool:
