@@ -10,11 +10,12 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: setup serve test test-fast lint format bench browser clean
 
+# (setuptools' notice on every editable install is not for the people who run make serve)
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet "$(TORCH)"
-	$(PY) -m pip install --quiet -e ".[dev,ray,postgres,sb3]"
+	PYTHONWARNINGS="ignore:Editable installation" $(PY) -m pip install --quiet -e ".[dev,ray,postgres,sb3]"
 	touch $@
 
 setup: $(STAMP)
