@@ -62,6 +62,13 @@ class Settings(BaseSettings):
     """torch threads of a session whose run leaves them open (`config.torch_threads` 0), pinned
     in the run when it is created; several workers share the machine's cores."""
 
+    pretrain_on_create: bool = True
+    """A human session made by hand (the REST API, the dashboard's new participant) starts
+    its random practice when it is made, so a participant who opens their link at once and
+    clicks straight through does not wait for it (an online study's arrivals get practised
+    sessions from its pools); `?pretrain=false` leaves one to its link. Each practised
+    session holds a worker process while it waits for its participant."""
+
     trainer_nice: int = Field(default=10, ge=0, le=19)
     """Niceness of machine-advised workers, and of human sessions once their advice is
     over, so training never slows people's requests."""

@@ -4,7 +4,14 @@ worker processes) is `live`; a module that starts its own server marks itself.""
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# A human session made by hand practises from when it is made (the server's
+# `pretrain_on_create`); in the tests its worker starts when a test asks for one. The
+# servers the tests start, in this process or another, read this.
+os.environ.setdefault("IDEEPRL_PRETRAIN_ON_CREATE", "false")
 
 LIVE_FIXTURES = frozenset({"server", "api", "live"})
 """tests/server/conftest.py's live server and its client; tests/e2e/conftest.py's."""

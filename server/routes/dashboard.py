@@ -226,8 +226,9 @@ def new_participant(
     study_id: StudyId,
     body: NewParticipant,
 ) -> dict[str, Any]:
-    """A human session with the paper's settings, and its link to hand out; with `pretrain`
-    its random pretraining starts now (after the response)."""
+    """A human session with the paper's settings, and its link to hand out; its random
+    pretraining starts now (after the response), unless `pretrain` or the server's
+    `pretrain_on_create` says otherwise."""
     try:
         options = SessionOptions(participant=body.participant or None)
     except FieldError as error:
@@ -237,7 +238,7 @@ def new_participant(
         db, study_id, spec, options, settings.data_dir, settings.worker_threads
     )
     public = session_routes.session_public(created, settings.base_url)
-    if body.pretrain:
+    if settings.pretrain_on_create if body.pretrain is None else body.pretrain:
         background.add_task(manager.welcome, created.id)
     return {"id": created.id, "participant_url": public.participant_url}
 

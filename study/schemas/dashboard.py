@@ -55,10 +55,10 @@ class NewStudy(BaseModel):
 class NewParticipant(BaseModel):
     participant: Text | None = Field(default=None, max_length=64)
     """Pseudonym; generated when empty."""
-    pretrain: bool = False
+    pretrain: bool | None = None
     """Start the session's random pretraining now (as `?pretrain=true` of the REST API), so
-    the robot is ready when the participant's induction ends; otherwise it starts when the
-    participant opens the link."""
+    the robot is ready when the participant's induction ends; false: it starts when the
+    participant opens the link; unset: the server's `pretrain_on_create` (on)."""
 
 
 class DashboardReport(BaseModel):

@@ -1,0 +1,64 @@
+"""A session made by hand practises from when it is made, by default: its participant, who
+may open the link at once and click straight through, does not wait for the robot's random
+practice (as an online study's arrivals do not: they get practised sessions from the pools).
+`pretrain: false` leaves it to the link."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+
+from study.settings import Settings
+from tests.server.live import API_KEY, LiveServer, serving
+
+pytestmark = pytest.mark.slow
+
+
+def test_the_default_is_on(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.delenv("IDEEPRL_PRETRAIN_ON_CREATE", raising=False)
+    monkeypatch.chdir(tmp_path)  # no .env here
+    assert Settings(data_dir=tmp_path).pretrain_on_create is True
+
+
+@pytest.fixture(scope="module")
+def practising(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """A server as installed: sessions made by hand practise from when they are made."""
+    data_dir = tmp_path_factory.mktemp("practising")
+    with serving(data_dir, pool_limit=0, pretrain_on_create=True) as live:
+        yield live
+
+
+def _logged_in(browser: httpx.Client) -> httpx.Client:
+    login = browser.post("/dashboard/login", data={"key": API_KEY})
+    assert login.status_code in (200, 303), login.text
+    browser.headers.update({"X-Requested-With": "fetch"})
+    return browser
+
+
+def _status_after(api: httpx.Client, session_id: int, seconds: float = 60) -> str:
+    """The session's status once it has had `seconds` to start practising."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        status = str(api.get(f"/api/sessions/{session_id}").json()["status"])
+        if status != "created":
+            return status
+        time.sleep(0.2)
+    return "created"
+
+
+def test_a_new_participant_from_the_dashboard_practises_at_once(practising: LiveServer) -> None:
+    with practising.client() as api, httpx.Client(base_url=practising.url) as browser:
+        dashboard = _logged_in(browser)
+        study = api.post("/api/studies", json={"name": "practice"}).json()["id"]
+        path = f"/dashboard/api/studies/{study}/participants"
+        made = dashboard.post(path, json={"participant": "P01"})
+        assert made.status_code == 201, made.text
+        assert _status_after(api, made.json()["id"]) == "running", "its practice started"
+        assert api.post(f"/api/sessions/{made.json()['id']}/stop").status_code == 200
+        later = dashboard.post(path, json={"participant": "P02", "pretrain": False})
+        assert later.status_code == 201, later.text
+        assert _status_after(api, later.json()["id"], seconds=3) == "created"
