@@ -41,7 +41,9 @@ def _tables(db: sqlite3.Connection) -> list[str]:
 
 def _with_session(db: sqlite3.Connection) -> list[str]:
     return [
-        t for t in _tables(db) if "session_id" in [c[1] for c in db.execute(f"pragma table_info({t})")]
+        t
+        for t in _tables(db)
+        if "session_id" in [c[1] for c in db.execute(f"pragma table_info({t})")]
     ]
 
 
@@ -118,7 +120,9 @@ def save(data: Path, state: Path) -> None:
             )
         }
         for session_id, study, label in sessions:
-            target = parts_dir / part_name(study) / part_name(label) / f"session-{session_id}.sqlite3.gz"
+            target = (
+                parts_dir / part_name(study) / part_name(label) / f"session-{session_id}.sqlite3.gz"
+            )
             if target.exists():
                 continue
             target.parent.mkdir(parents=True, exist_ok=True)
