@@ -33,7 +33,7 @@ from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.fields import FieldError, leaves, nest
 from learner.records import stage_of
-from learner.run import RunSpec
+from learner.run import RunSpec, declared
 
 
 class ExportError(ValueError):
@@ -81,9 +81,7 @@ class Exported:
         return float((self.design or {}).get("alpha", 0.05))
 
 
-def read_export(
-    path: Path, spec_class: type[RunSpec] = RunSpec, sessions: Collection[int] | None = None
-) -> Exported:
+def read_export(path: Path, sessions: Collection[int] | None = None) -> Exported:
     """The export at `path` (a folder, or the zip the API serves): the sessions a report
     takes by default, as the database's report chooses them (trained advisors, unchanged
     replays and, where the export has their status, sessions not finished are left out), or
@@ -92,7 +90,7 @@ def read_export(
     if path.is_file() and zipfile.is_zipfile(path):
         with tempfile.TemporaryDirectory() as tmp, zipfile.ZipFile(path) as archive:
             archive.extractall(tmp)
-            return read_export(Path(tmp), spec_class, sessions)
+            return read_export(Path(tmp), sessions)
     table = every = _table(path, "sessions")
     ids = table["session_id"].astype(int)
     advisors: tuple[int, ...] = ()
@@ -113,12 +111,12 @@ def read_export(
             if "advises" in row and not _missing(row["advises"]) and _boolean(row["advises"])
         )  # older exports have no such column: their advisors stay in
         table = table[~ids.isin(advisors)]
-        checks = _unchanged_replays(every, table, spec_class)
+        checks = _unchanged_replays(every, table)
         table = table[~table["session_id"].astype(int).isin(list(checks))]
         if "status" in table:  # (a table without it keeps every session)
             left_out = not_finished({int(row["session_id"]): _status(row) for row in _rows(table)})
             table = table[~table["session_id"].astype(int).isin(list(left_out))]
-    runs = {int(row["session_id"]): run_of(row, spec_class) for row in _rows(table)}
+    runs = {int(row["session_id"]): run_of(row) for row in _rows(table)}
     episodes = _with_stage(_table(path, "episodes"))
     episodes = episodes[episodes["session_id"].isin(list(runs))]
     training = episodes[episodes["stage"] == "train"].copy()
@@ -152,7 +150,7 @@ def read_export(
         steps=steps[[*STEP_COLUMNS, *(["outcome"] if "outcome" in steps else [])]].reset_index(
             drop=True
         ),
-        settings=settings_table(sorted(runs.items()), spec_class, _provenance(table)),
+        settings=settings_table(sorted(runs.items()), _provenance(table)),
     )
 
 
@@ -167,9 +165,7 @@ def export_of_table(path: Path) -> Path | None:
     return None
 
 
-def _unchanged_replays(
-    every: pd.DataFrame, chosen: pd.DataFrame, spec_class: type[RunSpec]
-) -> dict[int, int]:
+def _unchanged_replays(every: pd.DataFrame, chosen: pd.DataFrame) -> dict[int, int]:
     """Of the `chosen` sessions, the unchanged replays of a session in the export (`every`
     session, any status): an export without `replay_of` has none."""
     if "replay_of" not in chosen:
@@ -182,8 +178,8 @@ def _unchanged_replays(
     if not replay_of:
         return {}
     rows = {int(row["session_id"]): row for row in _rows(every)}
-    runs = {i: run_of(rows[i], spec_class) for i in replay_of}
-    sources = {i: run_of(rows[i], spec_class) for i in set(replay_of.values()) if i in rows}
+    runs = {i: run_of(rows[i]) for i in replay_of}
+    sources = {i: run_of(rows[i]) for i in set(replay_of.values()) if i in rows}
     return unchanged_replays(runs, replay_of, sources)
 
 
@@ -214,21 +210,22 @@ def _status(row: Mapping[str, Any]) -> str:
     return status_of(str(row["status"]), declined)
 
 
-def run_of(row: Mapping[str, Any], spec_class: type[RunSpec] = RunSpec) -> RunSpec:
+def run_of(row: Mapping[str, Any]) -> RunSpec:
     """A session row's run: its `run_spec` document, or its run columns (older exports)."""
+    declaration = declared()
     document = row.get("run_spec")
     try:
         if isinstance(document, str) and document:
-            return spec_class.from_json(json.loads(document))
+            return declaration.from_json(json.loads(document))
         values = {}
-        for leaf in leaves(spec_class):
+        for leaf in leaves(declaration):
             value = row.get(leaf.column)
             if _missing(value):
                 continue
             values[leaf.name] = _typed(leaf.kind, value)
         if values.get("strategy") is None:
             values.pop("strategy", None)
-        return spec_class.from_json(nest(values, spec_class))
+        return declaration.from_json(nest(values, declaration))
     except (FieldError, json.JSONDecodeError) as error:
         raise ExportError(f"session {row.get('session_id')}: {error}") from None
 

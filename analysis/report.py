@@ -22,6 +22,7 @@ from analysis import markdown as md
 from analysis.advice import advice_quality, quality_correlations
 from analysis.audit import Audit, audit, label
 from analysis.comparisons import compare
+from analysis.csvsafe import safe_frame
 from analysis.episodes import EpisodeTableError, agents_of, method_name
 from analysis.figures import (
     bands_window,
@@ -45,7 +46,6 @@ from analysis.rescoring import rescored_totals, rescoring_table
 from analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
 from analysis.summary import Analysis, analyze
 from sim.rewards import REWARD_SCHEMES
-from analysis.csvsafe import safe_frame
 
 FIGURE_FILES: dict[str, str] = {
     "reward_per_method": "figure5_reward_per_method.png",

@@ -19,7 +19,7 @@ from analysis.audit import describe_learner
 from learner import sb3_spec
 from learner.config import PRESETS, DQNConfig
 from learner.fields import leaves
-from learner.run import RunSpec
+from learner.run import RunSpec, declared
 
 PROVENANCE = {"code_version": "code", "cpu_kind": "cpu", "torch_version": "torch"}
 """The provenance the audit compares (`learner.provenance.record`): its column, and the
@@ -28,7 +28,6 @@ record's key. Arms computed by other code, on another CPU kind or torch are flag
 
 def settings_table(
     runs: Sequence[tuple[int, RunSpec]],
-    spec_class: type[RunSpec] = RunSpec,
     provenance: Mapping[int, Sequence[Mapping[str, Any]]] | None = None,
 ) -> pd.DataFrame:
     """The audit's table for `(session_id, run)` pairs; with `provenance` (each session's
@@ -37,7 +36,7 @@ def settings_table(
     presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
     settings = [
         leaf
-        for leaf in leaves(spec_class)
+        for leaf in leaves(declared())
         if leaf.role == "setting" and leaf.path[0] != "config" and leaf.name != "preset"
     ]
     rows = []

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import inspect
 import pkgutil
 import sys
 from collections.abc import Sequence
@@ -24,7 +23,6 @@ from sqlalchemy.exc import OperationalError
 
 from cli import commands
 from cli.commands.common import CommandError, database_down, fail, unreachable
-from learner.run import RunSpec
 
 
 class Parser(argparse.ArgumentParser):
@@ -44,12 +42,10 @@ def version() -> str:
         return "unknown (not installed)"
 
 
-def build_parser(
-    spec_class: type[RunSpec] = RunSpec, command: str | None = None
-) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """Every command's parser, or only `command`'s where a module of `cli/commands/` is
     named after it; the commands that take a run (`train`, `batch`) make their flags from
-    `spec_class`, the run's declaration."""
+    the run's declaration (`learner.run.declared`)."""
     parser = Parser(
         prog="ideeprl",
         description="Human advising studies in interactive deep reinforcement learning.",
@@ -66,17 +62,14 @@ def build_parser(
         register = getattr(module, "register", None)
         if register is None:
             continue
-        if "spec_class" in inspect.signature(register).parameters:
-            register(subparsers, spec_class=spec_class)
-        else:
-            register(subparsers)
+        register(subparsers)
     return parser
 
 
-def main(argv: Sequence[str] | None = None, spec_class: type[RunSpec] = RunSpec) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     given = list(sys.argv[1:] if argv is None else argv)
     command = given[0] if given and not given[0].startswith("-") else None
-    args = build_parser(spec_class, command).parse_args(given)
+    args = build_parser(command).parse_args(given)
     try:
         return int(args.func(args) or 0)
     except CommandError as error:

@@ -40,11 +40,10 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from learner.advisors import Advisor
 from learner.config import PER_AGENT_FIELDS, DQNConfig, shared_config
 from learner.records import EpisodeRecord, StepRecord
 from learner.stacked import ConvMode, StackedAgents
-from learner.strategies import AdvisingStrategy
+from learner.strategies import AdvisingStrategy, AnyAdvisor
 from learner.trainer import Trainer
 
 Layout = Literal["auto", "stacked", "stacked-actions", "loop"]
@@ -59,7 +58,7 @@ class Member:
 
     env: gym.Env
     seed: int = 0
-    advisor: Advisor | None = None
+    advisor: AnyAdvisor | None = None
     strategy: AdvisingStrategy | str | None = None
     callbacks: Iterable[Any] = field(default_factory=tuple)
 

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from learner.advisors import Advisor, NoAdvice
-from learner.strategies import AdviceMoment, AdvisingStrategy
+from learner.advisors import NoAdvice
+from learner.strategies import AdviceMoment, AdvisingStrategy, AnyAdvisor, ask
 
 SCHEDULE_VERSION = 1
 
@@ -117,12 +117,12 @@ class ScheduledAdvising(AdvisingStrategy):
         super().__init__(len(schedule.advised))
         self.schedule = schedule
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
+    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
         if moment.global_step not in self.schedule.advised:
             return None
-        return advisor.advise(moment.obs, moment.info)
+        return ask(advisor, moment)
 
-    def check(self, pretraining_steps: int, advisor: Advisor) -> None:
+    def check(self, pretraining_steps: int, advisor: AnyAdvisor) -> None:
         if pretraining_steps != self.schedule.pretraining_steps:
             raise ValueError(
                 f"the schedule was recorded with {self.schedule.pretraining_steps} pretraining "

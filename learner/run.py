@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-from collections.abc import Mapping, Sequence
+import json
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, cast
@@ -31,12 +33,23 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 from learner import machine
 from learner.advisors import ADVISOR_KINDS, Advisor, make_advisor
 from learner.config import PRESET_FIELDS, DQNConfig, Preset
-from learner.fields import FieldError, bounded, build, checked, flatten, group, nest, to_json
+from learner.fields import (
+    FieldError,
+    bounded,
+    build,
+    checked,
+    flatten,
+    group,
+    leaves,
+    nest,
+    to_json,
+)
 from learner.sb3_spec import sb3_hyperparameters
 from learner.strategies import (
     _STRATEGIES,
     STRATEGY_NAMES,
     AdvisingStrategy,
+    AnyAdvisor,
     early_budget_problem,
     make_strategy,
 )
@@ -300,6 +313,33 @@ class RunSpec:
         """Every leaf's value by leaf name (`with_values`' names)."""
         return flatten(to_json(self), type(self))
 
+    def identity(self) -> dict[str, Any]:
+        """What identifies this run among a study's sessions (a batch finds its runs by it):
+        every field of the normalized run in its stored JSON form, the advisor's checkpoint
+        and the fitted model as absolute paths, and numerics only where they were asked for
+        (not left `auto`): a run's pinned numerics are checked when it resumes
+        (`numerics_problem`)."""
+        doc = self.normalized().to_json()
+        doc.pop("version")
+        checkpoint = doc["advisor_checkpoint"]
+        if checkpoint is not None and not checkpoint.startswith("session:"):
+            doc["advisor_checkpoint"] = str(Path(checkpoint).resolve())
+        if doc.get("fitted_model") and not doc["fitted_model"].startswith("fitted:"):
+            doc["fitted_model"] = str(Path(doc["fitted_model"]).resolve())
+        for name in NUMERICS:
+            if doc["config"].get(name) in OPEN_NUMERICS:
+                doc["config"].pop(name)
+        return json.loads(json.dumps(doc))
+
+    def is_run(self, wanted: Mapping[str, Any]) -> bool:
+        """Whether this (stored) run is the run `wanted` (an `identity`): equal in
+        everything, numerics wanted `auto` matching whatever this run pinned."""
+        stored = self.identity()
+        for name in NUMERICS:
+            if name not in wanted["config"]:
+                stored["config"].pop(name, None)
+        return stored == wanted
+
     # --- rules ---------------------------------------------------------------------------
     def normalized(self) -> RunSpec:
         """The same run with every choice spelled out: the motion, the sort rule as its spec,
@@ -503,7 +543,7 @@ class RunSpec:
         return spec.make_trainer(env, spec.make_advisor(), callbacks), env
 
     def make_trainer(
-        self, env: Any, advisor: Advisor | None, callbacks: Sequence[Any] = ()
+        self, env: Any, advisor: AnyAdvisor | None, callbacks: Sequence[Any] = ()
     ) -> Trainer | SB3DQNTrainer:
         """The run's learner on `env`, advised by `advisor`: the ones `make_env` and
         `make_advisor` make, or what a caller wraps them in (the session worker adds the
@@ -534,16 +574,41 @@ class RunSpec:
             raise RunSpecError("schedule", str(error)) from None
 
 
+NUMERICS = tuple(leaf.name for leaf in leaves(RunSpec) if leaf.role == "numerics")
+"""The leaves a session pins when it is created (`RunSpec.pinned`)."""
+OPEN_NUMERICS = frozenset({"auto", 0})
+"""A numerics value that leaves the choice to the machine."""
+
+_DECLARED: list[type[RunSpec]] = []
+
+
+def declared() -> type[RunSpec]:
+    """The run's declaration: what every entry point reads, shows and stores runs with
+    (the REST body and its schema, the flags, the export's columns, the audit). `RunSpec`,
+    unless a class that extends it by fields is declared (`declare`)."""
+    return _DECLARED[-1] if _DECLARED else RunSpec
+
+
+@contextmanager
+def declare(spec_type: type[RunSpec]) -> Iterator[type[RunSpec]]:
+    """Read and show every run as `spec_type` (a subclass of `RunSpec` with more fields)
+    while the block runs, in this process. A worker process the server starts is handed
+    the declaration in force (so the class must be importable there)."""
+    if not issubclass(spec_type, RunSpec):
+        raise TypeError(f"{spec_type!r} does not extend RunSpec")
+    _DECLARED.append(spec_type)
+    try:
+        yield spec_type
+    finally:
+        _DECLARED.remove(spec_type)
+
+
 def run_flags(spec: RunSpec, normalized: bool = True) -> list[str]:
     """The command-line flags (`ideeprl batch`, `ideeprl train`) that describe `spec` beside
     its method: `--preset`, `--seed` and every field whose value is not the preset's. With
     `normalized`, both sides are compared after `normalized` (an unadvised run gives no
     advice options); without, as given (a batch's template, whose runs take several
     methods)."""
-    import json
-
-    from learner.fields import leaves
-
     base = type(spec).from_json({"preset": spec.preset, "method": spec.method})
     if normalized:
         spec, base = spec.normalized(), base.normalized()

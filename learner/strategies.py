@@ -9,7 +9,7 @@ exceeds its budget; an advised action is executed (policy shaping).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -58,6 +58,25 @@ class AdviceMoment:
         return self.global_step - self.pretraining_steps
 
 
+@runtime_checkable
+class MomentAdvisor(Protocol):
+    """An advisor shown the whole moment, not only the image: the step and the learner's
+    own choice, which the session worker's advisors log beside the advice."""
+
+    def advise_at(self, moment: AdviceMoment) -> int | NoAdvice: ...
+
+
+AnyAdvisor = Advisor | MomentAdvisor
+
+
+def ask(advisor: AnyAdvisor, moment: AdviceMoment) -> int | NoAdvice:
+    """The advisor's answer at this moment: shown the moment where it takes one, else the
+    image and the ground truth."""
+    if isinstance(advisor, MomentAdvisor):
+        return advisor.advise_at(moment)
+    return advisor.advise(moment.obs, moment.info)
+
+
 class AdvisingStrategy:
     """Base: budget bookkeeping; subclasses decide in `_advise`."""
 
@@ -75,7 +94,7 @@ class AdvisingStrategy:
     def remaining(self) -> int:
         return self.budget - self.used
 
-    def advise(self, moment: AdviceMoment, advisor: Advisor, n_actions: int = 4) -> int | None:
+    def advise(self, moment: AdviceMoment, advisor: AnyAdvisor, n_actions: int = 4) -> int | None:
         """The advised action to execute, or None; counts the advice against the budget.
         An advisor that answers `NO_ADVICE` (a replayed stream that ran out) was asked all
         the same: the request is counted, and the learner acts on its own."""
@@ -98,7 +117,7 @@ class AdvisingStrategy:
         self.used += 1
         return int(action)
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
+    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
         raise NotImplementedError
 
     def first_advice_step(self, pretraining_steps: int) -> int:
@@ -106,7 +125,7 @@ class AdvisingStrategy:
         step, unless a strategy advises in pretraining."""
         return pretraining_steps + 1
 
-    def check(self, pretraining_steps: int, advisor: Advisor) -> None:
+    def check(self, pretraining_steps: int, advisor: AnyAdvisor) -> None:
         """Raise a `ValueError` if this strategy cannot work with this run."""
         if self.needs_values and not callable(getattr(advisor, "q_values", None)):
             raise ValueError(
@@ -141,17 +160,17 @@ class EarlyAdvising(AdvisingStrategy):
 
     name = "early"
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
+    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
         if moment.stage != "pretrain":
             return None
         if moment.global_step < self.first_advice_step(moment.pretraining_steps):
             return None
-        return advisor.advise(moment.obs, moment.info)
+        return ask(advisor, moment)
 
     def first_advice_step(self, pretraining_steps: int) -> int:
         return max(1, pretraining_steps - self.budget + 1)
 
-    def check(self, pretraining_steps: int, advisor: Advisor) -> None:
+    def check(self, pretraining_steps: int, advisor: AnyAdvisor) -> None:
         super().check(pretraining_steps, advisor)
         problem = early_budget_problem(self.budget, pretraining_steps)
         if problem:
@@ -170,10 +189,10 @@ class AlternatingAdvising(AdvisingStrategy):
             raise ValueError(f"interval must be a whole number >= 1, got {interval!r}")
         self.interval = interval
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
+    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
         if moment.stage != "train" or (moment.training_step - 1) % self.interval:
             return None
-        return advisor.advise(moment.obs, moment.info)
+        return ask(advisor, moment)
 
     def options(self) -> dict[str, Any]:
         return {"interval": self.interval}
@@ -192,16 +211,16 @@ class ImportanceAdvising(AdvisingStrategy):
             raise ValueError(f"threshold must be a number >= 0, got {threshold!r}")
         self.threshold = float(threshold)
 
-    def _important(self, moment: AdviceMoment, advisor: Advisor) -> bool:
+    def _important(self, moment: AdviceMoment, advisor: AnyAdvisor) -> bool:
         if moment.stage != "train":
             return False
-        values = np.asarray(advisor.q_values(moment.obs))  # type: ignore[attr-defined]
+        values = np.asarray(advisor.q_values(moment.obs))  # type: ignore[union-attr]
         return float(values.max() - values.min()) >= self.threshold
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
+    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
         if not self._important(moment, advisor):
             return None
-        return advisor.advise(moment.obs, moment.info)
+        return ask(advisor, moment)
 
     def options(self) -> dict[str, Any]:
         return {"threshold": self.threshold}
@@ -213,10 +232,10 @@ class MistakeCorrecting(ImportanceAdvising):
 
     name = "mistake_correcting"
 
-    def _advise(self, moment: AdviceMoment, advisor: Advisor) -> int | NoAdvice | None:
+    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
         if not self._important(moment, advisor):
             return None
-        action = advisor.advise(moment.obs, moment.info)
+        action = ask(advisor, moment)
         return None if action == moment.intended_action else action
 
 

@@ -20,7 +20,6 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from learner.advisors import Advisor
 from learner.agent import DQNAgent
 from learner.checkpoint import read_checkpoint, write_checkpoint
 from learner.config import DQNConfig
@@ -31,7 +30,7 @@ from learner.records import EpisodeRecord, StepRecord, stage_of
 from learner.replay import ReplayMemory
 from learner.seeding import run_streams
 from learner.staged import EpisodeInProgress, StagedRun, StepTaken
-from learner.strategies import AdviceMoment, AdvisingStrategy, make_strategy
+from learner.strategies import AdviceMoment, AdvisingStrategy, AnyAdvisor, make_strategy
 
 N_ACTIONS = 4
 RUNTIME_FIELDS = ("device", "torch_threads", "precision", "episodes")
@@ -49,7 +48,7 @@ class Trainer(StagedRun):
         self,
         env: gym.Env,
         config: DQNConfig | None = None,
-        advisor: Advisor | None = None,
+        advisor: AnyAdvisor | None = None,
         strategy: AdvisingStrategy | str | None = None,
         seed: int = 0,
         callbacks: Iterable[Any] = (),
@@ -102,9 +101,6 @@ class Trainer(StagedRun):
         """The record of the episode the last step ended, else None."""
         self._episode: EpisodeInProgress | None = None
         self._stopped = False
-        self.moment: AdviceMoment | None = None
-        """The moment the strategy is deciding on, while it asks the advisor (what an advisor
-        that records its advice reads: the step, the learner's greedy action)."""
 
     def step(self) -> StepRecord:
         """Take one environment step (resetting first if no episode is in progress)."""
@@ -144,7 +140,6 @@ class Trainer(StagedRun):
                 episode.obs, episode.info, episode.stage, global_step,
                 config.pretraining_steps, intended, greedy,
             )  # fmt: skip
-            self.moment = moment
             try:
                 advised = self.strategy.advise(moment, self.advisor, N_ACTIONS)
             except BaseException:
@@ -307,7 +302,7 @@ def _episode_state(episode: EpisodeInProgress) -> dict[str, Any]:
     }
 
 
-def _advisor_state(advisor: Advisor | None) -> dict[str, Any] | None:
+def _advisor_state(advisor: AnyAdvisor | None) -> dict[str, Any] | None:
     state_dict = getattr(advisor, "state_dict", None)
     return state_dict() if callable(state_dict) else None
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from dataclasses import replace
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -15,8 +14,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from learner.fields import leaves
-from learner.run import RunSpec
+from learner.fields import FieldError, leaves
+from learner.run import declared
 from runs.worker.rerun import Rerun
 from runs.worker.worker import WorkerOptions
 from server.deps import credential_guards
@@ -78,10 +77,10 @@ def worker_options(settings: Settings) -> WorkerOptions:
     )
 
 
-def describe_run_field(spec_class: type[RunSpec]) -> Describe:
+def describe_run_field() -> Describe:
     """What a field of a session body's `run` allows, by its path (for the guard's 422 on
     NaN and infinities, which it refuses before the body is validated)."""
-    by_path = {leaf.path: leaf for leaf in leaves(spec_class)}
+    by_path = {leaf.path: leaf for leaf in leaves(declared())}
 
     def describe(path: tuple[str | int, ...]) -> str | None:
         leaf = by_path.get(tuple(map(str, path[1:]))) if path[:1] == ("run",) else None
@@ -90,11 +89,11 @@ def describe_run_field(spec_class: type[RunSpec]) -> Describe:
     return describe
 
 
-def run_field_home(spec_class: type[RunSpec]) -> Home:
+def run_field_home() -> Home:
     """Where a run's field of a given name belongs (`run.config.advice_budget`), for the
     422 on an unknown field: a run's field sent beside its `run` or in the wrong group."""
     places: dict[str, list[str]] = {}
-    for leaf in leaves(spec_class):
+    for leaf in leaves(declared()):
         places.setdefault(leaf.path[-1], []).append(".".join(("run", *leaf.path)))
     # a name that two groups share has no one home: it is named without one
     homes = {name: where[0] for name, where in places.items() if len(where) == 1}
@@ -118,9 +117,9 @@ def episode_playback(settings: Settings) -> tuple[Playbacks, PlaybackViewer]:
     return playbacks, viewer
 
 
-def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = RunSpec) -> FastAPI:
-    """The web app. `spec_class`: the run's declaration (`learner.run.RunSpec`); the body
-    that creates a session, its schema and the exports are made from it."""
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The web app. The body that creates a session, its schema and the exports are made
+    from the run's declaration in force when it is created (`learner.run.declared`)."""
     settings = settings or Settings()
     settings.ensure_api_key()
     engine = make_engine(settings.db_url)
@@ -130,7 +129,7 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         factory,
         settings.db_url,
         hub,
-        replace(worker_options(settings), spec_class=spec_class),
+        worker_options(settings),
         settings.stale_after_s,
         settings.max_trainers,
         settings.training_population,
@@ -140,7 +139,6 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         settings.pool_limit,
         settings.pool_every_s,
         settings.data_dir,
-        spec_class,
         settings.worker_threads,
         settings.pool_practising or max(1, (os.cpu_count() or 2) - 1),
     )
@@ -180,13 +178,12 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
     app.state.viewer = viewer
     app.state.playbacks = playbacks
     app.state.playback_viewer = playback_viewer
-    app.state.spec_class = spec_class
     app.state.participant_tokens = {}
     app.state.dashboard_logins = Logins(settings.dashboard_login_s)
     app.state.arrivals_by_address = WindowLimit()
     app.state.arrivals_by_study = WindowLimit()
     """The study links' rate limits (`server.routes.joining`)."""
-    for router in (*ROUTERS, sessions.creation_router(spec_class)):
+    for router in (*ROUTERS, sessions.creation_router()):
         app.include_router(router)
     for router in (
         reports.router,
@@ -203,10 +200,10 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
         RequestGuard,
         max_body_bytes=settings.max_request_bytes,
         guards={**credential_guards(settings), LOGIN: dashboard.require_login},
-        describe=describe_run_field(spec_class),
+        describe=describe_run_field(),
     )
     app.add_middleware(SecurityHeaders)
-    refuse = validation_error(run_field_home(spec_class))
+    refuse = validation_error(run_field_home())
     app.add_exception_handler(RequestValidationError, refuse)  # type: ignore[arg-type]
     install_openapi(app)
     add_docs(app)
@@ -223,13 +220,24 @@ def create_app(settings: Settings | None = None, spec_class: type[RunSpec] = Run
     @app.exception_handler(ServiceError)
     async def service_error(request: Request, error: ServiceError) -> JSONResponse:
         if isinstance(error, Invalid):
-            loc = ["body", *error.field.split(".")]
-            message = await without_input(request, error.message)
-            detail = [{"loc": loc, "msg": message, "type": "value_error"}]
-            return JSONResponse({"detail": detail}, status_code=422)
+            return await unacceptable(request, error.field, error.message)
         return JSONResponse({"detail": error.message}, status_code=error.status_code)
 
+    @app.exception_handler(FieldError)
+    async def run_field_error(request: Request, error: FieldError) -> JSONResponse:
+        """A run's value its declaration refuses (`learner.fields`), wherever in a request
+        the run was read: the body's `run`."""
+        field = f"run.{error.field}" if error.field else "run"
+        return await unacceptable(request, field, str(error))
+
     return app
+
+
+async def unacceptable(request: Request, field: str, message: str) -> JSONResponse:
+    """The 422 of a well-formed value a service or the run refuses, at its body field."""
+    loc = ["body", *field.split(".")]
+    detail = [{"loc": loc, "msg": await without_input(request, message), "type": "value_error"}]
+    return JSONResponse({"detail": detail}, status_code=422)
 
 
 def app_from_env() -> FastAPI:

@@ -287,9 +287,9 @@ RECORDS_ALLOWED: dict[str, str] = {
     "study.schemas.runs.given": "a body's set values as JSON, read by `RunSpec.from_json`",
     "study.schemas.errors.valid_fields": "a JSON Schema document (pydantic's "
     "`model_json_schema()`), walked as JSON to name an object's fields",
-    "study.services.learning.identity": RUN_JSON + ", normalized",
-    "study.services.learning.same_run": RUN_JSON + ", normalized (`identity`)",
-    "runs.worker.rerun.RerunOrder.__init__": RUN_JSON + ": the rerun's process reads it",
+    "learner.run.RunSpec.identity": RUN_JSON + ", normalized",
+    "learner.run.RunSpec.is_run": RUN_JSON + ", normalized (`identity`)",
+    "runs.batch.sessions._is_run": RUN_JSON + ", normalized (`RunSpec.identity`)",
     "learner.run.RunSpec.sb3": "keyword arguments of Stable-Baselines3's DQN, passed on as-is",
     "learner.sb3_spec.describe": "Stable-Baselines3's hyperparameters and config, as SB3 names "
     "them",

@@ -23,7 +23,7 @@ from cli.commands.common import (
 )
 from learner.fields import FieldError, leaves, nest, parse_text
 from learner.fields import add_arguments as add_spec_arguments
-from learner.run import RunSpec, run_flags
+from learner.run import declared, run_flags
 
 if TYPE_CHECKING:  # the command line starts without the batch's imports
     from sqlalchemy.orm import Session
@@ -82,7 +82,7 @@ def settings_from(args: argparse.Namespace) -> Settings:
     return Settings(**{k: v for k, v in overrides.items() if v is not None})
 
 
-def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
+def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "batch",
         help="run baseline agents (autonomous, agent, oracle, random, sb3-dqn, fitted) as a "
@@ -137,7 +137,7 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
         "by every method's runs; --seed is the base seed (agent i gets seed + i)",
     )
     add_spec_arguments(
-        run, spec_class, skip=("method",), defaults={"torch_threads": "1 (half the cores, 1-4)"}
+        run, declared(), skip=("method",), defaults={"torch_threads": "1 (half the cores, 1-4)"}
     )
     add_deprecated(parser, skip=("method",))
     add_set_option(what, "set any field of the runs by its name")
@@ -208,7 +208,7 @@ def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
     )
     how.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_database_options(how)
-    parser.set_defaults(func=batch, spec_class=spec_class)
+    parser.set_defaults(func=batch)
 
 
 def spec_from(
@@ -219,15 +219,15 @@ def spec_from(
     file `stored_model` finds for it."""
     from runs.batch import BatchError, BatchSpec
 
-    spec_class: type[RunSpec] = getattr(args, "spec_class", RunSpec)
-    by_name = {leaf.name: leaf for leaf in leaves(spec_class)}
+    declaration = declared()
+    by_name = {leaf.name: leaf for leaf in leaves(declaration)}
     try:
-        values = given_values(args, spec_class)
+        values = given_values(args, declaration)
         if args.run_file is not None:
-            template = spec_class.from_json(_document(args.run_file)).with_values(values)
+            template = declaration.from_json(_document(args.run_file)).with_values(values)
         else:
             values.setdefault("torch_threads", 1)  # a batch fills the cores with 1-thread runs
-            template = spec_class.from_json(nest(values, spec_class))
+            template = declaration.from_json(nest(values, declaration))
         fitted, advisor = template.fitted_model, template.advisor_checkpoint
         if fitted is not None and fitted.startswith("fitted:") and stored_model is not None:
             template = template.replace(fitted_model=stored_model(fitted))
@@ -409,7 +409,7 @@ def _dry_run(args: argparse.Namespace, spec: BatchSpec, settings: Settings) -> i
         rows = [PreviewRow(run.name, run.method, run.seed) for run in plan_runs(spec)]
     else:
         options = _options(args, settings)
-        runner = BatchRunner(spec, study_id, url, options, args.spec_class, migrate=False)
+        runner = BatchRunner(spec, study_id, url, options, migrate=False)
         rows = runner.preview_rows()
     if args.json:
         runs = [dataclasses.asdict(row) for row in rows]
@@ -474,7 +474,7 @@ def _run(args: argparse.Namespace, spec: BatchSpec, study_id: int, settings: Set
     from runs.batch import describe
     from runs.batch.runner import BatchRunner
 
-    runner = BatchRunner(spec, study_id, settings.db_url, _options(args, settings), args.spec_class)
+    runner = BatchRunner(spec, study_id, settings.db_url, _options(args, settings))
     result = runner.run()
     print("\n".join(describe(result)))
     if result.interrupted or not result.complete:

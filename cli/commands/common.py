@@ -202,10 +202,10 @@ def add_set_option(group: argparse._ActionsContainer, help: str) -> None:
     )
 
 
-def given_values(args: argparse.Namespace, spec_class: type[RunSpec]) -> dict[str, Any]:
+def given_values(args: argparse.Namespace, declaration: type[RunSpec]) -> dict[str, Any]:
     """The run's leaves the flags gave (generated flags, `--set FIELD=VALUE`, deprecated
     names), by leaf name, each checked; `FieldError` for a bad one."""
-    by_name = {leaf.name: leaf for leaf in leaves(spec_class)}
+    by_name = {leaf.name: leaf for leaf in leaves(declaration)}
     values: dict[str, Any] = {}
     for name, text in getattr(args, "assignments", None) or []:
         if name not in by_name:

@@ -23,28 +23,28 @@ from learner.config import DQNConfig
 from learner.fields import add_arguments as add_spec_arguments
 from learner.fields import nest
 from learner.records import EpisodeRecord, StepRecord
-from learner.run import RunSpec
+from learner.run import RunSpec, declared
 
 
-def register(subparsers: Any, spec_class: type[RunSpec] = RunSpec) -> None:
+def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "train",
         help="train one learner (autonomous, or advised) and write its records",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    add_arguments(parser, spec_class)
-    parser.set_defaults(func=train, spec_class=spec_class)
+    add_arguments(parser)
+    parser.set_defaults(func=train)
 
 
-def add_arguments(parser: argparse.ArgumentParser, spec_class: type[RunSpec] = RunSpec) -> None:
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", type=Path, help="output folder (default: study_data/runs/train-DATE)"
     )
     run = parser.add_argument_group(
         "the run", "every field of learner.run.RunSpec, one flag each (or --set FIELD=VALUE)"
     )
-    add_spec_arguments(run, spec_class)
+    add_spec_arguments(run, declared())
     add_deprecated(parser)
     add_set_option(parser, "set any field of the run by its name")
     parser.add_argument("--checkpoint-every", type=int, default=25, metavar="EPISODES")
@@ -120,10 +120,10 @@ def run_spec(args: argparse.Namespace) -> tuple[RunSpec, int | None]:
     checkpoint's when resuming (then only --episodes may change, and numerics this machine
     cannot honour are refused unless --override-numerics), and the global step a resumed run
     stands at."""
-    spec_class: type[RunSpec] = getattr(args, "spec_class", RunSpec)
-    values = given_values(args, spec_class)
+    declaration = declared()
+    values = given_values(args, declaration)
     if args.resume:
-        spec, global_step = spec_class.from_checkpoint(args.resume)
+        spec, global_step = declaration.from_checkpoint(args.resume)
         changed = sorted(set(values) - {"episodes"})
         if changed:
             raise ValueError(
@@ -140,7 +140,7 @@ def run_spec(args: argparse.Namespace) -> tuple[RunSpec, int | None]:
             spec = spec.replace(config=config).pinned(spec.config.torch_threads)
             print(f"warning: numerics overridden ({problem})", file=sys.stderr)
         return spec.validate().pinned(), global_step
-    return spec_class.from_json(nest(values, spec_class)).validate().pinned(), None
+    return declaration.from_json(nest(values, declaration)).validate().pinned(), None
 
 
 def _checkpoint_due(finished: EpisodeRecord | None, every: int) -> bool:

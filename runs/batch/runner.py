@@ -22,6 +22,7 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.advisor_check import AdvisorCheck, checked_advisor, last_check
+from learner.fields import FieldError
 from learner.run import RunSpec
 from runs.batch.backends import NOT_RUN, Backend, LocalBackend, RayBackend, usable_cores
 from runs.batch.progress import BatchProgress, MachineShare
@@ -32,7 +33,7 @@ from runs.worker.worker import WorkerOptions
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import BACKUPS, upgrade
 from study.db.models import ADVISOR_ROLE, LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
-from study.services import learning, numerics
+from study.services import numerics
 from study.services.errors import Invalid
 from study.services.ownership import set_status, take_back
 from study.services.schedules import write_schedule
@@ -166,11 +167,9 @@ class BatchRunner:
         study_id: int,
         database_url: str,
         options: RunnerOptions,
-        spec_class: type[RunSpec] = RunSpec,
         migrate: bool = True,
     ):
         self.spec = spec
-        self.spec_class = spec_class
         self.study_id = study_id
         self.options = options
         self.database_url = absolute_database_url(database_url)
@@ -214,18 +213,18 @@ class BatchRunner:
         spec = self._run_spec(state, self.advisor_checkpoint)
         label = f"{self.spec.label} advisor" if state.run.is_advisor else self.spec.label
         try:
-            session, _ = ensure_session(
-                db, self.study_id, spec, label, self.spec_class, state.run.source
-            )
+            session, _ = ensure_session(db, self.study_id, spec, label, state.run.source)
         except Invalid as error:
             raise BatchError(error.message) from None
+        except FieldError as error:
+            raise BatchError(str(error)) from None
         if state.run.is_advisor and session.role != ADVISOR_ROLE:
             session.role = ADVISOR_ROLE  # every attempt: never one of a report's agents
             db.commit()
         state.session_id, state.status = session.id, session.status
         state.done_before = session.status == Status.finished.value
         if session.status in TO_RUN and session.status != Status.created.value:
-            problem = numerics.refusal(session, self.spec_class)
+            problem = numerics.refusal(session, session.spec)
             if problem and not self.options.override_numerics:
                 state.status, state.detail = REFUSED, problem
 
@@ -334,9 +333,8 @@ class BatchRunner:
                     row.status = f"follows {self.spec.control_of} #{run.index + 1} once it ran"
                     continue
                 found = find_session(
-                    db, self.study_id, self._run_spec(state, checkpoint), self.spec_class,
-                    run.source,
-                )  # fmt: skip
+                    db, self.study_id, self._run_spec(state, checkpoint), run.source
+                )
                 if found is not None:
                     row.session, row.status = found.id, found.status
                 if run.is_advisor and found is not None and found.status == Status.finished:
@@ -364,9 +362,7 @@ class BatchRunner:
             state = RunState(Run("autonomous", -1, state.run.seed + 1))
             next_row = PreviewRow(f"advisor (attempt {attempt + 1})", "autonomous", state.run.seed)
             rows.append(next_row)
-            retry = find_session(
-                db, self.study_id, self._run_spec(state, None), self.spec_class, None
-            )
+            retry = find_session(db, self.study_id, self._run_spec(state, None), None)
             if retry is None:
                 return None
             next_row.session, next_row.status = retry.id, retry.status
@@ -439,7 +435,7 @@ class BatchRunner:
         if state.session_id not in self._keys:
             row = db.get(StudySession, state.session_id)
             assert row is not None
-            self._keys[state.session_id] = population_key(learning.spec_of(row, self.spec_class))
+            self._keys[state.session_id] = population_key(row.spec)
         return self._keys[state.session_id]
 
     def _next_group(self, db: Session, workers: int) -> list[RunState]:
@@ -462,7 +458,6 @@ class BatchRunner:
             heartbeat_s=self.options.heartbeat_s,
             nice=self.options.nice,
             override_numerics=self.options.override_numerics,
-            spec_class=self.spec_class,
         )
         if self.options.backend == "ray":
             return RayBackend(

@@ -1,15 +1,16 @@
 """A batch's runs in the database: find the session a run already has, create the missing
 ones (taking back those whose worker died is `study.services.ownership.take_back`).
 
-A run's identity is its study and `learning.identity` (every field of its `RunSpec` in its
-stored form, numerics only where the batch asked for them), compared with each stored run
-read back by the same declaration (fields added since take their defaults): the label is a
+A run's identity is its study and `RunSpec.identity` (every field of the run in its stored
+form, numerics only where the batch asked for them), compared with each stored run read
+back by the same declaration (fields added since take their defaults): the label is a
 name, not part of the identity, so a renamed batch still finds its runs.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -17,7 +18,7 @@ from sqlalchemy.orm import Session
 from learner.run import RunSpec
 from study.db.models import LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
 from study.schemas.sessions import SessionOptions
-from study.services import learning, replays
+from study.services import replays
 from study.services.sessions import create_session
 
 _RANK = {
@@ -42,12 +43,11 @@ def find_session(
     db: Session,
     study_id: int,
     spec: RunSpec,
-    spec_class: type[RunSpec] = RunSpec,
     replay_of: int | None = None,
 ) -> StudySession | None:
-    """The study's session for this run (`learning.same_run`; a replay's, of `replay_of`),
+    """The study's session for this run (`RunSpec.is_run`; a replay's, of `replay_of`),
     the furthest along if several match; None if the run has none yet."""
-    wanted = learning.identity(spec)
+    wanted = spec.identity()
     query = select(StudySession).where(StudySession.study_id == study_id)
     matches = [
         s
@@ -56,11 +56,18 @@ def find_session(
         and s.method == spec.method
         and s.seed == spec.seed
         and s.replay_of == replay_of
-        and learning.same_run(wanted, s, spec_class)
+        and _is_run(s, wanted)
     ]
     if not matches:
         return None
     return min(matches, key=lambda s: (_RANK[s.status], s.id))
+
+
+def _is_run(session: StudySession, wanted: dict[str, Any]) -> bool:
+    try:
+        return session.spec.is_run(wanted)
+    except (ValueError, TypeError):
+        return False  # a run the learner can no longer read is never the same as a new one
 
 
 def ensure_session(
@@ -68,12 +75,11 @@ def ensure_session(
     study_id: int,
     spec: RunSpec,
     label: str,
-    spec_class: type[RunSpec] = RunSpec,
     replay_of: int | None = None,
 ) -> tuple[StudySession, bool]:
     """The run's session, created (pinned on this machine) if missing; True if created now.
     A replay (`replay_of`: its source session) is fed the source's advice stream."""
-    found = find_session(db, study_id, spec, spec_class, replay_of)
+    found = find_session(db, study_id, spec, replay_of)
     if found is not None:
         return found, False
     if replay_of is not None:

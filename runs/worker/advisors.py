@@ -5,16 +5,14 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
-from typing import Any
-
-import numpy as np
+from typing import Any, Protocol
 
 from learner.advisors import NO_ADVICE, Advisor, NoAdvice
 from learner.strategies import AdviceMoment
 from runs.worker.link import WorkerLink
 from runs.worker.messages import AdviceRequest, AdviceResult
+from runs.worker.recorder import Reporter
 from study.services.advice import AdviceGiven
 from study.services.observations import encode_png
 
@@ -22,7 +20,9 @@ log = logging.getLogger(__name__)
 
 
 class HumanAdvisor:
-    """`learner.Advisor` for a person: publishes a request and blocks until they answer.
+    """The advisor for a person (`learner.strategies.MomentAdvisor`): publishes a request
+    through the `link` to the page and blocks until they answer; the `reporter` shows the
+    wait and has every step before it stored.
 
     Advice already given (`given`, from the database) is replayed without asking, so a
     resumed session reaches the same point without troubling the participant again."""
@@ -30,26 +30,18 @@ class HumanAdvisor:
     def __init__(
         self,
         link: WorkerLink,
+        reporter: Reporter,
         given: dict[int, int],
         start_index: int,
         advice_budget: int,
         idle_limit_s: float,
-        moment: Callable[[], AdviceMoment],
-        before_waiting: Callable[[], None] = lambda: None,
-        until_participant_ready: Callable[[], None] = lambda: None,
     ) -> None:
-        """`before_waiting()` runs before the request is sent (the worker flushes its
-        records there, so every step before the wait is in the database);
-        `until_participant_ready()` blocks until the participant consented and finished the
-        induction. `moment()`: what the trainer is deciding on (the step, its greedy action)."""
-        self._before_waiting = before_waiting
-        self._until_ready = until_participant_ready
         self._link = link
+        self._reporter = reporter
         self._given = given
         self.count = start_index
         self._budget = advice_budget
         self._idle_limit_s = idle_limit_s
-        self._moment = moment
         self._answered: int | None = None
 
     def state_dict(self) -> dict[str, Any]:
@@ -70,39 +62,51 @@ class HumanAdvisor:
             self._link.send(AdviceResult(self._answered, action, reward, episode_over))
             self._answered = None
 
-    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+    def advise_at(self, moment: AdviceMoment) -> int:
         index = self.count
         self._answered = None
         if index in self._given:
             action = self._given[index]
         else:
-            moment = self._moment()
             request = AdviceRequest(
                 advice_index=index,
                 global_step=moment.global_step,
                 greedy_action=moment.greedy_action,
-                observation_png=encode_png(obs),
-                info=dict(info),
+                observation_png=encode_png(moment.obs),
+                info=dict(moment.info),
                 advice_budget=self._budget,
             )
-            self._until_ready()
+            self._until_participant_ready()
             # The request first: the flush of the steps before it then overlaps the
             # person's decision instead of delaying the turn (it ends before the answer
             # is read, so the steps are stored before the wait for it).
             self._link.send(request)
-            self._before_waiting()
+            self._reporter.before_waiting()
             action = self._link.wait_for_answer(index, self._idle_limit_s)
             self._given[index] = action
             self._answered = index
         self.count += 1
         return action
 
+    def _until_participant_ready(self) -> None:
+        """Blocks until the participant consented and finished the induction."""
+        if self._link.participant_ready:
+            return
+        self._reporter.waiting_for_participant = True
+        self._reporter.before_waiting()
+        self._link.wait_for_participant(self._idle_limit_s)
+        self._reporter.waiting_for_participant = False
+
+
+class AdviceLog(Protocol):
+    def add_advice(self, advice: AdviceGiven) -> None: ...
+
 
 class RecordingAdvisor:
     """Wraps a machine advisor (agent, oracle, random, fitted) or a replayed stream: same
     advice, logged with the observation and the time it took, as the study's exports treat
     every advisor alike (`study.services.advice.AdviceGiven`, complete when built: the step
-    and the learner's greedy action come from the trainer's `moment`). A simulated decision
+    and the learner's greedy action come from the moment it is asked at). A simulated decision
     time (an advisor's `last_decision_time_s`: fitted, or an oracle with times) is logged
     as `decision_time_s`, where a person's page puts theirs. A replayed advice also logs
     whether it met the image its advisor saw (`same_observation`); a request beyond the
@@ -114,15 +118,13 @@ class RecordingAdvisor:
         session_id: int,
         kind: str,
         start_index: int,
-        record: Callable[[AdviceGiven], None],
-        moment: Callable[[], AdviceMoment],
+        log: AdviceLog,
     ) -> None:
         self._inner = inner
         self._session_id = session_id
         self._kind = kind
         self.count = start_index
-        self._record = record
-        self._moment = moment
+        self._log = log
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._inner, name)  # q_values, for importance advising
@@ -137,14 +139,13 @@ class RecordingAdvisor:
         if state["inner"] is not None and callable(load):
             load(state["inner"])
 
-    def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int | NoAdvice:
+    def advise_at(self, moment: AdviceMoment) -> int | NoAdvice:
         started = time.perf_counter()
         requested_at = datetime.now(UTC)
-        answer = self._inner.advise(obs, info)
+        answer = self._inner.advise(moment.obs, moment.info)
         action = None if answer is NO_ADVICE else int(answer)
         elapsed = time.perf_counter() - started
-        moment = self._moment()
-        self._record(
+        self._log.add_advice(
             AdviceGiven(
                 session_id=self._session_id,
                 advice_index=self.count,
@@ -152,7 +153,7 @@ class RecordingAdvisor:
                 advisor=self._kind,
                 action=action,
                 greedy_action=moment.greedy_action,
-                observation_png=encode_png(obs),
+                observation_png=encode_png(moment.obs),
                 response_time_s=elapsed,
                 decision_time_s=getattr(self._inner, "last_decision_time_s", None),
                 requested_at=requested_at,

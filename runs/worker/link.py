@@ -40,8 +40,8 @@ SHUTTING_DOWN = "the server shut down in order (a restart or an update)"
 """The detail of a session its server's shutdown interrupted (an update, a restart): the
 server resumes such a human session by itself when it starts again, if it was interrupted
 recently (`server.live.manager.RESUME_WITHIN_S`), so the participant goes on where they
-were. Earlier versions wrote "the server is shutting down" for every session a shutdown
-interrupted, paused ones included: those are never resumed by themselves."""
+were. A session paused when the server shut down has its own detail below: it is never
+resumed by itself."""
 SHUT_DOWN_WHILE_PAUSED = "the server shut down while the session was paused; resume it"
 """The detail of a session the researcher had paused: it waits for them, not the restart."""
 

@@ -45,7 +45,7 @@ from sqlalchemy import update
 
 from learner import machine
 from learner.config import DQNConfig, shared_config
-from learner.run import PROCESS_BYTES, RunSpec
+from learner.run import PROCESS_BYTES, RunSpec, declare
 from runs.worker.link import StopRequested, TaggedChannel, WorkerExit, WorkerLink
 from runs.worker.priority import lower_priority
 from runs.worker.recorder import LeaseLost
@@ -92,6 +92,18 @@ def run_population(
     `conn` what its own worker told it, `Tagged` with its session."""
     if options.nice:
         lower_priority(options.nice, idle=options.idle)
+    with declare(options.declaration):
+        return _run_together(session_ids, database_url, options, conn, ended, tokens)
+
+
+def _run_together(
+    session_ids: Sequence[int],
+    database_url: str,
+    options: WorkerOptions,
+    conn: Connection | None,
+    ended: Callable[[int, str], None],
+    tokens: Mapping[int, str] | None,
+) -> dict[int, str]:
     factory = make_session_factory(make_engine(database_url))
     statuses: dict[int, str] = {}
 
@@ -102,18 +114,19 @@ def run_population(
     runs: list[_Run] = []
     for session_id in session_ids:
         channel = TaggedChannel(conn, session_id) if tokens is not None and conn else None
+        spec = None
         if tokens is not None:
             token = tokens[session_id]
         else:
             try:
-                token = claim_session(factory, session_id, options)
+                token, spec = claim_session(factory, session_id, options)
             except Exception as error:  # someone else runs it, or it is gone
                 end(session_id, f"{NOT_RUN}{error}")
                 continue
         try:
             from learner.trainer import Trainer  # torch: loaded in the worker, not the runner
 
-            run = _Run(session_id, database_url, options, token, channel)
+            run = _Run(session_id, database_url, options, token, channel, spec)
             if not isinstance(run.trainer, Trainer):
                 raise ValueError(f"session {session_id}'s learner cannot join a population")
             if run.link is not None:
@@ -324,7 +337,7 @@ def default_population(run: RunSpec, cores: int | None = None, workers: int | No
     BF16 the update is a larger share still (95 % of a step, float32) and the rule the same:
     on the quiet AVX2-only EPYC (log `population-batch-2026-12-04-avx2-quiet.log`) N=2 and
     N=4 both 1.13x, the memory per agent 555, 298 and 173 MiB; with the padded update
-    (`population-batch-2026-12-04-avx2-padded.log`, the rates 1.38-1.57x those before) N=2
+    (`population-batch-2026-12-04-avx2-padded.log`, the rates 1.38-1.57x the unpadded ones) N=2
     1.08x, N=4 0.99x.
 
     On CUDA the update leaves the critical path, and the population's size only has to

@@ -236,6 +236,12 @@ class Reporter:
         self.send(self.progress())
         self._sent = time.monotonic()
 
+    def before_waiting(self) -> None:
+        """Before the run blocks on a person or a trainer slot: the live view shows where
+        it waits, and every step taken so far is in the database."""
+        self.send_progress()
+        self.recorder.flush()
+
     # --- learner callbacks -------------------------------------------------------------
     def on_step(self, record: StepRecord) -> None:
         self.stage = record.stage

@@ -16,7 +16,6 @@ import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from typing import Any
 
 from learner.run import RunSpec
 from runs.worker.messages import SceneReset, SceneStep
@@ -30,14 +29,13 @@ REWARD_TOLERANCE = 1e-9
 class RerunOrder:
     """What a rerun needs, read from the database by the web process."""
 
-    run: dict[str, Any]
-    """The session's stored run (`sessions.run`)."""
+    spec: RunSpec
+    """The session's run, as the web process read it."""
     reset_seed: int
     actions: Sequence[int]
     """The episode's logged actions, in order."""
     rewards: Sequence[float]
     """Their logged rewards: the rerun checks it reproduces them."""
-    spec_class: type[RunSpec] = RunSpec
 
 
 @dataclass(frozen=True)
@@ -73,8 +71,7 @@ def rerun_episode(order: RerunOrder) -> Rerun:
     """Reset with the episode's seed and take its logged actions."""
     from study.services.observations import encode_png  # the rerun's process only
 
-    spec = order.spec_class.from_json(order.run)
-    env = spec.make_env(record_motion=True)
+    env = order.spec.make_env(record_motion=True)
     try:
         obs, _ = env.reset(seed=order.reset_seed)
         scene = scene_of(env)

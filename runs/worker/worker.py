@@ -1,7 +1,7 @@
 """One session's run, in the process that owns its environment and learner.
 
 The web process starts `worker_main` in a spawned process per running session; the batch
-runner (issue 6) calls `run_session` directly, in its own processes or Ray tasks. Either
+runner (`runs.batch`) calls `run_session` directly, in its own processes or Ray tasks. Either
 way the worker claims the session, resumes from its last checkpoint when there is one,
 logs every record, checkpoints every few episodes and at pause/stop, and writes its own
 final status.
@@ -13,7 +13,7 @@ import contextlib
 import logging
 import os
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
@@ -23,8 +23,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from learner import provenance
 from learner.advisors import RecordedAdvisor
-from learner.run import RunSpec
-from learner.strategies import AdviceMoment
+from learner.run import RunSpec, declare, declared
 from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
 from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
 from runs.worker.messages import StatusChanged, TrainingWanted
@@ -33,7 +32,7 @@ from runs.worker.recorder import Checkpointable, LeaseLost, Recorder, Reporter
 from runs.worker.scene import SceneBroadcast
 from study.db.engine import make_engine, make_session_factory
 from study.db.models import Advice, Status, StudySession, utcnow
-from study.services import learning, numerics
+from study.services import numerics
 from study.services.errors import Conflict
 from study.services.sessions import claim, get_session, set_status
 
@@ -54,9 +53,10 @@ class WorkerOptions:
     """Longest time between two writes that mark the worker alive."""
     idle_limit_s: float = 1800.0
     """Default idle limit of human sessions (a session's own limit wins)."""
-    spec_class: type[RunSpec] = RunSpec
-    """The run's declaration the session's `run` is read with (`learner.run.RunSpec`, or a
-    class that extends it; it must be importable in the worker's process)."""
+    declaration: type[RunSpec] = field(default_factory=declared)
+    """The run's declaration where the worker was started (`learner.run.declared`): a
+    worker in a process of its own reads its session's run with it (so a class that
+    extends `RunSpec` must be importable there)."""
     override_numerics: bool = False
     """Resume a run whose pinned numerics this machine cannot honour, on what it can, and
     record the override in the session (`numerics_overrides`); without it such a resume is
@@ -87,21 +87,24 @@ class _Run:
         options: WorkerOptions,
         token: str,
         conn: Connection | TaggedChannel | None,
+        spec: RunSpec | None = None,
     ) -> None:
         """`conn`: the channel to the web process (a `TaggedChannel` for a session in a
-        population, whose commands its population's link reads)."""
+        population, whose commands its population's link reads); `spec`: the session's run
+        when this process has read it already (its claim settles the numerics)."""
         self.session_id, self.options, self.token = session_id, options, token
         self.factory = make_session_factory(make_engine(database_url))
         with self.factory() as db:
             self.session = get_session(db, session_id)
+            self.spec = spec if spec is not None else self.session.spec
+            """The session's run, read once in this process."""
             self.given = {  # a person's advice always has its action (only replays lack one)
                 a.advice_index: a.action
                 for a in db.scalars(select(Advice).where(Advice.session_id == session_id))
                 if self.session.method == "human" and a.action is not None
             }
-            run = learning.spec_of(self.session, options.spec_class)
             here = {  # where the run is computed from here on (the report audits it)
-                **provenance.record(run.config),
+                **provenance.record(self.spec.config),
                 "at": utcnow().isoformat(),
                 "from_step": self.session.checkpoint_step,
             }
@@ -138,7 +141,6 @@ class _Run:
         self.advisor: Any = None
         if s.method == "human" and self.link is None:
             raise Conflict("a human session needs the server: start it through the API")
-        self.spec = learning.spec_of(s, options.spec_class)
         self.advice_budget = self.spec.advice_budget
         """Read once, before the advisor that counts against it is made."""
         spec = self.spec.validate()
@@ -175,13 +177,11 @@ class _Run:
             assert self.link is not None
             self.advisor = HumanAdvisor(
                 self.link,
+                self.reporter,
                 self.given,
                 self.start_advice,
                 self.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
-                self._moment,
-                self._before_waiting,
-                self._until_participant_ready,
             )
             self.env.after_step.append(self.advisor.after_step)
             self.env.participant = self.advisor
@@ -197,26 +197,13 @@ class _Run:
                 s.id,
                 s.method,
                 self.start_advice,
-                self.recorder.add_advice,
-                self._moment,
+                self.recorder,
             )
         elif machine is not None:
             self.advisor = RecordingAdvisor(
-                machine,
-                s.id,
-                s.method,
-                self.start_advice,
-                self.recorder.add_advice,
-                self._moment,
+                machine, s.id, s.method, self.start_advice, self.recorder
             )
         return self.advisor
-
-    def _moment(self) -> AdviceMoment:
-        """What the trainer asks advice about (the advisor is called only from inside its
-        step, so there is one)."""
-        moment: AdviceMoment | None = getattr(self.trainer, "moment", None)  # SB3: no advice
-        assert moment is not None, "advice asked for outside a trainer's step"
-        return moment
 
     @property
     def advice_given(self) -> int:
@@ -252,21 +239,6 @@ class _Run:
     def _on_watch(self) -> None:
         self.env.announce()
 
-    def _before_waiting(self) -> None:
-        """Before blocking on a person: the live view shows where it waits, and every step
-        taken so far is in the database."""
-        self.send_progress()
-        self.recorder.flush()
-
-    def _until_participant_ready(self) -> None:
-        assert self.link is not None
-        if self.link.participant_ready:
-            return
-        self.reporter.waiting_for_participant = True
-        self._before_waiting()
-        self.link.wait_for_participant(self.session.idle_limit_s or self.options.idle_limit_s)
-        self.reporter.waiting_for_participant = False
-
     def _needs_training_slot(self) -> bool:
         """A human session whose advice is over trains only in one of the server's slots."""
         return (
@@ -280,7 +252,7 @@ class _Run:
         assert self.link is not None
         self.reporter.queued = True
         self.send(TrainingWanted())
-        self._before_waiting()
+        self.reporter.before_waiting()
         self.link.wait_for_training_slot()
         self.reporter.queued = False
         if self.options.train_nice:
@@ -364,11 +336,25 @@ def run_session(
     options = options or WorkerOptions()
     if options.nice:
         lower_priority(options.nice, idle=options.idle)
-    factory = make_session_factory(make_engine(database_url))
-    if worker_token is None:
-        worker_token = claim_session(factory, session_id, options, human=conn is not None)
+    with declare(options.declaration):
+        factory = make_session_factory(make_engine(database_url))
+        spec = None
+        if worker_token is None:
+            worker_token, spec = claim_session(factory, session_id, options, human=conn is not None)
+        return _run_to_end(session_id, database_url, options, worker_token, conn, spec, factory)
+
+
+def _run_to_end(
+    session_id: int,
+    database_url: str,
+    options: WorkerOptions,
+    worker_token: str,
+    conn: Connection | None,
+    spec: RunSpec | None,
+    factory: sessionmaker[Session],
+) -> str:
     try:
-        run = _Run(session_id, database_url, options, worker_token, conn)
+        run = _Run(session_id, database_url, options, worker_token, conn, spec)
         return run.run().value
     except LeaseLost as error:
         log.warning("%s", error)
@@ -380,16 +366,17 @@ def run_session(
 
 def claim_session(
     factory: sessionmaker[Session], session_id: int, options: WorkerOptions, human: bool = False
-) -> str:
+) -> tuple[str, RunSpec]:
     """Claim the session for this process (created sessions start, stopped or interrupted
-    ones resume), its numerics settled; returns the worker token. `human`: a channel to
-    the web process is there (a human session needs one)."""
+    ones resume), its numerics settled; returns the worker token and the run as this
+    machine computes it. `human`: a channel to the web process is there (a human session
+    needs one)."""
     with factory() as db:
         session = get_session(db, session_id)
         if session.method == "human" and not human:
             raise Conflict(f"session {session_id} is a human session: start it through the server")
-        numerics.settle(db, session, options.override_numerics, options.spec_class)
-        return claim(db, session_id, resume=session.status != Status.created)
+        spec = numerics.settle(db, session, session.spec, options.override_numerics)
+        return claim(db, session_id, resume=session.status != Status.created), spec
 
 
 def fail_session(

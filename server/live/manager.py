@@ -34,12 +34,13 @@ from dataclasses import dataclass, field, replace
 from datetime import datetime
 from multiprocessing import forkserver
 from multiprocessing.connection import Connection
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
+from learner.run import RunSpec
 from learner.strategies import make_strategy
 from runs.worker.link import SHUTTING_DOWN, WAITED_FOR_PARTICIPANT
 from runs.worker.messages import (
@@ -72,7 +73,7 @@ from study.db.models import (
     StudySession,
     utcnow,
 )
-from study.services import learning, numerics
+from study.services import numerics
 from study.services.assignment import expire_unopened_everywhere
 from study.services.errors import Conflict
 from study.services.sessions import (
@@ -82,9 +83,6 @@ from study.services.sessions import (
     set_status,
     silent_sessions,
 )
-
-if TYPE_CHECKING:
-    from learner.run import RunSpec
 
 log = logging.getLogger(__name__)
 HUB_KINDS: dict[type, str] = {
@@ -373,20 +371,19 @@ class SessionManager:
     ) -> None:
         """Start (or resume) the session's worker; `pooled`: it waits in its condition's
         pool for an arrival, its idle limit off until `assign`."""
-        token = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
+        token, spec = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
         parent, child = self._context.Pipe(duplex=True)
         with self.factory() as db:
             session = get_session(db, session_id)
             advice = db.scalars(
                 select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
             ).all()
-            spec = session.spec
             budget = spec.advice_budget
             human = session.method == "human"
             ready = human and session.ready_for_advice
             strategy = spec.make_strategy() or make_strategy("early", 0)
             first_turn = strategy.first_advice_step(spec.config.pretraining_steps) - 1
-            run = learning.spec_of(session, self.options.spec_class) if human else None
+            run = spec if human else None
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
@@ -483,8 +480,8 @@ class SessionManager:
 
     @staticmethod
     def _next_group(waiting: list[WorkerHandle], free: int) -> list[WorkerHandle]:
-        """`next_group` of the queued sessions; a paused one takes a slot alone (it is
-        granted as before, and resumes where it waits)."""
+        """`next_group` of the queued sessions; a paused one takes a slot alone (granted
+        like any other, it resumes where it waits)."""
 
         keys = [h.population_key if h.status == Status.running else None for h in waiting]
         return next_group(waiting, keys, waiting[0].population_size, free)
@@ -668,11 +665,15 @@ class SessionManager:
             return 0
         return max(0, handle.progress.episodes - handle.progress.episode)
 
-    def _claim(self, session_id: int, resume: bool, override_numerics: bool = False) -> str:
+    def _claim(
+        self, session_id: int, resume: bool, override_numerics: bool = False
+    ) -> tuple[str, RunSpec]:
+        """The session claimed for a worker of this process, and its run as this machine
+        computes it (read here once, and passed on)."""
         with self.factory() as db:
             session = get_session(db, session_id)
-            numerics.settle(db, session, override_numerics, self.options.spec_class)
-            return claim(db, session_id, resume)
+            spec = numerics.settle(db, session, session.spec, override_numerics)
+            return claim(db, session_id, resume), spec
 
     def _set_status(self, session_id: int, status: Status, detail: str, token: str) -> None:
         with self.factory() as db:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from starlette.concurrency import run_in_threadpool
 
-from learner.run import RunSpec
+from learner.fields import FieldError
 from server.live.manager import SessionManager
 from study.db.models import Status
 from study.services import assignment, storage
@@ -40,7 +40,6 @@ class Pools:
         limit: int,
         every_s: float,
         data_dir: Path,
-        spec_class: type[RunSpec] = RunSpec,
         threads: int | None = None,
         practising: int = 1,
     ) -> None:
@@ -51,7 +50,6 @@ class Pools:
         self._started: set[int] = set()
         self.every_s = every_s
         self.data_dir = data_dir
-        self.spec_class = spec_class
         self.threads = threads
         self._task: asyncio.Task[None] | None = None
 
@@ -111,12 +109,11 @@ class Pools:
                                 db,
                                 gap.study_id,
                                 gap.condition,
-                                self.spec_class,
                                 self.data_dir,
                                 self.threads,
                             )
                         )
-                    except ServiceError as error:  # a condition's run this machine refuses
+                    except (ServiceError, FieldError) as error:  # a run this machine refuses
                         log.warning("pool of study %s: %s", gap.study_id, error)
                         db.rollback()
                         break

@@ -133,7 +133,6 @@ def _arrive(request: Request, study_id: int, params: dict[str, str]) -> assignme
             design,
             params,
             request.cookies.get(COOKIE),
-            state.spec_class,
             state.settings.data_dir,
             state.settings.worker_threads,
         )

@@ -17,7 +17,6 @@ from fastapi.responses import RedirectResponse, Response
 from sqlalchemy import select
 
 import sim
-from learner.run import RunSpec
 from runs.worker.rerun import RerunOrder
 from server.deps import DbDep
 from server.live.playbacks import Playback, Playbacks, TooManyPlaybacks
@@ -101,15 +100,14 @@ def episodes(db: DbDep, session_id: SessionId) -> list[EpisodeRow]:
     ]
 
 
-def rerun_order(recorded: RecordedEpisode, spec_class: type[RunSpec]) -> RerunOrder:
+def rerun_order(recorded: RecordedEpisode) -> RerunOrder:
     """What the rerun's process needs of the recorded episode."""
     assert recorded.episode.reset_seed is not None, "checked by recorded_episode"
     return RerunOrder(
-        run=dict(recorded.session.run),
+        spec=recorded.session.spec,
         reset_seed=recorded.episode.reset_seed,
         actions=[s.action for s in recorded.steps],
         rewards=[s.reward for s in recorded.steps],
-        spec_class=spec_class,
     )
 
 
@@ -124,7 +122,7 @@ def open_playback(
     """Rerun the episode in a worker process; 429 when `playback_limit` are open."""
     recorded = recorded_episode(db, session_id, stage, episode)
     _viewer(request).ensure_started()
-    order = rerun_order(recorded, request.app.state.spec_class)
+    order = rerun_order(recorded)
     try:
         playback = _playbacks(request).start(session_id, stage, episode, order, recorded)
     except TooManyPlaybacks as error:

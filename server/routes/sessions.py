@@ -8,7 +8,7 @@ from fastapi import APIRouter, BackgroundTasks, Query, Request
 from fastapi.responses import Response
 from sqlalchemy import select
 
-from learner.run import RunSpec
+from learner.run import declared
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
@@ -23,7 +23,7 @@ from study.schemas.sessions import (
     SessionPublic,
     session_create_model,
 )
-from study.services import assignment, learning, sessions, storage
+from study.services import assignment, sessions, storage
 from study.services.errors import NotFound
 
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
@@ -46,12 +46,12 @@ def session_public(session: StudySession, base_url: str) -> SessionPublic:
     return SessionPublic(**data)
 
 
-def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
-    """The route that creates a session, its body made from `spec_class` (the run's
-    declaration: `create_app` is given it, so a field added there is in the body and its
-    OpenAPI schema)."""
+def creation_router() -> APIRouter:
+    """The route that creates a session, its body made from the run's declaration in force
+    (`learner.run.declared`: a field declared there is in the body and its OpenAPI
+    schema)."""
     creating = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
-    body_model = session_create_model(spec_class)
+    body_model = session_create_model()
 
     @creating.post("/studies/{study_id}/sessions", status_code=201)
     def create_session(
@@ -78,7 +78,7 @@ def creation_router(spec_class: type[RunSpec] = RunSpec) -> APIRouter:
         run = values.pop("run")
         if run.get("version", 0) is None:  # the document allows null: the current version
             del run["version"]
-        spec = learning.parse(run, spec_class)
+        spec = declared().from_json(run)
         if spec.method == "human" and "seed" not in run:
             spec = assignment.numbered_seed(db, study_id, spec)
         options = SessionOptions(**values)

@@ -170,14 +170,12 @@ def preview(db: DbDep, settings: SettingsDep, request: Request, study_id: StudyI
     """A preview link: the researcher walks the study as a participant would (a session
     of the next condition), taking no place, kept out of exports and the report."""
     study, design = _online(db, study_id)
-    state = request.app.state
     arrival = assignment.arrive(
         db,
         study,
         design,
         {},
         None,
-        state.spec_class,
         settings.data_dir,
         settings.worker_threads,
         preview=True,

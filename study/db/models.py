@@ -27,7 +27,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
-from learner.run import METHODS, UNADVISED, RunSpec
+from learner.run import METHODS, UNADVISED, RunSpec, declared
 
 
 def utcnow() -> datetime:
@@ -251,8 +251,10 @@ class StudySession(Base):
 
     @property
     def spec(self) -> RunSpec:
-        """The run this session describes (`run` read back, every value checked)."""
-        return RunSpec.from_json(self.run)
+        """The run this session describes (`run` read back as the run's declaration,
+        `learner.run.declared`, every value checked; fields declared since it was stored
+        take their defaults). Read it once and pass the object on."""
+        return declared().from_json(self.run)
 
     @property
     def method(self) -> str:

@@ -10,7 +10,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 
 from learner.fields import bounded, checked
-from learner.run import SPEC_VERSION, RunSpec
+from learner.run import SPEC_VERSION, RunSpec, declared
 from study.schemas.runs import body_model
 
 API_VERSION_NOTE = (
@@ -54,16 +54,18 @@ def _flat_body(data: Any) -> Any:
 _CREATE_MODELS: dict[type, type[BaseModel]] = {}
 
 
-def session_create_model(spec_class: type[RunSpec] = RunSpec) -> type[BaseModel]:
-    """The REST body that creates a session: `run` (the run, `spec_class`'s tree) beside the
-    session's own options (`SessionOptions`); one model per class (a dict, not
-    `functools.cache`, whose arguments mypy wants `Hashable`: a dataclass type is not)."""
-    if spec_class not in _CREATE_MODELS:
-        _CREATE_MODELS[spec_class] = _session_create_model(spec_class)
-    return _CREATE_MODELS[spec_class]
+def session_create_model() -> type[BaseModel]:
+    """The REST body that creates a session: `run` (the run, the tree of its declaration,
+    `learner.run.declared`) beside the session's own options (`SessionOptions`); one model
+    per declaration (a dict, not `functools.cache`, whose arguments mypy wants `Hashable`: a
+    dataclass type is not)."""
+    declaration = declared()
+    if declaration not in _CREATE_MODELS:
+        _CREATE_MODELS[declaration] = _session_create_model(declaration)
+    return _CREATE_MODELS[declaration]
 
 
-def _session_create_model(spec_class: type[RunSpec]) -> type[BaseModel]:
+def _session_create_model(declaration: type[RunSpec]) -> type[BaseModel]:
     options = body_model(SessionOptions, "SessionOptions")
     model = create_model(
         "SessionCreate",
@@ -73,7 +75,7 @@ def _session_create_model(spec_class: type[RunSpec]) -> type[BaseModel]:
         __doc__="A session: its run, described once, and the session's own options. Unset "
         "fields take their defaults (the learner config's: its preset's).",
         run=(
-            _run_model(spec_class),
+            _run_model(declaration),
             Field(
                 description="The run (learner.run.RunSpec): method, seed, preset, config, "
                 "strategy and its options, advisor, motion, sort rule, scenario."
@@ -83,13 +85,13 @@ def _session_create_model(spec_class: type[RunSpec]) -> type[BaseModel]:
     return model
 
 
-def _run_model(spec_class: type) -> type[BaseModel]:
-    """The run's body: every field of `spec_class`, and the stored document's `version`
+def _run_model(declaration: type) -> type[BaseModel]:
+    """The run's body: every field of `declaration`, and the stored document's `version`
     (so a session's `run`, or an export's `run_spec`, is accepted back as it is)."""
     return create_model(
         "Run",
-        __base__=body_model(spec_class, "RunFields"),
-        __doc__=(spec_class.__doc__ or "").strip(),
+        __base__=body_model(declaration, "RunFields"),
+        __doc__=(declaration.__doc__ or "").strip(),
         version=(
             Annotated[int | None, Field(strict=True, ge=1, le=SPEC_VERSION)],
             Field(default=None, description=f"The document's version (1 to {SPEC_VERSION})."),
@@ -97,7 +99,7 @@ def _run_model(spec_class: type) -> type[BaseModel]:
     )
 
 
-SessionCreate = session_create_model(RunSpec)
+SessionCreate = session_create_model()
 
 
 class SessionPublic(BaseModel):

@@ -27,7 +27,7 @@ from pathlib import Path
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from learner.run import RunSpec
+from learner.run import RunSpec, declared
 from study.db.models import (
     ENDED_EARLY,
     Assignment,
@@ -40,7 +40,6 @@ from study.db.models import (
 )
 from study.schemas.design import StudyDesign
 from study.schemas.sessions import SessionOptions
-from study.services import learning
 from study.services.errors import NotFound
 from study.services.sessions import create_session, session_for_token
 
@@ -247,7 +246,6 @@ def arrive(
     design: StudyDesign,
     params: dict[str, str],
     cookie: str | None,
-    spec_class: type[RunSpec] = RunSpec,
     data_dir: Path | None = None,
     threads: int | None = None,
     preview: bool = False,
@@ -266,7 +264,7 @@ def arrive(
     tally = counts(db, study, design)
     if preview:  # the condition the next arrival would get, or the first of a full study
         condition = next((name for name, c in tally.items() if c.short), next(iter(tally)))
-        session = _session(db, study, design, condition, 0, spec_class, data_dir, threads)
+        session = _session(db, study, design, condition, 0, data_dir, threads)
         session.preview = True
         db.commit()
         return Arrival(session.participant_token)
@@ -280,7 +278,7 @@ def arrive(
         condition, block, position = _next_place(db, study, tally)
     taken = _take_pooled(db, study, condition)
     session = taken or _session(
-        db, study, design, condition, _next_number(study), spec_class, data_dir, threads
+        db, study, design, condition, _next_number(study), data_dir, threads
     )
     db.add(
         Assignment(
@@ -396,7 +394,6 @@ def make_pooled(
     db: Session,
     study_id: int,
     condition: str,
-    spec_class: type[RunSpec] = RunSpec,
     data_dir: Path | None = None,
     threads: int | None = None,
 ) -> int:
@@ -405,7 +402,7 @@ def make_pooled(
     assert study is not None and study.design is not None, "pools belong to online studies"
     design = StudyDesign.model_validate(study.design)
     number = _next_number(study)
-    session = _session(db, study, design, condition, number, spec_class, data_dir, threads)
+    session = _session(db, study, design, condition, number, data_dir, threads)
     session.pooled = True
     db.commit()
     return session.id
@@ -429,13 +426,12 @@ def _session(
     design: StudyDesign,
     condition: str,
     number: int,
-    spec_class: type[RunSpec],
     data_dir: Path | None,
     threads: int | None,
 ) -> StudySession:
     """A human session of `condition`'s run; the arrival's number added to the run's seed,
     so each participant's learner differs and every one is reproducible."""
-    spec = learning.parse(design.conditions[condition].run, spec_class)
+    spec = declared().from_json(design.conditions[condition].run)
     spec = spec.replace(seed=(spec.seed + number) % SEEDS)
     options = SessionOptions(label=condition, idle_limit_s=design.idle_limit_s)
     session = create_session(db, study.id, spec, options, data_dir, threads)

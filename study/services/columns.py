@@ -13,7 +13,7 @@ from typing import Any
 from learner.docstrings import field_docstrings
 from learner.fields import leaves
 from learner.records import EpisodeRecord, StepRecord
-from learner.run import RunSpec
+from learner.run import declared
 from study.services.tables import Column, column
 from study.services.visit_export import VISIT_COLUMNS
 
@@ -237,20 +237,20 @@ def _record_columns(table: str) -> list[Column]:
     return columns + [column(name, *spec) for name, spec in RECORD_EXTRA.items()]
 
 
-def run_columns(spec_class: type[RunSpec] = RunSpec) -> list[Column]:
-    """One column per field of the run (`learner.run.RunSpec`'s leaves: `method`, `seed`,
+def run_columns() -> list[Column]:
+    """One column per field of the run (the leaves of `learner.run.declared()`: `method`, `seed`,
     `config_batch_size`, `strategy_interval`, `reward_scheme`, ...), typed and documented
     by the declaration itself."""
     return [
         column(leaf.column, KINDS[leaf.kind], f"{leaf.doc} [{leaf.allowed()}]".replace("]]", "]"))
-        for leaf in leaves(spec_class)
+        for leaf in leaves(declared())
     ]
 
 
-def table_columns(spec_class: type[RunSpec] = RunSpec) -> dict[str, list[Column]]:
+def table_columns() -> dict[str, list[Column]]:
     """Every exported table's typed, documented columns."""
     own = [column(name, *spec) for name, spec in SESSION_COLUMNS.items()]
-    sessions = own[:3] + run_columns(spec_class) + own[3:]
+    sessions = own[:3] + run_columns() + own[3:]
     return {
         "sessions": sessions,
         "episodes": _record_columns("episodes"),

@@ -17,9 +17,7 @@ from analysis.episodes import EPISODE_TABLE_COLUMNS
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.records import TRAINING
-from learner.run import RunSpec
 from study.db.models import Advice, Episode, Step, StudySession
-from study.services import learning
 
 
 def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
@@ -89,9 +87,9 @@ def load_replayed_advice(db: Session, session_ids: Sequence[int]) -> pd.DataFram
 
 
 def session_settings(
-    sessions: Sequence[StudySession], spec_class: type[RunSpec] = RunSpec
+    sessions: Sequence[StudySession],
 ) -> pd.DataFrame:
     """What each session ran under, for the report's comparability audit
     (`analysis.settings.settings_table` of their runs)."""
-    runs = [(s.id, learning.spec_of(s, spec_class)) for s in sessions]
-    return settings_table(runs, spec_class, {s.id: s.provenance for s in sessions})
+    runs = [(s.id, s.spec) for s in sessions]
+    return settings_table(runs, {s.id: s.provenance for s in sessions})

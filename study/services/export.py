@@ -31,7 +31,7 @@ from sqlalchemy.orm import Session
 
 from analysis.settings import where
 from learner.fields import leaves
-from learner.run import RunSpec
+from learner.run import declared
 from sim.actions import ACTION_NAMES
 from sim.rules import SortRule
 from study.db.models import (
@@ -45,7 +45,7 @@ from study.db.models import (
     StudySession,
     StudyTexts,
 )
-from study.services import learning, visit_export
+from study.services import visit_export
 from study.services.columns import TEXT_KEYS, table_columns
 from study.services.errors import Conflict
 from study.services.sessions import advisor_sessions
@@ -92,13 +92,11 @@ def plain_sort_rule(spec: str | dict[str, str]) -> str:
     return ";".join(f"{shape}/{color}={side}" for shape, color, side in rule.sides)
 
 
-def _session_rows(
-    sessions: list[StudySession], spec_class: type[RunSpec]
-) -> Iterator[dict[str, Any]]:
-    run_leaves = leaves(spec_class)
+def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
+    run_leaves = leaves(declared())
     advisors = advisor_sessions(sessions)
     for s in sessions:
-        values = learning.spec_of(s, spec_class).values()
+        values = s.spec.values()
         values["sort_rule"] = plain_sort_rule(values["sort_rule"])
         yield {
             "session_id": s.id,
@@ -235,12 +233,11 @@ def export_study(
     study_id: int,
     out: Path,
     fmt: str = "csv",
-    spec_class: type[RunSpec] = RunSpec,
     panel_ids: bool = False,
 ) -> dict[str, int]:
     """Write the study's tables (`fmt`: csv or parquet), `datapackage.json`, `columns.csv`
     and `study.json` into `out`; returns the row count of each table file. The sessions'
-    run columns are `spec_class`'s fields (the run's declaration). `panel_ids`: the
+    run columns are the fields of the run's declaration (`learner.run.declared`). `panel_ids`: the
     participants' panel ids as they are (for payment), not pseudonymous."""
     if fmt not in FORMATS:
         raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
@@ -252,9 +249,9 @@ def export_study(
         StudySession.pooled.is_(False),
     )
     sessions = list(db.scalars(query.order_by(StudySession.id)))
-    columns = table_columns(spec_class)
+    columns = table_columns()
     rows = {
-        "sessions": _session_rows(sessions, spec_class),
+        "sessions": _session_rows(sessions),
         "texts_versions": _texts_rows(db, study.id),
         "episodes": _records(db, Episode, sessions, Episode.first_global_step),
         "steps": _records(db, Step, sessions, Step.global_step),

@@ -30,7 +30,6 @@ from study.db.models import (
     Step,
     StudySession,
 )
-from study.services import learning
 from study.services.errors import Invalid, NotFound
 from study.services.fitted_files import write_model_file
 from study.services.outcomes import ReplayMismatch
@@ -69,7 +68,7 @@ class Fitted:
 
 def session_advice(db: Session, session: StudySession) -> tuple[SessionAdvice, int]:
     """One session's advice with their situations; and how many could not be placed."""
-    spec = learning.spec_of(session)
+    spec = session.spec
     advice = list(
         db.scalars(
             select(Advice).where(Advice.session_id == session.id).order_by(Advice.advice_index)
@@ -152,7 +151,7 @@ def _replay(
 
 def _budget_spent(db: Session, session: StudySession) -> bool:
     given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
-    return given >= learning.spec_of(session).advice_budget
+    return given >= session.spec.advice_budget
 
 
 def fit_study(

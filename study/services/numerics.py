@@ -28,9 +28,10 @@ class NumericsRefused(Conflict):
     """The session's pinned numerics cannot be honoured here."""
 
 
-def refusal(session: StudySession, spec_class: type[RunSpec] = RunSpec) -> str | None:
-    """Why this machine may not resume the session as pinned, or None."""
-    problem = spec_class.from_json(session.run).numerics_problem()
+def refusal(session: StudySession, spec: RunSpec) -> str | None:
+    """Why this machine may not resume the session (whose run is `spec`) as pinned, or
+    None."""
+    problem = spec.numerics_problem()
     if problem is None:
         return None
     return (
@@ -47,13 +48,13 @@ def _numbers(spec: RunSpec) -> dict[str, Any]:
 def settle(
     db: Session,
     session: StudySession,
+    spec: RunSpec,
     override: bool = False,
-    spec_class: type[RunSpec] = RunSpec,
 ) -> RunSpec:
-    """The run as this machine will compute it: pinned as stored, pinned now (stored before
-    pinning), or re-pinned by an override (recorded); raises `NumericsRefused` otherwise."""
-    spec = spec_class.from_json(session.run)
-    problem = refusal(session, spec_class)
+    """The run (`spec`, the session's) as this machine will compute it: pinned as stored,
+    pinned now (stored before pinning), or re-pinned by an override (recorded); raises
+    `NumericsRefused` otherwise."""
+    problem = refusal(session, spec)
     if problem is not None and not override:
         raise NumericsRefused(problem)
     if problem is not None:

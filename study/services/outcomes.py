@@ -16,7 +16,6 @@ from sqlalchemy.orm import Session
 
 from sim.rewards import step_outcome
 from study.db.models import Episode, Step, StudySession
-from study.services import learning
 
 
 @dataclass(frozen=True)
@@ -47,7 +46,7 @@ def fill_outcomes(db: Session, session: StudySession) -> Filled:
     wanted = {(stage, episode) for stage, episode in db.execute(query)}
     if not wanted:
         return Filled(session.id, 0, 0, 0)
-    env = learning.spec_of(session).make_env()
+    env = session.spec.make_env()
     filled = replayed = without_seed = 0
     try:
         episodes = db.scalars(

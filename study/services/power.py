@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session
 
 from analysis.audit import audit
 from analysis.baseline import AUTO, NO_BASELINE
+from analysis.csvsafe import safe_frame
 from analysis.episodes import (
     EpisodeTableError,
     method_name,
@@ -33,7 +34,6 @@ from analysis.power import (
 from analysis.report import FIGURE_FILES, OPTIONAL_TABLE_FILES
 from analysis.report import power_table as _table
 from analysis.stats import agent_totals
-from analysis.csvsafe import safe_frame
 from study.services.episodes import load_episodes, session_settings
 from study.services.errors import Conflict, Invalid
 from study.services.reports import CLI_CHOICE, ReportRequest, select_sessions

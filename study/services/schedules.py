@@ -10,7 +10,6 @@ from sqlalchemy.orm import Session
 
 from learner.procedure import Schedule
 from study.db.models import Step, StudySession
-from study.services import learning
 
 
 def schedule_of(db: Session, session: StudySession) -> Schedule:
@@ -20,7 +19,7 @@ def schedule_of(db: Session, session: StudySession) -> Schedule:
         .where(Step.session_id == session.id)
         .order_by(Step.global_step)
     ).tuples()
-    spec = learning.spec_of(session)
+    spec = session.spec
     return Schedule.from_steps(rows, spec.config.pretraining_steps, f"session {session.id}")
 
 

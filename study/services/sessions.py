@@ -1,5 +1,5 @@
-"""Sessions: create (the run checked and pinned once, `learning.checked`) and read. Who owns a
-running one is `study.services.ownership`'s (its names are re-exported here)."""
+"""Sessions: create (the run checked and pinned once) and read. Who owns a running one is
+`study.services.ownership`'s (its names are re-exported here)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,6 @@ from study.db.models import (
     StudySession,
 )
 from study.schemas.sessions import SessionOptions
-from study.services import learning
 from study.services.errors import Invalid, NotFound
 from study.services.fitted_files import resolve
 from study.services.ownership import claim as claim
@@ -124,7 +123,7 @@ def create_session(
         spec = spec.replace(advisor_checkpoint=advisor_path(db, spec.advisor_checkpoint, data_dir))
     if spec.fitted_model and spec.method == "fitted":
         spec = spec.replace(fitted_model=resolve(db, spec.fitted_model, data_dir))
-    spec = learning.checked(spec, threads)
+    spec = spec.validate().pinned(threads)
     if options.participant and spec.method != "human":
         raise Invalid("participant", "only method human has a participant")
     session = StudySession(
@@ -194,8 +193,8 @@ def advisor_sessions(sessions: list[StudySession]) -> set[int]:
     every advisor a batch trained for its `agent` runs (`role` advisor, each attempt, passed
     its check or not, used or not), and any session whose checkpoint advises another of
     these sessions (method `agent`)."""
-    # read from the stored run, not `s.spec`: a run declared with fields of its own
-    # (`create_app(spec_class=...)`) is not the default RunSpec's to read back
+    # the stored document's one field, not the whole run read back: a report reads old
+    # sessions whose runs another declaration may have stored
     advising = {
         str(Path(c).resolve()) for s in sessions if (c := (s.run or {}).get("advisor_checkpoint"))
     }

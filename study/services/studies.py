@@ -16,11 +16,11 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from learner.run import RunSpec
+from learner.fields import FieldError
+from learner.run import RunSpec, declared
 from study.db.models import Study, StudySession
 from study.schemas.design import StudyDesign
 from study.schemas.types import StudyName
-from study.services import learning
 from study.services.errors import Conflict, Invalid, NotFound
 
 
@@ -43,13 +43,15 @@ def session_count(db: Session, study_id: int) -> int:
 def condition_run(name: str, run: Any) -> RunSpec:
     """Condition `name`'s run checked as a study stores it: a human run, every value valid
     (a bad one is `Invalid` naming `design.conditions.NAME.run.FIELD`)."""
+    where = f"design.conditions.{name}.run"
     try:
-        spec = learning.parse(run)
+        spec = declared().from_json(run)
         if spec.method != "human":
-            raise Invalid("run.method", "a condition's run is method human: people advise")
-        learning.checked(spec)
-    except Invalid as error:
-        raise Invalid(f"design.conditions.{name}.{error.field}", error.message) from None
+            raise Invalid(f"{where}.method", "a condition's run is method human: people advise")
+        spec.validate().pinned()
+    except FieldError as error:
+        field = f"{where}.{error.field}" if error.field else where
+        raise Invalid(field, str(error)) from None
     return spec
 
 

@@ -27,8 +27,8 @@ from playwright.sync_api import expect
 from study.db.models import Study
 from study.services.assignment import block_order
 from tests.e2e.conftest import VIEWPORT, Live, dashboard_page, save_screenshot
-from tests.study.test_export_types import check_frictionless
 from tests.server.test_online_study import table
+from tests.study.test_export_types import check_frictionless
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

@@ -20,8 +20,8 @@ from study.db.models import CheckAttempt, QuestionnaireAnswer, StudySession
 from study.schemas.visit import Item
 from tests.e2e.conftest import Live, save_screenshot
 from tests.e2e.test_online_study import CODES, RUN, Arrivals, assert_returned, exported, token
-from tests.study.test_export_types import check_frictionless
 from tests.server.test_online_study import table
+from tests.study.test_export_types import check_frictionless
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

@@ -15,6 +15,7 @@ import pytest
 from PIL import Image
 from sqlalchemy import create_engine, select, update
 
+from learner.run import RunSpec
 from runs.worker.rerun import RerunOrder
 from server.live.playbacks import Playbacks, TooManyPlaybacks
 from study.db.models import Episode, Step
@@ -209,7 +210,7 @@ def test_an_idle_playback_is_closed_and_its_rerun_ended() -> None:
     )
     # A long episode, so the rerun is still going when the playback is swept.
     order = RerunOrder(
-        run={"method": "autonomous", "motion": "physics"},
+        spec=RunSpec(method="autonomous", motion="physics"),
         reset_seed=1,
         actions=[1, 2] * 100,
         rewards=[0.0] * 200,

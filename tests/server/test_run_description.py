@@ -20,7 +20,7 @@ from analysis.audit import audit
 from cli.commands import batch as batch_command
 from cli.main import build_parser
 from learner.fields import bounded, leaves
-from learner.run import RunSpec
+from learner.run import RunSpec, declare
 from runs.batch import BatchSpec
 from runs.batch.runner import BatchRunner, RunnerOptions
 from runs.worker.worker import WorkerOptions, run_session
@@ -29,7 +29,6 @@ from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Study, StudySession
 from study.schemas.sessions import SessionOptions, session_create_model
-from study.services import learning
 from study.services.episodes import session_settings
 from study.services.export import export_study
 from study.settings import Settings
@@ -65,15 +64,20 @@ def test_a_field_added_to_the_run_reaches_every_entry_point_and_every_view(
     tmp_path: Path, database: str
 ) -> None:
     # the command lines: generated flags, their help from the docstring and the range
-    parser = build_parser(Extended)
+    assert "--probe" not in _subparser(build_parser(), "train").format_help()
+    with declare(Extended):
+        _reaches_every_entry_point(tmp_path, database)
+
+
+def _reaches_every_entry_point(tmp_path: Path, database: str) -> None:
+    parser = build_parser()
     for command in ("train", "batch"):
         text = _subparser(parser, command).format_help()
         assert "--probe N" in text and "from 0 to 1000" in text and "added at test" in text
-    assert "--probe" not in _subparser(build_parser(), "train").format_help()
 
     # the REST body and its OpenAPI schema
     settings = Settings(data_dir=tmp_path / "data", database_url=database, api_key=API_KEY)
-    app = create_app(settings, Extended)
+    app = create_app(settings)
     schema = app.openapi()["components"]["schemas"]["Run"]["properties"]["probe"]
     assert (
         schema["maximum"] == 1000
@@ -104,7 +108,7 @@ def test_a_field_added_to_the_run_reaches_every_entry_point_and_every_view(
                               "--agents", "1", "--probe", "44", *TINY])  # fmt: skip
     spec = batch_command.spec_from(args)
     assert spec.template.probe == 44  # type: ignore[attr-defined]
-    runner = BatchRunner(spec, study, database, RunnerOptions(progress=False), Extended)
+    runner = BatchRunner(spec, study, database, RunnerOptions(progress=False))
     runner.prepare()
     made.append(runner.states[0].session_id)
 
@@ -120,19 +124,17 @@ def test_a_field_added_to_the_run_reaches_every_entry_point_and_every_view(
     factory = make_session_factory(make_engine(database))
     with factory() as db:
         rows = [db.get(StudySession, i) for i in made]
-        assert [learning.spec_of(r, Extended).probe for r in rows] == [42, 5, 44]  # type: ignore[attr-defined, union-attr]
+        assert [r.spec.probe for r in rows] == [42, 5, 44]  # type: ignore[attr-defined, union-attr]
     # the worker rebuilds and runs it
-    status = run_session(
-        made[0], database, WorkerOptions(data_dir=tmp_path / "data", spec_class=Extended)
-    )
+    status = run_session(made[0], database, WorkerOptions(data_dir=tmp_path / "data"))
     assert status == "finished"
 
     # the export: a typed, documented column, and the whole run
     out = tmp_path / "export"
     with factory() as db:
-        export_study(db, study, out, "csv", Extended)
+        export_study(db, study, out, "csv")
         sessions = list(db.scalars(select(StudySession).where(StudySession.study_id == study)))
-        settings_table = session_settings(sessions, Extended)
+        settings_table = session_settings(sessions)
     package = json.loads((out / "datapackage.json").read_text())
     fields = {f["name"]: f for f in package["resources"][0]["schema"]["fields"]}
     assert fields["probe"]["type"] == "integer" and "test time" in fields["probe"]["description"]
@@ -164,13 +166,13 @@ def test_a_finished_batch_still_finds_its_runs_after_a_field_is_added(
             "--no-progress", *TINY]  # fmt: skip
     args = build_parser().parse_args(argv)
     assert args.func(args) == 0
-    extended = build_parser(Extended).parse_args([*argv, "--dry-run", "--json"])
-    spec = batch_command.spec_from(extended)
-    with make_session_factory(make_engine(database))() as db:
+    with declare(Extended), make_session_factory(make_engine(database))() as db:
+        extended = build_parser().parse_args([*argv, "--dry-run", "--json"])
+        spec = batch_command.spec_from(extended)
         study = db.scalar(select(Study).where(Study.name == "resumes"))
         assert study is not None
         rows = BatchRunner(
-            spec, study.id, database, RunnerOptions(progress=False), Extended, migrate=False
+            spec, study.id, database, RunnerOptions(progress=False), migrate=False
         ).preview_rows()
     assert [r.status for r in rows] == ["finished", "finished"]
 
@@ -181,7 +183,7 @@ RUN_FIELDS = {leaf.name for leaf in leaves(RunSpec)} | {f.name for f in dataclas
 
 
 def test_the_rest_body_the_batch_and_the_command_lines_define_no_run_field() -> None:
-    body = session_create_model(RunSpec).model_fields
+    body = session_create_model().model_fields
     assert set(body) == {"run"} | {f.name for f in dataclasses.fields(SessionOptions)}
     assert not RUN_FIELDS & {f.name for f in dataclasses.fields(SessionOptions)}
     batch_own = {f.name for f in dataclasses.fields(BatchSpec)} - {"template"}

@@ -31,7 +31,6 @@ from study.db.backup import RESTORED, BackupError, backup, restore
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import alembic_config, upgrade
 from study.db.models import Episode, Status, Study, StudySession
-from study.services import learning
 from study.services.export import export_study
 from study.services.sessions import create_session
 from study.services.studies import create_study
@@ -341,7 +340,7 @@ def test_sessions_backed_up_while_they_write_resume_to_the_records_of_uninterrup
         upgrade(engine)
         with make_session_factory(engine)() as db:
             study = create_study(db, "backed up while running").id
-            runs = [learning.parse(body["run"]) for body in WRITERS.values()]
+            runs = [RunSpec.from_json(body["run"]) for body in WRITERS.values()]
             ids = [create_session(db, study, run).id for run in runs]
         workers = {i: spawn.Process(target=run_session, args=(i, url, options)) for i in ids}
         for worker in workers.values():
