@@ -19,7 +19,7 @@ from pydantic import (
     model_validator,
 )
 
-from study.schemas.types import Key, Number, Text, Texts, plain_text
+from study.schemas.types import KEY_NAMES, Key, Number, Text, Texts, plain_text
 from study.schemas.visit import CheckSpec, QuestionnaireSpec
 
 PANEL_PARAMS: dict[str, tuple[str, ...]] = {
@@ -105,7 +105,9 @@ class StudyDesign(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    conditions: dict[Key, Condition] = Field(min_length=1, max_length=32)
+    conditions: dict[Key, Condition] = Field(
+        min_length=1, max_length=32, json_schema_extra={"propertyNames": KEY_NAMES}
+    )
     capacity: int = Field(default=8, strict=True, ge=1, le=10_000)
     """Participants at once (started visits not ended); more arrivals see the study full.
     The default is what this project's 2-core machine holds with the advice round trip's

@@ -8,7 +8,7 @@ from typing import Annotated
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from sim.actions import ACTION_NAMES
-from study.schemas.types import Int, Key, Number, Text
+from study.schemas.types import KEY_NAMES, NO_NUL, Int, Key, Number, Text
 from study.schemas.visit import Section
 
 MAX_DECISION_TIME_S = 86_400.0
@@ -153,8 +153,10 @@ class CheckState(BaseModel):
 class CheckCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    answers: dict[Key, Key] = Field(
-        max_length=50, description="{question id: chosen value}, one for every question."
+    answers: dict[Key, Annotated[Key, Field(json_schema_extra={"pattern": NO_NUL})]] = Field(
+        max_length=50,
+        description="{question id: chosen value}, one for every question.",
+        json_schema_extra={"propertyNames": KEY_NAMES},
     )
 
 
@@ -174,6 +176,7 @@ class QuestionnaireCreate(BaseModel):
 
     answers: dict[Key, dict[Key, Answer]] = Field(
         max_length=20,
+        json_schema_extra={"propertyNames": KEY_NAMES},
         description="{instrument: {item id: answer}}: a Likert point (1..points), a number, a "
         'choice or text, or "Prefer not to say" where offered; leave an optional item out '
         "(or null) to skip it.",

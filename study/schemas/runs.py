@@ -79,7 +79,7 @@ def body_model(cls: type, name: str | None = None) -> type[BaseModel]:
     for f in dataclasses.fields(cls):
         if dataclasses.is_dataclass(hints[f.name]):
             inner = body_model(hints[f.name])
-            fields[f.name] = (inner | None, Field(default=None))
+            fields[f.name] = (inner, Field(default=None))  # an object, or left out
             continue
         leaf = by_name[f.name]
         kind = Annotated[Any, BeforeValidator(_validator(leaf)), WithJsonSchema(leaf_schema(leaf))]

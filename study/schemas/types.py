@@ -32,11 +32,18 @@ NO_NUL = r"^[^\x00]*$"
 """JSON Schema's `pattern` for text without the NUL character."""
 Text = Annotated[str, AfterValidator(plain_text), Field(json_schema_extra={"pattern": NO_NUL})]
 """A text field of a body (a name, a description, a page text): same 422 on every database."""
-Key = Annotated[Text, StringConstraints(min_length=1, max_length=64)]
-"""A key of a body's map (a config field, a text's name)."""
+Key = Annotated[str, AfterValidator(plain_text), StringConstraints(min_length=1, max_length=64)]
+"""A key of a body's map (a config field, a text's name). Its JSON Schema goes in the map's
+`propertyNames` (`KEY_NAMES`): a key's own `pattern` would make pydantic write the map's
+values under `patternProperties`, leaving any other key's value unchecked."""
+KEY_NAMES = {"minLength": 1, "maxLength": 64, "pattern": NO_NUL}
+"""The `propertyNames` of a map keyed by `Key`."""
 MAX_TEXT = 50_000
 """Characters of one page text (the consent form is the longest, about 3,000)."""
-Texts = dict[Key, Annotated[Text, Field(max_length=MAX_TEXT)]]
+Texts = Annotated[
+    dict[Key, Annotated[Text, Field(max_length=MAX_TEXT)]],
+    Field(json_schema_extra={"propertyNames": KEY_NAMES}),
+]
 """Page texts by key (a study's, or a condition's over them)."""
 
 

@@ -56,8 +56,8 @@ def test_every_study_name_the_document_allows_is_accepted(
     study = api.post("/api/studies", json={"name": f"rules-{uuid.uuid4().hex}"}).json()["id"]
 
     def create(body: dict[str, Any]) -> tuple[Any, httpx.Response]:
-        name = body["name"]
-        return name, api.post("/api/studies", json={"name": name})
+        drawn = {"name": body["name"], "texts": body.get("texts", {})}  # texts: keys, values
+        return drawn, api.post("/api/studies", json=drawn)
 
     def rename(body: dict[str, Any]) -> tuple[Any, httpx.Response]:
         name = body.get("name")
@@ -87,6 +87,16 @@ def test_every_pseudonym_the_document_allows_is_accepted(
         session = {"run": {"method": "human"}, "participant": bad}
         response = api.post(path, params={"pretrain": "false"}, json=session)
         assert response.status_code == 422, f"{bad!r} is still refused"
+
+
+def test_the_document_offers_a_run_group_only_as_an_object(api: httpx.Client) -> None:
+    """The server takes `config`, `scenario`, `strategy_options` as objects (or left out)."""
+    schemas = api.get("/openapi.json").json()["components"]["schemas"]
+    for group in ("config", "scenario", "strategy_options"):
+        assert "null" not in str(schemas["Run"]["properties"][group]), group
+    study = api.post("/api/studies", json={"name": f"rules-{uuid.uuid4().hex}"}).json()["id"]
+    refused = api.post(f"/api/studies/{study}/sessions", json={"run": {"config": None}})
+    assert refused.status_code == 422, refused.text
 
 
 def test_a_null_run_version_is_the_current_version(api: httpx.Client) -> None:
