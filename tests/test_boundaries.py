@@ -289,7 +289,6 @@ RECORDS_ALLOWED: dict[str, str] = {
     "`model_json_schema()`), walked as JSON to name an object's fields",
     "learner.run.RunSpec.identity": RUN_JSON + ", normalized",
     "learner.run.RunSpec.is_run": RUN_JSON + ", normalized (`identity`)",
-    "runs.batch.sessions._is_run": RUN_JSON + ", normalized (`RunSpec.identity`)",
     "learner.run.RunSpec.sb3": "keyword arguments of Stable-Baselines3's DQN, passed on as-is",
     "learner.sb3_spec.describe": "Stable-Baselines3's hyperparameters and config, as SB3 names "
     "them",
