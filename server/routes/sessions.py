@@ -61,12 +61,12 @@ def creation_router() -> APIRouter:
         background: BackgroundTasks,
         study_id: StudyId,
         body: body_model,  # type: ignore[valid-type]
-        pretrain: bool = Query(
-            default=False,
+        pretrain: bool | None = Query(
+            default=None,
             description="A human session: start its random pretraining now, so the robot "
-            "is ready for the first turn when the participant's induction ends (otherwise it "
-            "starts when the participant opens the link). Off by default because every "
-            "started session holds a worker process.",
+            "is ready for the first turn when the participant's induction ends; false: it "
+            "starts when the participant opens the link. Unset: the server's "
+            "pretrain_on_create (on; each practised session holds a worker process).",
         ),
     ) -> SessionCreated:
         """A session: `run` (the run, learner.run.RunSpec, every field optional: unset ones
@@ -87,7 +87,8 @@ def creation_router() -> APIRouter:
         )
         storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
         public = session_public(session, settings.base_url)
-        if pretrain and session.participant_token:
+        practise = settings.pretrain_on_create if pretrain is None else pretrain
+        if practise and session.participant_token:
             background.add_task(manager.welcome, session.id)
         return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
 

@@ -14,6 +14,7 @@ import pytest
 
 from study.settings import Settings
 from tests.server.live import API_KEY, LiveServer, serving
+from tests.server.scale import session_body
 
 pytestmark = pytest.mark.slow
 
@@ -60,5 +61,19 @@ def test_a_new_participant_from_the_dashboard_practises_at_once(practising: Live
         assert _status_after(api, made.json()["id"]) == "running", "its practice started"
         assert api.post(f"/api/sessions/{made.json()['id']}/stop").status_code == 200
         later = dashboard.post(path, json={"participant": "P02", "pretrain": False})
+        assert later.status_code == 201, later.text
+        assert _status_after(api, later.json()["id"], seconds=3) == "created"
+
+
+def test_a_human_session_made_through_the_api_practises_at_once(practising: LiveServer) -> None:
+    with practising.client() as api:
+        study = api.post("/api/studies", json={"name": "practice, API"}).json()["id"]
+        path = f"/api/studies/{study}/sessions"
+        made = api.post(path, json=session_body("human", advice_budget=3))
+        assert made.status_code == 201, made.text
+        assert _status_after(api, made.json()["id"]) == "running", "its practice started"
+        assert api.post(f"/api/sessions/{made.json()['id']}/stop").status_code == 200
+        body = session_body("human", advice_budget=3)
+        later = api.post(path, params={"pretrain": "false"}, json=body)
         assert later.status_code == 201, later.text
         assert _status_after(api, later.json()["id"], seconds=3) == "created"
