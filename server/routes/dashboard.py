@@ -164,8 +164,14 @@ def set_design(db: DbDep, study_id: StudyId, body: NewDesign) -> dict[str, Any]:
 
 
 @router.post("/dashboard/api/studies/{study_id}/preview", dependencies=[LoginDep], status_code=201)
-def preview(db: DbDep, settings: SettingsDep, request: Request, study_id: StudyId) -> Preview:
-    return study_routes.preview(db, settings, request, study_id)
+def preview(
+    db: DbDep,
+    settings: SettingsDep,
+    manager: ManagerDep,
+    background: BackgroundTasks,
+    study_id: StudyId,
+) -> Preview:
+    return study_routes.preview(db, settings, manager, background, study_id)
 
 
 @router.delete("/dashboard/api/studies/{study_id}/preview", dependencies=[LoginDep])

@@ -1,12 +1,13 @@
 """Studies (researcher key required). The services return rows and domain values; the
 functions before the routes make them the API's responses (the dashboard's too)."""
 
-from fastapi import APIRouter, Path, Request, Response
+from fastapi import APIRouter, BackgroundTasks, Path, Request, Response
 from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
 from learner.fitted import FittedModel
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
+from server.live.manager import SessionManager
 from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
 from study.db.models import LIVE_STATUSES, FittedAdvisorModel, Status, Study, StudySession
@@ -166,27 +167,45 @@ def condition_counts(db: DbDep, study_id: StudyId) -> list[ConditionCounts]:
 
 
 @router.post("/{study_id}/preview", status_code=201)
-def preview(db: DbDep, settings: SettingsDep, request: Request, study_id: StudyId) -> Preview:
+def preview(
+    db: DbDep,
+    settings: SettingsDep,
+    manager: ManagerDep,
+    background: BackgroundTasks,
+    study_id: StudyId,
+) -> Preview:
     """A preview link: the researcher walks the study as a participant would (a session
-    of the next condition), taking no place, kept out of exports and the report."""
+    of the next condition, practised in its pool as an arrival's is, or practising from
+    now), taking no place, kept out of exports and the report."""
     study, design = _online(db, study_id)
-    arrival = assignment.arrive(
-        db,
-        study,
-        design,
-        {},
-        None,
-        settings.data_dir,
-        settings.worker_threads,
-        preview=True,
-    )
+    with assignment.ARRIVALS:
+        arrival = assignment.arrive(
+            db,
+            study,
+            design,
+            {},
+            None,
+            settings.data_dir,
+            settings.worker_threads,
+            preview=True,
+        )
     assert arrival.token is not None, "a preview is never turned away"
     session = sessions.session_for_token(db, arrival.token)
     assert session is not None
+    if arrival.session_id is not None:
+        background.add_task(_assigned, manager, arrival.session_id)
+    else:
+        background.add_task(manager.welcome, session.id)
     return Preview(
         session_id=session.id,
         participant_url=sessions.participant_url(settings.base_url, arrival.token),
     )
+
+
+async def _assigned(manager: SessionManager, session_id: int) -> None:
+    """A pool's session given away: its idle limit runs from now (on the event loop, as
+    the study link's arrivals have it)."""
+    manager.assign(session_id)
 
 
 async def _delete_sessions(

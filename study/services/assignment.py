@@ -78,8 +78,8 @@ class Arrival:
     full_reason: str = ""
     params: dict[str, str] = field(default_factory=dict)
     session_id: int | None = None
-    """The session given to a new arrival (None for a returning one, a preview, a full
-    study)."""
+    """The session given to a new arrival, or a pool's given to a preview (None for a
+    returning one, a preview made anew, a full study)."""
 
 
 def study_for_key(db: Session, key: str) -> tuple[Study, StudyDesign]:
@@ -264,10 +264,11 @@ def arrive(
     tally = counts(db, study, design)
     if preview:  # the condition the next arrival would get, or the first of a full study
         condition = next((name for name, c in tally.items() if c.short), next(iter(tally)))
-        session = _session(db, study, design, condition, 0, data_dir, threads)
+        taken = _take_pooled(db, study, condition)  # practised, as an arrival's would be
+        session = taken or _session(db, study, design, condition, 0, data_dir, threads)
         session.preview = True
         db.commit()
-        return Arrival(session.participant_token)
+        return Arrival(session.participant_token, session_id=session.id if taken else None)
     reason = full_reason(design, tally)
     if reason:
         return Arrival(None, full_reason=reason, params=kept)
