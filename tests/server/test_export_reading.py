@@ -11,10 +11,13 @@ from pathlib import Path
 
 import httpx
 import pyarrow as pa
+import pytest
 import pyarrow.parquet as pq
 
 from analysis.declared import DTYPES, read_table, resources
 from cli.main import main
+
+pytestmark = pytest.mark.slow
 
 
 def _export(api: httpx.Client, study: int, fmt: str, folder: Path) -> Path:

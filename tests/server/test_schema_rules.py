@@ -18,6 +18,7 @@ schemathesis = pytest.importorskip("schemathesis")
 from hypothesis import HealthCheck, Phase, given, settings  # noqa: E402
 from schemathesis.generation.modes import GenerationMode  # noqa: E402
 
+pytestmark = pytest.mark.slow
 EXAMPLES = 150
 ACCEPTED = {200, 201, 409}
 """A valid body is taken, or (a name already used) a conflict: never a 4xx that says the
