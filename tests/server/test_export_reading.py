@@ -11,8 +11,8 @@ from pathlib import Path
 
 import httpx
 import pyarrow as pa
-import pytest
 import pyarrow.parquet as pq
+import pytest
 
 from analysis.declared import DTYPES, read_table, resources
 from cli.main import main
