@@ -1,6 +1,8 @@
 """Marks the suite's kinds of test, so `make test-fast` can leave out what needs a live
-server: a test that takes one of the fixtures below (a uvicorn server on loopback, with its
-worker processes) is `live`; a module that starts its own server marks itself."""
+server or a real batch: a test that takes one of the fixtures below (a uvicorn server on
+loopback, with its worker processes) is `live`; one that reads the batch the session runs
+once (`tests/runs/batch/conftest.py`) is `slow`; a module that starts its own server marks
+itself."""
 
 from __future__ import annotations
 
@@ -15,9 +17,14 @@ os.environ.setdefault("IDEEPRL_PRETRAIN_ON_CREATE", "false")
 
 LIVE_FIXTURES = frozenset({"server", "api", "live"})
 """tests/server/conftest.py's live server and its client; tests/e2e/conftest.py's."""
+BATCH_FIXTURES = frozenset({"baselines"})
+"""The local batch of two worker processes, run once for the tests that read it."""
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
-        if LIVE_FIXTURES & set(getattr(item, "fixturenames", ())):
+        fixtures = set(getattr(item, "fixturenames", ()))
+        if LIVE_FIXTURES & fixtures:
             item.add_marker(pytest.mark.live)
+        if BATCH_FIXTURES & fixtures:
+            item.add_marker(pytest.mark.slow)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from benchmarks.bench_capacity import CpuMeter
 
 BURN = "import time\nend = time.process_time() + {s}\nwhile time.process_time() < end: pass\n"
@@ -19,6 +21,7 @@ TRAINER = (
 )
 
 
+@pytest.mark.slow
 def test_processes_that_end_before_the_run_are_counted_in_their_part() -> None:
     # A stand-in server whose child trains (SCHED_IDLE) and ends; the server lives on.
     server = subprocess.Popen(

@@ -30,6 +30,7 @@ def settings_for(episodes: pd.DataFrame, **by_method: dict[str, str]) -> pd.Data
     return pd.DataFrame(rows)
 
 
+@pytest.mark.slow
 def test_same_settings_compare_and_keep_every_t_test(tmp_path: Path) -> None:
     episodes = study_episodes()
     result = write_report(episodes, tmp_path, settings=settings_for(episodes))
@@ -39,6 +40,7 @@ def test_same_settings_compare_and_keep_every_t_test(tmp_path: Path) -> None:
     assert "Comparability warning" not in text and "They do here." in text
 
 
+@pytest.mark.slow
 def test_different_schemes_are_flagged_and_their_t_tests_withheld(tmp_path: Path) -> None:
     episodes = study_episodes()
     settings = settings_for(
@@ -73,6 +75,7 @@ def test_different_schemes_are_flagged_and_their_t_tests_withheld(tmp_path: Path
     assert "Comparability warning" in allowed_text and "--allow-mismatch" in allowed_text
 
 
+@pytest.mark.slow
 def test_the_power_section_cautions_against_a_baseline_run_under_other_settings(
     tmp_path: Path,
 ) -> None:
@@ -105,6 +108,7 @@ def _steps(episodes: pd.DataFrame, settings: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=[*STEP_COLUMNS, "outcome"])
 
 
+@pytest.mark.slow
 def test_the_rescoring_table_withholds_what_one_scheme_does_not_make_comparable(
     tmp_path: Path,
 ) -> None:

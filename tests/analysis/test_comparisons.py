@@ -62,6 +62,7 @@ def test_the_paired_test_is_primary_only_where_every_seed_pairs() -> None:
     assert row.primary_p == pytest.approx(stats.ttest_ind(a, b, equal_var=False).pvalue)
 
 
+@pytest.mark.slow
 def test_the_report_leads_with_the_primary_test(tmp_path: Path) -> None:
     a, b = [10.0, 12.0, 15.0, 11.0], [8.0, 9.0, 7.5, 10.5]
     table = _episodes(

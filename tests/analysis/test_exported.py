@@ -48,6 +48,7 @@ def test_an_export_of_the_previous_version_reads_back_as_runs() -> None:
     assert set(export.steps["session_id"]) == set(export.runs)
 
 
+@pytest.mark.slow
 def test_the_report_of_an_old_export_audits_what_it_compares(tmp_path: Path) -> None:
     export = read_export(OLD_EXPORT)
     result = write_report(export.episodes, tmp_path, settings=export.settings, steps=export.steps)
@@ -84,6 +85,7 @@ def _as_online_study(folder: Path, alpha: float) -> dict[int, str]:
     return {int(row["session_id"]): row["condition"] for row in rows}
 
 
+@pytest.mark.slow
 def test_an_online_studys_export_compares_its_conditions_at_its_alpha(tmp_path: Path) -> None:
     folder = tmp_path / "online"
     conditions = _as_online_study(folder, alpha=0.01)

@@ -75,6 +75,7 @@ def test_an_export_of_a_session_still_training_has_nothing_to_report(
     assert "1 agent in 1 method, 2 episodes each" in (out / "report.md").read_text()
 
 
+@pytest.mark.slow
 def test_an_exports_analysis_leaves_out_what_the_databases_report_leaves_out(
     data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

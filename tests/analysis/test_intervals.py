@@ -111,6 +111,7 @@ def test_intervals_per_method_and_per_difference_follow_scipy() -> None:
     assert (diff["low"], diff["high"]) == pytest.approx(tuple(expected))
 
 
+@pytest.mark.slow
 def test_the_report_prints_and_writes_the_intervals(tmp_path) -> None:
     table = agents_with_totals({"autonomous": [3.0, 5.0, 4.0], "agent": [6.0, 8.0, 7.0]})
     result = write_report(table, tmp_path)

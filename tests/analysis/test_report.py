@@ -45,6 +45,7 @@ def report(tmp_path_factory: pytest.TempPathFactory) -> tuple[pd.DataFrame, Repo
     )
 
 
+@pytest.mark.slow
 def test_every_file_is_written_and_listed(report: tuple[pd.DataFrame, ReportResult]) -> None:
     _, result = report
     assert result.report == result.out_dir / "report.md"
@@ -58,6 +59,7 @@ def test_every_file_is_written_and_listed(report: tuple[pd.DataFrame, ReportResu
         assert path.with_suffix(".pdf").read_bytes().startswith(b"%PDF")
 
 
+@pytest.mark.slow
 def test_the_csv_tables_match_the_input(report: tuple[pd.DataFrame, ReportResult]) -> None:
     episodes, result = report
     agents = pd.read_csv(result.tables["agents"]).set_index("label")
@@ -143,6 +145,7 @@ def test_the_power_section_plans_from_the_agents_r_t(
     assert "(power.png)" in section and "(power.svg)" in section
 
 
+@pytest.mark.slow
 def test_too_few_agents_leave_the_power_section_with_the_reason(tmp_path: Path) -> None:
     result = write_report(episodes_from_curves(HAND_CASE), tmp_path / "hand")
     section = result.report.read_text(encoding="utf-8").split("## Power: ")[1].split("\n## ")[0]
@@ -155,6 +158,7 @@ def test_too_few_agents_leave_the_power_section_with_the_reason(tmp_path: Path) 
     assert "power" not in alone.figures and "power" not in alone.tables
 
 
+@pytest.mark.slow
 def test_the_paper_comparison_needs_the_papers_methods(tmp_path: Path) -> None:
     curves = {"o1": ("oracle", [1.0, 2.0, 3.0]), "r1": ("random", [0.0, 1.0, 0.0])}
     result = write_report(episodes_from_curves(curves), tmp_path, baseline="random")
@@ -166,6 +170,7 @@ def test_the_paper_comparison_needs_the_papers_methods(tmp_path: Path) -> None:
     assert "Figure 6's reference is r1" in text
 
 
+@pytest.mark.slow
 def test_a_single_method_still_gets_a_report_without_figure_6(tmp_path: Path) -> None:
     table = episodes_from_curves({"a": ("autonomous", [1.0, 2.0]), "b": ("autonomous", [2.0, 2.0])})
     result = write_report(table, tmp_path)
@@ -186,6 +191,7 @@ def test_a_single_method_says_why_it_has_no_comparison_table(tmp_path: Path) -> 
             assert lines[i + 1].startswith("|"), f"a table with no rows: {lines[i - 1]}"
 
 
+@pytest.mark.slow
 def test_one_agent_and_one_method_are_counted_in_the_singular(tmp_path: Path) -> None:
     text = write_report(episodes_from_curves(HAND_CASE), tmp_path / "hand").report.read_text()
     assert "- **human-IDeepRL** (1 agent × 3 episodes)" in text, text
@@ -195,6 +201,7 @@ def test_one_agent_and_one_method_are_counted_in_the_singular(tmp_path: Path) ->
     assert "1 agents" not in text and "1 methods" not in text
 
 
+@pytest.mark.slow
 def test_the_summary_reads_advice_against_its_control_by_the_primary_test(
     tmp_path: Path,
 ) -> None:
@@ -234,6 +241,7 @@ def test_bad_input_writes_nothing(tmp_path: Path) -> None:
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_the_command_line_writes_a_report_from_a_csv(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -250,6 +258,7 @@ def test_the_command_line_writes_a_report_from_a_csv(
     assert not (tmp_path / "none").exists()
 
 
+@pytest.mark.slow
 def test_a_new_report_leaves_none_of_an_earlier_ones_files(tmp_path: Path) -> None:
     """A report of two methods writes Figure 6; one of a single method into the same folder
     has none: the earlier figure must not stay beside it, read as this report's. Files
@@ -264,6 +273,7 @@ def test_a_new_report_leaves_none_of_an_earlier_ones_files(tmp_path: Path) -> No
     assert (tmp_path / "notes.txt").read_text() == "mine"
 
 
+@pytest.mark.slow
 def test_a_run_shorter_than_the_band_window_still_gets_a_band_figure(tmp_path: Path) -> None:
     """3 episodes under the 10-episode moving average drew an empty figure that the report
     embedded; the window now shrinks to the run (here: none) and the text says so."""
@@ -275,6 +285,7 @@ def test_a_run_shorter_than_the_band_window_still_gets_a_band_figure(tmp_path: P
     assert "moving average over 10 episodes" not in text
 
 
+@pytest.mark.slow
 def test_a_one_episode_run_leaves_the_band_figure_out_with_the_reason(tmp_path: Path) -> None:
     table = episodes_from_curves({"a": ("autonomous", [1.0]), "b": ("agent", [2.0])})
     result = write_report(table, tmp_path)

@@ -73,6 +73,7 @@ def test_version_prints_the_installed_version(capsys: pytest.CaptureFixture[str]
     assert capsys.readouterr().out.strip() == f"ideeprl {metadata.version('ideeprl')}"
 
 
+@pytest.mark.slow
 def test_export_by_name_or_id_finds_the_data_folder_as_serve_does(
     data_dir: Path, tmp_path: Path
 ) -> None:
@@ -98,6 +99,7 @@ def test_export_by_name_or_id_finds_the_data_folder_as_serve_does(
     assert list(elsewhere.iterdir()) == [elsewhere / ".env"]
 
 
+@pytest.mark.slow
 def test_reading_commands_never_create_an_empty_database(tmp_path: Path) -> None:
     for command in (["export"], ["report"]):
         done = ideeprl(*command, "--study", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
@@ -202,6 +204,7 @@ def test_json_output_is_all_of_stdout_and_keeps_the_exit_codes(
     assert capsys.readouterr().out == ""
 
 
+@pytest.mark.slow
 def test_printed_database_urls_hide_the_password(tmp_path: Path) -> None:
     """`serve`'s banner goes to the journal, which more people read than the `.env`; a
     database that is down (here: a PostgreSQL port nothing listens on) is one line, not a

@@ -50,6 +50,7 @@ def test_train_writes_records_plot_and_checkpoint_and_resumes(tmp_path: Path) ->
     ]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_train_runs_the_scenario_options_it_is_given(tmp_path: Path) -> None:
     """--reward-scheme and the realism rates reach the scene: under authors-interactive a
     step without a placement costs -0.01 from the first step (the paper's rule: 0 up to

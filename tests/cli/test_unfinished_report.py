@@ -41,6 +41,7 @@ def _set(server: LiveServer, session_id: int, status: Status, episodes: int = 0)
     engine.dispose()
 
 
+@pytest.mark.slow
 def test_sessions_that_ended_are_named_and_never_suggested(
     server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -49,6 +49,7 @@ def expected_loss(agent: DQNAgent, batch: ReplaySample) -> float:
         return float(torch.nn.functional.smooth_l1_loss(taken, y))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "config",
     [
@@ -77,6 +78,7 @@ def test_bfloat16_update_reports_nearly_the_float32_loss() -> None:
     assert agent.update(batch) == pytest.approx(expected, rel=0.05)
 
 
+@pytest.mark.slow
 def test_repeated_updates_fit_a_fixed_batch() -> None:
     # gamma 0: the targets are the rewards, a plain regression the network can overfit
     agent = DQNAgent(DQNConfig(gamma=0.0), CPU, init_seed=1)

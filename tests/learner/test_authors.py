@@ -109,6 +109,7 @@ def test_keras_fit_moves_untaken_outputs_only_through_shared_weights() -> None:
         torch.testing.assert_close(a, b)
 
 
+@pytest.mark.slow
 def test_updates_during_advice_and_not_on_final_steps(make_env) -> None:
     config = small_config(**{
         k: v for k, v in DQNConfig.preset("authors").to_dict().items()

@@ -14,6 +14,7 @@ def build(make_env, config: DQNConfig, recorder: Recorder) -> Trainer:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("preset", "stop_at"),
     [("paper", 50), ("paper", 75), ("paper", -8), ("modern", 88)],
@@ -84,6 +85,7 @@ def test_resume_refuses_an_environment_that_does_not_replay(make_env, tmp_path) 
         Trainer(inverted, small_config(), seed=1).load_checkpoint(tmp_path / "run.pt")
 
 
+@pytest.mark.slow
 def test_a_replayed_stream_resumes_where_it_stopped(make_env, tmp_path) -> None:
     """A replay stopped in the middle of its stream, and again past its end, continues with
     the next recorded advice (and the requests it counted) as if never stopped."""

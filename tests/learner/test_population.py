@@ -84,6 +84,7 @@ def advisor_checkpoint(tmp_path_factory) -> str:
     return str(path)
 
 
+@pytest.mark.slow
 def test_an_agent_in_a_mixed_population_takes_the_course_it_takes_alone(
     make_env, advisor_checkpoint
 ) -> None:
@@ -188,6 +189,7 @@ def test_grouped_convolutions_compute_the_same_values_and_update() -> None:
             torch.testing.assert_close(mine, theirs, rtol=1e-3, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_float32_parameters_after_50_updates_agree_alone_and_in_a_population(make_env) -> None:
     config = small_config(precision="fp32", episodes=10)
     seeds = (7, 8)
@@ -218,6 +220,7 @@ def test_float32_parameters_after_50_updates_agree_alone_and_in_a_population(mak
             assert (mine - theirs).norm() <= 1e-3 * theirs.norm()
 
 
+@pytest.mark.slow
 def test_a_resumed_population_matches_an_uninterrupted_one(make_env, tmp_path) -> None:
     config = small_config(episodes=2)
     seeds = (11, 12)

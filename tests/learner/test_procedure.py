@@ -37,6 +37,7 @@ def _records(spec: RunSpec) -> list:
         env.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("strategy", ["early", "alternating"])
 def test_the_control_repeats_the_advised_runs_schedule(tmp_path: Path, strategy: str) -> None:
     advised = RunSpec.from_json(

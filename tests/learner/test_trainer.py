@@ -7,6 +7,7 @@ from learner import DQNConfig, Trainer, make_advisor, make_strategy
 from tests.learner.conftest import Recorder, small_config
 
 
+@pytest.mark.slow
 def test_early_advising_takes_exactly_steps_901_to_1000(make_env) -> None:
     config = DQNConfig(memory_size=1200, batch_size=32)
     recorder = Recorder()

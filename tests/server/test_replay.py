@@ -114,6 +114,7 @@ def test_an_unchanged_replay_takes_the_originals_steps(
         assert all(h is not None and len(h) == 16 for h in hashes)
 
 
+@pytest.mark.slow
 def test_an_agent_advised_session_replays_unchanged(database: Database) -> None:
     """Advice from a trained agent's checkpoint: the replay needs only the stream (the
     checkpoint is not the replay's), and takes the original's steps."""
@@ -195,6 +196,7 @@ def test_an_alternating_replay_is_marked_different_from_where_it_diverges(
     }  # fmt: skip
 
 
+@pytest.mark.slow
 def test_on_another_cpu_a_difference_is_explained_and_on_the_same_one_a_fault(
     database: Database,
 ) -> None:

@@ -60,6 +60,7 @@ def database(tmp_path: Path) -> Iterator[str]:
         yield url
 
 
+@pytest.mark.slow
 def test_a_field_added_to_the_run_reaches_every_entry_point_and_every_view(
     tmp_path: Path, database: str
 ) -> None:
@@ -158,6 +159,7 @@ def _column(path: Path, name: str) -> list[str]:
         return [row[name] for row in csv.DictReader(f)]
 
 
+@pytest.mark.slow
 def test_a_finished_batch_still_finds_its_runs_after_a_field_is_added(
     tmp_path: Path, database: str
 ) -> None:

@@ -291,6 +291,7 @@ def _ending(ask: Requests) -> None:
     assert ask("POST", "/dashboard/logout").status_code == 303
 
 
+@pytest.mark.slow
 def test_importing_the_web_app_loads_none_of_them() -> None:
     """The quick check (`make test-fast`): what `server.main` imports at the top."""
     code = f"import sys, server.main; print([m for m in {HEAVY!r} if m in sys.modules])"

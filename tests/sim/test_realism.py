@@ -30,6 +30,7 @@ def grab_outcomes(rate_fail: float, rate_knock: float, episodes: int) -> tuple[i
     return tried, failed, knocked
 
 
+@pytest.mark.slow
 def test_rates_match_their_setting() -> None:
     tried, failed, knocked = grab_outcomes(0.2, 0.1, 150)
     assert tried > 800

@@ -6,6 +6,8 @@ from __future__ import annotations
 import random
 from pathlib import Path
 
+import pytest
+
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Episode, Status
@@ -32,6 +34,7 @@ def _finish(db, session, rewards: random.Random) -> None:  # type: ignore[no-unt
     db.commit()
 
 
+@pytest.mark.slow
 def test_the_report_compares_the_conditions_without_previews(tmp_path: Path) -> None:
     engine = make_engine(f"sqlite:///{tmp_path / 'study.sqlite3'}")
     upgrade(engine)

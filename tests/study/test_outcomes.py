@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from sqlalchemy import select, update
 
 from analysis.rescoring import rescored_totals
@@ -23,6 +24,7 @@ TINY = {"pretraining_steps": 30, "batch_size": 8, "memory_size": 300, "episodes"
         "max_episode_steps": 25, "advice_budget": 10}  # fmt: skip
 
 
+@pytest.mark.slow
 def test_old_logs_get_their_outcomes_by_replaying_their_episodes(tmp_path: Path) -> None:
     with fresh_database(tmp_path) as url:
         engine = make_engine(url)

@@ -17,6 +17,7 @@ REQUIRE = [a for a in SCALE if a not in ("--advisor-check", "record")]
 BATCH = ["batch", "--study", "pilot", "--methods", "autonomous", "agent", "--agents", "2"]
 
 
+@pytest.mark.slow
 def test_failed_advisor_attempts_are_not_counted_as_autonomous_agents(
     place: Place, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:

@@ -16,6 +16,8 @@ from cli.main import main
 from tests.runs.batch.helpers import Place
 from tests.study.test_export_types import ARROW_TYPES
 
+pytestmark = pytest.mark.slow  # a real batch's export, made once for the module
+
 PANDAS_TYPES = {"integer": "Int64", "number": "float64", "boolean": "boolean", "string": "string"}
 
 
