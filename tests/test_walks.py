@@ -47,7 +47,8 @@ main thread up to `ReplayMemory.add`, the frames still on the stack when the ans
 included: the value reaches them by return), for each entry F:
 
 - F *has* the value when it arrives as an argument (a closure's free variables count as
-  arguments) or comes back from a callee's return: a form itself, or a form one level inside
+  arguments) or comes back from a callee's return (a callee F calls itself, or awaits
+  through a thread pool): a form itself, or a form one level inside
   (an attribute, a dict value, an item: `session.run`, `values[run]`; inside `self`, only an
   attribute F's code loads). A comprehension is part of its function.
 - It *goes* from F to each project callee whose arguments have it (same object), to F's
@@ -56,8 +57,8 @@ included: the value reaches them by return), for each entry F:
   serializer, a thread pool; special methods other than `__init__`, `__new__` and
   `__call__` do not count: a descriptor, `isinstance`).
 - F *makes* a form when one it did not receive or get back is among what it gives out
-  (callees' arguments, its return, a store, a third-party call) or in its locals when it
-  returns.
+  (the arguments themselves of callees it calls itself, its return, a store, a third-party
+  call) or in its locals when it returns.
 - F *reads* the value when its bytecode (nested functions' included) takes an attribute,
   method or item of a name bound to a form, asks `in` it, or gives it first to `getattr`,
   `hasattr`, `vars`, `len`, `dict`, `list`, `tuple`, `set`, `sorted` or `iter`; for a form
@@ -77,7 +78,8 @@ worker's *advice cycle* (walk b) runs on its main thread from the entry of the o
 `advise` on the stack when the answer arrives (the advisor being asked) to the entry of
 `ReplayMemory.add` (the answer used); its climbs back are counted as above.
 
-The issue asks at most 10, 12 and 15 files, 8, 8 and 10 hand-offs and no climb back.
+Issue 18 asked at most 10, 12 and 15 files; issue 40 asks 8, 8 and 10 hand-offs and no climb
+back.
 `LIMITS` and `CYCLE_CLIMBS` hold the counts the code meets today, as upper bounds that may
 only go down (`docs/architecture.md`, "Three walks through the code", says what blocks the
 issue's). The section between the `walks` markers there is this test's output: `python
@@ -104,8 +106,8 @@ BEGIN, END = "<!-- walks: begin (python tests/test_walks.py --update) -->", "<!-
 
 LIMITS = {"a": (47, 0, 7), "b": (19, 0, 12), "c": (49, 0, 13)}
 """Walk: (most files, most climbs back, most hand-offs) the code meets today, bounds that may
-only go down; the issue asks 10, 12 and 15 files, and 8, 8 and 10 hand-offs, and no climb
-back (docs/architecture.md says what blocks it)."""
+only go down; issue 18 asked 10, 12 and 15 files, issue 40 asks 8, 8 and 10 hand-offs and
+no climb back (docs/architecture.md says what blocks them)."""
 CYCLE_CLIMBS = 1
 """The most climbs back over the worker's whole advice cycle (walk b): a bound that may only
 go down; the issue asks none."""
