@@ -14,6 +14,7 @@ from server.deps import DbDep, ResearcherDep, SettingsDep
 from server.routes.params import StudyId
 from study.schemas.reports import ReportCreate, ReportFile, ReportMethod, ReportPublic
 from study.services import reports
+from study.services.errors import Invalid, NotFound
 from study.services.studies import get_study
 
 router = APIRouter(prefix="/api/studies", tags=["reports"], dependencies=[ResearcherDep])
@@ -76,7 +77,14 @@ def build_report(
         primary=body.primary,
         choose=reports.API_CHOICE,
     )
-    description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
+    try:
+        description = reports.publish_report(db, study_id, reports.reports_dir(settings), request)
+    except Invalid as error:
+        if error.field != "sessions":
+            raise
+        # ids that name no session of this study: nothing with that id, as for a path id
+        lists = f"GET /api/studies/{study_id}/sessions lists them"
+        raise NotFound(f"{error.message} ({lists})") from None
     return public_report(description, study_id)
 
 

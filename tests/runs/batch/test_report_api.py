@@ -82,8 +82,8 @@ def test_choices_and_mistakes(place: Place, api: httpx.Client) -> None:
     assert all(str(i) in left_out for i in autonomous) and len(autonomous) == 2
 
     unknown = api.post(f"/api/studies/{study}/report", json={"sessions": [987654]})
-    assert unknown.status_code == 422
-    assert "987654 are not in study" in unknown.json()["detail"][0]["msg"]
+    assert unknown.status_code == 404
+    assert "987654 are not in study" in unknown.json()["detail"]
     bad_baseline = api.post(f"/api/studies/{study}/report", json={"baseline": "human"})
     assert bad_baseline.status_code == 422
     assert api.post("/api/studies/987654/report").status_code == 404
