@@ -13,13 +13,19 @@ from urllib.parse import quote
 from pydantic import (
     AfterValidator,
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Field,
+    GetJsonSchemaHandler,
     StringConstraints,
     model_validator,
 )
+from pydantic.json_schema import JsonSchemaValue
+from pydantic_core import core_schema
 
-from study.schemas.types import KEY_NAMES, Key, Number, Text, Texts, plain_text
+from study.schemas.runs import given
+from study.schemas.sessions import run_model
+from study.schemas.types import KEY_NAMES, Int, Key, Number, Text, Texts, plain_text
 from study.schemas.visit import CheckSpec, QuestionnaireSpec
 
 PANEL_PARAMS: dict[str, tuple[str, ...]] = {
@@ -47,6 +53,34 @@ Url = Annotated[
 (URL-encoded); `{turkSubmitTo}` may start it (MTurk's own hosts only)."""
 
 
+def _human_run(value: Any) -> dict[str, Any]:
+    """A condition's run read as a session's `run` is (`Run`: the same checks and 422s),
+    kept as the fields given; its method is human unless it says so, and a null version is
+    the current one."""
+    run = given(run_model().model_validate(value))
+    run.setdefault("method", "human")
+    if run.get("version", 0) is None:
+        del run["version"]
+    return run
+
+
+class _RunSchema:
+    """The JSON Schema of a condition's run: the `Run` component, its method human."""
+
+    def __get_pydantic_json_schema__(
+        self, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler
+    ) -> JsonSchemaValue:
+        run_schema = run_model().__pydantic_core_schema__
+        generator = getattr(handler, "generate_json_schema", None)  # a $ref to `Run`, not a copy
+        run = generator.generate_inner(run_schema) if generator else handler(run_schema)
+        human = {"properties": {"method": {"enum": ["human"], "default": "human"}}}
+        return {"allOf": [run, human]}
+
+
+HumanRun = Annotated[dict[str, Any], BeforeValidator(_human_run), _RunSchema()]
+"""A condition's run (`_human_run`); its JSON Schema refers to the session body's `Run`."""
+
+
 class Condition(BaseModel):
     """One arm of the study: the run each of its sessions gets (the body's `run` of
     `POST /api/studies/ID/sessions`, a human run for people), and its page texts (over the
@@ -54,12 +88,13 @@ class Condition(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    run: dict[str, Any] = Field(
+    run: HumanRun = Field(
         default_factory=lambda: {"method": "human"},
-        description="learner.run.RunSpec's fields; unset ones take their defaults.",
+        description="The run of each of its sessions, as a session's `run` (learner.run."
+        "RunSpec's fields; unset ones take their defaults), method human: people advise.",
     )
     texts: Texts = Field(default_factory=dict, max_length=32)
-    target: int = Field(default=10, strict=True, ge=1, le=100_000)
+    target: Int = Field(default=10, ge=1, le=100_000)
     """Completed participants wanted in this condition."""
 
 
@@ -82,7 +117,7 @@ class Panel(BaseModel):
     """A code per outcome; random ones are made for those not given."""
     urls: dict[OutcomeName, Url] = Field(default_factory=dict)
     """The return URL per outcome; Prolific's completion URL by default on Prolific."""
-    return_delay_s: int = Field(default=5, strict=True, ge=0, le=600)
+    return_delay_s: Int = Field(default=5, ge=0, le=600)
     """Seconds the outcome page shows the code before it sends the participant back."""
 
     @model_validator(mode="after")
@@ -108,7 +143,7 @@ class StudyDesign(BaseModel):
     conditions: dict[Key, Condition] = Field(
         min_length=1, max_length=32, json_schema_extra={"propertyNames": KEY_NAMES}
     )
-    capacity: int = Field(default=8, strict=True, ge=1, le=10_000)
+    capacity: Int = Field(default=8, ge=1, le=10_000)
     """Participants at once (started visits not ended); more arrivals see the study full.
     The default is what this project's 2-core machine holds with the advice round trip's
     p95 under 100 ms (8: 58 ms; 14: 741 ms; `benchmarks/bench_capacity.py`,
@@ -120,7 +155,7 @@ class StudyDesign(BaseModel):
     """The report's significance level for comparing the conditions."""
     idle_limit_s: Number = Field(default=600.0, gt=0, le=86_400)
     """Seconds without an answer before a visit ends as `timed_out` (final)."""
-    pool: int = Field(default=2, strict=True, ge=0, le=100)
+    pool: Int = Field(default=2, ge=0, le=100)
     """Sessions per condition kept made and pretrained ahead of arrivals (their seeds and
     conditions fixed when made), so an arrival's first turn does not wait for the robot's
     random practice; 0: each arrival's session practises when its link opens. The server

@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from analysis.baseline import AUTO
-from study.schemas.types import MAX_ID, Text
+from study.schemas.types import MAX_ID, WHOLE, Text
 
 
 class ReportCreate(BaseModel):
@@ -17,7 +17,7 @@ class ReportCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    sessions: list[Annotated[int, Field(strict=True, ge=1, le=MAX_ID)]] | None = Field(
+    sessions: list[Annotated[int, Field(strict=True, ge=1, le=MAX_ID), WHOLE]] | None = Field(
         default=None,
         min_length=1,
         max_length=10_000,
@@ -32,8 +32,8 @@ class ReportCreate(BaseModel):
         max_length=40,
         description="auto (autonomous when present), none, or a method.",
     )
-    n_episodes: Annotated[int, Field(strict=True)] | None = Field(
-        default=None, ge=1, le=100_000, description="First N episodes of every agent."
+    n_episodes: Annotated[int, Field(strict=True, ge=1, le=100_000), WHOLE] | None = Field(
+        default=None, description="First N episodes of every agent."
     )
     title: Text | None = Field(default=None, max_length=200, description="Report title.")
     allow_mismatch: StrictBool = Field(

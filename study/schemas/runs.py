@@ -15,7 +15,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, WithJsonSchema, create_model
 
 from learner.fields import FieldError, Leaf, check, leaves
-from study.schemas.types import NO_NUL, plain_text
+from study.schemas.types import NO_NUL, plain_text, whole_number
 
 
 def leaf_schema(leaf: Leaf) -> dict[str, Any]:
@@ -34,10 +34,14 @@ def leaf_schema(leaf: Leaf) -> dict[str, Any]:
         if leaf.maximum is not None:
             schema["maximum"] = number(leaf.maximum)
     elif leaf.kind is dict:
+        # printable ASCII without quote or backslash: each character one in the JSON text
+        # `check` measures, so 10 entries of these lengths take at most 340 of its 400
+        plain = r"^[ !#-\[\]-~]*$"
         mapping = {
             "type": "object",
-            "additionalProperties": {"type": "string", "maxLength": 10},
-            "maxProperties": 12,
+            "propertyNames": {"maxLength": 16, "pattern": plain},
+            "additionalProperties": {"type": "string", "maxLength": 10, "pattern": plain},
+            "maxProperties": 10,
         }
         schema = (
             {"anyOf": [{"type": "string", "maxLength": leaf.max_length or 400}, mapping]}
@@ -61,12 +65,21 @@ def _validator(leaf: Leaf) -> Any:
         for text in texts:  # NUL: the same 422 as every other text field of a body
             if isinstance(text, str):
                 plain_text(text)
+        if leaf.kind is int:
+            value = whole_number(value)
         try:
             return check(leaf, value)
         except FieldError as error:
             raise ValueError(str(error)) from None
 
     return validate
+
+
+def leaf_type(leaf: Leaf, schema: dict[str, Any] | None = None) -> Any:
+    """A declared value as a body's field: checked by its declaration, and shown as `schema`
+    (by default `leaf_schema`'s)."""
+    shown = leaf_schema(leaf) if schema is None else schema
+    return Annotated[Any, BeforeValidator(_validator(leaf)), WithJsonSchema(shown)]
 
 
 @cache
@@ -81,9 +94,7 @@ def body_model(cls: type, name: str | None = None) -> type[BaseModel]:
             inner = body_model(hints[f.name])
             fields[f.name] = (inner, Field(default=None))  # an object, or left out
             continue
-        leaf = by_name[f.name]
-        kind = Annotated[Any, BeforeValidator(_validator(leaf)), WithJsonSchema(leaf_schema(leaf))]
-        fields[f.name] = (kind, Field(default=None))
+        fields[f.name] = (leaf_type(by_name[f.name]), Field(default=None))
     model = create_model(
         name or cls.__name__,
         __config__=ConfigDict(extra="forbid"),

@@ -9,9 +9,10 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 
-from learner.fields import bounded, checked
+from learner.fields import bounded, checked, leaves
 from learner.run import SPEC_VERSION, RunSpec, declared
-from study.schemas.runs import body_model
+from study.schemas.runs import body_model, leaf_schema, leaf_type
+from study.schemas.types import WHOLE
 
 API_VERSION_NOTE = (
     "Since API version 2.0 a session's run is one object, `run` (every field of "
@@ -85,6 +86,15 @@ def _session_create_model(declaration: type[RunSpec]) -> type[BaseModel]:
     return model
 
 
+def _offered_method(declaration: type) -> Any:
+    """`method` as the API takes it: every method but replayed, which only `ideeprl replay`
+    makes (it gives the run a recorded session's advice stream)."""
+    [leaf] = [leaf for leaf in leaves(declaration) if leaf.path == ("method",)]
+    schema = leaf_schema(leaf)
+    schema["enum"] = [m for m in schema["enum"] if m != "replayed"]
+    return leaf_type(leaf, schema)
+
+
 def _run_model(declaration: type) -> type[BaseModel]:
     """The run's body: every field of `declaration`, and the stored document's `version`
     (so a session's `run`, or an export's `run_spec`, is accepted back as it is)."""
@@ -92,11 +102,20 @@ def _run_model(declaration: type) -> type[BaseModel]:
         "Run",
         __base__=body_model(declaration, "RunFields"),
         __doc__=(declaration.__doc__ or "").strip(),
+        method=(_offered_method(declaration), Field(default=None)),
         version=(
-            Annotated[int | None, Field(strict=True, ge=1, le=SPEC_VERSION)],
+            Annotated[int, Field(strict=True, ge=1, le=SPEC_VERSION), WHOLE] | None,
             Field(default=None, description=f"The document's version (1 to {SPEC_VERSION})."),
         ),
     )
+
+
+def run_model() -> type[BaseModel]:
+    """The body of a run (`Run`) under the declaration in force: a session's `run`, and
+    each condition's of a study design."""
+    run = session_create_model().model_fields["run"].annotation
+    assert isinstance(run, type) and issubclass(run, BaseModel)
+    return run
 
 
 SessionCreate = session_create_model()

@@ -1,10 +1,12 @@
 """Strict scalar types for request bodies: JSON `true` is not the number 1, `1.5` is not an
-integer, a number is finite (JSON has no NaN or Infinity; Python's parser accepts them), and
-text is text every database stores (PostgreSQL refuses the NUL character, SQLite keeps it)."""
+integer (`133.0` is, as JSON Schema reads it), a number is finite (JSON has no NaN or
+Infinity; Python's parser accepts them), and text is text every database stores (PostgreSQL
+refuses the NUL character, SQLite keeps it)."""
 
-from typing import Annotated
+from typing import Annotated, Any
 
-from pydantic import AfterValidator, Field, StringConstraints
+from pydantic import AfterValidator, BeforeValidator, Field, StringConstraints
+from pydantic.json_schema import JsonDict
 from pydantic_core import PydanticCustomError
 
 MAX_ID = 2**31 - 1
@@ -26,7 +28,21 @@ def plain_text(value: str) -> str:
     return value
 
 
-Int = Annotated[int, Field(strict=True)]
+def whole_number(value: Any) -> Any:
+    """A float without a fraction as the integer it is: JSON Schema's `integer` is any number
+    whose fraction is zero (`133.0` is one), and a client generated from the document may
+    send it so. `true`, `1.5` and text are left for the strict int to refuse."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+WHOLE = BeforeValidator(whole_number)
+Int = Annotated[int, Field(strict=True), WHOLE]
+"""An integer field of a body: a JSON integer, or a number without a fraction. Bounds go on
+the field (`x: Int = Field(ge=1)`); inside a list or a union, before `WHOLE`
+(`Annotated[int, Field(strict=True, ge=1), WHOLE]`): bounds after a validator function reach
+the JSON Schema as `ge` and `le`, which it does not know."""
 Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 NO_NUL = r"^[^\x00]*$"
 """JSON Schema's `pattern` for text without the NUL character."""
@@ -36,7 +52,7 @@ Key = Annotated[str, AfterValidator(plain_text), StringConstraints(min_length=1,
 """A key of a body's map (a config field, a text's name). Its JSON Schema goes in the map's
 `propertyNames` (`KEY_NAMES`): a key's own `pattern` would make pydantic write the map's
 values under `patternProperties`, leaving any other key's value unchecked."""
-KEY_NAMES = {"minLength": 1, "maxLength": 64, "pattern": NO_NUL}
+KEY_NAMES: JsonDict = {"minLength": 1, "maxLength": 64, "pattern": NO_NUL}
 """The `propertyNames` of a map keyed by `Key`."""
 MAX_TEXT = 50_000
 """Characters of one page text (the consent form is the longest, about 3,000)."""
