@@ -68,6 +68,10 @@ class Settings(BaseSettings):
     clicks straight through does not wait for it (an online study's arrivals get practised
     sessions from its pools); `?pretrain=false` leaves one to its link. Each practised
     session holds a worker process while it waits for its participant."""
+    pretrain_ahead_limit: int = Field(default=8, ge=0, le=1000)
+    """Human sessions that may hold a worker at once while they wait for their participant
+    (practising, or practised); a session made beyond them practises when its link is
+    opened, so a script making many sessions does not start a process for each."""
 
     trainer_nice: int = Field(default=10, ge=0, le=19)
     """Niceness of machine-advised workers, and of human sessions once their advice is

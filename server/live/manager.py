@@ -150,6 +150,10 @@ class WorkerHandle:
     """It trains in a population's worker (`process` and `conn` are the population's)."""
     steps_before_first_turn: int = 0
     """Random pretraining steps before the first advice (what the page's progress counts)."""
+    human: bool = False
+    """A person advises it."""
+    pooled: bool = False
+    """It waits in its condition's pool (the pools keep their own count)."""
     last_reward: float | None = None
     history: deque[HistoryEntry] = field(default_factory=lambda: deque(maxlen=HISTORY))
     started: float = field(default_factory=time.monotonic)
@@ -248,6 +252,8 @@ class SessionManager:
         self.command_timeout_s = min(COMMAND_TIMEOUT_S, stale_after_s)
         """How long pause and stop wait for a worker; a hung one is killed by then."""
         self.handles: dict[int, WorkerHandle] = {}
+        self._ahead: set[int] = set()
+        """Sessions given a practice ahead of their participant, not started yet."""
         self._context = worker_context()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._versions = itertools.count(int(time.time() * 1000))
@@ -295,6 +301,33 @@ class SessionManager:
         if resumed:
             log.info("resumed after the restart: sessions %s", resumed)
         return resumed
+
+    def waiting_for_people(self) -> int:
+        """Human sessions made by hand with a worker whose participant has not arrived yet
+        (practising, or practised and waiting), and those about to start so: each holds a
+        worker process."""
+        live = {
+            session_id
+            for session_id, h in self.handles.items()
+            if h.human and not h.pooled and not h.ready and h.status in LIVE_STATUSES
+        }
+        return len(live | self._ahead)
+
+    def practise_ahead(self, session_id: int, limit: int) -> bool:
+        """Whether the session may practise before its participant arrives: fewer than
+        `limit` sessions wait for their people with a worker. If so it is counted from now;
+        `welcome_ahead` then starts it. Otherwise it practises when its link is opened."""
+        if self.waiting_for_people() >= limit:
+            return False
+        self._ahead.add(session_id)
+        return True
+
+    async def welcome_ahead(self, session_id: int) -> None:
+        """Start the practice `practise_ahead` allowed."""
+        try:
+            await self.welcome(session_id)
+        finally:
+            self._ahead.discard(session_id)
 
     async def close(self) -> None:
         """Server shutdown: workers checkpoint and become `interrupted` (resumable)."""
@@ -413,6 +446,7 @@ class SessionManager:
         handle = WorkerHandle(session_id, token, process, parent, budget, given)
         handle.history.extend(HistoryEntry(*row) for row in answered)
         handle.steps_before_first_turn = first_turn
+        handle.human, handle.pooled = human, pooled
         handle.run = run
         try:
             process.start()

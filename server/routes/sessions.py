@@ -88,8 +88,9 @@ def creation_router() -> APIRouter:
         storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
         public = session_public(session, settings.base_url)
         practise = settings.pretrain_on_create if pretrain is None else pretrain
-        if practise and session.participant_token:
-            background.add_task(manager.welcome, session.id)
+        limit = settings.pretrain_ahead_limit
+        if practise and session.participant_token and manager.practise_ahead(session.id, limit):
+            background.add_task(manager.welcome_ahead, session.id)
         return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
 
     return creating

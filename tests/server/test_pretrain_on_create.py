@@ -77,3 +77,34 @@ def test_a_human_session_made_through_the_api_practises_at_once(practising: Live
         later = api.post(path, params={"pretrain": "false"}, json=body)
         assert later.status_code == 201, later.text
         assert _status_after(api, later.json()["id"], seconds=3) == "created"
+
+
+def test_sessions_made_by_the_dozen_start_no_more_workers_than_the_limit(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> None:
+    """A script making many sessions at once starts a worker for the first
+    `pretrain_ahead_limit` only; the rest practise when their links are opened, and a
+    session that stops frees its place for the next one made."""
+    data_dir = tmp_path_factory.mktemp("ahead")
+    with (
+        serving(data_dir, pool_limit=0, pretrain_on_create=True, pretrain_ahead_limit=2) as live,
+        live.client() as api,
+    ):
+        study = api.post("/api/studies", json={"name": "many"}).json()["id"]
+        path = f"/api/studies/{study}/sessions"
+        made = [
+            api.post(path, json=session_body("human", advice_budget=3)).json()["id"]
+            for _ in range(5)
+        ]
+        statuses = [_status_after(api, i, seconds=20 if n < 2 else 3) for n, i in enumerate(made)]
+        assert statuses == ["running", "running", "created", "created", "created"], statuses
+        assert api.post(f"/api/sessions/{made[0]}/stop").status_code == 200
+        _status_after(api, made[0])
+        deadline = time.monotonic() + 30
+        while api.get(f"/api/sessions/{made[0]}").json()["status"] != "stopped":
+            assert time.monotonic() < deadline, "the stop took its time"
+            time.sleep(0.2)
+        another = api.post(path, json=session_body("human", advice_budget=3)).json()["id"]
+        assert _status_after(api, another) == "running", "the stopped one's place is free"
+        for session_id in (made[1], another):
+            assert api.post(f"/api/sessions/{session_id}/stop").status_code == 200
