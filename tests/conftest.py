@@ -7,8 +7,12 @@ itself."""
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 
+import httpx
 import pytest
+
+from tests.server.live import LiveServer, serving
 
 # A human session made by hand practises from when it is made (the server's
 # `pretrain_on_create`); in the tests its worker starts when a test asks for one. The
@@ -16,7 +20,7 @@ import pytest
 os.environ.setdefault("IDEEPRL_PRETRAIN_ON_CREATE", "false")
 
 LIVE_FIXTURES = frozenset({"server", "api", "live"})
-"""tests/server/conftest.py's live server and its client; tests/e2e/conftest.py's."""
+"""The live server below and its client; tests/e2e/conftest.py's."""
 BATCH_FIXTURES = frozenset({"baselines"})
 """The local batch of two worker processes, run once for the tests that read it."""
 
@@ -28,3 +32,19 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             item.add_marker(pytest.mark.live)
         if BATCH_FIXTURES & fixtures:
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(scope="session")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """One live server for the API tests, on a fresh database (tests make their own
+    studies); the crash tests start their own. Its pools are off: a fuzzed design must not
+    make sessions behind other tests (tests/server/test_pools.py starts its own)."""
+    data_dir = tmp_path_factory.mktemp("study_data")
+    with serving(data_dir, checkpoint_every_episodes=2, heartbeat_s=1, pool_limit=0) as live:
+        yield live
+
+
+@pytest.fixture
+def api(server: LiveServer) -> Iterator[httpx.Client]:
+    with server.client() as client:
+        yield client
