@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import socket
 import traceback
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
@@ -107,6 +108,8 @@ class _Run:
                 **provenance.record(self.spec.config),
                 "at": utcnow().isoformat(),
                 "from_step": self.session.checkpoint_step,
+                "host": socket.gethostname(),
+                "pid": os.getpid(),  # the process (`worker_pid` is cleared when it ends)
             }
             db.execute(
                 update(StudySession)
@@ -119,13 +122,6 @@ class _Run:
             )
             db.commit()
         s = self.session
-        self.link = (
-            WorkerLink(
-                conn, self._on_pause, self._on_watch, self._on_idle, assigned=not options.pooled
-            )
-            if conn
-            else None
-        )
         self.recorder = Recorder(
             self.factory,
             session_id,
@@ -133,6 +129,17 @@ class _Run:
             options.data_dir / "checkpoints" / f"session-{session_id}",
             options.flush_every_steps,
             options.heartbeat_s,
+        )
+        self.link = (
+            WorkerLink(
+                conn,
+                self._on_pause,
+                self._on_watch,
+                self.recorder.tick,  # a wait flushes and marks the worker alive
+                assigned=not options.pooled,
+            )
+            if conn
+            else None
         )
         checkpoint = s.checkpoint_path
         if checkpoint and not Path(checkpoint).is_file():
@@ -232,9 +239,6 @@ class _Run:
             set_status(
                 db, self.session_id, Status.paused if paused else Status.running, token=self.token
             )
-
-    def _on_idle(self) -> None:
-        self.recorder.tick()  # flushes and marks the worker alive every heartbeat_s
 
     def _on_watch(self) -> None:
         self.env.announce()
