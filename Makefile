@@ -32,12 +32,15 @@ serve: setup
 	$(VENV)/bin/ideeprl serve
 
 # The suite's modules run in WORKERS processes (pytest-xdist; a module's tests stay together,
-# each process starts its own live server); test-fast is the inner loop between edits: no
-# browser, no live server, no learning run.
+# each process starts its own live server), then the browser and proxy tests (tests/e2e) one
+# at a time, as a participant's machine would run them: beside another test's learning run
+# their software-rendered 3-D view lost its frame rate. test-fast is the inner loop between
+# edits: no browser, no live server, no learning run.
 WORKERS ?= 2
 
 test: setup browser
-	$(PY) -m pytest -n $(WORKERS) --dist loadfile
+	$(PY) -m pytest -n $(WORKERS) --dist loadfile --ignore=tests/e2e
+	$(PY) -m pytest tests/e2e
 
 test-fast: setup
 	$(PY) -m pytest -n $(WORKERS) --dist loadfile -q -m "not slow and not browser and not live"
