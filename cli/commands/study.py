@@ -61,7 +61,8 @@ def read_body(source: Path, name: str | None) -> Any:
     except ValidationError as error:
         schema = StudyCreate.model_json_schema()
         problems = [_problem(schema, e) for e in error.errors()]
-    problems += _run_problems(data)
+    runs = _run_problems(data)  # in the service's words, as the API's 422 gives them
+    problems = [p for p in problems if not _in_a_condition_run(p)] + runs
     if len(problems) == 1:
         raise CommandError(f"{source}: {problems[0]}", EXIT_USAGE)
     if problems:
@@ -82,9 +83,15 @@ def _problem(schema: dict[str, Any], error: Any) -> str:
     return f"{where}: {message}" if where else message
 
 
+def _in_a_condition_run(problem: str) -> bool:
+    parts = problem.split(": ", 1)[0].split(".")
+    return parts[:2] == ["design", "conditions"] and parts[3:4] == ["run"] and len(parts) > 4
+
+
 def _run_problems(data: dict[str, Any]) -> list[str]:
-    """What is wrong with each condition's run (a mapping of the run's fields, which the
-    service checks, not pydantic), named `design.conditions.NAME.run.FIELD`."""
+    """What is wrong with each condition's run as the service checks it (its values, which
+    pydantic names too, and the rules between them, which only the service knows), named
+    `design.conditions.NAME.run.FIELD`."""
     from study.services.errors import Invalid
     from study.services.studies import condition_run
 
