@@ -21,6 +21,7 @@ from learner.advisors import RecordedAdvisor
 from learner.machine import cpu_kind
 from learner.records import StepRecord
 from learner.run import RunSpec
+from tests.learner.conftest import Recorder
 
 FOLDER = Path(__file__).parents[1] / "fixtures" / "records"
 ADVISOR = FOLDER / "advisor.pt"
@@ -66,18 +67,7 @@ def spec(method: str) -> RunSpec:
 
 def run(method: str, save_advisor: Path | None = None) -> list[StepRecord]:
     """Every step of the method's run, as the code records it now."""
-
-    class Steps:
-        def __init__(self) -> None:
-            self.steps: list[StepRecord] = []
-
-        def on_step(self, record: StepRecord) -> None:
-            self.steps.append(record)
-
-        def on_episode(self, record: Any) -> None:
-            pass
-
-    recorder = Steps()
+    recorder = Recorder()
     described = spec(method).validate()
     env = described.make_env()
     advisor = (
@@ -92,7 +82,7 @@ def run(method: str, save_advisor: Path | None = None) -> list[StepRecord]:
             trainer.save_checkpoint(save_advisor, memory=False)  # type: ignore[call-arg]
     finally:
         env.close()
-    return recorder.steps
+    return list(recorder.steps)
 
 
 def path(method: str) -> Path:
