@@ -322,6 +322,13 @@ class SessionManager:
         self._ahead.add(session_id)
         return True
 
+    async def started_ahead(self, session_id: int, timeout_s: float = 30.0) -> None:
+        """Wait while a practice `practise_ahead` allowed is starting (its worker claimed,
+        not yet handled here), so whoever ends the session finds its worker."""
+        deadline = time.monotonic() + timeout_s
+        while session_id in self._ahead and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
+
     async def welcome_ahead(self, session_id: int) -> None:
         """Start the practice `practise_ahead` allowed."""
         try:

@@ -244,9 +244,8 @@ def new_participant(
         db, study_id, spec, options, settings.data_dir, settings.worker_threads
     )
     public = session_routes.session_public(created, settings.base_url)
-    practise = settings.pretrain_on_create if body.pretrain is None else body.pretrain
-    if practise and manager.practise_ahead(created.id, settings.pretrain_ahead_limit):
-        background.add_task(manager.welcome_ahead, created.id)
+    if settings.pretrain_on_create if body.pretrain is None else body.pretrain:
+        session_routes.practise_ahead(background, manager, settings, created.id)
     return {"id": created.id, "participant_url": public.participant_url}
 
 

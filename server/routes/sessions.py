@@ -10,6 +10,7 @@ from sqlalchemy import select
 
 from learner.run import declared
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
+from server.live.manager import SessionManager
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
 from study.db.models import LIVE_STATUSES, Advice, StudySession
@@ -25,6 +26,7 @@ from study.schemas.sessions import (
 )
 from study.services import assignment, sessions, storage
 from study.services.errors import NotFound
+from study.settings import Settings
 
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
 
@@ -88,12 +90,20 @@ def creation_router() -> APIRouter:
         storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
         public = session_public(session, settings.base_url)
         practise = settings.pretrain_on_create if pretrain is None else pretrain
-        limit = settings.pretrain_ahead_limit
-        if practise and session.participant_token and manager.practise_ahead(session.id, limit):
-            background.add_task(manager.welcome_ahead, session.id)
+        if practise and session.participant_token:
+            practise_ahead(background, manager, settings, session.id)
         return SessionCreated(**public.model_dump(), participant_token=session.participant_token)
 
     return creating
+
+
+def practise_ahead(
+    background: BackgroundTasks, manager: SessionManager, settings: Settings, session_id: int
+) -> None:
+    """Start a human session's practice after the response, ahead of its participant, if
+    fewer than `pretrain_ahead_limit` sessions wait for theirs; else its link starts it."""
+    if manager.practise_ahead(session_id, settings.pretrain_ahead_limit):
+        background.add_task(manager.welcome_ahead, session_id)
 
 
 @router.get("/studies/{study_id}/sessions")

@@ -10,6 +10,7 @@ from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.live.manager import SessionManager
 from server.routes.paging import PageDep
 from server.routes.params import FittedId, StudyId
+from server.routes.sessions import practise_ahead
 from study.db.models import LIVE_STATUSES, FittedAdvisorModel, Status, Study, StudySession
 from study.schemas.design import StudyDesign
 from study.schemas.studies import (
@@ -195,7 +196,7 @@ def preview(
     if arrival.session_id is not None:
         background.add_task(_assigned, manager, arrival.session_id)
     else:
-        background.add_task(manager.welcome, session.id)
+        practise_ahead(background, manager, settings, session.id)
     return Preview(
         session_id=session.id,
         participant_url=sessions.participant_url(settings.base_url, arrival.token),
@@ -213,6 +214,7 @@ async def _delete_sessions(
 ) -> None:
     """Delete sessions, ending the live ones first (their visits are over)."""
     for session_id in ids:
+        await manager.started_ahead(session_id)
         handle = manager.handles.get(session_id)
         if handle is not None and handle.status in LIVE_STATUSES:
             await manager.end(session_id, Status.stopped, "deleted by the researcher")
