@@ -4,9 +4,10 @@ float32 on one thread, as the code recorded them in `tests/fixtures/records/`.
 
 A change to the run (a task, a feedback kind, a kernel in the numerics) proves that old
 records still come out the same by running these again (`tests/learner/test_records.py`).
-`python -m tests.learner.records` records them anew and adds this CPU kind to the list of
-kinds they were checked on; do that only when a change is meant to alter the records, and
-say why in its commit.
+`python -m tests.learner.records` records them anew on this CPU kind (the reference kind's
+in the folder itself, another kind's in a folder of its own) and adds the kind to the list
+of kinds they were checked on; do that only when a change is meant to alter the records,
+or for a CPU kind that has none, and say why in its commit.
 """
 
 from __future__ import annotations
@@ -85,12 +86,30 @@ def run(method: str, save_advisor: Path | None = None) -> list[StepRecord]:
     return list(recorder.steps)
 
 
-def path(method: str) -> Path:
-    return FOLDER / f"{method}.json"
+REFERENCE_KIND = "Intel(R) Xeon(R) Processor (AVX-512, AVX-512 BF16, AMX)"
+"""The CPU kind the records in `FOLDER` itself were made on. float32 on another instruction
+set rounds differently, and training carries the difference on until the learner ranks
+two actions the other way (the EPYC with AVX-512 BF16: step 96 of the agent run); such a
+kind's own records are in `FOLDER/<kind>/`."""
 
 
-def read(method: str) -> list[dict[str, Any]]:
-    return json.loads(path(method).read_text())  # type: ignore[no-any-return]
+def kind_folder(kind: str) -> Path:
+    words = "".join(c if c.isalnum() else " " for c in kind.lower()).split()
+    return FOLDER / "-".join(words)
+
+
+def path(method: str, kind: str = REFERENCE_KIND) -> Path:
+    folder = FOLDER if kind == REFERENCE_KIND else kind_folder(kind)
+    return folder / f"{method}.json"
+
+
+def has_own(kind: str) -> bool:
+    """Whether `kind` has records of its own (the reference kind's are `FOLDER`'s)."""
+    return path(METHODS[0], kind).exists()
+
+
+def read(method: str, kind: str = REFERENCE_KIND) -> list[dict[str, Any]]:
+    return json.loads(path(method, kind).read_text())  # type: ignore[no-any-return]
 
 
 def checked_kinds() -> list[str]:
@@ -98,11 +117,16 @@ def checked_kinds() -> list[str]:
 
 
 def record_all() -> None:
-    FOLDER.mkdir(parents=True, exist_ok=True)
+    """Records this CPU kind's runs: the reference records (and the advisor) on the
+    reference kind, that kind's own folder on another (`--kind`, the advisor kept)."""
+    kind = cpu_kind()
+    reference = kind == REFERENCE_KIND
+    path(METHODS[0], kind).parent.mkdir(parents=True, exist_ok=True)
     for method in METHODS:
-        steps = run(method, save_advisor=ADVISOR if method == "autonomous" else None)
+        keep = ADVISOR if method == "autonomous" and reference else None
+        steps = run(method, save_advisor=keep)
         rows = [dataclasses.asdict(s) for s in steps]
-        path(method).write_text(json.dumps(rows, indent=0) + "\n")
+        path(method, kind).write_text(json.dumps(rows, indent=0) + "\n")
         print(f"{method}: {len(rows)} steps", file=sys.stderr)
     KINDS.write_text(json.dumps(sorted({*checked_kinds(), cpu_kind()}), indent=1) + "\n")
 
