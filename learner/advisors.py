@@ -16,6 +16,8 @@ from learner.config import DQNConfig
 from learner.fitted import FittedAdvisor, log_normal_time, read_model
 from learner.no_advice import NO_ADVICE as NO_ADVICE
 from learner.no_advice import NoAdvice as NoAdvice
+from sim.rules import SortRule
+from tasks import Task, TaskOptions, get_task
 
 ADVISOR_KINDS = ("agent", "fitted", "oracle", "random")
 
@@ -69,11 +71,12 @@ class OracleAdvisor:
         sort_rule: Any = "color",
         error_rate: float = 0.0,
         seed: int | None = None,
-        n_actions: int = 4,
+        n_actions: int | None = None,
         decision_time_median_s: float | None = None,
         decision_time_sigma: float = 0.5,
+        task: Task | None = None,
+        task_options: TaskOptions | None = None,
     ) -> None:
-        import sim
 
         if not 0.0 <= error_rate <= 1.0:
             raise ValueError(f"error_rate must be between 0 and 1, got {error_rate}")
@@ -81,18 +84,26 @@ class OracleAdvisor:
             raise ValueError("decision_time_median_s must be above 0")
         if not decision_time_sigma >= 0:
             raise ValueError("decision_time_sigma must be at least 0")
-        self.sort_rule = sim.SortRule.parse(sort_rule)
+        if task is None:  # the sorting task, its rule given alone
+            task = get_task("sorting")
+            task_options = {"sort_rule": SortRule.parse(sort_rule).to_spec()}
+        self.task = task
+        self.task_options = task.checked_options(task_options)
         self.error_rate = float(error_rate)
-        self.n_actions = n_actions
+        self.n_actions = task.n_actions if n_actions is None else n_actions
         self.rng = np.random.default_rng(seed)
-        self._oracle_action = sim.oracle_action
         self.decision_time_median_s = decision_time_median_s
         self.decision_time_sigma = float(decision_time_sigma)
         self.time_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         self.last_decision_time_s: float | None = None
 
     def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
-        correct = int(self._oracle_action(info, self.sort_rule))
+        action = self.task.correct(info, self.task_options)
+        if action is None:
+            raise ValueError(
+                f"the oracle was asked where task {self.task.name} names no correct action"
+            )
+        correct = int(action)
         wrong = self.rng.random() < self.error_rate
         other = int(self.rng.integers(self.n_actions - 1))
         if self.decision_time_median_s is not None:
@@ -122,8 +133,13 @@ class AgentAdvisor:
 
         state = read_checkpoint(checkpoint)
         config = DQNConfig.from_dict({**state["config"], "device": device})
-        self.agent = DQNAgent(config, resolve_device(device))
-        self.agent.network.load_state_dict(state["agent"]["network"])
+        network = state["agent"]["network"]
+        # the task's action count and image size, as the checkpoint's learner had them
+        # (checkpoints from before tasks other than the sorting robot's: 4, 64x64x3)
+        n_actions = int(network["out.weight"].shape[0])
+        image_shape = tuple(int(n) for n in state.get("image_shape", (64, 64, 3)))
+        self.agent = DQNAgent(config, resolve_device(device), n_actions, image_shape)  # type: ignore[arg-type]
+        self.agent.network.load_state_dict(network)
         self.checkpoint = str(checkpoint)
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:

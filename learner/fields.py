@@ -134,7 +134,11 @@ class Leaf:
             else:
                 text = noun
         elif self.kind is dict:
-            text = "a text" + (" or a JSON object" if self.also_text else "")
+            text = (
+                "a text or a JSON object"
+                if self.also_text
+                else "a JSON object of texts, numbers and true/false"
+            )
         else:
             text = "a text"
             if self.max_length:
@@ -258,11 +262,13 @@ def check(leaf: Leaf, value: Any) -> Any:
             if leaf.max_length and len(text) > leaf.max_length:
                 raise problem
             if isinstance(value, Mapping) and not all(
-                isinstance(k, str) and isinstance(v, str) for k, v in value.items()
+                isinstance(k, str) and _entry(v, leaf.also_text) for k, v in value.items()
             ):
                 raise problem
-            for text in [value] if isinstance(value, str) else [*value, *value.values()]:
-                _storable(leaf, text)
+            texts = [value] if isinstance(value, str) else [*value, *value.values()]
+            for text in texts:
+                if isinstance(text, str):
+                    _storable(leaf, text)
             return value if isinstance(value, str) else dict(value)
         raise problem
     if not isinstance(value, str) or (leaf.max_length and len(value) > leaf.max_length):
@@ -271,6 +277,16 @@ def check(leaf: Leaf, value: Any) -> Any:
     if leaf.pattern and not re.fullmatch(leaf.pattern, value):
         raise problem
     return value
+
+
+def _entry(value: Any, text_only: bool) -> bool:
+    """A JSON object's value a leaf allows: a text for a sort rule's map; a text, a finite
+    number or true/false for an object of options."""
+    if isinstance(value, str):
+        return True
+    if text_only:
+        return False
+    return isinstance(value, bool | int) or (isinstance(value, float) and math.isfinite(value))
 
 
 def _storable(leaf: Leaf, text: str) -> None:
@@ -504,6 +520,8 @@ def _argument_type(leaf: Leaf) -> Callable[[str], Any]:
 def _metavar(leaf: Leaf) -> str:
     if leaf.choices is not None:
         return "{" + ",".join(map(str, leaf.choices)) + "}"
+    if leaf.kind is dict and not leaf.also_text:
+        return "JSON"
     return {bool: "BOOL", int: "N", float: "X", dict: "RULE"}.get(leaf.kind, "TEXT")
 
 

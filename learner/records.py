@@ -63,14 +63,19 @@ class StepRecord:
     `exploration` (epsilon-greedy's random action)."""
     greedy_action: int
     """The learner's own greedy choice before this step (argmax of its Q-values)."""
-    q_grab: float
-    """The learner's Q-value of grab in the observed state."""
-    q_move_right: float
-    """The learner's Q-value of move right."""
-    q_move_left: float
-    """The learner's Q-value of move left."""
-    q_drop: float
-    """The learner's Q-value of drop."""
+    q_grab: float | None
+    """The learner's Q-value of grab (action 0) in the observed state; for a task with
+    four actions its actions 0-3 fill these four columns, else they are empty and
+    `q_values` holds them."""
+    q_move_right: float | None
+    """The learner's Q-value of move right (action 1)."""
+    q_move_left: float | None
+    """The learner's Q-value of move left (action 2)."""
+    q_drop: float | None
+    """The learner's Q-value of drop (action 3)."""
+    q_values: str | None
+    """A task without four actions: the learner's Q-values in action order, as a JSON list
+    (empty for four actions: the four columns above hold them)."""
     advised_action: int | None
     """The advisor's action when advice was given at this step, else empty."""
     advice_remaining: int

@@ -55,6 +55,10 @@ from learner.strategies import (
 )
 from sim.rules import SortRule
 from sim.scenario import ScenarioOptions
+from tasks import OptionValue, Task, TaskError, get_task
+
+TASK_NAME = r"[A-Za-z_][\w.]*(:[A-Za-z_]\w*)?"
+"""A built-in task's name, or package.module:callable."""
 
 if TYPE_CHECKING:
     import gymnasium as gym
@@ -218,6 +222,13 @@ class RunSpec:
     or a map of all six objects to a side, as JSON or as cube/red=left;cube/blue=right;..."""
     scenario: ScenarioOptions = group(ScenarioOptions)
     """Reward scheme and realism rates (`sim.ScenarioOptions`)."""
+    task: str = bounded("sorting", max_length=200, pattern=TASK_NAME)
+    """What the agent learns to do (`tasks`): sorting (the paper's robot; its options are
+    motion, sort_rule and scenario), gridworld (MiniGrid's empty room), or a researcher's
+    own as package.module:callable, a function marked @tasks.task_factory."""
+    task_options: dict[str, OptionValue] = bounded({}, max_length=2000)
+    """The task's own options, a JSON object (gridworld: size, max_steps); the sorting
+    task takes none here."""
 
     # --- what the run is ---------------------------------------------------------------
     @property
@@ -367,7 +378,14 @@ class RunSpec:
         config = self.config if self.advised else self.config.replace(advice_budget=0)
         motion = self.motion or ("physics" if self.method == "human" else "fast")
         oracle = self.method == "oracle"
+        task_options = self.task_options
+        if self.task != "sorting":
+            try:
+                task_options = self.the_task.checked_options(self.task_options)
+            except TaskError as error:
+                raise RunSpecError("task_options", str(error)) from None
         return self.replace(
+            task_options=task_options,
             sort_rule=rule,
             strategy=self.strategy if self.advised else "early",
             strategy_options=options,
@@ -378,9 +396,49 @@ class RunSpec:
             decision_time_sigma=self.decision_time_sigma if oracle else 0.5,
         )
 
+    @property
+    def the_task(self) -> Task:
+        """The task the run names (`RunSpecError` when it cannot be had)."""
+        try:
+            return get_task(self.task)
+        except TaskError as error:
+            raise RunSpecError("task", str(error)) from None
+
+    def env_options(self) -> dict[str, OptionValue]:
+        """The options its task's environment is made with: the sorting task's from the
+        run's own sorting fields, another task's from `task_options`."""
+        if self.task == "sorting":
+            return {
+                "motion": self.motion or "fast",
+                "sort_rule": self.sort_rule,
+                **self.scenario.to_dict(),
+            }
+        return self.the_task.checked_options(self.task_options)
+
+    def _check_task(self) -> None:
+        """The sorting task's fields belong to it; another task's options to that task."""
+        if self.task == "sorting":
+            if self.task_options:
+                raise RunSpecError(
+                    "task_options",
+                    "the sorting task takes its options from motion, sort_rule and scenario, "
+                    "not task_options",
+                )
+            return
+        self.the_task  # noqa: B018 (raises for a task that cannot be had)
+        sorting = RunSpec()
+        for name in ("sort_rule", "scenario"):
+            if getattr(self, name) != getattr(sorting, name):
+                raise RunSpecError(
+                    name, f"{name} is the sorting task's; task {self.task} does not take it"
+                )
+        if self.motion not in (None, "fast", "physics"):
+            raise RunSpecError("motion", "motion is the sorting task's")
+
     def validate(self) -> RunSpec:
         """Every rule between fields, checked before anything is built or stored; returns the
         normalized spec. Raises `RunSpecError` (a `ValueError`) naming the field."""
+        self._check_task()
         spec = self.normalized()
         if spec.learner == "sb3-dqn":
             try:
@@ -490,14 +548,9 @@ class RunSpec:
             )
 
     def make_env(self, record_motion: bool = False) -> gym.Env[Any, Any]:
-        from sim.env import SortingEnv  # PyBullet: imported when an environment is made
-
-        return SortingEnv(
-            motion=self.motion or "fast",
-            sort_rule=self.sort_rule,
-            max_episode_steps=self.config.max_episode_steps,
-            record_motion=record_motion,
-            **self.scenario.to_dict(),
+        """The run's task's environment (its simulator imported now)."""
+        return self.the_task.make_env(
+            self.env_options(), self.config.max_episode_steps, record_motion
         )
 
     def make_advisor(self) -> Advisor | None:
@@ -508,7 +561,8 @@ class RunSpec:
         if self.method == "oracle":
             return make_advisor(
                 "oracle",
-                sort_rule=self.sort_rule,
+                task=self.the_task,
+                task_options=self.env_options(),
                 error_rate=self.error_rate,
                 seed=self.seed,
                 decision_time_median_s=self.decision_time_median_s,
@@ -526,7 +580,7 @@ class RunSpec:
             except ValueError as error:
                 raise RunSpecError("fitted_model", str(error)) from None
         if self.method in ("random", "procedure"):
-            return make_advisor("random", seed=self.seed)
+            return make_advisor("random", seed=self.seed, n_actions=self.the_task.n_actions)
         return None
 
     def make_strategy(self) -> AdvisingStrategy | None:

@@ -5,6 +5,7 @@ told to the callbacks, an episode ends with its record. `learner.trainer.Trainer
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -150,10 +151,7 @@ class StagedRun:
             action=step.action,
             action_source=step.source,  # type: ignore[arg-type]
             greedy_action=step.greedy,
-            q_grab=float(q_values[0]),
-            q_move_right=float(q_values[1]),
-            q_move_left=float(q_values[2]),
-            q_drop=float(q_values[3]),
+            **_q_columns(q_values),
             advised_action=step.advised,
             advice_remaining=self.strategy.remaining if self.strategy else 0,
             reward=step.reward,
@@ -206,3 +204,16 @@ class StagedRun:
             handler = getattr(callback, method, None)
             if handler is not None and handler(record) is False:
                 self._stopped = True
+
+
+def _q_columns(q_values: np.ndarray) -> dict[str, Any]:
+    """A step's Q-values as its record's columns: the four named ones for four actions,
+    else a JSON list."""
+    if len(q_values) == 4:
+        named = dict(zip(Q_NAMES, map(float, q_values), strict=True))
+        return {**named, "q_values": None}
+    listed = json.dumps([float(q) for q in q_values])
+    return {**dict.fromkeys(Q_NAMES), "q_values": listed}
+
+
+Q_NAMES = ("q_grab", "q_move_right", "q_move_left", "q_drop")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -32,7 +32,8 @@ from learner.seeding import run_streams
 from learner.staged import EpisodeInProgress, StagedRun, StepTaken
 from learner.strategies import AdviceMoment, AdvisingStrategy, AnyAdvisor, make_strategy
 
-N_ACTIONS = 4
+MAX_ACTIONS = 32
+"""The most actions a task may have (a person picks one from buttons)."""
 RUNTIME_FIELDS = ("device", "torch_threads", "precision", "episodes")
 """Config fields a resumed run may change: where it computes, and how long it goes on."""
 
@@ -80,10 +81,12 @@ class Trainer(StagedRun):
         init, env_seeds, actions, memory = run_streams(seed)
         assert env.observation_space.shape is not None, "checked by _check_spaces"
         height, width, channels = env.observation_space.shape
+        self.n_actions = int(cast(gym.spaces.Discrete, env.action_space).n)
+        """How many actions the task has (the network's outputs)."""
         self.agent = DQNAgent(
             config,
             self.device,
-            N_ACTIONS,
+            self.n_actions,
             (height, width, channels),
             int(init.generate_state(1)[0]),
         )
@@ -128,10 +131,10 @@ class Trainer(StagedRun):
         rng_state = self._action_rng.bit_generator.state
         if pretraining:
             source = "random"
-            intended = int(self._action_rng.integers(N_ACTIONS))
+            intended = int(self._action_rng.integers(self.n_actions))
         else:
             explore = bool(self._action_rng.random() < self.epsilon.value)
-            random_action = int(self._action_rng.integers(N_ACTIONS))
+            random_action = int(self._action_rng.integers(self.n_actions))
             source = "exploration" if explore else "greedy"
             intended = random_action if explore else greedy
         advised = None
@@ -141,7 +144,7 @@ class Trainer(StagedRun):
                 config.pretraining_steps, intended, greedy,
             )  # fmt: skip
             try:
-                advised = self.strategy.advise(moment, self.advisor, N_ACTIONS)
+                advised = self.strategy.advise(moment, self.advisor, self.n_actions)
             except BaseException:
                 self._action_rng.bit_generator.state = rng_state  # the step never happened
                 raise
@@ -199,6 +202,7 @@ class Trainer(StagedRun):
                 "config": self.config.to_dict(),
                 "seed": self.seed,
                 "agent": self.agent.state_dict(),
+                "image_shape": list(self.agent.network.image_shape),
                 "memory": self.memory.state_dict() if memory else None,
                 "epsilon": self.epsilon.value,
                 "global_step": self.global_step,
@@ -318,5 +322,13 @@ def _check_spaces(env: gym.Env) -> None:
         raise ValueError(
             f"the learner needs uint8 RGB image observations (H, W, 3), got {obs_space}"
         )
-    if not (isinstance(action_space, gym.spaces.Discrete) and action_space.n == N_ACTIONS):
-        raise ValueError(f"the learner needs Discrete({N_ACTIONS}) actions, got {action_space}")
+    if not (isinstance(action_space, gym.spaces.Discrete) and 2 <= action_space.n <= MAX_ACTIONS):
+        raise ValueError(
+            f"the learner needs Discrete(n) actions, n from 2 to {MAX_ACTIONS}, got {action_space}"
+        )
+    height, width = obs_space.shape[:2]
+    if height % 8 or width % 8 or height < 16 or width < 16:
+        raise ValueError(
+            "the learner needs images whose sides are multiples of 8, at least 16, "
+            f"got {height}x{width}"
+        )

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 ROOT = Path(__file__).absolute().parents[1]
-PACKAGES = ("sim", "learner", "study", "runs", "server", "analysis", "cli")
+PACKAGES = ("sim", "tasks", "learner", "study", "runs", "server", "analysis", "cli")
 
 HISTORY = re.compile(
     "|".join(

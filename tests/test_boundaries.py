@@ -14,7 +14,7 @@ from functools import cache
 from pathlib import Path
 
 ROOT = Path(__file__).absolute().parents[1]
-PACKAGES = ("sim", "learner", "study", "runs", "server", "analysis", "cli")
+PACKAGES = ("sim", "tasks", "learner", "study", "runs", "server", "analysis", "cli")
 SCHEMAS = "study.schemas."
 PYDANTIC_BASES = {"pydantic.BaseModel", "pydantic.RootModel", "pydantic_settings.BaseSettings"}
 

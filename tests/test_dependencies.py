@@ -15,7 +15,7 @@ from packaging.requirements import Requirement
 ROOT = Path(__file__).absolute().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 PROJECT = PYPROJECT["project"]
-PACKAGES = ("sim", "learner", "study", "runs", "server", "analysis", "cli")
+PACKAGES = ("sim", "tasks", "learner", "study", "runs", "server", "analysis", "cli")
 
 
 def _requirements(names: list[str]) -> dict[str, Requirement]:

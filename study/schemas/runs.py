@@ -43,11 +43,21 @@ def leaf_schema(leaf: Leaf) -> dict[str, Any]:
             "additionalProperties": {"type": "string", "maxLength": 10, "pattern": plain},
             "maxProperties": 10,
         }
-        schema = (
-            {"anyOf": [{"type": "string", "maxLength": leaf.max_length or 400}, mapping]}
-            if leaf.also_text
-            else mapping
-        )
+        if leaf.also_text:
+            schema = {"anyOf": [{"type": "string", "maxLength": leaf.max_length or 400}, mapping]}
+        else:  # an object of options: texts, finite numbers, true/false
+            schema = {
+                "type": "object",
+                "propertyNames": {"maxLength": 40, "pattern": plain},
+                "additionalProperties": {
+                    "anyOf": [
+                        {"type": "string", "maxLength": 200, "pattern": plain},
+                        {"type": "number"},
+                        {"type": "boolean"},
+                    ]
+                },
+                "maxProperties": 20,
+            }
     else:
         schema = {"type": "string"}
         if leaf.max_length:

@@ -138,12 +138,22 @@ def test_a_bad_advised_action_raises_and_loses_no_step(make_env) -> None:
     assert [s.to_dict() for s in recorder.steps] == [s.to_dict() for s in expected.steps]
 
 
-def test_the_environment_must_be_the_papers(make_env) -> None:
+def test_the_environment_must_have_discrete_actions_and_images_the_network_takes(
+    make_env,
+) -> None:
     import gymnasium as gym
+    import numpy as np
 
     env = make_env()
-    env.action_space = gym.spaces.Discrete(5)
+    env.action_space = gym.spaces.Box(-1, 1, (2,))
     with pytest.raises(ValueError, match="Discrete"):
+        Trainer(env, small_config())
+    env.action_space = gym.spaces.Discrete(1)
+    with pytest.raises(ValueError, match="Discrete"):
+        Trainer(env, small_config())
+    env.action_space = gym.spaces.Discrete(4)
+    env.observation_space = gym.spaces.Box(0, 255, (60, 64, 3), np.uint8)
+    with pytest.raises(ValueError, match="multiples of 8"):
         Trainer(env, small_config())
 
 

@@ -1,0 +1,206 @@
+"""Tasks: the environments a study's learners act in, each with what people need to advise
+in it. A task is any Gymnasium environment with discrete actions whose observations are
+uint8 RGB images (H, W, 3), H and W multiples of 8; the learner sees it only through the
+Gymnasium API.
+
+A task is named in a run (`RunSpec.task`) by one of:
+- a built-in name: `sorting` (the paper's robot, the default) or `gridworld` (MiniGrid);
+- `package.module:callable`, a researcher's own: the module is imported (it must be
+  importable by the server and its worker processes, e.g. installed, or on `PYTHONPATH`)
+  and the callable, marked with `@task_factory`, returns a `Task`.
+
+The ground truth an advisor may look at travels in the environment's `info`: a task whose
+advisor can name the right action puts it in `info["correct_action"]` (the oracle advisor
+reads it), or gives `correct_action` a function of `info` and the task's options.
+
+Torch-free, PyBullet-free: a task's own module imports its simulator when an environment is
+made.
+"""
+
+from __future__ import annotations
+
+import importlib
+import re
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+
+BUILT_IN = {"sorting": "tasks.sorting:sorting_task", "gridworld": "tasks.gridworld:gridworld_task"}
+"""The tasks this package brings, by name."""
+
+_OWN = re.compile(r"^[A-Za-z_][\w]*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*$")
+"""`package.module:callable`."""
+
+OptionValue = str | int | float | bool | dict[str, str]
+"""A task option's value: JSON's text, number or true/false (the sorting rule's map too)."""
+TaskOptions = Mapping[str, OptionValue]
+"""A run's options for its task, by name."""
+EnvFactory = Callable[[TaskOptions, int, bool], gym.Env[Any, Any]]
+"""(the run's task options, the episode's step limit, record the motion) -> environment."""
+
+
+GymInfo = Mapping[str, Any]
+"""An environment's `info`: Gymnasium's own untyped mapping, which a task fills as it likes."""
+
+
+@dataclass(frozen=True)
+class CheckQuestion:
+    """A comprehension check's question about the task, with its right answer."""
+
+    id: str
+    text: str
+    choices: tuple[str, ...]
+    answer: str
+
+
+class TaskError(ValueError):
+    """A task that cannot be found or made; the message says why, for a person."""
+
+
+@dataclass(frozen=True)
+class TaskAction:
+    """One action as a person meets it on the advice page."""
+
+    word: str
+    """The button's words, e.g. "move left"."""
+    key: str = ""
+    """The keyboard key that chooses it (one character, or an arrow's name), or none."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """A task: how to make its environment, and what people see of it."""
+
+    name: str
+    """How runs name it (`sorting`, `gridworld`, or `package.module:callable`)."""
+    title: str
+    """A few words for people: the page's heading."""
+    make_env: EnvFactory
+    """Makes the environment for the run's task options."""
+    actions: tuple[TaskAction, ...]
+    """The actions in the learner's order (action i is the network's output i)."""
+    goal: str = ""
+    """One sentence for the participant: what the agent must do."""
+    options: TaskOptions = field(default_factory=dict)
+    """The task options a run may set, with their defaults; others are refused."""
+    correct_action: Callable[[GymInfo, TaskOptions], int | None] | None = None
+    """The right action from (info, task options), for the oracle advisor; None: the
+    environment's `info["correct_action"]` when it states one."""
+    good_reward: float | None = None
+    """An episode's reward a competent policy collects; an agent advisor's check asks for
+    it (None: the check judges only that the advisor does not repeat one action)."""
+    live_view: bool = False
+    """The web page shows the task's live 3-D view (the sorting robot's); else frames."""
+    check_questions: tuple[CheckQuestion, ...] = ()
+    """The comprehension check's questions for a study of this task: each a mapping with
+    its id, text, choices and the right answer."""
+
+    @property
+    def n_actions(self) -> int:
+        return len(self.actions)
+
+    @property
+    def action_words(self) -> tuple[str, ...]:
+        return tuple(a.word for a in self.actions)
+
+    def checked_options(self, given: TaskOptions | None) -> dict[str, OptionValue]:
+        """The run's task options with the task's defaults filled in; `TaskError` names an
+        option the task does not have."""
+        given = dict(given or {})
+        unknown = sorted(set(given) - set(self.options))
+        if unknown:
+            allowed = ", ".join(sorted(self.options)) or "none"
+            raise TaskError(
+                f"task {self.name} has no option {unknown[0]!r} (its options: {allowed})"
+            )
+        for name, value in given.items():
+            if not _same_kind(value, self.options[name]):
+                kind = type(self.options[name]).__name__
+                raise TaskError(f"task {self.name}'s option {name!r} must be of type {kind}")
+        return {**self.options, **given}
+
+    def env(
+        self, options: TaskOptions | None, max_episode_steps: int, record_motion: bool
+    ) -> gym.Env[Any, Any]:
+        return self.make_env(self.checked_options(options), max_episode_steps, record_motion)
+
+    def correct(self, info: GymInfo, options: TaskOptions) -> int | None:
+        """The right action in the state `info` describes, or None where nobody can say."""
+        if self.correct_action is not None:
+            return self.correct_action(info, self.checked_options(options))
+        action = info.get("correct_action")
+        return None if action is None else int(action)
+
+
+def _same_kind(value: Any, default: Any) -> bool:
+    """Whether an option's value has its default's JSON type (an int stands for a float)."""
+    if isinstance(default, bool) or isinstance(value, bool):
+        return isinstance(value, bool) and isinstance(default, bool)
+    if isinstance(default, int):
+        return isinstance(value, int)
+    if isinstance(default, float):
+        return isinstance(value, int | float)
+    return default is None or isinstance(value, type(default))
+
+
+_FACTORY = "__ideeprl_task_factory__"
+_made: dict[str, Task] = {}
+
+
+def task_factory(function: Callable[[], Task]) -> Callable[[], Task]:
+    """Marks a function of a researcher's module as one that returns a `Task`: only marked
+    functions may be named as `module:callable` (a run names code the server will call)."""
+    setattr(function, _FACTORY, True)
+    return function
+
+
+def task_names() -> tuple[str, ...]:
+    return tuple(BUILT_IN)
+
+
+def get_task(name: str) -> Task:
+    """The task a run names; `TaskError` says why when it cannot be had."""
+    if name in _made:
+        return _made[name]
+    reference = BUILT_IN.get(name, name)
+    if not isinstance(reference, str) or not _OWN.match(reference):
+        raise TaskError(
+            f"unknown task {name!r}: a built-in one ({', '.join(BUILT_IN)}) or "
+            "package.module:callable, a function marked @tasks.task_factory"
+        )
+    module_name, attribute = reference.split(":")
+    if module_name.split(".")[0] in sys.stdlib_module_names:
+        raise TaskError(f"task {name}: {module_name} is a module of Python's, not a task's")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as error:
+        raise TaskError(
+            f"task {name}: module {module_name!r} cannot be imported ({error.msg}); it must be "
+            "importable by the server and its workers (installed, or on PYTHONPATH)"
+        ) from None
+    factory = getattr(module, attribute, None)
+    if not callable(factory) or not getattr(factory, _FACTORY, False):
+        raise TaskError(f"task {name}: {reference} is not a function marked @tasks.task_factory")
+    task = factory()
+    if not isinstance(task, Task):
+        raise TaskError(f"task {name}: {reference}() returned {type(task).__name__}, not a Task")
+    if task.name != name:
+        task = Task(**{**task.__dict__, "name": name})
+    _made[name] = task
+    return task
+
+
+__all__ = [
+    "BUILT_IN",
+    "CheckQuestion",
+    "OptionValue",
+    "Task",
+    "TaskAction",
+    "TaskError",
+    "TaskOptions",
+    "get_task",
+    "task_factory",
+]

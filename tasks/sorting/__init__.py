@@ -1,0 +1,54 @@
+"""The paper's task: a robot arm sorting red and blue objects onto two tables (`sim`).
+
+Its options are the run's own sorting fields (`motion`, `sort_rule`, `scenario`), which
+runs have always carried; `RunSpec` hands them here."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+from sim.actions import ACTION_NAMES
+from sim.rules import oracle_action
+from sim.scenario import ScenarioOptions
+from tasks import GymInfo, OptionValue, Task, TaskAction, TaskOptions, task_factory
+
+KEYS = ("g", "ArrowRight", "ArrowLeft", "d")
+"""The advice page's keys, in action order (grab, move right, move left, drop)."""
+
+OPTIONS: dict[str, OptionValue] = {
+    "motion": "fast",
+    "sort_rule": "color",
+    **ScenarioOptions().to_dict(),
+}
+
+
+def _make_env(
+    options: TaskOptions, max_episode_steps: int, record_motion: bool
+) -> gym.Env[Any, Any]:
+    from sim.env import SortingEnv  # PyBullet: imported when an environment is made
+
+    given: dict[str, Any] = dict(options)  # checked by the run: motion, sort_rule, scenario
+    return SortingEnv(max_episode_steps=max_episode_steps, record_motion=record_motion, **given)
+
+
+def _correct(info: GymInfo, options: TaskOptions) -> int | None:
+    rule = options["sort_rule"]
+    assert isinstance(rule, str | dict), "checked by the run"
+    return oracle_action(info, rule)
+
+
+@task_factory
+def sorting_task() -> Task:
+    return Task(
+        name="sorting",
+        title="Sorting objects",
+        make_env=_make_env,
+        actions=tuple(TaskAction(w, k) for w, k in zip(ACTION_NAMES, KEYS, strict=True)),
+        goal="Sort the objects on the center table onto the side tables by their rule.",
+        options=OPTIONS,
+        correct_action=_correct,
+        good_reward=2.5,
+        live_view=True,
+    )
