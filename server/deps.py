@@ -77,7 +77,8 @@ def participant_session(
             raise HTTPException(
                 403, "this participant token is not valid; use the link you were given"
             )
-        found = ParticipantSession(session.id, session.spec.advice_budget, session.condition)
+        spec = session.spec
+        found = ParticipantSession(session.id, spec.advice_budget, session.condition, spec.task)
     known[token] = found
     return found
 

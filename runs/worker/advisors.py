@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
 from typing import Any, Protocol
 
@@ -35,8 +36,11 @@ class HumanAdvisor:
         start_index: int,
         advice_budget: int,
         idle_limit_s: float,
+        frames: Callable[[], Any] | None = None,
     ) -> None:
         self._link = link
+        self._frames = frames
+        """A task without a live 3-D view: what people see now (an RGB image)."""
         self._reporter = reporter
         self._given = given
         self.count = start_index
@@ -75,6 +79,7 @@ class HumanAdvisor:
                 observation_png=encode_png(moment.obs),
                 info=dict(moment.info),
                 advice_budget=self._budget,
+                frame_png=encode_png(self._frames()) if self._frames is not None else None,
             )
             self._until_participant_ready()
             # The request first: the flush of the steps before it then overlaps the

@@ -60,6 +60,8 @@ class AdviceRequest:
     holds and where, in words (the scene shows it too)."""
     advice_budget: int
     """Advice the strategy may ask for in all."""
+    frame_png: bytes | None = None
+    """A task without a live 3-D view: what people see at this step, PNG."""
 
 
 @dataclass(frozen=True)

@@ -17,9 +17,11 @@ if TYPE_CHECKING:
 
 
 class SceneBroadcast(gym.Wrapper):
-    def __init__(self, env: gym.Env, link: WorkerLink | None) -> None:
+    def __init__(self, env: gym.Env, link: WorkerLink | None, live_view: bool = True) -> None:
         super().__init__(env)
-        self._link = link
+        self._link = link if live_view else None
+        """Where the scene goes: none for a task without a live 3-D view (its page shows
+        frames, which come with each advice request)."""
         self.collected_reward = 0.0
         self.steps = 0
         self.episode = -1
@@ -58,8 +60,10 @@ class SceneBroadcast(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
     def announce(self) -> None:
-        """Send the whole scene (bodies and poses): on reset, and when a viewer arrives."""
-        assert self._link is not None
+        """Send the whole scene (bodies and poses): on reset, and when a viewer arrives
+        (none for a task without a live view)."""
+        if self._link is None:
+            return
         scene = scene_of(self.env)
         self._link.send(
             SceneReset(

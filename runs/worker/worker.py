@@ -173,7 +173,7 @@ class _Run:
 
     def _broadcast(self, env: Any) -> SceneBroadcast:
         """The environment as the trainer sees it: each step also goes to the live view."""
-        self.env = SceneBroadcast(env, self.link)
+        self.env = SceneBroadcast(env, self.link, self.spec.the_task.live_view)
         return self.env
 
     def _advisor(self, machine: Any) -> Any:
@@ -189,6 +189,7 @@ class _Run:
                 self.start_advice,
                 self.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
+                frames=None if self.spec.the_task.live_view else self.env.render,
             )
             self.env.after_step.append(self.advisor.after_step)
             self.env.participant = self.advisor

@@ -21,7 +21,6 @@ from starlette.concurrency import run_in_threadpool
 
 from runs.worker.messages import AdviceAnswer, AdviceRequest
 from server.live.manager import HistoryEntry, SessionManager
-from sim.actions import ACTION_NAMES
 from study.db.models import Advice, Status, StudySession
 from study.schemas.participant import (
     AdviceCreate,
@@ -32,7 +31,8 @@ from study.schemas.participant import (
 )
 from study.services.advice import AdviceGiven, write_advice
 from study.services.consent import NOT_CONSENTED
-from study.services.errors import Conflict, NotFound
+from study.services.errors import Conflict, Invalid, NotFound
+from tasks import get_task
 
 
 @dataclass(frozen=True)
@@ -43,6 +43,12 @@ class ParticipantSession:
     advice_budget: int
     condition: str | None = None
     """The online study's condition (None: a lab session)."""
+    task: str = "sorting"
+    """The run's task (`tasks`): its actions' words, and how many there are."""
+
+    @property
+    def action_words(self) -> tuple[str, ...]:
+        return get_task(self.task).action_words
 
 
 MESSAGES = {
@@ -60,12 +66,12 @@ MESSAGES = {
 }
 
 
-def _history(entries: list[HistoryEntry]) -> list[HistoryItem]:
+def _history(entries: list[HistoryEntry], words: tuple[str, ...]) -> list[HistoryItem]:
     return [
         HistoryItem(
             advice_index=e.advice_index,
             action=e.action,
-            action_name=ACTION_NAMES[e.action],
+            action_name=words[e.action],
             reward=e.reward,
         )
         for e in entries
@@ -126,6 +132,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             stage=progress.get("stage"),
             ready=ready,
             queued=bool(progress.get("queued", False)) and status == Status.running,
+            action_names=list(session.action_words),
         )
     request = handle.request if handle.ready else None
     wanted = request is not None and handle.status == Status.running
@@ -154,7 +161,13 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
         stage=shown.stage if shown else None,
         ready=handle.ready,
         queued=handle.queued,
-        history=_history(list(handle.history)),
+        history=_history(list(handle.history), session.action_words),
+        action_names=list(session.action_words),
+        frame_png=(
+            base64.b64encode(request.frame_png).decode()
+            if request is not None and request.frame_png is not None
+            else None
+        ),
     )
 
 
@@ -196,12 +209,14 @@ def _insert(manager: SessionManager, advice: AdviceGiven) -> bool:
     return True
 
 
-def _receipt(stored: Advice, body: AdviceCreate, version: int) -> AdviceReceipt:
+def _receipt(
+    stored: Advice, body: AdviceCreate, version: int, words: tuple[str, ...]
+) -> AdviceReceipt:
     assert stored.action is not None, "a person's advice has its action (only replays lack one)"
     if stored.action != body.action:
         raise Conflict(
             f"advice {body.advice_index} was already given as {stored.action} "
-            f"({ACTION_NAMES[stored.action]}); it cannot be changed"
+            f"({words[stored.action]}); it cannot be changed"
         )
     return AdviceReceipt(
         advice_index=stored.advice_index,
@@ -215,12 +230,15 @@ def _receipt(stored: Advice, body: AdviceCreate, version: int) -> AdviceReceipt:
 async def submit_advice(
     manager: SessionManager, session: ParticipantSession, body: AdviceCreate
 ) -> AdviceReceipt:
+    words = session.action_words
+    if body.action >= len(words):
+        raise Invalid("action", f"action must be one of this task's actions, 0 to {len(words) - 1}")
     handle = manager.handles.get(session.id)
     budget = session.advice_budget
     if handle is None:
         stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
         if stored is not None:
-            return _receipt(stored, body, manager.version(session.id))
+            return _receipt(stored, body, manager.version(session.id), words)
         _refuse_over_budget(body, budget)
         if not await run_in_threadpool(_ready, manager, session.id):
             raise Conflict(NOT_CONSENTED)
@@ -230,7 +248,7 @@ async def submit_advice(
         if body.advice_index in handle.given:
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None, "advice given but not stored"
-            return _receipt(stored, body, manager.version(session.id))
+            return _receipt(stored, body, manager.version(session.id), words)
         _refuse_over_budget(body, budget)
         if not handle.ready:
             raise Conflict(NOT_CONSENTED)
@@ -266,7 +284,7 @@ async def submit_advice(
         if not await run_in_threadpool(_insert, manager, advice):
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None
-            return _receipt(stored, body, manager.version(session.id))
+            return _receipt(stored, body, manager.version(session.id), words)
         handle.given[body.advice_index] = body.action
         handle.request = None
         handle.moving = True

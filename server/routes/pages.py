@@ -40,6 +40,7 @@ from study.services import visit as visit_service
 from study.services.errors import Conflict, Invalid
 from study.services.sessions import session_for_token
 from study.services.visit import CheckProgress
+from tasks import Task, get_task
 
 WEB_DIR = Path(__file__).resolve().parents[2] / "web"
 templates = Jinja2Templates(directory=WEB_DIR / "templates")
@@ -105,6 +106,8 @@ class Visit:
     """When the robot asks (`learner.strategies`): what `{advice_plan}` tells the person."""
     interval: int | None = None
     """The alternating strategy's: one advised action in every `interval`."""
+    task: str = "sorting"
+    """The run's task (`tasks`): the advice page's buttons and view."""
 
     @property
     def online(self) -> bool:
@@ -220,6 +223,7 @@ def _visit(request: Request, token: str) -> Visit | None:
             advice_given=int(given),
             texts=_texts(session.study.texts, session.study.design, session.condition),
             sort_rule=session.spec.sort_rule,
+            task=session.spec.task,
             consented=session.consented_at is not None,
             ready=session.induction_done_at is not None,
             shown_texts=(
@@ -413,8 +417,17 @@ def advise(request: Request, token: str) -> Response:
         "participant/advise.html",
         visit,
         scene_src=scene_src(request),
-        action_names=sim.ACTION_NAMES,
+        task=get_task(visit.task),
+        task_keys=_task_keys,
     )
+
+
+def _task_keys(task: Task) -> dict[str, int]:
+    """The advice page's keys for a task's actions (lower case, as the page reads them),
+    and the digits 1 to n for actions 1 to n."""
+    keys = {str(i + 1): i for i in range(min(task.n_actions, 9))}
+    keys.update({a.key.lower(): i for i, a in enumerate(task.actions) if a.key})
+    return keys
 
 
 @router.get("/p/{token}/thanks")

@@ -19,7 +19,12 @@ class AdviceCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     advice_index: Int = Field(ge=0, le=2**31 - 1, description="Index of the advice (0-based).")
-    action: Int = Field(ge=0, le=3, description="0 grab, 1 move right, 2 move left, 3 drop.")
+    action: Int = Field(
+        ge=0,
+        le=31,
+        description="The action's index in the task's actions (the state's action_names; the "
+        "sorting robot's: 0 grab, 1 move right, 2 move left, 3 drop).",
+    )
     decision_time_s: Number | None = Field(
         default=None,
         ge=0.0,
@@ -80,7 +85,15 @@ class ParticipantState(BaseModel):
         default=False, description="Advice over; the learner waits for a free trainer slot."
     )
     history: list[HistoryItem] = Field(default_factory=list)
-    action_names: list[str] = Field(default_factory=lambda: list(ACTION_NAMES))
+    action_names: list[str] = Field(
+        default_factory=lambda: list(ACTION_NAMES),
+        description="The task's actions in order, as the buttons name them.",
+    )
+    frame_png: str | None = Field(
+        default=None,
+        description="A task without a live 3-D view: what people see at this request, PNG "
+        "in base64 (None for the sorting robot, whose scene the 3-D view shows).",
+    )
 
 
 class AdviceReceipt(BaseModel):

@@ -7,7 +7,9 @@
   const config = JSON.parse(document.getElementById("page-config").textContent);
   const $ = (id) => document.getElementById(id);
   const buttons = [...document.querySelectorAll("button.action")];
-  const KEYS = { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
+  // the sorting robot's keys; another task's come with the page
+  const KEYS = config.keys || { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
+  const LIVE = config.liveView !== false; // the task has a live 3-D view, else frames
   const LAST_MOVE_MS = 4000;
   const FIRST_VIEW_WAIT_MS = 2000; // the longest a turn waits for the 3-D view's first frame
   const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
@@ -24,7 +26,7 @@
   let readinessPolling = false;
   let beforeFirstTurn = false; // the latest state: no advice asked yet, robot practising
   let idleWarning = null; // the timer of an online study's warning before its idle limit
-  let sceneShown = false; // the 3-D view has drawn the robot's scene
+  let sceneShown = !LIVE; // the 3-D view has drawn the robot's scene (no view: nothing to wait for)
 
   function api(path, options = {}) {
     const headers = { Authorization: `Bearer ${config.token}` };
@@ -106,6 +108,11 @@
   }
 
   function showObservation(s) {
+    if (s.frame_png && $("frame")) {
+      $("frame").src = `data:image/png;base64,${s.frame_png}`;
+      $("frame").hidden = false;
+      $("frame-empty").hidden = true;
+    }
     if (!s.observation_png) return;
     $("observation").src = `data:image/png;base64,${s.observation_png}`;
     $("observation").hidden = false;
@@ -122,6 +129,13 @@
   // The sentence, and beside the camera image a small map of the three tables with the
   // arm's one lit: the image alone can make a side table look like the center one.
   function showArm(s, on) {
+    if (!LIVE) {  // the arm's words and map are the sorting robot's
+      $("holding").hidden = !on || !s.own_moves;
+      $("arm-words").textContent = "";
+      $("own-moves").textContent = on ? ownMovesWords(s.own_moves).trim() : "";
+      $("own-moves").hidden = !$("own-moves").textContent;
+      return;
+    }
     $("holding").hidden = !on;
     $("arm-words").textContent = on ? window.describeArm(s) : "";
     $("own-moves").textContent = on ? ownMovesWords(s.own_moves) : "";
@@ -343,9 +357,11 @@
     event.preventDefault();
     send(action);
   });
-  const scene = $("scene");
-  scene.src = window.sceneUrl(scene);
-  window.keepKeysOnPage(scene);
-  watchView();
+  if (LIVE) {
+    const scene = $("scene");
+    scene.src = window.sceneUrl(scene);
+    window.keepKeysOnPage(scene);
+    watchView();
+  }
   follow();
 })();
