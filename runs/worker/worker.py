@@ -150,6 +150,8 @@ class _Run:
             raise Conflict("a human session needs the server: start it through the API")
         self.advice_budget = self.spec.advice_budget
         """Read once, before the advisor that counts against it is made."""
+        self.live_view = self.spec.the_task.live_view
+        """Whether the task has the live 3-D view (else the page shows its frames)."""
         spec = self.spec.validate()
         # The run's parts, each wrapped here: the worker calls into `learner/`, never back.
         env = self._broadcast(spec.make_env(record_motion=isinstance(conn, Connection)))
@@ -173,7 +175,7 @@ class _Run:
 
     def _broadcast(self, env: Any) -> SceneBroadcast:
         """The environment as the trainer sees it: each step also goes to the live view."""
-        self.env = SceneBroadcast(env, self.link, self.spec.the_task.live_view)
+        self.env = SceneBroadcast(env, self.link, self.live_view)
         return self.env
 
     def _advisor(self, machine: Any) -> Any:
@@ -189,7 +191,7 @@ class _Run:
                 self.start_advice,
                 self.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
-                frames=None if self.spec.the_task.live_view else self.env.render,
+                frames=None if self.live_view else self.env.render,
             )
             self.env.after_step.append(self.advisor.after_step)
             self.env.participant = self.advisor

@@ -92,6 +92,12 @@ def plain_sort_rule(spec: str | dict[str, str]) -> str:
     return ";".join(f"{shape}/{color}={side}" for shape, color, side in rule.sides)
 
 
+def _cell_value(value: Any) -> Any:
+    """A run field's value as one cell: a mapping (a task's options) as JSON with sorted keys,
+    as its declared `string` column holds it in CSV and Parquet alike."""
+    return json.dumps(value, sort_keys=True) if isinstance(value, dict) else value
+
+
 def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
     run_leaves = leaves(declared())
     advisors = advisor_sessions(sessions)
@@ -102,7 +108,7 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "session_id": s.id,
             "study_id": s.study_id,
             "label": s.label,
-            **{leaf.column: values[leaf.name] for leaf in run_leaves},
+            **{leaf.column: _cell_value(values[leaf.name]) for leaf in run_leaves},
             "participant": s.participant.pseudonym if s.participant else None,
             "status": s.status,
             "created_at": s.created_at,
