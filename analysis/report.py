@@ -46,6 +46,7 @@ from analysis.rescoring import rescored_totals, rescoring_table
 from analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
 from analysis.summary import Analysis, analyze
 from sim.rewards import REWARD_SCHEMES
+from tasks.sorting import OPTIONS as SORTING_OPTIONS
 
 FIGURE_FILES: dict[str, str] = {
     "reward_per_method": "figure5_reward_per_method.png",
@@ -607,13 +608,20 @@ def write_report(
             f"unknown reference {reference!r}; available: {', '.join(REFERENCES)}"
         )
     analysis = analyze(episodes_df, baseline=baseline, n_episodes=n_episodes, equal_var=equal_var)
+    if settings is not None:
+        settings = _without_sorting_settings(settings)
     checked = None
     if settings is not None:
         kept = settings[settings["session_id"].isin(analysis.episodes["session_id"])]
         checked = audit(kept, baseline)
         analysis = _withhold_tests(analysis, checked, allow_mismatch)
     rescored = rescored_agents = None
-    if steps is not None and settings is not None and not steps.empty:  # none: nothing to rescore
+    if (
+        steps is not None
+        and settings is not None
+        and "reward_scheme" in settings
+        and not steps.empty  # none: nothing to rescore
+    ):
         schemes = dict(zip(settings["session_id"], settings["reward_scheme"], strict=True))
         methods = dict(zip(settings["session_id"], settings["method"], strict=True))
         kept_steps = steps[steps["session_id"].isin(analysis.episodes["session_id"])]
@@ -805,6 +813,14 @@ def _withhold_tests(analysis: Analysis, checked: Audit, allow_mismatch: bool) ->
     tests.loc[mask, statistics] = np.nan
     paper = paper_comparison(analysis.methods, tests, baseline=analysis.baseline)
     return dataclasses.replace(analysis, t_tests=tests, paper=paper)
+
+
+def _without_sorting_settings(settings: pd.DataFrame) -> pd.DataFrame:
+    """The settings without the sorting robot's own (its motion, rule and scenario, which
+    the rescoring reads) when no session ran the sorting task: they mean nothing there."""
+    if "task" not in settings or (settings["task"] == "sorting").any():
+        return settings
+    return settings.drop(columns=[c for c in SORTING_OPTIONS if c in settings])
 
 
 def _withhold_rescored(table: pd.DataFrame, checked: Audit, baseline: str | None) -> pd.DataFrame:

@@ -23,7 +23,7 @@ drawn in software on the participant's CPU, and on the benchmark's machine besid
 server's. Median of `--runs` 15-second windows, each on a fresh page.
 
     python -m benchmarks.bench_participant_page [--scenario first-turn|weight|idle|all] [--runs 3]
-        [--pretraining-steps 1000] [--head-start 0]
+        [--pretraining-steps 1000] [--head-start 0] [--task sorting|gridworld|module:callable]
 """
 
 from __future__ import annotations
@@ -57,8 +57,12 @@ def _load() -> str:
     return f"load average {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} cores"
 
 
-def _session(server: LiveServer, study: int, steps: int, budget: int = 100) -> dict[str, Any]:
-    body = rest_body(method="human", config={"pretraining_steps": steps}, advice_budget=budget)
+def _session(
+    server: LiveServer, study: int, steps: int, budget: int = 100, task: str = "sorting"
+) -> dict[str, Any]:
+    body = rest_body(
+        method="human", config={"pretraining_steps": steps}, advice_budget=budget, task=task
+    )
     with server.client() as api:
         made = api.post(f"/api/studies/{study}/sessions?pretrain=true", json=body)
         assert made.status_code == 201, made.text
@@ -70,10 +74,13 @@ VIEWERS = """async (token) => (await (await fetch('/api/participant/playback',
 
 
 def first_turn(browser: Any, server: LiveServer, study: int, args: argparse.Namespace) -> None:
+    from tasks import get_task
+
+    live = get_task(args.task).live_view  # else the task's frames: no 3-D view to wait for
     waits: list[float] = []
     views: list[float] = []
     for _ in range(args.runs):
-        session = _session(server, study, args.pretraining_steps)
+        session = _session(server, study, args.pretraining_steps, task=args.task)
         time.sleep(args.head_start)
         context = browser.new_context(viewport={"width": 1280, "height": 800})
         page = context.new_page()
@@ -86,7 +93,7 @@ def first_turn(browser: Any, server: LiveServer, study: int, args: argparse.Name
         page.click("#start")
         page.wait_for_function(ENABLED, timeout=600_000, polling=50)
         waits.append(time.perf_counter() - started)
-        while page.evaluate(VIEWERS, session["participant_token"]) < 1:
+        while live and page.evaluate(VIEWERS, session["participant_token"]) < 1:
             assert time.perf_counter() - started < 300, "the 3-D view never connected"
             time.sleep(0.05)
         views.append(time.perf_counter() - started)
@@ -94,13 +101,19 @@ def first_turn(browser: Any, server: LiveServer, study: int, args: argparse.Name
         context.close()
         with server.client() as api:
             api.post(f"/api/sessions/{session['id']}/stop")
-        print(f"  Start -> buttons active {waits[-1]:.2f} s, -> 3-D view open {views[-1]:.2f} s")
+        view = f"-> 3-D view open {views[-1]:.2f} s" if live else "(frames, no 3-D view)"
+        print(f"  Start -> buttons active {waits[-1]:.2f} s, {view}")
     print(
-        f"first turn in Chromium, {args.pretraining_steps} pretraining steps (physics motion), "
+        f"first turn in Chromium, task {args.task}, {args.pretraining_steps} pretraining steps, "
         f"head start {args.head_start:.0f} s, over {args.runs} runs: Start -> buttons active "
         f"median {statistics.median(waits):.2f} s ({min(waits):.2f}-{max(waits):.2f}); "
-        f"-> 3-D view open {statistics.median(views):.2f} s ({min(views):.2f}-{max(views):.2f}); "
-        f"{_load()}"
+        + (
+            f"-> 3-D view open {statistics.median(views):.2f} s "
+            f"({min(views):.2f}-{max(views):.2f}); "
+            if live
+            else "(the task's frames, no 3-D view); "
+        )
+        + _load()
     )
 
 
@@ -242,6 +255,7 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--pretraining-steps", type=int, default=1000)
     parser.add_argument("--head-start", type=float, default=0.0)
+    parser.add_argument("--task", default="sorting", help="the run's task (first-turn only)")
     args = parser.parse_args([] if __name__ != "__main__" else None)
     from playwright.sync_api import sync_playwright
 

@@ -36,7 +36,6 @@ from learner.staged import EpisodeInProgress, StagedRun, StepTaken
 
 FORMAT = "ideeprl-sb3-dqn-checkpoint"
 VERSION = 1
-N_ACTIONS = 4
 MISSING = (
     "the sb3-dqn baseline needs Stable-Baselines3: pip install 'ideeprl[sb3]' "
     "(or pip install stable-baselines3 --no-deps, keeping this torch)"
@@ -117,7 +116,7 @@ class SB3DQNTrainer(StagedRun):
         height, width, channels = env.observation_space.shape
         # SB3 builds its networks from the spaces; the env is stepped here, not by SB3.
         model.observation_space = spaces.Box(0, 255, (channels, height, width), np.uint8)
-        model.action_space = spaces.Discrete(N_ACTIONS)
+        model.action_space = spaces.Discrete(int(env.action_space.n))  # the task's actions
         model.n_envs = 1
         model._setup_model()
         model.set_logger(Logger(None, []))  # no outputs, and no folder made in /tmp

@@ -188,7 +188,9 @@ class StagedRun:
             placed_correct=int(info.get("placed_correct", 0)),
             misplaced=misplaced,
             lost=int(info.get("lost", 0)),
-            success=terminated and misplaced == 0,
+            # Gymnasium's `is_success` where the task states it (the sorting robot's equals
+            # this fallback: it ends an episode only by finishing it or by a misplacement)
+            success=bool(info.get("is_success", terminated and misplaced == 0)),
             terminated=terminated,
             truncated=truncated,
             advised_steps=episode.advised_steps,

@@ -11,7 +11,9 @@ A task is named in a run (`RunSpec.task`) by one of:
 
 The ground truth an advisor may look at travels in the environment's `info`: a task whose
 advisor can name the right action puts it in `info["correct_action"]` (the oracle advisor
-reads it), or gives `correct_action` a function of `info` and the task's options.
+reads it), or gives `correct_action` a function of `info` and the task's options. An
+episode's success is Gymnasium's `info["is_success"]` at its end where the task states it
+(else: it terminated without a misplacement, as the sorting robot's does).
 
 Torch-free, PyBullet-free: a task's own module imports its simulator when an environment is
 made.
@@ -51,6 +53,7 @@ class CheckQuestion:
     """A comprehension check's question about the task, with its right answer."""
 
     id: str
+    """Lowercase letters, digits and _, starting with a letter."""
     text: str
     choices: tuple[str, ...]
     answer: str
@@ -95,8 +98,13 @@ class Task:
     live_view: bool = False
     """The web page shows the task's live 3-D view (the sorting robot's); else frames."""
     check_questions: tuple[CheckQuestion, ...] = ()
-    """The comprehension check's questions for a study of this task: each a mapping with
-    its id, text, choices and the right answer."""
+    """The comprehension check's questions for a study of this task (an online study whose
+    design keeps the default check asks these; none: one question on the task's goal)."""
+    agent: str = "agent"
+    """What the participant pages call the learner: "the agent", "the robot"."""
+    texts: Mapping[str, str] = field(default_factory=dict)
+    """The task's own participant page texts by key (title, consent, induction_1..3,
+    thanks), over the pages' defaults for any task; a study's texts go over these."""
 
     @property
     def n_actions(self) -> int:

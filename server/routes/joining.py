@@ -13,6 +13,7 @@ from study.db.models import Outcome
 from study.schemas.design import StudyDesign
 from study.services import assignment, studies
 from study.services.errors import NotFound
+from tasks import get_task
 
 router = APIRouter(include_in_schema=False)
 COOKIE = "ideeprl_visit"
@@ -56,6 +57,7 @@ async def open_link(request: Request, key: str) -> Response:
             None,
             title,
             action=f"/join/{key}" + (f"?{query}" if query else ""),
+            task=get_task(design_task(design)),
         )
     return await _join(request, key, linked)
 
@@ -115,10 +117,17 @@ def _not_a_link(request: Request) -> Response:
     return response
 
 
+def design_task(design: StudyDesign) -> str:
+    """The task the study link's conditions share (the pages' words before a session
+    exists); `sorting` when they name different ones, or none."""
+    named = {str(c.run.get("task", "sorting")) for c in design.conditions.values()}
+    return named.pop() if len(named) == 1 else "sorting"
+
+
 def _linked(request: Request, key: str) -> Linked:
     with request.app.state.session_factory() as db:
         study, design = assignment.study_for_key(db, key)
-        return study.id, design, study_title(study.texts)
+        return study.id, design, study_title(study.texts, design_task(design))
 
 
 def _arrive(request: Request, study_id: int, params: dict[str, str]) -> assignment.Arrival:

@@ -47,8 +47,44 @@ templates = Jinja2Templates(directory=WEB_DIR / "templates")
 router = APIRouter(include_in_schema=False)
 
 TEXT_KEYS = ("title", "consent", "induction_1", "induction_2", "induction_3", "thanks")
-"""Keys of a study's `texts` that replace the default page texts (web/texts/KEY.txt)."""
-INDUCTION_TITLES = ("The robot and the experiment", "The task, and how to solve it", "Your screen")
+"""Keys of a study's `texts` that replace the default page texts: its task's own
+(`Task.texts`), else those for any task (web/texts/KEY.txt)."""
+KEY_NAMES = {"ArrowUp": "↑", "ArrowRight": "→", "ArrowDown": "↓", "ArrowLeft": "←", " ": "space"}
+"""How the pages write a key that is not one character."""
+
+
+def induction_titles(task: Task) -> tuple[str, str, str]:
+    return (f"The {task.agent} and the experiment", "The task, and how to solve it", "Your screen")
+
+
+def key_name(key: str) -> str:
+    return KEY_NAMES.get(key, key.upper() if len(key) == 1 else key)
+
+
+templates.env.globals["key_name"] = key_name
+
+
+def task_words(task: Task) -> dict[str, str]:
+    """The placeholders a page text may hold about its task and what learns in it."""
+    article = "an" if task.agent[:1].lower() in "aeiou" else "a"
+    keyed = [a for a in task.actions if a.key]
+    return {
+        "{agent}": task.agent,
+        "{agent_the}": f"the {task.agent}",
+        "{Agent_the}": f"The {task.agent}",
+        "{agent_a}": f"{article} {task.agent}",
+        "{Agent_a}": f"{article.capitalize()} {task.agent}",
+        "{task_title}": task.title,
+        "{task_goal}": task.goal or task.title,
+        "{task_actions}": "\n".join(f"- **{a.word.capitalize()}**" for a in task.actions),
+        "{task_keys}": ", ".join(f"**{key_name(a.key)}** {a.word}" for a in keyed)
+        or "no keys: use the buttons",
+    }
+
+
+def default_text(key: str, task: Task) -> str:
+    """A page text before a study's: the task's own, else the one for any task."""
+    return task.texts.get(key) or (WEB_DIR / "texts" / f"{key}.txt").read_text()
 
 
 def static_files() -> StaticFiles:
@@ -107,7 +143,16 @@ class Visit:
     interval: int | None = None
     """The alternating strategy's: one advised action in every `interval`."""
     task: str = "sorting"
-    """The run's task (`tasks`): the advice page's buttons and view."""
+    """The run's task (`tasks`): the advice page's buttons and view, the pages' words."""
+
+    @property
+    def the_task(self) -> Task:
+        return get_task(self.task)
+
+    @property
+    def agent(self) -> str:
+        """What the pages call the learner ("robot", "agent")."""
+        return self.the_task.agent
 
     @property
     def online(self) -> bool:
@@ -145,7 +190,7 @@ class Visit:
                 "between your choices. After your last choice it continues on its own"
             )
         return (
-            f"**You** choose {n} of its actions, at moments the robot picks itself; in "
+            f"**You** choose {n} of its actions, at moments the {self.agent} picks itself; in "
             "between and after, it acts on its own"
         )
 
@@ -172,7 +217,7 @@ class Visit:
         completion code (the visit ends there: no progress page)."""
         if self.design is None:
             return (
-                "After your last choice, the robot carries on learning on its own, and you "
+                f"After your last choice, the {self.agent} carries on learning on its own, and you "
                 "can watch its progress."
             )
         if self.design.get("questionnaire"):
@@ -184,7 +229,9 @@ class Visit:
 
     def resolved_texts(self) -> dict[str, str]:
         """Every page text as it is shown now: the study's or the default, filled in."""
+        task = self.the_task
         fill = {
+            **task_words(task),
             "{advice_budget}": str(self.advice_budget),
             "{sorting_rule}": describe_rule(self.sort_rule),
             "{advice_plan}": self.advice_plan(),
@@ -193,7 +240,7 @@ class Visit:
         }
         out = {}
         for key in TEXT_KEYS:
-            raw = self.texts.get(key) or (WEB_DIR / "texts" / f"{key}.txt").read_text()
+            raw = self.texts.get(key) or default_text(key, task)
             for name, value in fill.items():
                 raw = raw.replace(name, value)
             out[key] = raw
@@ -280,9 +327,12 @@ def _page(
 participant_page = _page
 
 
-def study_title(texts: dict[str, Any] | None) -> str:
-    """A study's page title (its `title` text, else the default), before any session."""
-    raw = str((texts or {}).get("title") or (WEB_DIR / "texts" / "title.txt").read_text())
+def study_title(texts: dict[str, Any] | None, task: str = "sorting") -> str:
+    """A study's page title (its `title` text, else its task's), before any session."""
+    the_task = get_task(task)
+    raw = str((texts or {}).get("title") or default_text("title", the_task))
+    for name, value in task_words(the_task).items():
+        raw = raw.replace(name, value)
     return render_text(raw).striptags()
 
 
@@ -400,7 +450,7 @@ async def induction(request: Request, token: str, step: int) -> Response:
         "participant/induction.html",
         visit,
         step=step,
-        titles=INDUCTION_TITLES,
+        titles=induction_titles(visit.the_task),
         body=visit.text(f"induction_{step}"),
     )
 

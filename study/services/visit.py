@@ -24,10 +24,22 @@ from study.db.models import Advice, CheckAttempt, QuestionnaireAnswer, Status, S
 from study.schemas.design import StudyDesign
 from study.schemas.instruments import PREFER_NOT_TO_SAY
 from study.schemas.participant import Answer
-from study.schemas.visit import CheckQuestion, CheckSpec, Item, QuestionnaireSpec, Section
+from study.schemas.visit import (
+    CheckQuestion,
+    CheckSpec,
+    Choice,
+    Item,
+    QuestionnaireSpec,
+    Section,
+    default_questions,
+)
 from study.services.errors import Conflict, Invalid
+from tasks import CheckQuestion as TaskQuestion
+from tasks import Task, get_task
 
 NOT_CONSENTED = "consent first: the check comes after the consent and the induction"
+VALUES = "abcdefgh"
+"""A task question's choice values, in its order (a check question has at most 8)."""
 MAX_TEXT = 2000
 """Longest free-text answer when an item sets no `max_length`."""
 
@@ -83,8 +95,41 @@ def design_of(session: StudySession) -> StudyDesign | None:
 
 
 def check_of(session: StudySession) -> CheckSpec | None:
+    """The design's check; where the design keeps the default questions (the sorting
+    robot's) and the session's task is another, that task's own questions instead."""
     design = design_of(session)
-    return None if design is None else design.check
+    if design is None or design.check is None:
+        return None
+    task = session.spec.task
+    if task == "sorting" or design.check.questions != default_questions():
+        return design.check
+    return design.check.model_copy(update={"questions": task_questions(get_task(task))})
+
+
+def task_questions(task: Task) -> list[CheckQuestion]:
+    """A task's check questions in the design's form (choices valued a, b, c, ...); a task
+    without any gets one on its goal."""
+    asked = task.check_questions or (
+        TaskQuestion(
+            "goal",
+            f"What must the {task.agent} learn to do?",
+            (
+                task.goal or task.title,
+                "Collect as few points as it can",
+                "Nothing: it only watches",
+            ),
+            task.goal or task.title,
+        ),
+    )
+    return [
+        CheckQuestion(
+            id=q.id,
+            text=q.text,
+            choices=[Choice(value=VALUES[i], label=c) for i, c in enumerate(q.choices)],
+            answer=VALUES[q.choices.index(q.answer)],
+        )
+        for q in asked
+    ]
 
 
 def questionnaire_of(session: StudySession) -> QuestionnaireSpec | None:

@@ -91,6 +91,7 @@ class GridWorldEnv(gym.Env[np.ndarray, int]):
             "position": position,
             "distance": self._distance.get(position),
             "correct_action": self._next_move(position),
+            "is_success": self._distance.get(position) == 0,
         }
 
     def _open(self, x: int, y: int) -> bool:
@@ -153,13 +154,13 @@ def gridworld_task() -> Task:
         good_reward=0.5,
         check_questions=(
             CheckQuestion(
-                "gridworld-goal",
+                "gridworld_goal",
                 "Where should the red triangle go?",
                 ("To the green square", "To a wall", "Anywhere"),
                 "To the green square",
             ),
             CheckQuestion(
-                "gridworld-moves",
+                "gridworld_moves",
                 "What does the 'up' button do?",
                 (
                     "Moves the triangle one square up, as you see the room",

@@ -5,6 +5,7 @@ runs have always carried; `RunSpec` hands them here."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -13,6 +14,9 @@ from sim.actions import ACTION_NAMES
 from sim.rules import oracle_action
 from sim.scenario import ScenarioOptions
 from tasks import GymInfo, OptionValue, Task, TaskAction, TaskOptions, task_factory
+
+TEXTS = Path(__file__).with_name("texts")
+"""The participant pages' texts for this task (the robot, its tables and its four actions)."""
 
 KEYS = ("g", "ArrowRight", "ArrowLeft", "d")
 """The advice page's keys, in action order (grab, move right, move left, drop)."""
@@ -51,4 +55,6 @@ def sorting_task() -> Task:
         correct_action=_correct,
         good_reward=2.5,
         live_view=True,
+        agent="robot",
+        texts={f.stem: f.read_text() for f in sorted(TEXTS.glob("*.txt"))},
     )

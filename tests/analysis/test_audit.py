@@ -228,3 +228,30 @@ def test_rescored_r_t_are_tested_under_each_scheme_with_welch() -> None:
         assert np.isnan(table.loc["autonomous", f"p_welch_{scheme}"])
     # the first scheme has no shift, the last a large one
     assert table.loc["agent", f"p_welch_{REWARD_SCHEMES[-1]}"] < 0.001
+
+
+@pytest.mark.slow
+def test_a_study_of_another_task_is_audited_without_the_sorting_robots_settings(
+    tmp_path: Path,
+) -> None:
+    """No session ran the sorting robot: its motion, rule and reward scheme are not audited
+    (they mean nothing to the task), and R_T is not rescored under its schemes; a study
+    with a sorting session keeps them."""
+    episodes = study_episodes()
+    settings = settings_for(episodes).assign(task="gridworld")
+    result = write_report(
+        episodes, tmp_path / "grid", settings=settings, steps=_steps(episodes, settings),
+        power_draws=200,
+    )  # fmt: skip
+    assert result.rescored is None and result.audit is not None
+    assert {"sort_rule", "motion", "reward_scheme"}.isdisjoint(result.audit.methods.columns)
+    text = result.report.read_text()
+    assert "sorting rule" not in text and "rescored under each reward scheme" not in text
+    assert "| gridworld |" in text
+
+    mixed = settings.assign(task=["sorting"] + ["gridworld"] * (len(settings) - 1))
+    kept = write_report(
+        episodes, tmp_path / "mixed", settings=mixed, steps=_steps(episodes, mixed),
+        power_draws=200,
+    )  # fmt: skip
+    assert kept.rescored is not None and "sort_rule" in kept.audit.methods.columns

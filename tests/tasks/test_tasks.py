@@ -125,3 +125,35 @@ def test_a_researchers_own_task_runs_with_its_own_number_of_actions(
     advisor = AgentAdvisor(tmp_path / "catch.pt")
     obs, _ = env.reset(seed=1)
     assert advisor.q_values(obs).shape == (3,)
+
+
+def test_the_sb3_baseline_takes_the_tasks_actions() -> None:
+    """Stable-Baselines3's DQN on a task of five actions defined in the tests (its CNN
+    needs 36 pixels a side or more: 40 here)."""
+    pytest.importorskip("stable_baselines3")
+    spec = small(task="tests.tasks.line:line_task", method="sb3-dqn", config={"advice_budget": 0})
+    trainer, _ = spec.build()
+    records = []
+    while not trainer.done:
+        records.append(trainer.step())
+    assert trainer.model.q_net.action_space.n == 5
+    assert {r.action for r in records} == {0, 1, 2, 3, 4}
+
+
+def test_an_episodes_success_is_the_tasks_own_where_it_states_one(catch_importable) -> None:
+    """The catch task ends every episode (caught or missed): success is its `is_success`,
+    not the termination; the grid world's is reaching the goal."""
+    for task, options in ((catch_importable, {"paddle_width": 1}), ("gridworld", {})):
+        spec = small(task=task, method="random", task_options=options)
+        trainer, _ = spec.build()
+        episodes = []
+        while not trainer.done:
+            trainer.step()
+            if trainer.episode_record is not None:
+                episodes.append(trainer.episode_record)
+        assert episodes
+        for episode in episodes:
+            if task == "gridworld":
+                assert episode.success == episode.terminated
+            elif episode.terminated:
+                assert episode.success == (episode.collected_reward > 0)

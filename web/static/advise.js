@@ -10,6 +10,7 @@
   // the sorting robot's keys; another task's come with the page
   const KEYS = config.keys || { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
   const LIVE = config.liveView !== false; // the task has a live 3-D view, else frames
+  const AGENT = config.agent || "robot"; // what the page calls the learner
   const LAST_MOVE_MS = 4000;
   const FIRST_VIEW_WAIT_MS = 2000; // the longest a turn waits for the 3-D view's first frame
   const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
@@ -195,15 +196,15 @@
       showArm(s, false);
       if (VISIT_ENDED.includes(s.status)) return window.location.assign(`/p/${config.token}`); // its end page
       if (s.status !== "running") setStatus(s.message || `The session is ${s.status}.`, "paused");
-      else if (s.robot_moving || sentIndex !== null) setStatus("The robot is moving…", "busy");
+      else if (s.robot_moving || sentIndex !== null) setStatus(`The ${AGENT} is moving…`, "busy");
       else if (s.advice_given === 0) showReadiness();
-      else setStatus("The robot is exploring on its own. Your first turn comes in a moment…", "busy");
+      else setStatus(`The ${AGENT} is exploring on its own. Your first turn comes in a moment…`, "busy");
       return;
     }
     hideReadiness();
     if (enabledFor === s.advice_index) return;
     setButtons(false);
-    setStatus("The robot is moving…", "busy");
+    setStatus(`The ${AGENT} is moving…`, "busy");
     await waitForPlayback(gen);
     if (!sceneShown) {
       setStatus("The 3-D view is loading…", "busy");
@@ -219,7 +220,7 @@
     delete $("feedback").dataset.mood;
     setButtons(true);
     activeSince = performance.now();
-    setStatus("Your turn: what should the robot do?", "turn");
+    setStatus(`Your turn: what should the ${AGENT} do?`, "turn");
   }
 
   async function finish(gen) {
@@ -257,17 +258,17 @@
         if (r.ready || !beforeFirstTurn) break;
         const total = Math.max(1, r.steps_before_first_turn);
         const done = Math.min(r.steps_done, total);
-        setStatus(`Getting the robot ready: ${done} of ${total} practice moves done. Your first turn comes next.`, "busy");
+        setStatus(`Getting the ${AGENT} ready: ${done} of ${total} practice moves done. Your first turn comes next.`, "busy");
         $("scene-wait").hidden = false;
         $("scene-wait-fill").style.width = `${((100 * done) / total).toFixed(1)}%`;
-        $("scene-wait-text").textContent = `The robot practises on its own: ${done} of ${total} moves`;
+        $("scene-wait-text").textContent = `The ${AGENT} practises on its own: ${done} of ${total} moves`;
         await sleep(500);
       }
     } finally {
       readinessPolling = false;
     }
     if (beforeFirstTurn && !finished) {
-      setStatus("The robot is getting ready. Your first turn comes in a moment…", "busy");
+      setStatus(`The ${AGENT} is getting ready. Your first turn comes in a moment…`, "busy");
     }
     $("scene-wait").hidden = true;
   }
@@ -292,7 +293,7 @@
     setTimeout(() => button.classList.remove("chosen"), 900);
     const name = capital(config.actionNames[action]);
     $("feedback").textContent = `Sending “${name}”…`;
-    setStatus("The robot is moving…", "busy");
+    setStatus(`The ${AGENT} is moving…`, "busy");
     for (let attempt = 0; attempt < 5; attempt++) {
       let response;
       try {

@@ -7,6 +7,7 @@
   const $ = (id) => document.getElementById(id);
   const ENDED = { finished: "Finished", stopped: "Stopped by the researcher", failed: "Stopped (a technical problem)" };
   const ORDINAL = ["", "next", "second", "third"];
+  const AGENT = config.agent || "robot"; // what the page calls the learner
 
   function inWords(seconds) {
     if (seconds === null || seconds === undefined) return null;
@@ -21,12 +22,12 @@
     $("queue").hidden = false;
     $("queue").dataset.place = place ?? "";
     $("queue-place-text").textContent = place
-      ? `Your robot is number ${place} in line${place <= 3 ? ` (${ORDINAL[place]} to start)` : ""}: other robots are practising first.`
-      : "Your robot is waiting for its turn to practise.";
+      ? `Your ${AGENT} is number ${place} in line${place <= 3 ? ` (${ORDINAL[place]} to start)` : ""}: other ${AGENT}s are practising first.`
+      : `Your ${AGENT} is waiting for its turn to practise.`;
     const when = inWords(data.wait_s);
     $("queue-wait").textContent = when
       ? `It should start practising ${when}. You may close this window at any time.`
-      : "We will show how long it should take once a robot ahead of it has finished a round. You may close this window at any time.";
+      : `We will show how long it should take once ${/^[aeiou]/i.test(AGENT) ? "an" : "a"} ${AGENT} ahead of it has finished a round. You may close this window at any time.`;
   }
 
   async function refresh() {
@@ -44,7 +45,7 @@
     $("curve").toggleAttribute("hidden", !plotted); // an <svg> has no `hidden` property
     $("curve-caption").hidden = !plotted;
     if (plotted) {
-      window.drawCurves($("curve"), [{ label: "the robot", points }], {
+      window.drawCurves($("curve"), [{ label: `the ${AGENT}`, points }], {
         xMax: data.episodes,
         xLabel: "round",
         yLabel: "points",
@@ -54,8 +55,8 @@
     $("curve-waiting").hidden = !waiting;
     if (waiting) {
       $("curve-waiting").textContent = ENDED[data.status]
-        ? "The robot did not finish a round."
-        : "The robot has started practising. The points of its first round appear here when it ends.";
+        ? `The ${AGENT} did not finish a round.`
+        : `The ${AGENT} has started practising. The points of its first round appear here when it ends.`;
     }
     const status = $("learning-status");
     status.textContent = ENDED[data.status] || (queued

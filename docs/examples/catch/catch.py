@@ -67,7 +67,9 @@ class CatchEnv(gym.Env[np.ndarray, int]):
     def _info(self) -> dict[str, Any]:
         middle = self.paddle + self.width // 2
         move = int(np.sign(self.ball[1] - middle)) + 1  # 0 left, 1 stay, 2 right
-        return {"correct_action": move}
+        under = self.paddle <= self.ball[1] < self.paddle + self.width
+        caught = self.ball[0] == BOARD - 1 and under
+        return {"correct_action": move, "is_success": caught}
 
 
 def _make_env(options: TaskOptions, max_episode_steps: int, record_motion: bool) -> gym.Env:
