@@ -71,6 +71,7 @@ def test_every_study_name_the_document_allows_is_accepted(
     assert not refused, "\n".join(refused[:10])
     blank = api.post("/api/studies", json={"name": " \u3000\t"})
     assert blank.status_code == 422, "a blank name is still refused"
+    assert blank.json()["detail"][0]["msg"] == "A name must not be blank"
 
 
 def test_every_pseudonym_the_document_allows_is_accepted(
@@ -90,6 +91,7 @@ def test_every_pseudonym_the_document_allows_is_accepted(
         session = {"run": {"method": "human"}, "participant": bad}
         response = api.post(path, params={"pretrain": "false"}, json=session)
         assert response.status_code == 422, f"{bad!r} is still refused"
+        assert "matching [A-Za-z0-9_-]+" in response.text, "it says what a pseudonym holds"
 
 
 def _texts(schema: dict[str, Any], where: str, document: dict[str, Any]) -> Iterator[Any]:
