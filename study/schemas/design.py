@@ -25,7 +25,7 @@ from pydantic_core import core_schema
 
 from study.schemas.runs import given
 from study.schemas.sessions import run_model
-from study.schemas.types import KEY_NAMES, Int, Key, Number, Text, Texts, plain_text
+from study.schemas.types import KEY_NAMES, NO_NUL, Int, Key, Number, Text, Texts, plain_text
 from study.schemas.visit import CheckSpec, QuestionnaireSpec
 
 PANEL_PARAMS: dict[str, tuple[str, ...]] = {
@@ -44,10 +44,12 @@ OutcomeName = Literal["completed", "declined", "excluded", "timed_out", "full"]
 """`study.db.models.Outcome`'s values, each with its own code and return URL."""
 OUTCOMES: tuple[OutcomeName, ...] = get_args(OutcomeName)
 ParamName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
+URL_START = r"^(https?://|\{turkSubmitTo\}/)"
 Url = Annotated[
     str,
-    StringConstraints(max_length=2000, pattern=r"^(https?://|\{turkSubmitTo\}/)"),
+    StringConstraints(max_length=2000, pattern=URL_START),
     AfterValidator(plain_text),
+    Field(json_schema_extra={"pattern": URL_START + NO_NUL[1:]}),  # the whole text, no NUL
 ]
 """A return URL: `{code}` is the outcome's code, `{NAME}` the arrival's panel parameter NAME
 (URL-encoded); `{turkSubmitTo}` may start it (MTurk's own hosts only)."""

@@ -187,7 +187,9 @@ Answer = Int | Number | Annotated[Text, Field(max_length=5000)] | None
 class QuestionnaireCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    answers: dict[Key, dict[Key, Answer]] = Field(
+    answers: dict[
+        Key, Annotated[dict[Key, Answer], Field(json_schema_extra={"propertyNames": KEY_NAMES})]
+    ] = Field(
         max_length=20,
         json_schema_extra={"propertyNames": KEY_NAMES},
         description="{instrument: {item id: answer}}: a Likert point (1..points), a number, a "

@@ -44,7 +44,8 @@ def leaf_schema(leaf: Leaf) -> dict[str, Any]:
             "maxProperties": 10,
         }
         if leaf.also_text:
-            schema = {"anyOf": [{"type": "string", "maxLength": leaf.max_length or 400}, mapping]}
+            text = {"type": "string", "maxLength": leaf.max_length or 400, "pattern": NO_NUL}
+            schema = {"anyOf": [text, mapping]}
         else:  # an object of options: texts, finite numbers, true/false
             schema = {
                 "type": "object",

@@ -13,13 +13,15 @@ from typing import Annotated, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
 
-from sim.rules import COLORS, SHAPES
+from sim.rules import COLORS, OBJECTS, SHAPES
 from study.schemas import instruments as inst
 from study.schemas.types import Number, Text
 
 Id = Annotated[str, StringConstraints(pattern=r"^[a-z][a-z0-9_]{0,39}$")]
 """A question's or item's id: lowercase letters, digits and _, starting with a letter."""
 Label = Annotated[Text, StringConstraints(min_length=1, max_length=500)]
+SideOf = Annotated[Text, Field(json_schema_extra={"pattern": f"^({'|'.join(OBJECTS)})$"})]
+"""An object as `shape/color` (its check and message are `CheckQuestion`'s)."""
 SIDE_CHOICES = ("left", "right")
 
 
@@ -47,7 +49,7 @@ class CheckQuestion(BaseModel):
     text: Label
     choices: list[Choice] = Field(min_length=2, max_length=8)
     answer: Id | None = Field(default=None, description="The value of the right choice.")
-    side_of: str | None = Field(
+    side_of: SideOf | None = Field(
         default=None,
         description='An object "shape/color" (e.g. "cube/blue"): the right answer is its '
         "side under the session's sort rule; the choices then hold `left` and `right`.",
