@@ -151,3 +151,31 @@ def test_an_evaluator_cannot_take_a_strategy_that_decides_by_the_advisors_action
             make_env(), small_config(), strategy=make_strategy("mistake_correcting", 5),
             evaluator=Scripted([1.0]),
         )  # fmt: skip
+
+
+def test_a_judged_run_resumed_from_its_checkpoint_goes_on_as_if_never_stopped(
+    make_env, tmp_path
+) -> None:
+    def build(recorder: Recorder) -> Trainer:
+        # an erring oracle evaluator: its random state must resume too
+        evaluator = AdvisorEvaluator(OracleAdvisor(), error_rate=0.3, seed=8)
+        return Trainer(
+            make_env(), small_config(), strategy=make_strategy("early", 20), seed=6,
+            callbacks=[recorder], evaluator=evaluator,
+        )  # fmt: skip
+
+    whole = Recorder()
+    uninterrupted = build(whole)
+    uninterrupted.run()
+    before, after = Recorder(), Recorder()
+    first = build(before)
+    for _ in range(50):  # inside the window (steps 41 to 60)
+        first.step()
+    first.save_checkpoint(tmp_path / "run.pt")
+    second = build(after)
+    second.load_checkpoint(tmp_path / "run.pt")
+    second.run()
+    assert [r.to_dict() for r in before.steps + after.steps] == [r.to_dict() for r in whole.steps]
+    added = uninterrupted.memory.added
+    assert second.memory.added == added
+    assert (second.memory.rewards[:added] == uninterrupted.memory.rewards[:added]).all()
