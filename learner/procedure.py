@@ -122,7 +122,7 @@ class ScheduledAdvising(AdvisingStrategy):
             return None
         return ask(advisor, moment)
 
-    def check(self, pretraining_steps: int, advisor: AnyAdvisor) -> None:
+    def check(self, pretraining_steps: int, advisor: object) -> None:
         if pretraining_steps != self.schedule.pretraining_steps:
             raise ValueError(
                 f"the schedule was recorded with {self.schedule.pretraining_steps} pretraining "

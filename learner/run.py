@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 from learner import machine
 from learner.advisors import ADVISOR_KINDS, Advisor, make_advisor
 from learner.config import PRESET_FIELDS, DQNConfig, Preset
+from learner.evaluators import AdvisorEvaluator, AnyEvaluator, Evaluator
 from learner.fields import (
     FieldError,
     bounded,
@@ -107,6 +108,14 @@ MOTIONS = ("fast", "physics")
 """`sim.SortingEnv`'s motion modes."""
 Motion = Literal["fast", "physics"]
 Strategy = Literal[STRATEGY_NAMES]  # type: ignore[valid-type]
+FEEDBACK_KINDS = ("advice", "evaluative")
+"""The paper's two strategies of interactive feedback (its section 2): corrective advice
+(policy shaping: the advisor names the action taken) or evaluative feedback (reward
+shaping: the advisor judges the learner's own action, `learner.evaluators`)."""
+Feedback = Literal["advice", "evaluative"]
+EVALUATORS = ("agent", "oracle")
+"""Methods whose advisor can judge an action (evaluative feedback): those that name the
+right one. A person's judgement needs its page (not built yet)."""
 MAX_SEED = 2**31 - 1
 FRAME_BYTES = 64 * 64 * 3
 """One stored observation (uint8)."""
@@ -188,6 +197,17 @@ class RunSpec:
     without an advisor."""
     strategy_options: StrategyOptions = group(StrategyOptions, prefix="strategy_")
     """The strategy's options besides its budget."""
+    feedback: Feedback = bounded("advice", role="treatment")
+    """The kind of feedback the advisor gives (the paper's section 2): advice (policy
+    shaping, the paper's: the advised action is taken) or evaluative (reward shaping: the
+    learner takes its own action and the advisor judges it, good +1 or bad -1, on the
+    steps the strategy and the advice budget give it); evaluative takes method oracle or
+    agent, strategy early, alternating or importance."""
+    feedback_weight: float = bounded(1.0, 0.0, 100.0, role="treatment")
+    """Evaluative feedback: w in the reward the learner remembers for a judged step, the
+    environment's plus w times the judgement (TAMER+RL's reward shaping). 1: a judgement
+    weighs as much as the task's largest rewards (a placement's +1, a misplacement's -1),
+    so that it counts where the environment rewards nothing (a grab, a move)."""
     advisor_checkpoint: str | None = bounded(None, role="treatment", max_length=1000)
     """The trained learner whose checkpoint advises (method agent): `session:ID` (a session
     of this installation), or a checkpoint file's path."""
@@ -378,6 +398,7 @@ class RunSpec:
         config = self.config if self.advised else self.config.replace(advice_budget=0)
         motion = self.motion or ("physics" if self.method == "human" else "fast")
         oracle = self.method == "oracle"
+        evaluative = self.advised and self.feedback == "evaluative"
         task_options = self.task_options
         if self.task != "sorting":
             try:
@@ -394,6 +415,8 @@ class RunSpec:
             error_rate=self.error_rate if self.method == "oracle" else 0.0,
             decision_time_median_s=self.decision_time_median_s if oracle else None,
             decision_time_sigma=self.decision_time_sigma if oracle else 0.5,
+            feedback="evaluative" if evaluative else "advice",
+            feedback_weight=self.feedback_weight if evaluative else 1.0,
         )
 
     @property
@@ -471,6 +494,8 @@ class RunSpec:
                 "advisor_checkpoint",
                 "method agent needs advisor_checkpoint: the trained learner that advises",
             )
+        if spec.feedback == "evaluative":
+            spec._check_evaluative()
         if spec.method == "replayed" and spec.strategy not in REPLAY_STRATEGIES:
             raise RunSpecError(
                 "strategy",
@@ -492,6 +517,21 @@ class RunSpec:
         except ValueError as error:
             raise RunSpecError("strategy_options", str(error)) from None
         return spec
+
+    def _check_evaluative(self) -> None:
+        if self.method not in EVALUATORS:
+            raise RunSpecError(
+                "feedback",
+                f"evaluative feedback is judged by a machine, method {' or '.join(EVALUATORS)}"
+                f"; method {self.method} cannot judge (a person's judgement needs its page, "
+                "which is not built yet)",
+            )
+        if not _STRATEGIES[self.strategy].judges:
+            raise RunSpecError(
+                "strategy",
+                f"the {self.strategy} strategy decides by the advisor's action, which an "
+                "evaluator does not give; use early, alternating or importance",
+            )
 
     # --- numerics --------------------------------------------------------------------------
     def pinned(self, threads: int | None = None) -> RunSpec:
@@ -555,7 +595,22 @@ class RunSpec:
 
     def make_advisor(self) -> Advisor | None:
         """The machine advisor (None for none, human and replayed: a person, or a recorded
-        stream, is the caller's)."""
+        stream, is the caller's; and under evaluative feedback, whose is `make_evaluator`)."""
+        if self.feedback == "evaluative":
+            return None
+        return self._machine_advisor()
+
+    def make_evaluator(self) -> Evaluator | None:
+        """Under evaluative feedback, the machine evaluator: the oracle's correct action or
+        the agent's greedy one is good, any other bad, each judgement wrong with the
+        oracle's error rate (`learner.evaluators.AdvisorEvaluator`); else None."""
+        if self.feedback != "evaluative" or not self.advised:
+            return None
+        advisor = self.replace(error_rate=0.0)._machine_advisor()
+        assert advisor is not None, "validate() admits evaluative feedback from machines only"
+        return AdvisorEvaluator(advisor, self.error_rate, self.seed)
+
+    def _machine_advisor(self) -> Advisor | None:
         if self.method == "agent":
             return make_advisor("agent", checkpoint=self.advisor_checkpoint)
         if self.method == "oracle":
@@ -594,15 +649,21 @@ class RunSpec:
         """The trainer and its environment, as the run describes them."""
         spec = self.validate()
         env = spec.make_env(record_motion)
-        return spec.make_trainer(env, spec.make_advisor(), callbacks), env
+        trainer = spec.make_trainer(env, spec.make_advisor(), callbacks, spec.make_evaluator())
+        return trainer, env
 
     def make_trainer(
-        self, env: Any, advisor: AnyAdvisor | None, callbacks: Sequence[Any] = ()
+        self,
+        env: Any,
+        advisor: AnyAdvisor | None,
+        callbacks: Sequence[Any] = (),
+        evaluator: AnyEvaluator | None = None,
     ) -> Trainer | SB3DQNTrainer:
-        """The run's learner on `env`, advised by `advisor`: the ones `make_env` and
-        `make_advisor` make, or what a caller wraps them in (the session worker adds the
-        live view's scene broadcast and records the advice, or supplies the person). The
-        spec is a validated one (`validate`); SB3's DQN takes no advice."""
+        """The run's learner on `env`, advised by `advisor` or judged by `evaluator`: the
+        ones `make_env`, `make_advisor` and `make_evaluator` make, or what a caller wraps
+        them in (the session worker adds the live view's scene broadcast and records the
+        advice and the judgements, or supplies the person). The spec is a validated one
+        (`validate`); SB3's DQN takes no advice."""
         if self.learner == "sb3-dqn":
             from learner.sb3_dqn import SB3DQNTrainer
 
@@ -613,7 +674,8 @@ class RunSpec:
 
         return Trainer(
             env, self.config, advisor, self.make_strategy(), self.seed, list(callbacks),
-            schedule=self.make_schedule(),
+            schedule=self.make_schedule(), evaluator=evaluator,
+            feedback_weight=self.feedback_weight,
         )  # fmt: skip
 
     def make_schedule(self) -> Schedule | None:

@@ -83,6 +83,9 @@ class AdvisingStrategy:
     name: ClassVar[str] = ""
     needs_values: ClassVar[bool] = False
     """Whether the advisor must offer `q_values` (importance)."""
+    judges: ClassVar[bool] = True
+    """Whether its window is decided without the advisor's action, so that an evaluator can
+    judge in it (evaluative feedback: `in_window`)."""
 
     def __init__(self, budget: int = 100) -> None:
         if isinstance(budget, bool) or not isinstance(budget, int) or budget < 0:
@@ -117,6 +120,17 @@ class AdvisingStrategy:
         self.used += 1
         return int(action)
 
+    def in_window(self, moment: AdviceMoment, evaluator: Any) -> bool:
+        """Whether this step is one the strategy gives its advisor, counted against the
+        budget: evaluative feedback's window (`learner.evaluators`), decided by the very
+        rule that gives advice its steps, so both kinds of feedback get the same ones. The
+        strategy is shown `evaluator` (its values, for importance) in the advisor's place,
+        and never an action of its."""
+        if self.remaining <= 0 or self._advise(moment, _Window(evaluator)) is None:
+            return False
+        self.used += 1
+        return True
+
     def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
         raise NotImplementedError
 
@@ -125,7 +139,7 @@ class AdvisingStrategy:
         step, unless a strategy advises in pretraining."""
         return pretraining_steps + 1
 
-    def check(self, pretraining_steps: int, advisor: AnyAdvisor) -> None:
+    def check(self, pretraining_steps: int, advisor: object) -> None:
         """Raise a `ValueError` if this strategy cannot work with this run."""
         if self.needs_values and not callable(getattr(advisor, "q_values", None)):
             raise ValueError(
@@ -154,6 +168,21 @@ class AdvisingStrategy:
         return f"{type(self).__name__}(budget={self.budget}{options}, used={self.used})"
 
 
+class _Window:
+    """The advisor's stand-in when a strategy is asked only whether a step is in its
+    window: it would answer (`NO_ADVICE`: no action of its is taken), and shows the
+    strategy the evaluator's Q-values."""
+
+    def __init__(self, evaluator: Any) -> None:
+        self._evaluator = evaluator
+
+    def advise_at(self, moment: AdviceMoment) -> NoAdvice:
+        return NO_ADVICE
+
+    def q_values(self, obs: np.ndarray) -> np.ndarray:
+        return np.asarray(self._evaluator.q_values(obs))
+
+
 class EarlyAdvising(AdvisingStrategy):
     """The paper's: the advisor takes the last `budget` steps of pretraining, consecutively
     (global steps 901..1000 with the defaults)."""
@@ -170,7 +199,7 @@ class EarlyAdvising(AdvisingStrategy):
     def first_advice_step(self, pretraining_steps: int) -> int:
         return max(1, pretraining_steps - self.budget + 1)
 
-    def check(self, pretraining_steps: int, advisor: AnyAdvisor) -> None:
+    def check(self, pretraining_steps: int, advisor: object) -> None:
         super().check(pretraining_steps, advisor)
         problem = early_budget_problem(self.budget, pretraining_steps)
         if problem:
@@ -231,6 +260,7 @@ class MistakeCorrecting(ImportanceAdvising):
     differs from the advisor's; where they agree the learner acts on its own."""
 
     name = "mistake_correcting"
+    judges = False
 
     def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
         if not self._important(moment, advisor):

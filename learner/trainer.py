@@ -4,7 +4,9 @@ Pretraining (Algorithm 1) takes `pretraining_steps` actions to fill the memory: 
 except that an advising strategy may take some (early advising takes the last
 `advice_budget` of them). Training (Algorithm 2) runs `episodes` episodes of
 epsilon-greedy action with one update on a sampled batch after every action; strategies
-other than early advising may replace an action by the advisor's.
+other than early advising may replace an action by the advisor's. Under evaluative
+feedback (an `evaluator` in the advisor's place) the learner's own action is always taken,
+and on the strategy's steps the evaluator's judgement shapes the reward it remembers.
 
 `step()` does one environment step and returns its record, so a server can interleave
 its own work (pause, stop, progress) between steps; `run()` steps until done.
@@ -24,6 +26,7 @@ from learner.agent import DQNAgent
 from learner.checkpoint import read_checkpoint, write_checkpoint
 from learner.config import DQNConfig
 from learner.device import configure_threads, resolve_device
+from learner.evaluators import AnyEvaluator, judge
 from learner.exploration import EpsilonSchedule
 from learner.procedure import Schedule, ScheduledAdvising
 from learner.records import EpisodeRecord, StepRecord, stage_of
@@ -54,10 +57,15 @@ class Trainer(StagedRun):
         seed: int = 0,
         callbacks: Iterable[Any] = (),
         schedule: Schedule | None = None,
+        evaluator: AnyEvaluator | None = None,
+        feedback_weight: float = 1.0,
     ) -> None:
         """`schedule`: the procedure control's (`learner.procedure`): advice (from `advisor`,
         a random one) exactly at the recorded advised steps, fits exactly after the recorded
-        pretraining steps, and the recorded epsilon at every recorded step."""
+        pretraining steps, and the recorded epsilon at every recorded step. `evaluator`:
+        evaluative feedback instead of advice (`learner.evaluators`): on the strategy's
+        steps the action taken is judged, and the memory keeps the environment's reward
+        plus `feedback_weight` times the judgement."""
         self.config = config = config or DQNConfig()
         self.env = env
         _check_spaces(env)
@@ -68,13 +76,25 @@ class Trainer(StagedRun):
         self.schedule = schedule
         if schedule is not None:
             strategy = ScheduledAdvising(schedule)
-        if advisor is not None and strategy is None:
+        if advisor is not None and evaluator is not None:
+            raise ValueError("a run is advised or evaluated, not both; pass advisor= or evaluator=")
+        if evaluator is not None and strategy is not None and not strategy.judges:
+            raise ValueError(
+                f"the {strategy.name} strategy cannot give an evaluator its steps (it decides "
+                "by the advisor's action); use early, alternating or importance"
+            )
+        giver = advisor if advisor is not None else evaluator
+        if giver is not None and strategy is None:
             strategy = make_strategy("early", config.advice_budget)
         if strategy is not None:
-            if advisor is None:
+            if giver is None:
                 raise ValueError(f"the {strategy.name} strategy needs an advisor; pass advisor=")
-            strategy.check(config.pretraining_steps, advisor)
+            strategy.check(config.pretraining_steps, giver)
         self.advisor = advisor
+        self.evaluator = evaluator
+        self.feedback_weight = float(feedback_weight)
+        self.last_judgement: tuple[int, float | None] | None = None
+        """The last step judged (its global step) and its judgement (None: no answer)."""
         self.strategy = strategy
         self.callbacks = list(callbacks)
         self.seed = seed
@@ -137,14 +157,17 @@ class Trainer(StagedRun):
             random_action = int(self._action_rng.integers(self.n_actions))
             source = "exploration" if explore else "greedy"
             intended = random_action if explore else greedy
-        advised = None
-        if self.strategy is not None and self.advisor is not None:
+        advised, judged = None, False
+        if self.strategy is not None and (self.advisor, self.evaluator) != (None, None):
             moment = AdviceMoment(
                 episode.obs, episode.info, episode.stage, global_step,
                 config.pretraining_steps, intended, greedy,
             )  # fmt: skip
             try:
-                advised = self.strategy.advise(moment, self.advisor, self.n_actions)
+                if self.evaluator is not None:
+                    judged = self.strategy.in_window(moment, self.evaluator)
+                else:
+                    advised = self.strategy.advise(moment, self.advisor, self.n_actions)  # type: ignore[arg-type]
             except BaseException:
                 self._action_rng.bit_generator.state = rng_state  # the step never happened
                 raise
@@ -154,17 +177,24 @@ class Trainer(StagedRun):
 
         obs, reward, terminated, truncated, info = self.env.step(action)
         reward, terminated = float(reward), bool(terminated)
+        remembered = reward
+        if judged:
+            assert self.evaluator is not None
+            judgement = judge(self.evaluator, moment)  # after the step: it judges what was done
+            self.last_judgement = (global_step, judgement)
+            if judgement is not None:
+                remembered = reward + self.feedback_weight * judgement
         self.global_step = global_step
         episode.actions.append(action)
         truncated = bool(truncated) or len(episode.actions) >= config.max_episode_steps
         if pretraining and global_step == config.pretraining_steps:
             truncated = truncated or not terminated  # pretraining ends: cut its last episode
         self.memory.add(
-            self.agent.encode(episode.obs), action, reward,
+            self.agent.encode(episode.obs), action, remembered,
             self.agent.encode(obs), terminated, truncated,
         )  # fmt: skip
         updates = self._updates_now(
-            pretraining, advised is not None, terminated or truncated, global_step
+            pretraining, advised is not None or judged, terminated or truncated, global_step
         )
         return StepTaken(
             episode.stage, source, action, greedy, q_values, advised, obs, reward, terminated,
@@ -215,6 +245,7 @@ class Trainer(StagedRun):
                 "episode": None if episode is None else _episode_state(episode),
                 "strategy": self.strategy.state_dict() if self.strategy else None,
                 "advisor": _advisor_state(self.advisor),
+                "evaluator": _advisor_state(self.evaluator),
             },
         )
 
@@ -244,6 +275,8 @@ class Trainer(StagedRun):
             self.strategy.load_state_dict(state["strategy"])
         if state["advisor"] is not None and hasattr(self.advisor, "load_state_dict"):
             self.advisor.load_state_dict(state["advisor"])  # type: ignore[union-attr]
+        if state.get("evaluator") is not None and hasattr(self.evaluator, "load_state_dict"):
+            self.evaluator.load_state_dict(state["evaluator"])  # type: ignore[union-attr]
         self.seed = int(state["seed"])
         self.agent.load_state_dict(state["agent"])
         self.memory.load_state_dict(state["memory"])
@@ -306,7 +339,7 @@ def _episode_state(episode: EpisodeInProgress) -> dict[str, Any]:
     }
 
 
-def _advisor_state(advisor: AnyAdvisor | None) -> dict[str, Any] | None:
+def _advisor_state(advisor: AnyAdvisor | AnyEvaluator | None) -> dict[str, Any] | None:
     state_dict = getattr(advisor, "state_dict", None)
     return state_dict() if callable(state_dict) else None
 

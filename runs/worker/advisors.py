@@ -1,5 +1,5 @@
 """Advisors as the worker sees them: the participant behind the channel, and machine
-advisors whose advice is logged like a person's."""
+advisors whose advice (or evaluative feedback) is logged like a person's."""
 
 from __future__ import annotations
 
@@ -10,11 +10,14 @@ from datetime import UTC, datetime, timedelta
 from typing import Any, Protocol
 
 from learner.advisors import NO_ADVICE, Advisor, NoAdvice
+from learner.evaluators import Evaluator
+from learner.records import observation_hash
 from learner.strategies import AdviceMoment
 from runs.worker.link import WorkerLink
 from runs.worker.messages import AdviceRequest, AdviceResult
 from runs.worker.recorder import Reporter
 from study.services.advice import AdviceGiven
+from study.services.feedback import FeedbackGiven
 from study.services.observations import encode_png
 
 log = logging.getLogger(__name__)
@@ -168,3 +171,70 @@ class RecordingAdvisor:
         )
         self.count += 1
         return NO_ADVICE if action is None else action
+
+
+class FeedbackLog(Protocol):
+    def add_feedback(self, feedback: FeedbackGiven) -> None: ...
+
+
+class RecordingEvaluator:
+    """Wraps a machine evaluator (`learner.evaluators`): the same judgements, each logged
+    with the action judged, what it added to the remembered reward (`weight` times the
+    judgement: the run's feedback_weight) and the time it took, as `RecordingAdvisor` logs
+    advice. `count` is the judgements given (the worker's advice count)."""
+
+    def __init__(
+        self,
+        inner: Evaluator,
+        session_id: int,
+        kind: str,
+        start_index: int,
+        weight: float,
+        log: FeedbackLog,
+    ) -> None:
+        self._inner = inner
+        self._session_id = session_id
+        self._kind = kind
+        self.count = start_index
+        self._weight = weight
+        self._log = log
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "q_values":  # for importance's window
+            return getattr(self._inner, name)
+        raise AttributeError(name)
+
+    def state_dict(self) -> dict[str, Any]:
+        inner = getattr(self._inner, "state_dict", None)
+        return {"count": self.count, "inner": inner() if callable(inner) else None}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.count = int(state["count"])
+        load = getattr(self._inner, "load_state_dict", None)
+        if state["inner"] is not None and callable(load):
+            load(state["inner"])
+
+    def judge_at(self, moment: AdviceMoment) -> float | None:
+        started = time.perf_counter()
+        requested_at = datetime.now(UTC)
+        judgement = self._inner.judge(moment.obs, moment.info, moment.intended_action)
+        elapsed = time.perf_counter() - started
+        self._log.add_feedback(
+            FeedbackGiven(
+                session_id=self._session_id,
+                feedback_index=self.count,
+                global_step=moment.global_step,
+                evaluator=self._kind,
+                action=moment.intended_action,
+                judgement=judgement,
+                shaping=0.0 if judgement is None else self._weight * judgement,
+                greedy_action=moment.greedy_action,
+                observation_hash=observation_hash(moment.obs),
+                response_time_s=elapsed,
+                decision_time_s=getattr(self._inner, "last_decision_time_s", None),
+                requested_at=requested_at,
+                answered_at=requested_at + timedelta(seconds=elapsed),
+            )
+        )
+        self.count += 1
+        return judgement

@@ -20,8 +20,9 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from learner.records import TRAINING, EpisodeRecord, StepRecord
 from runs.worker.messages import EpisodeDone, Progress
-from study.db.models import Advice, Episode, Step, StudySession, utcnow
+from study.db.models import Advice, Episode, Feedback, Step, StudySession, utcnow
 from study.services.advice import AdviceGiven, write_advice
+from study.services.feedback import FeedbackGiven, write_feedback
 
 PROGRESS_EVERY_S = 0.2
 STEP_COLUMNS = frozenset(c.name for c in Step.__table__.columns) - {"id"}
@@ -70,6 +71,7 @@ class Recorder:
         self._steps: list[dict[str, Any]] = []
         self._episodes: list[dict[str, Any]] = []
         self._advice: list[AdviceGiven] = []
+        self._feedback: list[FeedbackGiven] = []
         self._last_flush = time.monotonic()
         self.steps = 0
         self.episodes = 0
@@ -95,6 +97,10 @@ class Recorder:
         written by the web process, complete, before the worker hears of it)."""
         self._advice.append(advice)
 
+    def add_feedback(self, feedback: FeedbackGiven) -> None:
+        """A machine evaluator's judgement, written at the next flush."""
+        self._feedback.append(feedback)
+
     # --- writing -----------------------------------------------------------------------
     def tick(self) -> None:
         """Between steps: flush and heartbeat when it is time."""
@@ -108,9 +114,10 @@ class Recorder:
             if self._episodes:
                 db.execute(insert(Episode), self._episodes)
             write_advice(db, self._advice)
+            write_feedback(db, self._feedback)
             self._own(db, heartbeat_at=utcnow(), progress=self.progress(), **session_values)
             db.commit()
-        self._steps, self._episodes, self._advice = [], [], []
+        self._steps, self._episodes, self._advice, self._feedback = [], [], [], []
         self._last_flush = time.monotonic()
 
     def checkpoint(
@@ -139,7 +146,7 @@ class Recorder:
 
     def rewind(self, session: StudySession) -> None:
         """Forget every row written after the checkpoint we resume from: steps and episodes
-        past its global step, machine advice past its advice count."""
+        past its global step, machine advice (or judgements) past its advice count."""
         self.steps = session.checkpoint_step
         self.episodes = session.checkpoint_episodes
         self.advice = session.checkpoint_advice
@@ -155,6 +162,11 @@ class Recorder:
                 db.execute(
                     delete(Advice).where(
                         Advice.session_id == sid, Advice.advice_index >= self.advice
+                    )
+                )
+                db.execute(
+                    delete(Feedback).where(
+                        Feedback.session_id == sid, Feedback.feedback_index >= self.advice
                     )
                 )
             self._own(db, heartbeat_at=utcnow())

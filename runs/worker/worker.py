@@ -25,7 +25,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from learner import provenance
 from learner.advisors import RecordedAdvisor
 from learner.run import RunSpec, declare, declared
-from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
+from runs.worker.advisors import HumanAdvisor, RecordingAdvisor, RecordingEvaluator
 from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
 from runs.worker.messages import StatusChanged, TrainingWanted
 from runs.worker.priority import lower_priority
@@ -159,8 +159,9 @@ class _Run:
             self.link, self.recorder, env, spec.config.episodes, self.advice_budget
         )
         advisor = self._advisor(spec.make_advisor())  # None for sb3-dqn, which takes none
+        evaluator = self._evaluator(spec.make_evaluator())  # evaluative feedback's, or None
         self.reporter.advisor = self.advisor
-        self.trainer = spec.make_trainer(env, advisor, [self.recorder, self.reporter])
+        self.trainer = spec.make_trainer(env, advisor, [self.recorder, self.reporter], evaluator)
         if checkpoint:
             self.trainer.load_checkpoint(checkpoint)
         else:
@@ -213,6 +214,17 @@ class _Run:
             self.advisor = RecordingAdvisor(
                 machine, s.id, s.method, self.start_advice, self.recorder
             )
+        return self.advisor
+
+    def _evaluator(self, machine: Any) -> RecordingEvaluator | None:
+        """Under evaluative feedback, the machine evaluator with its judgements recorded;
+        it stands as the session's advisor (its count is the feedback given)."""
+        if machine is None:
+            return None
+        s = self.session
+        self.advisor = RecordingEvaluator(
+            machine, s.id, s.method, self.start_advice, self.spec.feedback_weight, self.recorder
+        )
         return self.advisor
 
     @property

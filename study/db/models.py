@@ -1,8 +1,8 @@
 """The study database's tables, as SQLAlchemy 2.0 typed models.
 
 One study has many sessions; a session (one learner's run) has its step, episode and
-advice records. Records carry unique (session, index) keys so a resumed worker can never
-write a row twice.
+advice (or evaluative feedback) records. Records carry unique (session, index) keys so a
+resumed worker can never write a row twice.
 """
 
 from __future__ import annotations
@@ -362,6 +362,37 @@ class Advice(Base):
     """Replayed advice: whether the replay showed the advice the image its advisor saw
     (equal observation hashes); NULL for advice given live, and for requests beyond the
     stream."""
+
+
+class Feedback(Base):
+    """One judgement of evaluative feedback (`learner.evaluators`): the action the learner
+    took by itself, how its evaluator judged it, and what that added to the reward the
+    learner remembers."""
+
+    __tablename__ = "feedback"
+    __table_args__ = (
+        UniqueConstraint("session_id", "feedback_index"),
+        Index("ix_feedback_session_step", "session_id", "global_step"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"))
+    feedback_index: Mapped[int] = mapped_column(Integer)
+    global_step: Mapped[int] = mapped_column(Integer)
+    evaluator: Mapped[str] = mapped_column(String(20))
+    action: Mapped[int] = mapped_column(Integer)
+    """The action judged: the learner's own, the one taken."""
+    judgement: Mapped[float | None] = mapped_column(Float)
+    """+1 good, -1 bad (or a signed value); NULL: no answer."""
+    shaping: Mapped[float] = mapped_column(Float)
+    """What the judgement added to the environment's reward (the run's feedback_weight
+    times the judgement; 0 without one)."""
+    greedy_action: Mapped[int] = mapped_column(Integer)
+    observation_hash: Mapped[str] = mapped_column(String(16))
+    response_time_s: Mapped[float] = mapped_column(Float)
+    decision_time_s: Mapped[float | None] = mapped_column(Float)
+    requested_at: Mapped[datetime] = mapped_column(UTCDateTime())
+    answered_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
 
 
 class CheckAttempt(Base):

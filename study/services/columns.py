@@ -152,6 +152,44 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
         "observation hashes); empty for advice given live and for requests beyond the stream.",
     ),
 }
+FEEDBACK_COLUMNS: dict[str, tuple[str, str]] = {
+    "session_id": ("integer", "Session the judgement belongs to (its run's feedback: evaluative)."),
+    "feedback_index": ("integer", "Index of the judgement in its session, from 0."),
+    "global_step": (
+        "integer",
+        "Global step whose action was judged (from 1, pretraining included); steps.csv has "
+        "the step, its reward the environment's.",
+    ),
+    "evaluator": ("string", "Who judged: oracle or agent (machine evaluators)."),
+    "action": (
+        "integer",
+        "The action judged: the learner's own, the one taken (0 grab, 1 move right, 2 move "
+        "left, 3 drop for the sorting task).",
+    ),
+    "action_name": ("string", "The judged action's words, as its task names it."),
+    "judgement": (
+        "number",
+        "The evaluator's judgement: 1 good (the action the oracle or the trained agent would "
+        "take), -1 bad; empty: no answer.",
+    ),
+    "shaping": (
+        "number",
+        "What the judgement added to the environment's reward in the learner's memory: the "
+        "run's feedback_weight times the judgement (0 without one) [reward].",
+    ),
+    "greedy_action": ("integer", "The learner's own greedy choice for the same observation."),
+    "observation_hash": (
+        "string",
+        "The image the action was chosen on: its hash, as steps.csv's observation_hash.",
+    ),
+    "response_time_s": ("number", "The evaluator's compute time (machine evaluators) [s]."),
+    "decision_time_s": (
+        "number",
+        "An oracle with simulated times: the time it drew (never waited); else empty [s].",
+    ),
+    "requested_at": ("datetime", "When the judgement was asked (UTC)."),
+    "answered_at": ("datetime", "When it arrived (UTC)."),
+}
 ASSIGNMENT_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "The session the arrival got."),
     "condition": ("string", "The condition it was assigned to."),
@@ -256,6 +294,7 @@ def table_columns() -> dict[str, list[Column]]:
         "episodes": _record_columns("episodes"),
         "steps": _record_columns("steps"),
         "advice": [column(name, *spec) for name, spec in ADVICE_COLUMNS.items()],
+        "feedback": [column(name, *spec) for name, spec in FEEDBACK_COLUMNS.items()],
         "texts_versions": [column(name, *spec) for name, spec in TEXTS_COLUMNS.items()],
         "assignments": [column(name, *spec) for name, spec in ASSIGNMENT_COLUMNS.items()],
         "panel_ids": [column(name, *spec) for name, spec in PANEL_COLUMNS.items()],

@@ -1,7 +1,7 @@
-"""A study's data, ready for analysis: sessions, episodes, steps and advice (with the
-advised images) as CSV or Parquet, described by a Frictionless `datapackage.json` (each
-column's type, unit and description) and the same dictionary as `columns.csv`; written to
-a folder or packed as one zip.
+"""A study's data, ready for analysis: sessions, episodes, steps, advice (with the
+advised images) and evaluative feedback as CSV or Parquet, described by a Frictionless
+`datapackage.json` (each column's type, unit and description) and the same dictionary as
+`columns.csv`; written to a folder or packed as one zip.
 
 Analysis-ready means: ISO 8601 UTC timestamps (`logged_at`, with `elapsed_s` since the
 session started beside it), lowercase booleans, the sort rule as plain text, the learner
@@ -38,6 +38,7 @@ from study.db.models import (
     Advice,
     Assignment,
     Episode,
+    Feedback,
     PanelId,
     Participant,
     Step,
@@ -58,6 +59,7 @@ TABLES = (
     "episodes",
     "steps",
     "advice",
+    "feedback",
     "texts_versions",
     "assignments",
     "panel_ids",
@@ -68,6 +70,7 @@ KEYS: dict[str, dict[str, Any]] = {
     "episodes": {"primaryKey": ["session_id", "stage", "episode"]},
     "steps": {"primaryKey": ["session_id", "global_step"]},
     "advice": {"primaryKey": ["session_id", "advice_index"]},
+    "feedback": {"primaryKey": ["session_id", "feedback_index"]},
     "texts_versions": {"primaryKey": ["study_id", "texts_version"]},
     "assignments": {"primaryKey": ["session_id"]},
     "panel_ids": {"primaryKey": ["participant"]},
@@ -184,6 +187,32 @@ def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterat
             }
 
 
+def _feedback_rows(db: Session, sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
+    """Evaluative feedback's judgements, session by session, in the order given; each
+    action named in its run's task's words."""
+    for session in sessions:
+        query = select(Feedback).where(Feedback.session_id == session.id)
+        words: tuple[str, ...] = ()
+        for f in db.scalars(query.order_by(Feedback.feedback_index)):
+            words = words or session.spec.the_task.action_words
+            yield {
+                "session_id": session.id,
+                "feedback_index": f.feedback_index,
+                "global_step": f.global_step,
+                "evaluator": f.evaluator,
+                "action": f.action,
+                "action_name": words[f.action] if f.action < len(words) else None,
+                "judgement": f.judgement,
+                "shaping": f.shaping,
+                "greedy_action": f.greedy_action,
+                "observation_hash": f.observation_hash,
+                "response_time_s": f.response_time_s,
+                "decision_time_s": f.decision_time_s,
+                "requested_at": f.requested_at,
+                "answered_at": f.answered_at,
+            }
+
+
 def _texts_rows(db: Session, study_id: int) -> Iterator[dict[str, Any]]:
     """Each distinct version of the study's texts that a participant was shown."""
     query = select(StudyTexts).where(StudyTexts.study_id == study_id).order_by(StudyTexts.version)
@@ -262,6 +291,7 @@ def export_study(
         "episodes": _records(db, Episode, sessions, Episode.first_global_step),
         "steps": _records(db, Step, sessions, Step.global_step),
         "advice": _advice_rows(db, sessions, out),
+        "feedback": _feedback_rows(db, sessions),
         "assignments": _assignment_rows(db, study.id),
         "panel_ids": _panel_rows(db, study, panel_ids),
         **visit_export.visit_rows(db, sessions),

@@ -1,0 +1,52 @@
+"""Evaluative feedback into the database: one typed message for every evaluator, written
+once, complete (as `study.services.advice` writes advice).
+
+A machine evaluator's judgements are built by the worker (`runs/worker/advisors.py`,
+`RecordingEvaluator`) and written in the recorder's batched flush; no row is updated
+afterwards.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import datetime
+
+from sqlalchemy import insert
+from sqlalchemy.orm import Session
+
+from study.db.models import Feedback
+
+
+@dataclass(frozen=True)
+class FeedbackGiven:
+    """One judgement, as its row in `feedback` (docs/export.md, feedback.csv)."""
+
+    session_id: int
+    feedback_index: int
+    """0-based index of this judgement in the session."""
+    global_step: int
+    """The step whose action it judged (from 1)."""
+    evaluator: str
+    """The machine evaluator's method (oracle, agent)."""
+    action: int
+    """The action judged: the learner's own, the one taken."""
+    judgement: float | None
+    """+1 good, -1 bad; None: no answer."""
+    shaping: float
+    """What it added to the environment's reward in the learner's memory."""
+    greedy_action: int
+    observation_hash: str
+    """The image the learner chose the action on (`learner.records.observation_hash`)."""
+    response_time_s: float
+    decision_time_s: float | None
+    requested_at: datetime
+    answered_at: datetime
+
+
+def write_feedback(db: Session, feedback: Sequence[FeedbackGiven]) -> None:
+    """Insert the judgements (in the caller's transaction; the caller commits). A repeated
+    (session, feedback_index) raises `IntegrityError`: a judgement is written once."""
+    if feedback:
+        db.execute(insert(Feedback), [dataclasses.asdict(f) for f in feedback])

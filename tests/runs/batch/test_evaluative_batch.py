@@ -1,0 +1,79 @@
+"""A batch compares evaluative feedback with advice and with no feedback (issue 43): the
+oracle judging runs to its end, its judgements are recorded and exported, its learner takes
+its own actions, and oracle advice in the same study is another run."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from study.db.models import Advice, Feedback, Step
+from tests.runs.batch.helpers import ADVICE, SCALE, Place, read_csv, sessions, study_id
+from tests.runs.batch.helpers import in_process as run
+
+pytestmark = pytest.mark.slow
+PRETRAINING = 20  # SCALE's --pretraining-steps
+STUDY = ["--study", "feedback kinds", "--agents", "1", *SCALE, "--workers", "1"]
+
+
+def test_oracle_evaluation_beside_oracle_advice_and_no_feedback(
+    place: Place, capsys: pytest.CaptureFixture[str]
+) -> None:
+    evaluative = ["--feedback", "evaluative", "--feedback-weight", "0.5"]
+    code, out = run(
+        place, capsys, "batch", "--methods", "autonomous", "oracle", *evaluative, *STUDY
+    )
+    assert code == 0, out
+    code, out = run(place, capsys, "batch", "--methods", "oracle", *STUDY)
+    assert code == 0, out
+    engine = place.engine()
+    study = study_id(engine, "feedback kinds")
+    autonomous, judged, advised = sessions(engine, study)
+    assert {s.status for s in (autonomous, judged, advised)} == {"finished"}
+    assert (judged.method, advised.method) == ("oracle", "oracle")
+    assert (judged.spec.feedback, judged.spec.feedback_weight) == ("evaluative", 0.5)
+    assert advised.spec.feedback == "advice" and autonomous.spec.feedback == "advice"
+
+    with Session(engine) as db:
+        feedback = list(db.scalars(select(Feedback).order_by(Feedback.session_id, Feedback.id)))
+        steps = {
+            s.global_step: s for s in db.scalars(select(Step).where(Step.session_id == judged.id))
+        }
+        advice_of = set(db.scalars(select(Advice.session_id)))
+    assert {f.session_id for f in feedback} == {judged.id} and advice_of == {advised.id}
+    assert [f.feedback_index for f in feedback] == list(range(ADVICE))
+    assert [f.global_step for f in feedback] == list(range(PRETRAINING - ADVICE + 1, 21))
+    for f in feedback:
+        step = steps[f.global_step]
+        assert f.action == step.action and step.action_source == "random"
+        assert step.advised_action is None and f.observation_hash == step.observation_hash
+        assert f.judgement in (1.0, -1.0) and f.shaping == 0.5 * f.judgement
+        assert f.evaluator == "oracle"
+    assert all(s.advised_action is None for s in steps.values())
+
+    out_dir = place.data_dir / "feedback-export"
+    code, out = run(place, capsys, "export", "--study", "feedback kinds", "--out", str(out_dir))
+    assert code == 0, out
+    rows = read_csv(out_dir / "feedback.csv")
+    assert [(int(r["session_id"]), int(r["global_step"])) for r in rows] == [
+        (f.session_id, f.global_step) for f in feedback
+    ]
+    assert [float(r["judgement"]) for r in rows] == [f.judgement for f in feedback]
+    assert {r["action_name"] for r in rows} <= {"grab", "move right", "move left", "drop"}
+    kinds = {int(r["session_id"]): r["feedback"] for r in read_csv(out_dir / "sessions.csv")}
+    assert kinds == {autonomous.id: "advice", judged.id: "evaluative", advised.id: "advice"}
+    package = json.loads((out_dir / "datapackage.json").read_text())
+    (resource,) = [r for r in package["resources"] if r["name"] == "feedback"]
+    described = {f["name"]: f["type"] for f in resource["schema"]["fields"]}
+    assert described["judgement"] == "number" and described["shaping"] == "number"
+
+
+def test_a_method_that_cannot_judge_is_refused(
+    place: Place, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["batch", "--study", "refused feedback", "--methods", "random", "--agents", "1"]
+    code, out = run(place, capsys, *args, "--feedback", "evaluative", *SCALE)
+    assert code == 2 and "method random cannot judge" in out, out
