@@ -43,7 +43,7 @@ from analysis.paper import PAPER_AGENTS, PAPER_EPISODES, paper_comparison
 from analysis.power import DEFAULT_DRAWS, MIN_AGENTS, PowerAnalysis, power_analysis
 from analysis.reference import REFERENCES, authors_totals, overlay_authors
 from analysis.rescoring import rescored_totals, rescoring_table
-from analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
+from analysis.stats import AGENT_TOTALS, EPISODE_MEANS
 from analysis.summary import Analysis, analyze
 from sim.rewards import REWARD_SCHEMES
 
@@ -322,7 +322,8 @@ def _summary(
             continue
         more = "more" if row["R_T"] >= methods.loc[base, "R_T"] else "less"
         lines.append(
-            f"{head}; it collects {md.signed_pct(row['improvement_pct'])} ({more} reward) "
+            f"{head}; it collects {md.versus(row['R_T'], methods.loc[base, 'R_T'])} "
+            f"({more} reward) "
             f"compared with {method_name(base)}. "
             + _describe_primary(comparisons, method, alpha)
             + "; the paper's own test on the average curves: "
@@ -350,8 +351,8 @@ def _summary(
         )
     if base is not None and methods.loc[base, "R_T"] <= 0:
         lines.append(
-            f"- {method_name(base)}'s R_T is not positive, so percentages relative to it "
-            "are hard to read: compare the R_T values themselves."
+            f"- {method_name(base)}'s R_T is not positive, so the differences from it are "
+            "in points: a percentage of it would read as a gain or loss it is not."
         )
     if analysis.epsilon_reached is not None:
         reached = ", ".join(
@@ -373,14 +374,24 @@ def _methods_table(analysis: Analysis) -> str:
         "R_T_std": "std of agents' R_T",
         "R_T_min": "min",
         "R_T_max": "max",
-        "improvement_pct": "improvement",
+        "vs_baseline": "improvement",
     }
     for column in analysis.methods.columns:
         if column.endswith("_per_episode"):
             columns[column] = column.removesuffix("_per_episode").replace("_", " ") + " / episode"
-    formats = {c: md.fixed(2) for c in columns if c not in ("name", "agents", "episodes")}
-    formats["improvement_pct"] = md.signed_pct
-    return md.table(analysis.methods, columns, formats)
+    formats = {
+        c: md.fixed(2) for c in columns if c not in ("name", "agents", "episodes", "vs_baseline")
+    }
+    frame = analysis.methods.assign(vs_baseline=_versus_baseline(analysis, analysis.methods))
+    return md.table(frame, columns, formats)
+
+
+def _versus_baseline(analysis: Analysis, frame: pd.DataFrame) -> list[str]:
+    """Each row's R_T against the baseline method's (`md.versus`); blank without one."""
+    if analysis.baseline is None:
+        return ["–"] * len(frame)
+    base = float(analysis.methods.set_index("method").loc[analysis.baseline, "R_T"])
+    return [md.versus(r, base) for r in frame["R_T"]]
 
 
 def _tests_table(analysis: Analysis, alpha: float) -> str:
@@ -509,13 +520,13 @@ def _agents_table(analysis: Analysis, labels: Sequence[str], reference: str | No
     columns = {"label": "agent", "name": "method"}
     if "seed" in frame:
         columns["seed"] = "seed"
-    columns |= {"R_T": "R_T", "improvement_pct": "vs baseline method"}
-    formats = {"R_T": md.fixed(2), "improvement_pct": md.signed_pct, "seed": md.whole}
+    columns |= {"R_T": "R_T", "vs_baseline": "vs baseline method"}
+    formats = {"R_T": md.fixed(2), "seed": md.whole}
+    frame["vs_baseline"] = _versus_baseline(analysis, frame)
     if reference is not None:
         base = float(analysis.agents.set_index("label").loc[reference, "R_T"])
-        frame["vs_reference"] = [improvement_pct(r, base) for r in frame["R_T"]]
+        frame["vs_reference"] = [md.versus(r, base) for r in frame["R_T"]]
         columns["vs_reference"] = f"vs {reference}"
-        formats["vs_reference"] = md.signed_pct
     return md.table(frame, columns, formats)
 
 
@@ -863,11 +874,20 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
             columns[f"R_T_{scheme}"] = f"R_T under {scheme}"
             formats[f"R_T_{scheme}"] = md.fixed(2)
             if f"improvement_{scheme}" in extra.rescored:
-                columns[f"improvement_{scheme}"] = f"vs baseline under {scheme}"
-                formats[f"improvement_{scheme}"] = md.signed_pct
+                columns[f"vs_{scheme}"] = f"vs baseline under {scheme}"
                 columns[f"p_welch_{scheme}"] = f"Welch's p under {scheme}"
                 formats[f"p_welch_{scheme}"] = md.p_value
         rescored, withheld = extra.rescored, ""
+        if baseline is not None and f"improvement_{REWARD_SCHEMES[0]}" in rescored:
+            base = rescored.set_index("method").loc[baseline]
+            rescored = rescored.assign(
+                **{
+                    f"vs_{scheme}": [
+                        md.versus(v, base[f"R_T_{scheme}"]) for v in rescored[f"R_T_{scheme}"]
+                    ]
+                    for scheme in REWARD_SCHEMES
+                }
+            )
         if "withheld" in rescored and (rescored["withheld"] != "").any():
             rescored = rescored.assign(
                 withheld=[f"withheld: {w}" if w else "" for w in rescored["withheld"]]
