@@ -38,6 +38,8 @@ from analysis.figures import (
     save_figure,
     vector_paths,
 )
+from analysis.human import Visits
+from analysis.human_report import HUMAN_FILES, human_section
 from analysis.markdown import REPORT_FILE
 from analysis.paper import PAPER_AGENTS, PAPER_EPISODES, paper_comparison
 from analysis.power import DEFAULT_DRAWS, MIN_AGENTS, PowerAnalysis, power_analysis
@@ -81,6 +83,7 @@ OPTIONAL_TABLE_FILES: dict[str, str] = {
 logs (rescoring), a reference, two agents per arm and a baseline (power)."""
 REPORT_FILES = (
     "report.md",
+    *HUMAN_FILES,
     *FIGURE_FILES.values(),
     *TABLE_FILES.values(),
     *OPTIONAL_TABLE_FILES.values(),
@@ -105,8 +108,9 @@ class ReportResult:
     """CSV files by name (keys of `TABLE_FILES`)."""
     notes: tuple[str, ...]
     """Sentences on what the report left out or chose, also printed in it."""
-    analysis: Analysis
-    """The statistics behind the files, for callers that show them another way."""
+    analysis: Analysis | None
+    """The statistics behind the files, for callers that show them another way (None: a
+    report of the participants alone, no learner finished yet)."""
     audit: Audit | None = None
     """What each method ran under and which pairs differ (None without a settings table)."""
     rescored: pd.DataFrame | None = None
@@ -588,6 +592,7 @@ def write_report(
     primary: str = "welch",
     power_draws: int = DEFAULT_DRAWS,
     power_seed: int = 0,
+    visits: Visits | None = None,
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -612,6 +617,7 @@ def write_report(
     test of the agents' R_T, or the paired t-test where seeds pair; the rest are secondary.
     The Power section plans a future study from these agents' R_T (`analysis.power`,
     `power_draws` simulated studies per size, seeded by `power_seed`) at `alpha`.
+    `visits` (an online study's) adds the participants' section (`analysis.human_report`).
     """
     if reference is not None and reference not in REFERENCES:
         raise EpisodeTableError(
@@ -728,14 +734,41 @@ def write_report(
         checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes, quality,
         tables.get("advice_correlations"), tables.get("comparisons"), power,
     )  # fmt: skip
-    report.write_text(
-        _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra),
-        encoding="utf-8",
-    )
+    text = _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra)
+    if visits is not None:
+        lines, files = human_section(visits, out, alpha)
+        text = text.rstrip("\n") + "\n\n" + "\n".join(lines)
+        figure_paths |= {p.stem: p for p in files if p.suffix == ".png"}
+        table_paths |= {p.stem: p for p in files if p.suffix == ".csv"}
+    report.write_text(text, encoding="utf-8")
     warnings = tuple(checked.warnings()) if checked is not None else ()
     return ReportResult(
         out, report, figure_paths, table_paths, (*warnings, *report_notes), analysis,
         checked, rescored, power,
+    )  # fmt: skip
+
+
+def write_human_report(
+    visits: Visits,
+    out_dir: str | Path,
+    *,
+    title: str,
+    notes: Sequence[str] = (),
+    alpha: float = 0.05,
+) -> ReportResult:
+    """The report of the participants alone, while no learner has finished: the section
+    of `analysis.human_report` under the title and `notes`."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in REPORT_FILES:
+        (out / name).unlink(missing_ok=True)
+    lines, files = human_section(visits, out, alpha)
+    report = out / REPORT_FILE
+    head = [f"# {title}", "", *(f"- {n}" for n in notes), ""]
+    report.write_text("\n".join([*head, *lines]), encoding="utf-8")
+    return ReportResult(
+        out, report, {p.stem: p for p in files if p.suffix == ".png"},
+        {p.stem: p for p in files if p.suffix == ".csv"}, (), None,
     )  # fmt: skip
 
 

@@ -140,6 +140,9 @@ def report(args: argparse.Namespace) -> int:
     for note in built.notes:
         if note not in warnings:
             print(f"note: {note}")
+    if result.analysis is None:  # the participants alone: no learner finished yet
+        print(f"report: {result.report}")
+        return 0
     methods_table = result.analysis.methods
     base = result.analysis.baseline
     reference = None if base is None else methods_table.set_index("method").loc[base, "R_T"]
