@@ -315,13 +315,18 @@ def plot_individual_agents(
     figure, ax = _new_figure(9.0, 5.5)
     for i, label in enumerate(labels):
         rows = table[table["label"] == label]
-        gain = improvement_pct(float(totals.loc[label, "R_T"]), reference_total)
+        total = float(totals.loc[label, "R_T"])
+        gain = (
+            f"{improvement_pct(total, reference_total):+.1f} %"
+            if reference_total > 0  # a percentage of a negative score misleads
+            else f"{total - reference_total:+.1f} points"
+        )
         ax.plot(
             rows["episode"],
             smooth(rows["collected_reward"], smoothing),
             color=_AGENT_COLORS[i % len(_AGENT_COLORS)],
             lw=1.1,
-            label=f"{label} (R_T = {totals.loc[label, 'R_T']:.1f}, {gain:+.1f} %)",
+            label=f"{label} (R_T = {totals.loc[label, 'R_T']:.1f}, {gain})",
         )
     rows = table[table["label"] == reference_label]
     ax.plot(

@@ -26,6 +26,18 @@ def signed_pct(value: object) -> str:
     return "–" if _is_missing(value) else f"{float(value):+.2f} %"  # type: ignore[arg-type]
 
 
+def versus(value: object, reference: object) -> str:
+    """`value` against `reference`: in percent ("+64.03 %") where the reference is
+    positive, else the difference in points ("+2.00 points"); a percentage of a negative
+    or zero score reads as a gain or loss it is not."""
+    if _is_missing(value) or _is_missing(reference):
+        return "–"
+    value, reference = float(value), float(reference)  # type: ignore[arg-type]
+    if reference > 0:
+        return signed_pct((value - reference) / reference * 100.0)
+    return f"{value - reference:+.2f} points"
+
+
 def p_value(value: object) -> str:
     """Four significant digits, scientific below 0.001 (6.395e-14), as the paper prints."""
     if _is_missing(value):

@@ -38,12 +38,14 @@ from analysis.figures import (
     save_figure,
     vector_paths,
 )
+from analysis.human import Visits
+from analysis.human_report import HUMAN_FILES, human_section
 from analysis.markdown import REPORT_FILE
 from analysis.paper import PAPER_AGENTS, PAPER_EPISODES, paper_comparison
 from analysis.power import DEFAULT_DRAWS, MIN_AGENTS, PowerAnalysis, power_analysis
 from analysis.reference import REFERENCES, authors_totals, overlay_authors
 from analysis.rescoring import rescored_totals, rescoring_table
-from analysis.stats import AGENT_TOTALS, EPISODE_MEANS, improvement_pct
+from analysis.stats import AGENT_TOTALS, EPISODE_MEANS
 from analysis.summary import Analysis, analyze
 from sim.rewards import REWARD_SCHEMES
 from tasks.sorting import OPTIONS as SORTING_OPTIONS
@@ -82,6 +84,7 @@ OPTIONAL_TABLE_FILES: dict[str, str] = {
 logs (rescoring), a reference, two agents per arm and a baseline (power)."""
 REPORT_FILES = (
     "report.md",
+    *HUMAN_FILES,
     *FIGURE_FILES.values(),
     *TABLE_FILES.values(),
     *OPTIONAL_TABLE_FILES.values(),
@@ -106,8 +109,9 @@ class ReportResult:
     """CSV files by name (keys of `TABLE_FILES`)."""
     notes: tuple[str, ...]
     """Sentences on what the report left out or chose, also printed in it."""
-    analysis: Analysis
-    """The statistics behind the files, for callers that show them another way."""
+    analysis: Analysis | None
+    """The statistics behind the files, for callers that show them another way (None: a
+    report of the participants alone, no learner finished yet)."""
     audit: Audit | None = None
     """What each method ran under and which pairs differ (None without a settings table)."""
     rescored: pd.DataFrame | None = None
@@ -323,7 +327,8 @@ def _summary(
             continue
         more = "more" if row["R_T"] >= methods.loc[base, "R_T"] else "less"
         lines.append(
-            f"{head}; it collects {md.signed_pct(row['improvement_pct'])} ({more} reward) "
+            f"{head}; it collects {md.versus(row['R_T'], methods.loc[base, 'R_T'])} "
+            f"({more} reward) "
             f"compared with {method_name(base)}. "
             + _describe_primary(comparisons, method, alpha)
             + "; the paper's own test on the average curves: "
@@ -351,8 +356,8 @@ def _summary(
         )
     if base is not None and methods.loc[base, "R_T"] <= 0:
         lines.append(
-            f"- {method_name(base)}'s R_T is not positive, so percentages relative to it "
-            "are hard to read: compare the R_T values themselves."
+            f"- {method_name(base)}'s R_T is not positive, so the differences from it are "
+            "in points: a percentage of it would read as a gain or loss it is not."
         )
     if analysis.epsilon_reached is not None:
         reached = ", ".join(
@@ -374,14 +379,24 @@ def _methods_table(analysis: Analysis) -> str:
         "R_T_std": "std of agents' R_T",
         "R_T_min": "min",
         "R_T_max": "max",
-        "improvement_pct": "improvement",
+        "vs_baseline": "improvement",
     }
     for column in analysis.methods.columns:
         if column.endswith("_per_episode"):
             columns[column] = column.removesuffix("_per_episode").replace("_", " ") + " / episode"
-    formats = {c: md.fixed(2) for c in columns if c not in ("name", "agents", "episodes")}
-    formats["improvement_pct"] = md.signed_pct
-    return md.table(analysis.methods, columns, formats)
+    formats = {
+        c: md.fixed(2) for c in columns if c not in ("name", "agents", "episodes", "vs_baseline")
+    }
+    frame = analysis.methods.assign(vs_baseline=_versus_baseline(analysis, analysis.methods))
+    return md.table(frame, columns, formats)
+
+
+def _versus_baseline(analysis: Analysis, frame: pd.DataFrame) -> list[str]:
+    """Each row's R_T against the baseline method's (`md.versus`); blank without one."""
+    if analysis.baseline is None:
+        return ["–"] * len(frame)
+    base = float(analysis.methods.set_index("method").loc[analysis.baseline, "R_T"])
+    return [md.versus(r, base) for r in frame["R_T"]]
 
 
 def _tests_table(analysis: Analysis, alpha: float) -> str:
@@ -510,13 +525,13 @@ def _agents_table(analysis: Analysis, labels: Sequence[str], reference: str | No
     columns = {"label": "agent", "name": "method"}
     if "seed" in frame:
         columns["seed"] = "seed"
-    columns |= {"R_T": "R_T", "improvement_pct": "vs baseline method"}
-    formats = {"R_T": md.fixed(2), "improvement_pct": md.signed_pct, "seed": md.whole}
+    columns |= {"R_T": "R_T", "vs_baseline": "vs baseline method"}
+    formats = {"R_T": md.fixed(2), "seed": md.whole}
+    frame["vs_baseline"] = _versus_baseline(analysis, frame)
     if reference is not None:
         base = float(analysis.agents.set_index("label").loc[reference, "R_T"])
-        frame["vs_reference"] = [improvement_pct(r, base) for r in frame["R_T"]]
+        frame["vs_reference"] = [md.versus(r, base) for r in frame["R_T"]]
         columns["vs_reference"] = f"vs {reference}"
-        formats["vs_reference"] = md.signed_pct
     return md.table(frame, columns, formats)
 
 
@@ -578,6 +593,7 @@ def write_report(
     primary: str = "welch",
     power_draws: int = DEFAULT_DRAWS,
     power_seed: int = 0,
+    visits: Visits | None = None,
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -602,6 +618,7 @@ def write_report(
     test of the agents' R_T, or the paired t-test where seeds pair; the rest are secondary.
     The Power section plans a future study from these agents' R_T (`analysis.power`,
     `power_draws` simulated studies per size, seeded by `power_seed`) at `alpha`.
+    `visits` (an online study's) adds the participants' section (`analysis.human_report`).
     """
     if reference is not None and reference not in REFERENCES:
         raise EpisodeTableError(
@@ -725,14 +742,41 @@ def write_report(
         checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes, quality,
         tables.get("advice_correlations"), tables.get("comparisons"), power,
     )  # fmt: skip
-    report.write_text(
-        _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra),
-        encoding="utf-8",
-    )
+    text = _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra)
+    if visits is not None:
+        lines, files = human_section(visits, out, alpha)
+        text = text.rstrip("\n") + "\n\n" + "\n".join(lines)
+        figure_paths |= {p.stem: p for p in files if p.suffix == ".png"}
+        table_paths |= {p.stem: p for p in files if p.suffix == ".csv"}
+    report.write_text(text, encoding="utf-8")
     warnings = tuple(checked.warnings()) if checked is not None else ()
     return ReportResult(
         out, report, figure_paths, table_paths, (*warnings, *report_notes), analysis,
         checked, rescored, power,
+    )  # fmt: skip
+
+
+def write_human_report(
+    visits: Visits,
+    out_dir: str | Path,
+    *,
+    title: str,
+    notes: Sequence[str] = (),
+    alpha: float = 0.05,
+) -> ReportResult:
+    """The report of the participants alone, while no learner has finished: the section
+    of `analysis.human_report` under the title and `notes`."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in REPORT_FILES:
+        (out / name).unlink(missing_ok=True)
+    lines, files = human_section(visits, out, alpha)
+    report = out / REPORT_FILE
+    head = [f"# {title}", "", *(f"- {n}" for n in notes), ""]
+    report.write_text("\n".join([*head, *lines]), encoding="utf-8")
+    return ReportResult(
+        out, report, {p.stem: p for p in files if p.suffix == ".png"},
+        {p.stem: p for p in files if p.suffix == ".csv"}, (), None,
     )  # fmt: skip
 
 
@@ -879,11 +923,20 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
             columns[f"R_T_{scheme}"] = f"R_T under {scheme}"
             formats[f"R_T_{scheme}"] = md.fixed(2)
             if f"improvement_{scheme}" in extra.rescored:
-                columns[f"improvement_{scheme}"] = f"vs baseline under {scheme}"
-                formats[f"improvement_{scheme}"] = md.signed_pct
+                columns[f"vs_{scheme}"] = f"vs baseline under {scheme}"
                 columns[f"p_welch_{scheme}"] = f"Welch's p under {scheme}"
                 formats[f"p_welch_{scheme}"] = md.p_value
         rescored, withheld = extra.rescored, ""
+        if baseline is not None and f"improvement_{REWARD_SCHEMES[0]}" in rescored:
+            base = rescored.set_index("method").loc[baseline]
+            rescored = rescored.assign(
+                **{
+                    f"vs_{scheme}": [
+                        md.versus(v, base[f"R_T_{scheme}"]) for v in rescored[f"R_T_{scheme}"]
+                    ]
+                    for scheme in REWARD_SCHEMES
+                }
+            )
         if "withheld" in rescored and (rescored["withheld"] != "").any():
             rescored = rescored.assign(
                 withheld=[f"withheld: {w}" if w else "" for w in rescored["withheld"]]

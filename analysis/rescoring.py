@@ -12,7 +12,7 @@ from __future__ import annotations
 import pandas as pd
 
 from analysis.episodes import method_name, order_methods
-from analysis.stats import student_t_test
+from analysis.stats import improvement_pct, student_t_test
 from sim.rewards import REWARD_SCHEMES, rescore
 
 STEP_COLUMNS: tuple[str, ...] = (
@@ -98,8 +98,7 @@ def rescoring_table(
             column = f"R_T_{logged_or_scheme}"
             reference = float(base.loc[baseline, column])
             table[f"improvement_{logged_or_scheme}"] = [
-                100.0 * (value - reference) / abs(reference) if reference else float("nan")
-                for value in table[column]
+                improvement_pct(value, reference) for value in table[column]
             ]
         # Under one scheme the agents' R_T are comparable, so they can be tested.
         ours = frame["method"] == baseline

@@ -6,7 +6,9 @@ can be written as CSV as it is. The definitions follow the paper's "Results":
 - `R_T` of an agent is the sum of its collected reward over the N episodes (Eq. 3).
 - `R_T` of a method is the sum over episodes of the method's average curve (the black,
   blue and red lines of Figure 5); with equal N it equals the mean of its agents' R_T.
-- The improvement of a method is `(R_T - R_T_baseline) / |R_T_baseline| * 100`.
+- The improvement of a method is `(R_T - R_T_baseline) / R_T_baseline * 100` where the
+  baseline's R_T is positive; against a reference that is not, a percentage says nothing
+  (+405 % of a negative score), so reports give the difference in points instead.
 - Table 2 compares two methods' average curves as two samples of N values each, with
   the independent two-sample Student t-test (equal variances): t = 7.6829 with
   p = 6.3947e-14 is what N = 300 per sample (598 degrees of freedom) gives, and not what
@@ -50,14 +52,12 @@ def _check_baseline(table: pd.DataFrame, baseline: str | None) -> None:
 
 
 def improvement_pct(total: float, baseline_total: float) -> float:
-    """How much more reward than the baseline, in percent of the baseline's magnitude.
-
-    The magnitude keeps the sign meaningful (positive means more reward) when a short run
-    leaves the baseline's R_T negative; a baseline of exactly zero gives NaN.
-    """
-    if baseline_total == 0:
+    """How much more reward than the baseline, in percent of the baseline's R_T; NaN where
+    that is not positive (a short run's negative R_T): a percentage of it misleads, and
+    `analysis.markdown.versus` gives the difference in points instead."""
+    if not baseline_total > 0:
         return float("nan")
-    return (total - baseline_total) / abs(baseline_total) * 100.0
+    return (total - baseline_total) / baseline_total * 100.0
 
 
 def method_curves(episodes: pd.DataFrame) -> pd.DataFrame:
@@ -75,7 +75,8 @@ def agent_totals(episodes: pd.DataFrame, *, baseline: str | None = "autonomous")
     """R_T per agent, with its improvement over the baseline method's R_T.
 
     Columns: session_id, label, method, [seed], episodes, R_T, mean_reward (R_T / N),
-    improvement_pct (NaN without a baseline).
+    improvement_pct (NaN without a baseline, or where its R_T is not positive) and
+    difference (R_T minus the baseline's, in points; NaN without a baseline).
     """
     table = validate_episodes(episodes)
     _check_baseline(table, baseline)
@@ -86,9 +87,11 @@ def agent_totals(episodes: pd.DataFrame, *, baseline: str | None = "autonomous")
     agents["mean_reward"] = agents["R_T"] / agents["episodes"]
     if baseline is None:
         agents["improvement_pct"] = np.nan
+        agents["difference"] = np.nan
     else:
         base = _method_total(table, baseline)
         agents["improvement_pct"] = [improvement_pct(r, base) for r in agents["R_T"]]
+        agents["difference"] = agents["R_T"] - base
     return agents
 
 
@@ -101,8 +104,8 @@ def method_totals(episodes: pd.DataFrame, *, baseline: str | None = "autonomous"
     """R_T per method (the paper's definition) with the spread of its agents' R_T.
 
     Columns: method, name, agents, episodes, R_T, R_T_std (sample std of the agents' R_T),
-    R_T_min, R_T_max, improvement_pct, and the mean per episode of every outcome column
-    present (`steps`, `placed_correct`, `misplaced`, `lost`).
+    R_T_min, R_T_max, improvement_pct, difference (as `agent_totals`), and the mean per
+    episode of every outcome column present (`steps`, `placed_correct`, `misplaced`, `lost`).
     """
     table = validate_episodes(episodes)
     _check_baseline(table, baseline)
@@ -122,6 +125,7 @@ def method_totals(episodes: pd.DataFrame, *, baseline: str | None = "autonomous"
             "R_T_min": float(totals.min()),
             "R_T_max": float(totals.max()),
             "improvement_pct": float("nan") if base is None else improvement_pct(total, base),
+            "difference": float("nan") if base is None else total - base,
         }
         for column in OUTCOME_COLUMNS:
             if column in table:

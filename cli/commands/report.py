@@ -96,6 +96,7 @@ def _fail(message: str, code: int = EXIT_USAGE) -> int:
 
 
 def report(args: argparse.Namespace) -> int:
+    from analysis.markdown import versus
     from study.db.engine import make_session_factory
     from study.services.errors import ServiceError
     from study.services.reports import ReportRequest, build_report, describe_report
@@ -139,10 +140,14 @@ def report(args: argparse.Namespace) -> int:
     for note in built.notes:
         if note not in warnings:
             print(f"note: {note}")
+    if result.analysis is None:  # the participants alone: no learner finished yet
+        print(f"report: {result.report}")
+        return 0
     methods_table = result.analysis.methods
+    base = result.analysis.baseline
+    reference = None if base is None else methods_table.set_index("method").loc[base, "R_T"]
     for _, row in methods_table.iterrows():
-        gain = row["improvement_pct"]
-        more = "" if gain != gain else f", {gain:+.1f} % vs {result.analysis.baseline}"
+        more = "" if base is None else f", {versus(row['R_T'], reference)} vs {base}"
         print(f"{row['name']}: {row['agents']} agents, R_T {row['R_T']:.2f}{more}")
     print(f"figures: {', '.join(p.name for p in result.figures.values())}")
     print(f"tables: {', '.join(p.name for p in result.tables.values())}")

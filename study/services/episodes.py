@@ -7,6 +7,7 @@ Pretraining episodes are left out: the paper's curves and R_T count the training
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import pandas as pd
 from sqlalchemy import select
@@ -18,6 +19,9 @@ from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.records import TRAINING
 from study.db.models import Advice, Episode, Step, StudySession
+
+if TYPE_CHECKING:
+    from analysis.human import Visits
 
 
 def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
@@ -84,6 +88,39 @@ def load_replayed_advice(db: Session, session_ids: Sequence[int]) -> pd.DataFram
     )
     rows = [tuple(row) for row in db.execute(query)]
     return pd.DataFrame(rows, columns=REPLAYED_ADVICE_COLUMNS)
+
+
+def load_visits(db: Session, sessions: Sequence[StudySession]) -> Visits:
+    """What the participants of these sessions did (`analysis.human.Visits`), the tables
+    the export writes, read from the database."""
+    from analysis.human import Visits
+    from study.services.visit_export import check_rows, questionnaire_rows, scale_rows
+
+    visits = pd.DataFrame(
+        [(s.id, s.condition, s.outcome, s.consented_at, s.status) for s in sessions],
+        columns=["session_id", "condition", "outcome", "consented_at", "status"],
+    )
+    query = (
+        select(Advice.session_id, Advice.advisor, Advice.action, Advice.decision_time_s)
+        .where(Advice.session_id.in_([s.id for s in sessions]))
+        .order_by(Advice.session_id, Advice.advice_index)
+    )
+    advice = pd.DataFrame(
+        [tuple(row) for row in db.execute(query)],
+        columns=["session_id", "advisor", "action", "decision_time_s"],
+    )
+    check = pd.DataFrame(
+        list(check_rows(db, list(sessions))),
+        columns=["session_id", "attempt", "question", "correct"],
+    )
+    answers = pd.DataFrame(
+        list(questionnaire_rows(db, list(sessions))),
+        columns=["session_id", "instrument", "item", "value_number"],
+    )
+    scales = pd.DataFrame(
+        list(scale_rows(db, list(sessions))), columns=["session_id", "scale", "score"]
+    )
+    return Visits(visits, advice, check, answers, scales)
 
 
 def session_settings(

@@ -254,19 +254,42 @@ def build_report(
     analysis (pandas' tables, scipy's tests, matplotlib's figures) loads here, when a report
     is built, not with the web app."""
     from analysis.advice import replayed_advice_notes
-    from analysis.report import write_report
+    from analysis.report import write_human_report, write_report
     from study.services.episodes import (
         load_advised_steps,
         load_episodes,
         load_replayed_advice,
         load_training_steps,
+        load_visits,
         session_settings,
     )
 
     request = request or ReportRequest()
     study = get_study(db, study_id)
-    sessions, notes = select_sessions(db, study_id, request)
     design = design_of(study)
+    visits = learners = None
+    if design is not None:  # the participants' measures wait for no learner
+        everything = [s for s in list_sessions(db, study_id) if not s.preview and not s.pooled]
+        visits = load_visits(db, everything)
+    if visits is not None and len(visits.visits):
+        done = visits.completed
+        finished = sum(is_finished(status) for status in done["status"])
+        learners = (
+            f"Learners finished: {finished} of the {len(done)} completed visits' learners; "
+            "the participants' section covers every completed visit, the learners' R_T only "
+            "the finished ones."
+        )
+    try:
+        sessions, notes = select_sessions(db, study_id, request)
+    except Conflict:
+        if visits is None or visits.completed.empty or request.sessions:
+            raise
+        assert learners is not None
+        title = request.title or f"{study.name}: the participants"
+        lines = [learners, *request.notes, f"Study {study.id} ({study.name})."]
+        alpha = design.alpha if design is not None else 0.05
+        result = write_human_report(visits, out_dir, title=title, notes=lines, alpha=alpha)
+        return StudyReport(result, (learners,))
     group = {s.id: (s.condition if design and s.condition else s.method) for s in sessions}
     baseline, baseline_notes = choose_baseline(set(group.values()), request.baseline)
     if baseline is None and request.baseline == AUTO and design is None:
@@ -302,6 +325,7 @@ def build_report(
         for m in dict.fromkeys(group[s.id] for s in sessions)
     )
     lines = [
+        *([learners] if learners else []),
         *request.notes,
         f"Study {study.id} ({study.name}); sessions {_ids(sessions)}: {counts}.",
         *notes,
@@ -322,6 +346,7 @@ def build_report(
             advice=advice,
             primary=request.primary,
             alpha=design.alpha if design is not None else 0.05,  # write_report's default
+            visits=visits if visits is not None and len(visits.visits) else None,
         )
     except EpisodeTableError as error:
         reason = error.worded(request.choose.length)
@@ -371,6 +396,7 @@ class ReportDescription(TypedDict):
 def describe_report(study_id: int, built: StudyReport) -> ReportDescription:
     """What the API says about a report: its sessions, choices, files and R_T per method."""
     result = built.result
+    analysis = result.analysis
     files = [("report", result.report)]
     files += [("figure", p) for p in result.figures.values()]
     files += [("figure", p) for p in result.vector_figures]
@@ -378,9 +404,11 @@ def describe_report(study_id: int, built: StudyReport) -> ReportDescription:
     return {
         "study_id": study_id,
         "created_at": iso_z(datetime.now(UTC)),
-        "sessions": sorted(int(i) for i in result.analysis.episodes["session_id"].unique()),
-        "baseline": result.analysis.baseline,
-        "n_episodes": result.analysis.n_episodes,
+        "sessions": []
+        if analysis is None
+        else sorted(int(i) for i in analysis.episodes["session_id"].unique()),
+        "baseline": None if analysis is None else analysis.baseline,
+        "n_episodes": 0 if analysis is None else analysis.n_episodes,
         "notes": list(built.notes),
         "files": [ReportFileEntry(name=path.name, kind=kind) for kind, path in files],
         "methods": [
@@ -394,7 +422,7 @@ def describe_report(study_id: int, built: StudyReport) -> ReportDescription:
                 if pd.isna(row["improvement_pct"])
                 else float(row["improvement_pct"]),
             )
-            for _, row in result.analysis.methods.iterrows()
+            for _, row in (pd.DataFrame() if analysis is None else analysis.methods).iterrows()
         ],
     }
 

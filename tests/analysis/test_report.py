@@ -73,7 +73,7 @@ def test_the_csv_tables_match_the_input(report: tuple[pd.DataFrame, ReportResult
         assert methods.loc[method, "R_T"] == pytest.approx(curve.loc[method].sum())
     base = curve.loc["autonomous"].sum()
     assert methods.loc["agent", "improvement_pct"] == pytest.approx(
-        (curve.loc["agent"].sum() - base) / abs(base) * 100
+        (curve.loc["agent"].sum() - base) / base * 100
     )
 
     tests = pd.read_csv(result.tables["t_tests"])
@@ -227,6 +227,22 @@ def test_the_summary_reads_advice_against_its_control_by_the_primary_test(
     pooled = result.analysis.t_tests.set_index(["method_a", "method_b", "sample"])
     student = pooled.loc[("agent", "procedure", "agent_totals"), "t"]
     assert f"t = {student:.2f}," not in line, "the pooled test is not the plan's"
+
+
+def test_no_percentage_against_a_negative_reference(tmp_path: Path) -> None:
+    """A short run's negative baseline: the differences are in points, never "+405 %"."""
+    curves = {
+        "a1": ("autonomous", [-2.0, -1.0]),
+        "a2": ("autonomous", [-3.0, -2.0]),
+        "h1": ("human", [1.0, 2.0]),
+        "h2": ("human", [0.0, 2.0]),
+    }
+    text = write_report(episodes_from_curves(curves), tmp_path).report.read_text()
+    # autonomous R_T -4, human 2.5: 6.5 points more (as a percentage of |-4|: +162.50 %)
+    assert "it collects +6.50 points (more reward) compared with autonomous DeepRL" in text
+    assert "| +6.50 points |" in text, "the methods table"
+    assert "| h1 | human-IDeepRL | 3.00 | +7.00 points |" in text, "the agents table"
+    assert not re.search(r"[+-]\d+\.\d+ %", text), re.findall(r"[+-]\d+\.\d+ %", text)
 
 
 def test_bad_input_writes_nothing(tmp_path: Path) -> None:

@@ -18,6 +18,7 @@ from analysis import (
     student_t_test,
     t_tests,
 )
+from analysis import markdown as md
 from analysis.paper import PAPER_EPISODES, PAPER_T_TESTS
 from tests.analysis.helpers import HAND_CASE, episodes_from_curves
 
@@ -55,11 +56,19 @@ def test_r_t_per_method_is_the_sum_of_its_average_curve() -> None:
     assert methods.loc["agent", "name"] == "agent-IDeepRL"
 
 
-def test_the_improvement_uses_the_baseline_of_your_choice_and_its_magnitude() -> None:
+def test_the_improvement_uses_the_baseline_of_your_choice_and_no_percent_of_a_negative_one() -> (
+    None
+):
     negative = {"a": ("autonomous", [-3.0, -1.0]), "b": ("agent", [-1.0, -1.0])}
     methods = method_totals(episodes_from_curves(negative)).set_index("method")
-    # from -4 to -2 is more reward: +50 % of |-4|
-    assert methods.loc["agent", "improvement_pct"] == pytest.approx(50.0)
+    # from -4 to -2: no percentage of -4 (it read as +50 %); the difference is in points
+    assert math.isnan(methods.loc["agent", "improvement_pct"])
+    assert methods.loc["agent", "difference"] == pytest.approx(2.0)
+    assert md.versus(methods.loc["agent", "R_T"], methods.loc["autonomous", "R_T"]) == (
+        "+2.00 points"
+    )
+    assert md.versus(7.0, 4.0) == "+75.00 %"
+    assert md.versus(1.0, 0.0) == "+1.00 points"
     by_agent = method_totals(episodes_from_curves(HAND_CASE), baseline="agent").set_index("method")
     assert by_agent.index[0] == "agent"
     assert by_agent.loc["human", "improvement_pct"] == pytest.approx((9 - 7) / 7 * 100)

@@ -118,4 +118,4 @@ def test_a_killed_batch_resumes_with_the_missing_runs_only(
     assert "No autonomous DeepRL sessions" not in printed and "not comparable" not in printed
     methods = {r["method"]: r for r in read_csv(out / "r_t_per_method.csv")}
     assert set(methods) == {"autonomous", "oracle", "random"}
-    assert all(methods[m]["improvement_pct"] != "" for m in ("oracle", "random"))
+    assert all(methods[m]["difference"] != "" for m in ("oracle", "random"))
