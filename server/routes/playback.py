@@ -16,7 +16,6 @@ from fastapi import APIRouter, HTTPException, Path, Request, WebSocket
 from fastapi.responses import RedirectResponse, Response
 from sqlalchemy import select
 
-import sim
 from runs.worker.rerun import RerunOrder
 from server.deps import DbDep
 from server.live.playbacks import Playback, Playbacks, TooManyPlaybacks
@@ -74,7 +73,7 @@ def playback_page(request: Request, db: DbDep, session_id: SessionId) -> Respons
             "site_title": "IDeepRL dashboard",
             "session": session,
             "scene_src": scene_src(request),
-            "action_names": sim.ACTION_NAMES,
+            "action_names": session.spec.the_task.action_words,
         },
     )
 
@@ -135,7 +134,7 @@ def _state(playback: Playback) -> PlaybackState:
     recorded: RecordedEpisode = playback.recorded
     base = f"{API}/playbacks/{playback.id}"
     first = recorded.episode.first_global_step
-    names = sim.ACTION_NAMES
+    names = recorded.session.spec.the_task.action_words  # its task's words
     ready = playback.state == "ready"
     return PlaybackState(
         id=playback.id,

@@ -32,7 +32,6 @@ from sqlalchemy.orm import Session
 from analysis.settings import where
 from learner.fields import leaves
 from learner.run import declared
-from sim.actions import ACTION_NAMES
 from sim.rules import SortRule
 from study.db.models import (
     Advice,
@@ -167,6 +166,7 @@ def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterat
     images.mkdir(exist_ok=True)
     for session in sessions:
         query = select(Advice).where(Advice.session_id == session.id)
+        words = session.spec.the_task.action_words  # each action in its task's words
         for a in db.scalars(query.order_by(Advice.advice_index).execution_options(yield_per=500)):
             name = f"session-{session.id}-advice-{a.advice_index:05d}.png"
             (images / name).write_bytes(a.observation_png)
@@ -176,7 +176,7 @@ def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterat
                 "global_step": a.global_step,
                 "advisor": a.advisor,
                 "action": a.action,
-                "action_name": None if a.action is None else ACTION_NAMES[a.action],
+                "action_name": None if a.action is None else words[a.action],
                 "greedy_action": a.greedy_action,
                 "response_time_s": a.response_time_s,
                 "decision_time_s": a.decision_time_s,

@@ -29,10 +29,8 @@ RUN = {
     "method": "human",
     "task": "gridworld",
     "seed": 5,
-    "episodes": 2,
-    "max_episode_steps": 30,
     "config": {"pretraining_steps": BUDGET + 20, "batch_size": 16, "memory_size": 500,
-               "advice_budget": BUDGET},
+               "advice_budget": BUDGET, "episodes": 2, "max_episode_steps": 30},
 }  # fmt: skip
 
 
@@ -117,7 +115,9 @@ def test_a_grid_world_participant_goes_through_the_whole_online_visit(
         arrivals.close()
     folder = exported(live, study, tmp_path)
     assert [r["outcome"] for r in table(folder, "sessions")] == ["completed"]
-    assert [r["result"] for r in table(folder, "check")] == ["retry", "passed"]
+    check = table(folder, "check")  # a row per question and try
+    assert [r["result"] for r in check] == ["retry"] * 2 + ["passed"] * 2
+    assert {r["question"] for r in check} == {q.id for q in task.check_questions}
     advice = table(folder, "advice")
     assert [int(r["action"]) for r in advice] == given
     assert {r["action_name"] for r in advice} <= {a.word for a in task.actions}
