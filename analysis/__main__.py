@@ -32,7 +32,7 @@ from analysis.baseline import (
     compare_conditions,
 )
 from analysis.demo_curves import demo_episodes
-from analysis.episodes import CONTRACT, REQUIRED_COLUMNS, EpisodeTableError
+from analysis.episodes import CONTRACT, REQUIRED_COLUMNS, EpisodeTableError, arm
 from analysis.exported import ExportError, export_of_table, read_export
 from analysis.finished import Choice, left_out_notes, nothing_finished
 from analysis.replays import REPLAYED, unchanged_replays_note
@@ -143,7 +143,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         notes += left_out
         if export.design is not None:  # an online study: its conditions are compared
             # (a session with no condition, a batch run beside the study, keeps its method)
-            group = {i: str(run.method) for i, run in export.runs.items()} | export.conditions
+            group = {i: arm(run.method, run.feedback) for i, run in export.runs.items()}
+            group |= export.conditions
             episodes, settings, note = compare_conditions(episodes, settings, group, export.alpha)
             notes.append(note)
         if export.replayed_advice is not None:  # each replayed arm: how much advice met its image

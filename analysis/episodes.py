@@ -26,6 +26,7 @@ OPTIONAL_COLUMNS: tuple[str, ...] = (
     "placed_correct",
     "misplaced",
     "lost",
+    "success",
     "epsilon",
 )
 """Columns used when present: `label` names an agent in figures (derived when absent),
@@ -40,6 +41,7 @@ EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
     "episode",
     "collected_reward",
     *OUTCOME_COLUMNS,
+    "success",
     "epsilon",
 )
 """The table the platform gives the analysis (from its database, or from an export);
@@ -61,6 +63,8 @@ METHOD_NAMES: dict[str, str] = {
     "random": "random-IDeepRL",
     "procedure": "procedure control",
     "sb3-dqn": "SB3 DQN",
+    "oracle-evaluative": "oracle evaluative feedback",
+    "agent-evaluative": "agent evaluative feedback",
 }
 """Display names in the paper's words (and Stable-Baselines3's DQN, the independent
 baseline)."""
@@ -98,6 +102,13 @@ class EpisodeTableError(ValueError):
         if self.n_episodes is None:
             return self.text
         return self.text.replace("{n_episodes}", length.format(n=self.n_episodes))
+
+
+def arm(method: str, feedback: str = "advice") -> str:
+    """What a report compares a run as: its method, and for evaluative feedback (the
+    paper's other strategy) its method with `-evaluative`, so that advice and evaluation
+    by the same advisor are two arms, never one mean."""
+    return f"{method}-evaluative" if feedback == "evaluative" else method
 
 
 def method_name(method: str) -> str:

@@ -26,7 +26,7 @@ from typing import Any
 import pandas as pd
 
 from analysis.advice import ADVICE_COLUMNS, REPLAYED_ADVICE_COLUMNS
-from analysis.episodes import EPISODE_TABLE_COLUMNS
+from analysis.episodes import EPISODE_TABLE_COLUMNS, arm
 from analysis.finished import not_finished, status_of
 from analysis.replays import REPLAYED, unchanged_replays
 from analysis.rescoring import STEP_COLUMNS
@@ -120,7 +120,9 @@ def read_export(path: Path, sessions: Collection[int] | None = None) -> Exported
     episodes = _with_stage(_table(path, "episodes"))
     episodes = episodes[episodes["session_id"].isin(list(runs))]
     training = episodes[episodes["stage"] == "train"].copy()
-    training["method"] = training["session_id"].map({i: r.method for i, r in runs.items()})
+    training["method"] = training["session_id"].map(
+        {i: arm(r.method, r.feedback) for i, r in runs.items()}
+    )
     training["seed"] = training["session_id"].map({i: r.seed for i, r in runs.items()})
     training = training.sort_values(["session_id", "episode"])
     every_step = _with_stage(_table(path, "steps"))
@@ -294,8 +296,9 @@ def _with_stage(table: pd.DataFrame) -> pd.DataFrame:
     for column in ("collected_reward", "epsilon", "reward"):
         if column in table:
             table[column] = pd.to_numeric(table[column]).astype("float64")
-    if "terminated" in table:
-        table["terminated"] = table["terminated"].map(_boolean)
+    for column in ("terminated", "success"):
+        if column in table:
+            table[column] = table[column].map(_boolean)
     return table
 
 

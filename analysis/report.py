@@ -384,6 +384,8 @@ def _methods_table(analysis: Analysis) -> str:
     for column in analysis.methods.columns:
         if column.endswith("_per_episode"):
             columns[column] = column.removesuffix("_per_episode").replace("_", " ") + " / episode"
+    if "success_rate" in analysis.methods:
+        columns["success_rate"] = "success rate (of its episodes)"
     formats = {
         c: md.fixed(2) for c in columns if c not in ("name", "agents", "episodes", "vs_baseline")
     }

@@ -16,6 +16,7 @@ from typing import Any
 import pandas as pd
 
 from analysis.audit import describe_learner
+from analysis.episodes import arm
 from learner import sb3_spec
 from learner.config import PRESETS, DQNConfig
 from learner.fields import leaves
@@ -52,7 +53,7 @@ def settings_table(
         rows.append(
             {
                 "session_id": session_id,
-                "method": spec.method,
+                "method": arm(spec.method, spec.feedback),
                 "learner": learner,
                 **{leaf.name: _text(values[leaf.name]) for leaf in settings},
                 **(
@@ -65,7 +66,12 @@ def settings_table(
                 ),
                 "advice": "none"
                 if not spec.advised
-                else f"{spec.strategy}{_options(spec.strategy_options.given())}, "
+                else (
+                    f"evaluative feedback (weight {spec.feedback_weight:g}), "
+                    if spec.feedback == "evaluative"
+                    else ""
+                )
+                + f"{spec.strategy}{_options(spec.strategy_options.given())}, "
                 f"budget {spec.advice_budget}",
             }
         )

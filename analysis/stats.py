@@ -105,7 +105,9 @@ def method_totals(episodes: pd.DataFrame, *, baseline: str | None = "autonomous"
 
     Columns: method, name, agents, episodes, R_T, R_T_std (sample std of the agents' R_T),
     R_T_min, R_T_max, improvement_pct, difference (as `agent_totals`), and the mean per
-    episode of every outcome column present (`steps`, `placed_correct`, `misplaced`, `lost`).
+    episode of every outcome column present (`steps`, `placed_correct`, `misplaced`, `lost`);
+    with a `success` column, `success_rate`: the share of the method's episodes that
+    succeeded (the task's `is_success`).
     """
     table = validate_episodes(episodes)
     _check_baseline(table, baseline)
@@ -131,6 +133,8 @@ def method_totals(episodes: pd.DataFrame, *, baseline: str | None = "autonomous"
             if column in table:
                 values = pd.to_numeric(table.loc[table["method"] == method, column])
                 row[f"{column}_per_episode"] = float(values.mean())
+        if "success" in table:  # the share of its episodes the task counts as a success
+            row["success_rate"] = float(table.loc[table["method"] == method, "success"].mean())
         rows.append(row)
     return pd.DataFrame(rows)
 

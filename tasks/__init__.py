@@ -53,10 +53,25 @@ class CheckQuestion:
     """A comprehension check's question about the task, with its right answer."""
 
     id: str
-    """Lowercase letters, digits and _, starting with a letter."""
+    """Lowercase letters, digits and _, starting with a letter (at most 40)."""
     text: str
     choices: tuple[str, ...]
+    """2 to 8 distinct choices, each at most 500 characters, as the participant reads them."""
     answer: str
+    """The right choice, one of `choices`."""
+
+    def __post_init__(self) -> None:
+        """A question a check page can ask: `TaskError` says what is wrong with it."""
+        where = f"check question {self.id!r}"
+        if not re.fullmatch(r"[a-z][a-z0-9_]{0,39}", self.id):
+            raise TaskError(f"{where}: its id takes lowercase letters, digits and _")
+        texts = (self.text, *self.choices)
+        if not (2 <= len(self.choices) <= 8) or len(set(self.choices)) != len(self.choices):
+            raise TaskError(f"{where}: it takes 2 to 8 different choices")
+        if any(not isinstance(t, str) or not 1 <= len(t) <= 500 or "\x00" in t for t in texts):
+            raise TaskError(f"{where}: its text and choices take 1 to 500 characters each")
+        if self.answer not in self.choices:
+            raise TaskError(f"{where}: its answer {self.answer!r} is not one of its choices")
 
 
 class TaskError(ValueError):

@@ -257,8 +257,8 @@ async def submit_advice(
         request = handle.request
         if request is None or handle.status != Status.running:
             raise Conflict(
-                "no advice is wanted right now (the robot is moving or the learner is on its "
-                "own); wait for the next observation from GET /api/participant/state"
+                "no advice is wanted right now (the learner is acting or is on its own); "
+                "wait for the next observation from GET /api/participant/state"
             )
         if request.advice_index != body.advice_index:
             raise Conflict(

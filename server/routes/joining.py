@@ -13,7 +13,7 @@ from study.db.models import Outcome
 from study.schemas.design import StudyDesign
 from study.services import assignment, studies
 from study.services.errors import NotFound
-from tasks import get_task
+from tasks import Task, get_task
 
 router = APIRouter(include_in_schema=False)
 COOKIE = "ideeprl_visit"
@@ -57,7 +57,7 @@ async def open_link(request: Request, key: str) -> Response:
             None,
             title,
             action=f"/join/{key}" + (f"?{query}" if query else ""),
-            task=get_task(design_task(design)),
+            task=_task_or_none(design_task(design)),
         )
     return await _join(request, key, linked)
 
@@ -117,11 +117,15 @@ def _not_a_link(request: Request) -> Response:
     return response
 
 
-def design_task(design: StudyDesign) -> str:
+def design_task(design: StudyDesign) -> str | None:
     """The task the study link's conditions share (the pages' words before a session
-    exists); `sorting` when they name different ones, or none."""
+    exists); None when they name different ones."""
     named = {str(c.run.get("task", "sorting")) for c in design.conditions.values()}
-    return named.pop() if len(named) == 1 else "sorting"
+    return named.pop() if len(named) == 1 else None
+
+
+def _task_or_none(name: str | None) -> Task | None:
+    return None if name is None else get_task(name)
 
 
 def _linked(request: Request, key: str) -> Linked:

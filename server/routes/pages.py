@@ -7,8 +7,9 @@ session) the link shows the consent page; then the induction (the page in the UR
 they press Start; then they advise until the budget is spent; then they are thanked.
 Opening the link starts the session's random pretraining, so the robot is ready when the
 induction ends. Page texts come from the study's `texts` (keys in `TEXT_KEYS`), else from
-`web/texts/`; once a participant consented, their pages show the stored version they
-consented to.
+the session's task (`tasks.Task.texts`: the sorting robot's are in `tasks/sorting/texts/`),
+else from `web/texts/`, the texts for any task; once a participant consented, their pages
+show the stored version they consented to.
 """
 
 from __future__ import annotations
@@ -327,12 +328,19 @@ def _page(
 participant_page = _page
 
 
-def study_title(texts: dict[str, Any] | None, task: str = "sorting") -> str:
-    """A study's page title (its `title` text, else its task's), before any session."""
-    the_task = get_task(task)
-    raw = str((texts or {}).get("title") or default_text("title", the_task))
-    for name, value in task_words(the_task).items():
-        raw = raw.replace(name, value)
+def study_title(texts: dict[str, Any] | None, task: str | None = "sorting") -> str:
+    """A study's page title (its `title` text, else its task's), before any session;
+    `task` None: its conditions' tasks differ, and the title names none."""
+    given = (texts or {}).get("title")
+    if given:
+        raw = str(given)
+    elif task is None:
+        raw = "Help a learning program learn"
+    else:
+        the_task = get_task(task)
+        raw = default_text("title", the_task)
+        for name, value in task_words(the_task).items():
+            raw = raw.replace(name, value)
     return render_text(raw).striptags()
 
 

@@ -233,13 +233,13 @@ class QuestionnaireSpec(BaseModel):
         """The SPEC's default: NASA-TLX raw, the trust checklist, optional demographics."""
         return cls()
 
-    def sections(self) -> list[Section]:
+    def sections(self, agent: str = "robot") -> list[Section]:
         """What the page asks, in order."""
         out = []
         if self.nasa_tlx:
             out.append(_nasa_tlx())
         if self.trust:
-            out.append(_trust())
+            out.append(_trust(agent))
         if self.items:
             out.append(
                 Section(
@@ -272,20 +272,22 @@ def _nasa_tlx() -> Section:
     return Section(instrument="nasa_tlx", title="Workload", intro=intro, items=items)
 
 
-def _trust() -> Section:
+def _trust(agent: str = "robot") -> Section:
+    """The trust checklist about what the participant advised: the sorting robot, or the
+    task's own agent (`tasks.Task.agent`), its items' words taken from it."""
     items = [
         Item(
             id=inst.trust_item_id(n),
             kind="likert",
-            text=text,
+            text=text.replace("robot", agent),
             required=True,
             points=inst.TRUST_POINTS,
             anchors=list(inst.TRUST_ANCHORS),
         )
         for n, text in enumerate(inst.TRUST_ITEMS, start=1)
     ]
-    intro = "How much does each statement fit your impression of the robot you advised?"
-    return Section(instrument="trust", title="The robot", intro=intro, items=items)
+    intro = f"How much does each statement fit your impression of the {agent} you advised?"
+    return Section(instrument="trust", title=f"The {agent}", intro=intro, items=items)
 
 
 def _demographics() -> Section:

@@ -121,10 +121,11 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
     "advisor": ("string", "Who advised: human, agent, oracle, random, fitted or replayed."),
     "action": (
         "integer",
-        "Advised action: 0 grab, 1 move right, 2 move left, 3 drop; empty for a replay's "
+        "Advised action, its index in the run's task's actions (the sorting robot's: 0 grab, "
+        "1 move right, 2 move left, 3 drop); empty for a replay's "
         "request beyond its recorded stream (asked, counted against the budget, none given).",
     ),
-    "action_name": ("string", "The advised action's name."),
+    "action_name": ("string", "The advised action's words, as its task names it."),
     "greedy_action": (
         "integer",
         "The learner's own greedy choice for the same observation (if known).",

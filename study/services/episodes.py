@@ -14,7 +14,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from analysis.advice import ADVICE_COLUMNS, REPLAYED_ADVICE_COLUMNS
-from analysis.episodes import EPISODE_TABLE_COLUMNS
+from analysis.episodes import EPISODE_TABLE_COLUMNS, arm
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.records import TRAINING
@@ -27,8 +27,8 @@ if TYPE_CHECKING:
 def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
     """The training episodes of these sessions, ordered by session and episode."""
     ids = list(session_ids)
-    runs = {
-        s.id: (s.method, s.seed)
+    runs = {  # the method as the report compares it: evaluative feedback an arm of its own
+        s.id: (arm(s.method, s.spec.feedback), s.seed)
         for s in db.scalars(select(StudySession).where(StudySession.id.in_(ids)))
     }
     query = (
@@ -40,6 +40,7 @@ def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
             Episode.placed_correct,
             Episode.misplaced,
             Episode.lost,
+            Episode.success,
             Episode.epsilon,
         )
         .where(Episode.session_id.in_(ids), Episode.stage == TRAINING)

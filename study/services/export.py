@@ -31,7 +31,7 @@ from sqlalchemy.orm import Session
 
 from analysis.settings import where
 from learner.fields import leaves
-from learner.run import declared
+from learner.run import RunSpecError, declared
 from sim.rules import SortRule
 from study.db.models import (
     Advice,
@@ -161,12 +161,22 @@ def _records(
             yield row
 
 
+def _action_words(session: StudySession) -> tuple[str, ...]:
+    """The session's actions in its task's words; none where its task cannot be had here
+    (a researcher's module not importable by this process: the export then leaves the
+    names empty rather than failing)."""
+    try:
+        return session.spec.the_task.action_words
+    except RunSpecError:
+        return ()
+
+
 def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterator[dict[str, Any]]:
     images = out / "advice"
     images.mkdir(exist_ok=True)
     for session in sessions:
         query = select(Advice).where(Advice.session_id == session.id)
-        words = session.spec.the_task.action_words  # each action in its task's words
+        words = _action_words(session)
         for a in db.scalars(query.order_by(Advice.advice_index).execution_options(yield_per=500)):
             name = f"session-{session.id}-advice-{a.advice_index:05d}.png"
             (images / name).write_bytes(a.observation_png)
@@ -176,7 +186,9 @@ def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterat
                 "global_step": a.global_step,
                 "advisor": a.advisor,
                 "action": a.action,
-                "action_name": None if a.action is None else words[a.action],
+                "action_name": words[a.action]
+                if a.action is not None and a.action < len(words)
+                else None,
                 "greedy_action": a.greedy_action,
                 "response_time_s": a.response_time_s,
                 "decision_time_s": a.decision_time_s,
@@ -192,9 +204,8 @@ def _feedback_rows(db: Session, sessions: list[StudySession]) -> Iterator[dict[s
     action named in its run's task's words."""
     for session in sessions:
         query = select(Feedback).where(Feedback.session_id == session.id)
-        words: tuple[str, ...] = ()
+        words = _action_words(session)
         for f in db.scalars(query.order_by(Feedback.feedback_index)):
-            words = words or session.spec.the_task.action_words
             yield {
                 "session_id": session.id,
                 "feedback_index": f.feedback_index,

@@ -19,6 +19,7 @@ from analysis.baseline import AUTO, NO_BASELINE
 from analysis.csvsafe import safe_frame
 from analysis.episodes import (
     EpisodeTableError,
+    arm,
     method_name,
     order_methods,
     validate_episodes,
@@ -144,7 +145,9 @@ def study_power(
     get_study(db, study_id)
     chosen = ReportRequest(sessions=request.sessions, methods=request.methods, label=request.label)
     sessions, notes = select_sessions(db, study_id, chosen)
-    baseline = _baseline({s.method for s in sessions}, request.baseline, request.methods)
+    baseline = _baseline(
+        {arm(s.method, s.spec.feedback) for s in sessions}, request.baseline, request.methods
+    )
     episodes = load_episodes(db, [s.id for s in sessions])
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))
     if empty:

@@ -109,16 +109,13 @@ def check_of(session: StudySession) -> CheckSpec | None:
 def task_questions(task: Task) -> list[CheckQuestion]:
     """A task's check questions in the design's form (choices valued a, b, c, ...); a task
     without any gets one on its goal."""
+    goal = (task.goal or task.title)[:500]
     asked = task.check_questions or (
         TaskQuestion(
             "goal",
             f"What must the {task.agent} learn to do?",
-            (
-                task.goal or task.title,
-                "Collect as few points as it can",
-                "Nothing: it only watches",
-            ),
-            task.goal or task.title,
+            (goal, "Collect as few points as it can", "Nothing: it only watches"),
+            goal,
         ),
     )
     return [
@@ -233,7 +230,7 @@ def questionnaire_progress(db: Session, session: StudySession) -> QuestionnaireP
         return QuestionnaireProgress(required=False)
     return QuestionnaireProgress(
         required=True,
-        sections=spec.sections(),
+        sections=spec.sections(session.spec.the_task.agent),
         available=advice_done(db, session),
         submitted_at=_submitted_at(db, session.id),
     )

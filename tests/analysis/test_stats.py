@@ -238,3 +238,15 @@ def test_two_constant_samples_are_no_test() -> None:
     assert math.isnan(t) and math.isnan(p)
     t, p = student_t_test(np.array([0.1, 0.1, 0.1]), np.array([0.2, 0.3, 0.2]))
     assert not math.isnan(p), "one constant sample beside a varying one is a test"
+
+
+def test_the_success_rate_is_the_share_of_a_methods_episodes_that_succeeded() -> None:
+    """Hand-computed: the autonomous agents' episodes succeed in the second half only."""
+    episodes = episodes_from_curves(HAND_CASE)
+    half = episodes["episode"] > episodes["episode"].max() / 2
+    episodes = episodes.assign(success=half & (episodes["method"] == "autonomous"))
+    methods = method_totals(episodes).set_index("method")
+    expected = half[episodes["method"] == "autonomous"].mean()
+    assert methods.loc["autonomous", "success_rate"] == pytest.approx(expected)
+    assert methods.loc["agent", "success_rate"] == 0.0
+    assert "success_rate" not in method_totals(episodes_from_curves(HAND_CASE))

@@ -157,3 +157,33 @@ def test_an_episodes_success_is_the_tasks_own_where_it_states_one(catch_importab
                 assert episode.success == episode.terminated
             elif episode.terminated:
                 assert episode.success == (episode.collected_reward > 0)
+
+
+@pytest.mark.parametrize(
+    ("question", "why"),
+    [
+        (("goal-1", "Where?", ("a", "b"), "a"), "its id takes lowercase letters"),
+        (("goal", "Where?", ("a",), "a"), "2 to 8 different choices"),
+        (("goal", "Where?", ("a", "a"), "a"), "2 to 8 different choices"),
+        (("goal", "Where?", ("a", "b"), "c"), "is not one of its choices"),
+        (("goal", "x" * 501, ("a", "b"), "a"), "1 to 500 characters"),
+    ],
+)
+def test_a_tasks_check_question_a_page_cannot_ask_is_refused(question, why) -> None:
+    """Refused when the task is declared, not when a participant's page asks it."""
+    with pytest.raises(TaskError, match=why):
+        tasks.CheckQuestion(*question)
+
+
+def test_the_trust_checklist_names_the_tasks_agent() -> None:
+    """A grid world participant rates the agent they advised, never a robot; the sorting
+    robot's checklist keeps its words, and the items their ids."""
+    from study.schemas.visit import QuestionnaireSpec
+
+    spec = QuestionnaireSpec.default()
+    robot = {s.instrument: s for s in spec.sections()}["trust"]
+    agent = {s.instrument: s for s in spec.sections(get_task("gridworld").agent)}["trust"]
+    assert [i.id for i in agent.items] == [i.id for i in robot.items]
+    assert robot.title == "The robot" and "robot" in robot.items[0].text
+    shown = " ".join([agent.title, agent.intro, *(i.text for i in agent.items)])
+    assert "robot" not in shown and agent.title == "The agent"

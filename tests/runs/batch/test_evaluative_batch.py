@@ -70,6 +70,27 @@ def test_oracle_evaluation_beside_oracle_advice_and_no_feedback(
     described = {f["name"]: f["type"] for f in resource["schema"]["fields"]}
     assert described["judgement"] == "number" and described["shaping"] == "number"
 
+    # The report compares oracle evaluation and oracle advice as two arms, from the
+    # database and from the export alike, neither averaged into the other.
+    from analysis.exported import read_export
+
+    for source in ("database", "export"):
+        report = place.data_dir / f"feedback-report-{source}"
+        if source == "database":
+            args = ["report", "--study", "feedback kinds", "--out", str(report)]
+            code, out = run(place, capsys, *args)
+            assert code == 0, out
+            table = read_csv(report / "r_t_per_method.csv")
+        else:
+            exported = read_export(out_dir)
+            table = [{"method": m} for m in sorted(set(exported.episodes["method"]))]
+        methods = {r["method"] for r in table}
+        assert methods == {"autonomous", "oracle", "oracle-evaluative"}, (source, methods)
+    assert (
+        "oracle evaluative feedback"
+        in (place.data_dir / "feedback-report-database" / "report.md").read_text()
+    )
+
 
 def test_a_method_that_cannot_judge_is_refused(
     place: Place, capsys: pytest.CaptureFixture[str]
