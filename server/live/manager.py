@@ -118,6 +118,8 @@ class WorkerHandle:
     advice_budget: int
     given: dict[int, int]
     status: str = Status.running.value
+    killed: bool = False
+    """The web process killed its worker (`SessionManager._kill`), which records the status."""
     progress: Progress | None = None
     request: AdviceRequest | None = None
     request_arrived: float = 0.0
@@ -359,10 +361,12 @@ class SessionManager:
             for sid, h in self.handles.items()
             if h.status in LIVE_STATUSES and (h.reported or h.started < starting)
         }
+        # The silent workers are found (a read) and killed before anything is written: one
+        # stopped in the middle of its own write holds the database's write lock until it
+        # dies, and a write here would wait for it, fail, and never reach the kill.
         with self.factory() as db:
-            marked = mark_dead_interrupted(db, self.stale_after_s, set(self.handles))
             silent = silent_sessions(db, self.stale_after_s, set(owned))
-            expire_unopened_everywhere(db)  # links never opened free their place on time
+        marked: list[int] = []
         for session_id, token in silent:
             handle = owned[session_id]
             if handle.token != token:
@@ -376,6 +380,9 @@ class SessionManager:
                 continue
             self._kill(handle, Status.interrupted, f"{silence} and was killed; resume it")
             marked.append(session_id)
+        with self.factory() as db:
+            marked += mark_dead_interrupted(db, self.stale_after_s, set(self.handles))
+            expire_unopened_everywhere(db)  # links never opened free their place on time
         for session_id in marked:
             self.hub.publish(session_id, "status", StatusChanged(Status.interrupted.value))
         return marked
@@ -383,13 +390,15 @@ class SessionManager:
     def _kill(
         self, handle: WorkerHandle, status: Status, detail: str, level: int = logging.WARNING
     ) -> None:
-        """Record `status` for a worker that does not answer (or is no longer needed), then
-        kill it (SIGKILL works on a stopped process too); its last checkpoint stays."""
-        self._set_status(handle.session_id, status, detail, handle.token)
+        """Kill a worker that does not answer (or is no longer needed; SIGKILL works on a
+        stopped process too), then record `status`: a worker stopped in its own write holds
+        the database until it dies. Its last checkpoint stays."""
         handle.status = status.value
+        handle.killed = True
         with contextlib.suppress(Exception):
             handle.process.kill()
         join(handle.process, 5)
+        self._set_status(handle.session_id, status, detail, handle.token)
         log.log(level, "session %s: %s", handle.session_id, detail)
         self._call_soon(self.notify, handle.session_id)
 
@@ -897,6 +906,9 @@ class SessionManager:
     def _exited(self, handle: WorkerHandle, code: int | None) -> None:
         """The session's worker is gone: if it left the session live, it died."""
         if handle.handing_over:  # the session goes on in its population's worker
+            return
+        if handle.killed:  # `_kill` records why, once it is gone
+            self._call_soon(self._drop, handle)
             return
         with self.factory() as db:
             session = get_session(db, handle.session_id)
