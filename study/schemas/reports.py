@@ -63,7 +63,13 @@ class ReportMethod(BaseModel):
     agents: int
     episodes: int
     R_T: float = Field(description="Total collected reward of the method's average curve.")
-    improvement_pct: float | None = Field(description="Over the baseline; None without one.")
+    improvement_pct: float | None = Field(
+        description="Over the baseline, in percent; None without one, or where the baseline's "
+        "R_T is not positive (a percentage of it would mislead: see `difference`)."
+    )
+    difference: float | None = Field(
+        default=None, description="R_T minus the baseline's, in points; None without one."
+    )
 
 
 class ReportPublic(BaseModel):

@@ -387,6 +387,7 @@ class ReportMethodEntry(TypedDict):
     episodes: int
     R_T: float
     improvement_pct: float | None
+    difference: float | None
 
 
 class ReportDescription(TypedDict):
@@ -431,6 +432,9 @@ def describe_report(study_id: int, built: StudyReport) -> ReportDescription:
                 improvement_pct=None
                 if pd.isna(row["improvement_pct"])
                 else float(row["improvement_pct"]),
+                difference=None
+                if pd.isna(row.get("difference", float("nan")))
+                else float(row["difference"]),
             )
             for _, row in (pd.DataFrame() if analysis is None else analysis.methods).iterrows()
         ],

@@ -205,7 +205,7 @@ def test_an_online_study_runs_through_its_link(
     editor.fill(json.dumps({**shown, "capacity": 8}))
     section.locator(".save-design").click()
     expect(editor).to_have_value(re.compile(r'"capacity": 8'))
-    expect(refused).to_be_hidden()
+    expect(refused).to_be_hidden(timeout=30_000)  # the save's round trip, beside the pools' work
     with live.api() as api:
         stored = api.get(f"/api/studies/{study['id']}").json()["design"]
     assert stored == {**shown, "capacity": 8}, "the design edited on the dashboard, stored"

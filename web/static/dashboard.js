@@ -126,7 +126,10 @@
       ...report.methods.map((m) => {
         const tr = document.createElement("tr");
         tr.dataset.method = m.method;
-        const improvement = m.improvement_pct === null ? "—" : `${m.improvement_pct >= 0 ? "+" : ""}${m.improvement_pct.toFixed(1)} %`;
+        // a percentage only against a positive baseline; else the difference in points
+        const signed = (x, digits) => `${x >= 0 ? "+" : ""}${x.toFixed(digits)}`;
+        const improvement = m.improvement_pct !== null ? `${signed(m.improvement_pct, 1)} %`
+          : m.difference != null ? `${signed(m.difference, 2)} points` : "—";
         for (const text of [m.name, m.agents, m.episodes, m.R_T.toFixed(2), improvement]) {
           tr.appendChild(document.createElement("td")).textContent = text;
         }
