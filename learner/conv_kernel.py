@@ -9,9 +9,12 @@ instruction set, compiled with explicit flags, is chosen by the CPU's flags in
 neither loads (another CPU, no compiler, CUDA), the PyTorch update is used.
 
 The kernel takes the replay memory's packed uint8 frames (`pack_frame`) and gives the
-layer's output (B, 4, 32, 32) in float32; `code` keeps, per output, the window position
-the max-pool took (0-3, row-major; the first maximal one, as `max_pool2d` does) or 255
-where the ReLU is off: all the backward needs besides the frames.
+layer's output as the second layer reads it: in the convolutions' dtype, in that layer's
+space-to-depth layout (`space_to_depth`: (B, 16, 16, 16), channels (ry, rx, c),
+channels-last), so no copy stands between the two layers. `code` keeps, per output, the
+window position the max-pool took (0-3, row-major; the first maximal one, as
+`max_pool2d` does) or 255 where the ReLU is off: all the backward needs besides the
+frames.
 """
 
 from __future__ import annotations
@@ -100,28 +103,37 @@ def first_layer_forward(
     bias: torch.Tensor,
     with_code: bool,
 ) -> tuple[torch.Tensor, torch.Tensor | None]:
-    """(B, 4, 32, 32) float32 from packed uint8 frames (B, 32, 32, 12), and the max-pool's
-    codes where `with_code`."""
+    """The layer's output in the second layer's space-to-depth layout (see the module's
+    docstring) from packed uint8 frames (B, 32, 32, 12), and the max-pool's codes where
+    `with_code`."""
     assert frames.dtype == torch.uint8 and frames.shape[1:] == (32, 32, 12), frames.shape
     assert weight.shape == (4, 3, 8, 8) and bias.shape == (4,)
     frames = frames.contiguous()
     weight = weight.detach().float().contiguous()
     bias = bias.detach().float().contiguous()
     batch = frames.shape[0]
-    out = torch.empty(batch, 4, 32, 32)
+    out = torch.empty(batch, 16, 16, 16, dtype=kernel.dtype)
     code = torch.empty(batch, 4, 32, 32, dtype=torch.uint8) if with_code else None
     kernel.forward_fn(
         frames.data_ptr(), batch, weight.data_ptr(), bias.data_ptr(), out.data_ptr(), _pointer(code)
     )
-    return out, code
+    return out.permute(0, 3, 1, 2), code
+
+
+def as_pooled(s2d: torch.Tensor) -> torch.Tensor:
+    """The layer's output (B, 4, 32, 32) from its space-to-depth layout (B, 16, 16, 16)."""
+    b = s2d.shape[0]
+    blocks = s2d.permute(0, 2, 3, 1).reshape(b, 16, 16, 2, 2, 4)
+    return blocks.permute(0, 5, 1, 3, 2, 4).reshape(b, 4, 32, 32)
 
 
 def first_layer_backward(
     kernel: FirstLayerKernel, frames: torch.Tensor, grad_out: torch.Tensor, code: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """The weight's (4, 3, 8, 8) and bias's (4,) gradients, float32."""
+    """The weight's (4, 3, 8, 8) and bias's (4,) gradients, float32, from the output's
+    gradient in the output's shape (B, 16, 16, 16)."""
     frames = frames.contiguous()
-    grad_out = grad_out.float().contiguous()
+    grad_out = grad_out.to(kernel.dtype).permute(0, 2, 3, 1).contiguous()
     grad_weight = torch.empty(4, 3, 8, 8)
     grad_bias = torch.empty(4)
     kernel.backward_fn(
@@ -159,7 +171,8 @@ class _FirstLayer(torch.autograd.Function):
 def first_layer(
     kernel: FirstLayerKernel, frames: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor
 ) -> torch.Tensor:
-    """The first layer's output (B, 4, 32, 32), differentiable in weight and bias."""
+    """The first layer's output in the second layer's space-to-depth layout,
+    differentiable in weight and bias."""
     if torch.is_grad_enabled() and (weight.requires_grad or bias.requires_grad):
         return _FirstLayer.apply(frames, weight, bias, kernel)
     return first_layer_forward(kernel, frames, weight, bias, with_code=False)[0]

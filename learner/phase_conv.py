@@ -357,12 +357,15 @@ class PhaseConvForward:
         """Q-values of packed uint8 frames (B, H/2, W/2, 4C), see `pack_frame`."""
         x = frames
         for i, (layout, (kernel, bias)) in enumerate(zip(self.layouts, weights, strict=True)):
-            if i == 0 and self.first_layer_kernel is not None:
+            if self.first_layer_kernel is not None and i < 2:
+                if i == 0:
+                    continue
                 conv = self.network.conv1
                 assert conv.bias is not None, "the network's convolutions have biases"
-                x = first_layer(self.first_layer_kernel, frames, conv.weight, conv.bias)
-                continue
-            s, padding = space_to_depth(x, i == 0, layout, self.dtype)
+                s = first_layer(self.first_layer_kernel, frames, conv.weight, conv.bias)
+                padding = layout.pad_before // 2
+            else:
+                s, padding = space_to_depth(x, i == 0, layout, self.dtype)
             x = phase_max_bias_relu(channels_last(F.conv2d(s, kernel, padding=padding)), bias)
         return self.network.output(x.flatten(1))
 

@@ -37,6 +37,25 @@ static void unpack(const uint8_t *frame, uint16_t plane[3][R + 1][W], const uint
     }
 }
 
+/* One pooled row py of the 4 channels into the next layer's space-to-depth layout:
+ * (B, 16, 16, 2, 2, 4), element (b, py / 2, px / 2, py % 2, px % 2, oc). */
+static void store_s2d(const uint16_t pooled[4][32], uint16_t *out, int64_t b, int py) {
+    uint16_t *row = out + (b * 16 + (py >> 1)) * 256 + (py & 1) * 8;
+    for (int px = 0; px < 32; px++)
+        for (int oc = 0; oc < 4; oc++) row[(px >> 1) * 16 + (px & 1) * 4 + oc] = pooled[oc][px];
+}
+
+/* The output's gradient of image b, from the space-to-depth layout, as g[oc][py][px]. */
+static void load_s2d(const uint16_t *grad, int64_t b, float g[4][32][32]) {
+    const uint16_t *image = grad + b * 4096;
+    for (int py = 0; py < 32; py++)
+        for (int px = 0; px < 32; px++)
+            for (int oc = 0; oc < 4; oc++) {
+                uint32_t bits = (uint32_t)image[(py >> 1) * 256 + (px >> 1) * 16 + (py & 1) * 8 + (px & 1) * 4 + oc] << 16;
+                memcpy(&g[oc][py][px], &bits, 4);
+            }
+}
+
 static inline uint32_t bf16_bits(float f) {
     __m128 v = _mm_set_ss(f);
     __m128bh b = _mm_cvtneps_pbh(v);
@@ -46,7 +65,7 @@ static inline uint32_t bf16_bits(float f) {
 }
 
 void conv1_forward_bf16(const uint8_t *frames, int64_t batch, const float *weight,
-                        const float *bias, float *out, uint8_t *code) {
+                        const float *bias, uint16_t *out, uint8_t *code) {
     static __thread uint16_t table[256];
     static __thread int ready = 0;
     if (!ready) {
@@ -65,6 +84,7 @@ void conv1_forward_bf16(const uint8_t *frames, int64_t batch, const float *weigh
     static __thread uint16_t plane[3][R + 1][W] __attribute__((aligned(64)));
     static __thread uint32_t pairs[3][R][W] __attribute__((aligned(64)));
     float rows[2][4][64] __attribute__((aligned(64)));
+    uint16_t pooled[4][32] __attribute__((aligned(64)));
     const __m512i even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
     const __m512i odd = _mm512_add_epi32(even, _mm512_set1_epi32(1));
     const __m512 scale = _mm512_set1_ps(1.0f / 255.0f);
@@ -120,18 +140,20 @@ void conv1_forward_bf16(const uint8_t *frames, int64_t batch, const float *weigh
                     __m512 v = _mm512_fmadd_ps(m, scale, bv);
                     __mmask16 on = _mm512_cmp_ps_mask(v, _mm512_setzero_ps(), _CMP_GT_OQ);
                     int64_t o = ((b * 4 + oc) * 32 + py) * 32 + 16 * h;
-                    _mm512_storeu_ps(out + o, _mm512_maskz_mov_ps(on, v));
+                    __m256bh rounded = _mm512_cvtneps_pbh(_mm512_maskz_mov_ps(on, v));
+                    _mm256_store_si256((__m256i *)&pooled[oc][16 * h], (__m256i)rounded);
                     if (code) {
                         k = _mm512_mask_blend_epi32(on, _mm512_set1_epi32(255), k);
                         _mm_storeu_si128((__m128i *)(code + o), _mm512_cvtepi32_epi8(k));
                     }
                 }
             }
+            store_s2d(pooled, out, b, py);
         }
     }
 }
 
-void conv1_backward_bf16(const uint8_t *frames, int64_t batch, const float *grad_out,
+void conv1_backward_bf16(const uint8_t *frames, int64_t batch, const uint16_t *grad_out,
                          const uint8_t *code, float *grad_weight, float *grad_bias) {
     static __thread uint16_t table[256];
     static __thread int ready = 0;
@@ -148,13 +170,15 @@ void conv1_backward_bf16(const uint8_t *frames, int64_t batch, const float *grad
     __m512 bsum[4];
     for (int oc = 0; oc < 4; oc++) bsum[oc] = _mm512_setzero_ps();
     const __m512i none = _mm512_set1_epi32(255);
+    static __thread float image_grad[4][32][32] __attribute__((aligned(64)));
     for (int64_t b = 0; b < batch; b++) {
         unpack(frames + b * 64 * 64 * 3, plane, table);
+        load_s2d(grad_out, b, image_grad);
         for (int oc = 0; oc < 4; oc++)
             for (int py = 0; py < 32; py++)
                 for (int h = 0; h < 2; h++) {
                     int64_t o = ((b * 4 + oc) * 32 + py) * 32 + 16 * h;
-                    __m512 g = _mm512_loadu_ps(grad_out + o);
+                    __m512 g = _mm512_load_ps(&image_grad[oc][py][16 * h]);
                     __m512i k = _mm512_cvtepu8_epi32(_mm_loadu_si128((const __m128i *)(code + o)));
                     __mmask16 on = _mm512_cmpneq_epi32_mask(k, none);
                     bsum[oc] = _mm512_mask_add_ps(bsum[oc], on, bsum[oc], g);

@@ -43,10 +43,19 @@ static inline void pool4(const float rows[2][64], int q, __m128 *m, __m128i *k) 
     *k = where;
 }
 
+/* One pooled row py of the 4 channels into the next layer's space-to-depth layout:
+ * (B, 16, 16, 2, 2, 4), element (b, py / 2, px / 2, py % 2, px % 2, oc). */
+static void store_s2d(const float pooled[4][32], float *out, int64_t b, int py) {
+    float *row = out + (b * 16 + (py >> 1)) * 256 + (py & 1) * 8;
+    for (int px = 0; px < 32; px++)
+        for (int oc = 0; oc < 4; oc++) row[(px >> 1) * 16 + (px & 1) * 4 + oc] = pooled[oc][px];
+}
+
 void conv1_forward_fp32(const uint8_t *frames, int64_t batch, const float *weight,
                         const float *bias, float *out, uint8_t *code) {
     static __thread float plane[3][R][W] __attribute__((aligned(64)));
     float rows[2][4][64] __attribute__((aligned(64)));
+    float pooled[4][32] __attribute__((aligned(64)));
     const __m128 scale = _mm_set1_ps(1.0f / 255.0f);
     for (int64_t b = 0; b < batch; b++) {
         unpack(frames + b * 64 * 64 * 3, plane);
@@ -86,7 +95,7 @@ void conv1_forward_fp32(const uint8_t *frames, int64_t batch, const float *weigh
                     __m128 v = _mm_add_ps(_mm_mul_ps(m, scale), bv);
                     __m128 on = _mm_cmpgt_ps(v, _mm_setzero_ps());
                     int64_t o = ((b * 4 + oc) * 32 + py) * 32 + 4 * q;
-                    _mm_storeu_ps(out + o, _mm_and_ps(v, on));
+                    _mm_store_ps(&pooled[oc][4 * q], _mm_and_ps(v, on));
                     if (code) {
                         k = _mm_blendv_epi8(_mm_set1_epi32(255), k, _mm_castps_si128(on));
                         __m128i bytes = _mm_shuffle_epi8(k, _mm_setr_epi8(0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1));
@@ -95,6 +104,7 @@ void conv1_forward_fp32(const uint8_t *frames, int64_t batch, const float *weigh
                     }
                 }
             }
+            store_s2d(pooled, out, b, py);
         }
     }
 }
@@ -111,14 +121,15 @@ void conv1_backward_fp32(const uint8_t *frames, int64_t batch, const float *grad
     for (int64_t b = 0; b < batch; b++) {
         unpack(frames + b * 64 * 64 * 3, plane);
         memset(gy, 0, sizeof(gy));
+        const float *image = grad_out + b * 4096;
         for (int oc = 0; oc < 4; oc++) {
-            const float *g = grad_out + (b * 4 + oc) * 1024;
             const uint8_t *k = code + (b * 4 + oc) * 1024;
             for (int i = 0; i < 1024; i++) {
                 if (k[i] == 255) continue;
-                bsum[oc] += g[i];
                 int py = i >> 5, px = i & 31;
-                gy[oc][2 * py + (k[i] >> 1)][2 * px + (k[i] & 1)] = g[i];
+                float g = image[(py >> 1) * 256 + (px >> 1) * 16 + (py & 1) * 8 + (px & 1) * 4 + oc];
+                bsum[oc] += g;
+                gy[oc][2 * py + (k[i] >> 1)][2 * px + (k[i] & 1)] = g;
             }
         }
         for (int c = 0; c < 3; c++)
