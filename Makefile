@@ -32,7 +32,7 @@ kernels: $(KERNELS)/build/libconv1_avx512bf16.so $(KERNELS)/build/libconv1_avx2.
 
 $(KERNELS)/build/libconv1_avx512bf16.so: $(KERNELS)/conv1_bf16.c $(KERNELS)/conv1.h
 	mkdir -p $(@D)
-	$(CC) $(KFLAGS) -mavx512f -mavx512bw -mavx512vl -mavx512bf16 -mfma -o $@ $< \
+	$(CC) $(KFLAGS) -mavx512f -mavx512bw -mavx512vl -mavx512vbmi -mavx512bf16 -mfma -o $@ $< \
 	  || echo "the AVX-512 BF16 kernel did not build: the learner uses PyTorch there"
 
 $(KERNELS)/build/libconv1_avx2.so: $(KERNELS)/conv1_fp32.c $(KERNELS)/conv1.h

@@ -32,7 +32,7 @@ SWITCH = "IDEEPRL_CONV_KERNEL"
 """The environment variable that turns the kernel on (`on`); anything else: off."""
 BUILD = Path(__file__).parent / "kernels" / "build"
 VARIANTS = {
-    "avx512bf16": ({"avx512f", "avx512bw", "avx512vl", "avx512_bf16", "fma"}, "bf16"),
+    "avx512bf16": ({"avx512f", "avx512bw", "avx512vl", "avx512vbmi", "avx512_bf16", "fma"}, "bf16"),
     "avx2": ({"avx2", "fma"}, "fp32"),
 }
 """Instruction-set variant: (the CPU flags it needs, the precision of its functions)."""

@@ -2,9 +2,10 @@
  * max-pool) with bfloat16 dot products (AVX-512 BF16), forward and the weight's and bias's
  * gradients, on packed uint8 frames (64x64x3 stored as 32x32x12, channels (ry, rx, c)).
  *
- * Pixel values 0..255 are exact in bfloat16, so the frames go in as integers and the scale
- * 1/255 is applied once to each float32 sum: the weights' rounding to bfloat16 (and, in
- * the backward, the output gradient's) is the only one before float32 accumulation.
+ * Pixel values 0..255 are exact in bfloat16 (integers up to 256 fit its 8 significant
+ * bits), so the frames go in as integers and the scale 1/255 is applied once to each
+ * float32 sum: the weights' rounding to bfloat16 (and, in the backward, the output
+ * gradient's) is the only one before float32 accumulation.
  * Vectorised over output pixels: a lane of vdpbf16ps holds two horizontally adjacent
  * taps (forward) or two adjacent pixels (weight gradient). */
 #include <immintrin.h>
@@ -16,23 +17,36 @@
 #define W 80 /* padded row: 3 zeros, 64 pixels, 13 zeros (vector loads read past 71) */
 #define R 71 /* padded rows: 3 zeros, 64 rows, 4 zeros */
 
-static inline uint16_t bf16_of_byte(uint8_t v) {
-    float f = (float)v;
-    uint32_t u;
-    memcpy(&u, &f, 4);
-    return (uint16_t)(u >> 16); /* exact: integers up to 256 fit 8 significant bits */
-}
-
-/* plane[c][r][x]: the frame's channel c, zero padded, as bfloat16 bits. */
-static void unpack(const uint8_t *frame, uint16_t plane[3][R + 1][W], const uint16_t table[256]) {
+/* plane[c][r][x]: the frame's channel c, zero padded, as bfloat16 bits. A packed row
+ * (384 bytes) holds image rows 2 py and 2 py + 1; 16 pixels of one of them lie in 96
+ * bytes, which one byte permutation (VBMI) sorts by channel, 16 bytes each. */
+static void unpack(const uint8_t *frame, uint16_t plane[3][R + 1][W]) {
     memset(plane, 0, sizeof(uint16_t) * 3 * (R + 1) * W);
-    for (int y = 0; y < 64; y++) {
-        const uint8_t *src = frame + (y >> 1) * 32 * 12 + (y & 1) * 6;
-        for (int x = 0; x < 64; x++) {
-            const uint8_t *p = src + (x >> 1) * 12 + (x & 1) * 3;
-            plane[0][y + 3][x + 3] = table[p[0]];
-            plane[1][y + 3][x + 3] = table[p[1]];
-            plane[2][y + 3][x + 3] = table[p[2]];
+    uint8_t index[2][64];
+    for (int ry = 0; ry < 2; ry++)
+        for (int i = 0; i < 64; i++) {
+            int c = i >> 4, j = i & 15;
+            index[ry][i] = (uint8_t)(c < 3 ? 12 * (j >> 1) + 3 * (j & 1) + 6 * ry + c : 0);
+        }
+    const __m512i sort[2] = {_mm512_loadu_si512(index[0]), _mm512_loadu_si512(index[1])};
+    for (int py = 0; py < 32; py++) {
+        const uint8_t *row = frame + py * 384;
+        for (int g = 0; g < 4; g++) {
+            __m512i lo = _mm512_loadu_si512(row + 96 * g);
+            /* the last group's window ends 32 bytes past the row: not read */
+            __mmask64 inside = g == 3 ? 0xffffffffull : ~0ull;
+            __m512i hi = _mm512_maskz_loadu_epi8(inside, row + 96 * g + 64);
+            for (int ry = 0; ry < 2; ry++) {
+                __m512i bytes = _mm512_permutex2var_epi8(lo, sort[ry], hi);
+                for (int c = 0; c < 3; c++) {
+                    __m128i v = _mm512_extracti32x4_epi32(bytes, 0);
+                    if (c == 1) v = _mm512_extracti32x4_epi32(bytes, 1);
+                    if (c == 2) v = _mm512_extracti32x4_epi32(bytes, 2);
+                    __m512 f = _mm512_cvtepi32_ps(_mm512_cvtepu8_epi32(v));
+                    _mm256_storeu_si256((__m256i *)&plane[c][2 * py + ry + 3][16 * g + 3],
+                                        (__m256i)_mm512_cvtneps_pbh(f));
+                }
+            }
         }
     }
 }
@@ -66,12 +80,6 @@ static inline uint32_t bf16_bits(float f) {
 
 void conv1_forward_bf16(const uint8_t *frames, int64_t batch, const float *weight,
                         const float *bias, uint16_t *out, uint8_t *code) {
-    static __thread uint16_t table[256];
-    static __thread int ready = 0;
-    if (!ready) {
-        for (int v = 0; v < 256; v++) table[v] = bf16_of_byte((uint8_t)v);
-        ready = 1;
-    }
     /* w2[oc][c][ky][kxp]: the pair of taps (2 kxp, 2 kxp + 1) as one 32-bit lane */
     uint32_t w2[4][3][8][4];
     for (int oc = 0; oc < 4; oc++)
@@ -89,7 +97,7 @@ void conv1_forward_bf16(const uint8_t *frames, int64_t batch, const float *weigh
     const __m512i odd = _mm512_add_epi32(even, _mm512_set1_epi32(1));
     const __m512 scale = _mm512_set1_ps(1.0f / 255.0f);
     for (int64_t b = 0; b < batch; b++) {
-        unpack(frames + b * 64 * 64 * 3, plane, table);
+        unpack(frames + b * 64 * 64 * 3, plane);
         for (int c = 0; c < 3; c++)
             for (int r = 0; r < R; r++)
                 for (int x = 0; x < W; x += 16) {
@@ -155,12 +163,6 @@ void conv1_forward_bf16(const uint8_t *frames, int64_t batch, const float *weigh
 
 void conv1_backward_bf16(const uint8_t *frames, int64_t batch, const uint16_t *grad_out,
                          const uint8_t *code, float *grad_weight, float *grad_bias) {
-    static __thread uint16_t table[256];
-    static __thread int ready = 0;
-    if (!ready) {
-        for (int v = 0; v < 256; v++) table[v] = bf16_of_byte((uint8_t)v);
-        ready = 1;
-    }
     static __thread uint16_t plane[3][R + 1][W] __attribute__((aligned(64)));
     /* gy[oc][y][x]: the gradient of the convolution's output, bfloat16, pairs of pixels */
     static __thread uint32_t gy[4][64][32] __attribute__((aligned(64)));
@@ -172,7 +174,7 @@ void conv1_backward_bf16(const uint8_t *frames, int64_t batch, const uint16_t *g
     const __m512i none = _mm512_set1_epi32(255);
     static __thread float image_grad[4][32][32] __attribute__((aligned(64)));
     for (int64_t b = 0; b < batch; b++) {
-        unpack(frames + b * 64 * 64 * 3, plane, table);
+        unpack(frames + b * 64 * 64 * 3, plane);
         load_s2d(grad_out, b, image_grad);
         for (int oc = 0; oc < 4; oc++)
             for (int py = 0; py < 32; py++)
