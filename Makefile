@@ -8,7 +8,7 @@ PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup serve test test-fast lint format bench browser clean
+.PHONY: setup kernels serve test test-fast lint format bench browser clean
 
 # (setuptools' notice on every editable install is not for the people who run make serve)
 $(STAMP): pyproject.toml
@@ -18,7 +18,27 @@ $(STAMP): pyproject.toml
 	PYTHONWARNINGS="ignore:Editable installation" $(PY) -m pip install --quiet -e ".[dev,ray,postgres,sb3]"
 	touch $@
 
-setup: $(STAMP)
+setup: $(STAMP) kernels
+
+# The learner's compiled first layer (learner/conv_kernel.py), one shared library per
+# instruction set, each with explicit flags (never -march=native: the library must run on
+# any CPU with those flags, and the learner picks by /proc/cpuinfo). Plain C loaded with
+# ctypes, so no torch headers; where the compiler or the flags are missing the learner
+# keeps its PyTorch update.
+CC        ?= cc
+KERNELS   := learner/kernels
+KFLAGS    := -O3 -fPIC -shared -std=c11 -Wall -Wextra
+kernels: $(KERNELS)/build/libconv1_avx512bf16.so $(KERNELS)/build/libconv1_avx2.so
+
+$(KERNELS)/build/libconv1_avx512bf16.so: $(KERNELS)/conv1_bf16.c $(KERNELS)/conv1.h
+	mkdir -p $(@D)
+	$(CC) $(KFLAGS) -mavx512f -mavx512bw -mavx512vl -mavx512vbmi -mavx512bf16 -mfma -o $@ $< \
+	  || echo "the AVX-512 BF16 kernel did not build: the learner uses PyTorch there"
+
+$(KERNELS)/build/libconv1_avx2.so: $(KERNELS)/conv1_fp32.c $(KERNELS)/conv1.h
+	mkdir -p $(@D)
+	$(CC) $(KFLAGS) -mavx2 -mfma -o $@ $< \
+	  || echo "the AVX2 kernel did not build: the learner uses PyTorch there"
 
 # Debian's Chromium drives the browser tests, through Debian's nginx in front of the
 # server as deployed; installed when missing and we may.

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from learner import conv_kernel
 from learner.config import DQNConfig
 from learner.device import conv_dtype
 from learner.network import QNetwork
@@ -50,8 +51,11 @@ class DQNAgent:
         else:
             self.optimizer = Adam(params, config.learning_rate, config.optimizer_eps)
         self.dtype = conv_dtype(config.precision, device)
-        self._fast = PhaseConvForward(self.network, self.dtype)
-        self._fast_target = PhaseConvForward(self.target, self.dtype) if self.target else None
+        kernel = conv_kernel.for_dtype(self.dtype)
+        self._fast = PhaseConvForward(self.network, self.dtype, kernel)
+        self._fast_target = (
+            PhaseConvForward(self.target, self.dtype, kernel) if self.target else None
+        )
 
     @property
     def frame_shape(self) -> tuple[int, ...]:

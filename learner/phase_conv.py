@@ -26,6 +26,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from learner.conv_kernel import FirstLayerKernel, first_layer
 from learner.network import QNetwork, same_padding
 
 
@@ -279,10 +280,25 @@ class PhaseConvForward:
     `_CachedKernel`, whose gradient is the rebuilt kernel's to the bit).
     """
 
-    def __init__(self, network: QNetwork, dtype: torch.dtype) -> None:
+    def __init__(
+        self,
+        network: QNetwork,
+        dtype: torch.dtype,
+        first_layer_kernel: FirstLayerKernel | None = None,
+    ) -> None:
         self.network = network
         self.dtype = dtype
         device = network.out.weight.device
+        fits = (
+            first_layer_kernel is not None
+            and device.type == "cpu"
+            and network.image_shape == (64, 64, 3)
+            and network.conv1.weight.shape == (4, 3, 8, 8)
+            and first_layer_kernel.dtype == dtype
+        )
+        self.first_layer_kernel = first_layer_kernel if fits else None
+        """The compiled first layer (`learner.conv_kernel`) where given and it fits this
+        network, device and precision; else the first layer runs in PyTorch too."""
         self.layouts = []
         for conv in network.convs:
             out_channels, in_channels, kernel, _ = conv.weight.shape
@@ -341,7 +357,15 @@ class PhaseConvForward:
         """Q-values of packed uint8 frames (B, H/2, W/2, 4C), see `pack_frame`."""
         x = frames
         for i, (layout, (kernel, bias)) in enumerate(zip(self.layouts, weights, strict=True)):
-            s, padding = space_to_depth(x, i == 0, layout, self.dtype)
+            if self.first_layer_kernel is not None and i < 2:
+                if i == 0:
+                    continue
+                conv = self.network.conv1
+                assert conv.bias is not None, "the network's convolutions have biases"
+                s = first_layer(self.first_layer_kernel, frames, conv.weight, conv.bias)
+                padding = layout.pad_before // 2
+            else:
+                s, padding = space_to_depth(x, i == 0, layout, self.dtype)
             x = phase_max_bias_relu(channels_last(F.conv2d(s, kernel, padding=padding)), bias)
         return self.network.output(x.flatten(1))
 
