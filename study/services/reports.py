@@ -256,6 +256,7 @@ def build_report(
     analysis (pandas' tables, scipy's tests, matplotlib's figures) loads here, when a report
     is built, not with the web app."""
     from analysis.advice import replayed_advice_notes
+    from analysis.human import learners_finished
     from analysis.report import write_human_report, write_report
     from study.services.episodes import (
         load_advised_steps,
@@ -274,13 +275,7 @@ def build_report(
         everything = [s for s in list_sessions(db, study_id) if not s.preview and not s.pooled]
         visits = load_visits(db, everything)
     if visits is not None and len(visits.visits):
-        done = visits.completed
-        finished = sum(is_finished(status) for status in done["status"])
-        learners = (
-            f"Learners finished: {finished} of the {len(done)} completed visits' learners; "
-            "the participants' section covers every completed visit, the learners' R_T only "
-            "the finished ones."
-        )
+        learners = learners_finished(visits)
     try:
         sessions, notes = select_sessions(db, study_id, request)
     except Conflict:
