@@ -145,8 +145,8 @@ def human_section(visits: Visits, out: Path, alpha: float) -> tuple[list[str], l
     accuracy = (
         "Accuracy is the share of a participant's advice that named the task's correct action."
         if visits.correct_action_recorded
-        else "No accuracy: the export records no correct action for the advice (the task's "
-        "correct action is not stored beside it), so none is given."
+        else "No accuracy: no correct action is recorded beside the advice (the task cannot "
+        "say, or the advice was stored before it was recorded), so none is given."
     )
     lines = [
         "## The participants (the unit of the human study)",

@@ -102,13 +102,19 @@ def load_visits(db: Session, sessions: Sequence[StudySession]) -> Visits:
         columns=["session_id", "condition", "outcome", "consented_at", "status"],
     )
     query = (
-        select(Advice.session_id, Advice.advisor, Advice.action, Advice.decision_time_s)
+        select(
+            Advice.session_id,
+            Advice.advisor,
+            Advice.action,
+            Advice.decision_time_s,
+            Advice.correct_action,
+        )
         .where(Advice.session_id.in_([s.id for s in sessions]))
         .order_by(Advice.session_id, Advice.advice_index)
     )
     advice = pd.DataFrame(
         [tuple(row) for row in db.execute(query)],
-        columns=["session_id", "advisor", "action", "decision_time_s"],
+        columns=["session_id", "advisor", "action", "decision_time_s", "correct_action"],
     )
     check = pd.DataFrame(
         list(check_rows(db, list(sessions))),

@@ -4,6 +4,7 @@ EXPORT OUT`): while no learner has finished, and once some have."""
 
 from __future__ import annotations
 
+import json
 import random
 from datetime import UTC, datetime
 from pathlib import Path
@@ -65,7 +66,7 @@ def _visit(db: Session, session: StudySession, outcome: str, rng: random.Random)
                 session_id=session.id, advice_index=k, global_step=10 * k + 1, advisor="human",
                 action=rng.randint(0, 3) if answered else None, observation_png=b"",
                 response_time_s=1.0, decision_time_s=rng.uniform(0.5, 6.0) if answered else None,
-                requested_at=NOW,
+                requested_at=NOW, correct_action=rng.choice([0, 1, 2, 3, None]),
             )
         )  # fmt: skip
     for subscale in NASA_TLX:
@@ -154,3 +155,21 @@ def test_the_export_gives_the_databases_participants_section(tmp_path: Path) -> 
     assert tests["p"].notna().sum() >= 5, "numbers to compare, not only 'no test'"
     people = pd.read_csv(tmp_path / "exported-4" / TABLE_FILES["participants"])
     assert len(people) == 7 and people["scale_nasa_tlx"].notna().all()
+    assert people["accuracy"].notna().any()
+
+    _without_correct_action(tmp_path / "export-4")  # as an export made before it was stored
+    assert analyse([str(tmp_path / "export-4"), str(tmp_path / "older")]) == 0
+    older = pd.read_csv(tmp_path / "older" / TABLE_FILES["participants"])
+    assert older["accuracy"].isna().all()
+    pd.testing.assert_frame_equal(older.drop(columns="accuracy"), people.drop(columns="accuracy"))
+    assert "no correct action" in (tmp_path / "older" / "report.md").read_text()
+
+
+def _without_correct_action(export: Path) -> None:
+    advice = pd.read_csv(export / "advice.csv", dtype=str, keep_default_na=False)
+    advice.drop(columns="correct_action").to_csv(export / "advice.csv", index=False)
+    package = json.loads((export / "datapackage.json").read_text())
+    for resource in package["resources"]:
+        fields = resource["schema"]["fields"]
+        resource["schema"]["fields"] = [f for f in fields if f["name"] != "correct_action"]
+    (export / "datapackage.json").write_text(json.dumps(package))
