@@ -182,6 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "alpha": export.alpha,
             "advice": export.advice,
             "visits": visits,
+            "strategies": {i: r.strategy if r.advised else None for i, r in export.runs.items()},
         }
         title = export.name or title
     else:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import platform
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +21,8 @@ import scipy
 from analysis import markdown as md
 from analysis.advice import advice_quality, quality_correlations
 from analysis.audit import Audit, audit, label
+from analysis.comparable import comparable
+from analysis.comparable_report import COMPARABLE_FILES, comparable_section
 from analysis.comparisons import compare
 from analysis.csvsafe import safe_frame
 from analysis.episodes import EpisodeTableError, agents_of, method_name
@@ -85,6 +87,7 @@ logs (rescoring), a reference, two agents per arm and a baseline (power)."""
 REPORT_FILES = (
     "report.md",
     *HUMAN_FILES,
+    *COMPARABLE_FILES.values(),
     *FIGURE_FILES.values(),
     *TABLE_FILES.values(),
     *OPTIONAL_TABLE_FILES.values(),
@@ -596,6 +599,7 @@ def write_report(
     power_draws: int = DEFAULT_DRAWS,
     power_seed: int = 0,
     visits: Visits | None = None,
+    strategies: Mapping[int, str | None] | None = None,
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -620,7 +624,9 @@ def write_report(
     test of the agents' R_T, or the paired t-test where seeds pair; the rest are secondary.
     The Power section plans a future study from these agents' R_T (`analysis.power`,
     `power_draws` simulated studies per size, seeded by `power_seed`) at `alpha`.
-    `visits` (an online study's) adds the participants' section (`analysis.human_report`).
+    `visits` (an online study's) adds the participants' section (`analysis.human_report`),
+    and with `advice` and each session's strategy (`strategies`, None: no advice) the
+    learning outcomes that compare like with like (`analysis.comparable`).
     """
     if reference is not None and reference not in REFERENCES:
         raise EpisodeTableError(
@@ -747,6 +753,10 @@ def write_report(
     text = _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra)
     if visits is not None:
         lines, files = human_section(visits, out, alpha)
+        if advice is not None and strategies is not None:
+            found = comparable(analysis.episodes, advice, strategies)
+            learning, more = comparable_section(found, strategies, out, alpha)
+            lines, files = [*learning, *lines], [*more, *files]
         text = text.rstrip("\n") + "\n\n" + "\n".join(lines)
         figure_paths |= {p.stem: p for p in files if p.suffix == ".png"}
         table_paths |= {p.stem: p for p in files if p.suffix == ".csv"}

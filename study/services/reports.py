@@ -249,6 +249,11 @@ class StudyReport:
     """What the choice of sessions and baseline left out or decided (also in the report)."""
 
 
+def strategy_of(spec: RunSpec) -> str | None:
+    """The run's advising strategy; None for a run without advice."""
+    return spec.strategy if spec.advised else None
+
+
 def build_report(
     db: Session, study_id: int, out_dir: str | Path, request: ReportRequest | None = None
 ) -> StudyReport:
@@ -352,6 +357,7 @@ def build_report(
             primary=request.primary,
             alpha=design.alpha if design is not None else 0.05,  # write_report's default
             visits=visits if visits is not None and len(visits.visits) else None,
+            strategies={s.id: strategy_of(s.spec) for s in sessions},
         )
     except EpisodeTableError as error:
         reason = error.worded(request.choose.length)

@@ -14,6 +14,7 @@ import pytest
 from sqlalchemy.orm import Session
 
 from analysis.__main__ import main as analyse
+from analysis.comparable_report import COMPARABLE_FILES
 from analysis.human_report import TABLE_FILES
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
@@ -96,8 +97,11 @@ def _finish(db: Session, session: StudySession, rng: random.Random) -> None:
         )  # fmt: skip
 
 
-def _same_tables(database: Path, exported: Path) -> None:
-    for name in TABLE_FILES.values():
+def _same_tables(database: Path, exported: Path, learning: bool = False) -> None:
+    names = [*TABLE_FILES.values()]
+    if learning:
+        names += [COMPARABLE_FILES["scores"], COMPARABLE_FILES["timing"]]
+    for name in names:
         a, b = pd.read_csv(database / name), pd.read_csv(exported / name)
         pd.testing.assert_frame_equal(a, b, check_dtype=False, obj=name)
 
@@ -147,10 +151,10 @@ def test_the_export_gives_the_databases_participants_section(tmp_path: Path) -> 
         export_study(db, study.id, tmp_path / "export-4")
     engine.dispose()
     assert analyse([str(tmp_path / "export-4"), str(tmp_path / "exported-4")]) == 0
-    _same_tables(tmp_path / "database-4", tmp_path / "exported-4")
+    _same_tables(tmp_path / "database-4", tmp_path / "exported-4", learning=True)
     text = (tmp_path / "exported-4" / "report.md").read_text()
     assert "Learners finished: 4 of the 7 completed visits" in text
-    assert "## The participants" in text
+    assert "## The participants" in text and "## Learning outcomes that compare like" in text
     tests = pd.read_csv(tmp_path / "exported-4" / TABLE_FILES["tests"])
     assert tests["p"].notna().sum() >= 5, "numbers to compare, not only 'no test'"
     people = pd.read_csv(tmp_path / "exported-4" / TABLE_FILES["participants"])
