@@ -39,6 +39,7 @@ from analysis.episodes import CONTRACT, REQUIRED_COLUMNS, EpisodeTableError, arm
 from analysis.exported import Exported, ExportError, export_of_table, read_export
 from analysis.finished import Choice, left_out_notes, nothing_finished
 from analysis.human import Visits, learners_finished
+from analysis.preregistration import preregistered
 from analysis.replays import REPLAYED, unchanged_replays_note
 from analysis.report import write_human_report, write_report
 
@@ -82,7 +83,10 @@ def _participants_alone(export: Exported, visits: Visits, args: argparse.Namespa
     finished (as `ideeprl report` writes it then)."""
     title = args.title or f"{export.name or 'IDeepRL study'}: the participants"
     notes = [learners_finished(visits), f"Sessions from the export `{args.episodes}`."]
-    result = write_human_report(visits, args.out_dir, title=title, notes=notes, alpha=export.alpha)
+    result = write_human_report(
+        visits, args.out_dir, title=title, notes=notes, alpha=export.alpha,
+        preregistered=preregistered(export.design),
+    )  # fmt: skip
     for path in result.files:
         print(path)
     return 0
@@ -183,6 +187,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "advice": export.advice,
             "visits": visits,
             "strategies": {i: r.strategy if r.advised else None for i, r in export.runs.items()},
+            "preregistered": preregistered(export.design),
         }
         title = export.name or title
     else:

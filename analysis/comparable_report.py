@@ -63,9 +63,14 @@ def plot_curves(found: Comparable) -> Figure:
 
 
 def comparable_section(
-    found: Comparable, strategies: Mapping[int, str | None], out: Path, alpha: float
+    found: Comparable,
+    strategies: Mapping[int, str | None],
+    out: Path,
+    alpha: float,
+    exploratory: bool = False,
 ) -> tuple[list[str], list[Path]]:
-    """Write the section's tables and figure into `out`; its Markdown lines and files."""
+    """Write the section's tables and figure into `out`; its Markdown lines and files.
+    `exploratory`: a primary test leads the report, and these tests say they are not it."""
     used = sorted({strategies.get(int(i)) or "" for i in found.scores["session_id"]})
     rules = [f"- {s or 'no advice'}: {rule(s or None)}." for s in used]
     files = [out / COMPARABLE_FILES["timing"]]
@@ -97,6 +102,8 @@ def comparable_section(
         ]
         return lines, files
     tests = comparable_tests(found.scores, alpha)
+    if exploratory:
+        tests["role"] = "exploratory"
     for name, frame in (("scores", found.scores), ("tests", tests)):
         path = out / COMPARABLE_FILES[name]
         safe_frame(frame).to_csv(path, index=False)
@@ -130,7 +137,8 @@ def comparable_section(
         "",
         f"![Learning over the shared window]({COMPARABLE_FILES['curves']})",
         "",
-        f"Welch's t on the score, the participant's learner as the unit, Holm's correction "
+        ("Exploratory: " if exploratory else "")
+        + f"Welch's t on the score, the participant's learner as the unit, Holm's correction "
         f"over the pairs, at α = {alpha:g}; the difference in means (a - b) with its "
         f"{100 * (1 - alpha):g} % interval.",
         "",

@@ -262,6 +262,7 @@ def build_report(
     is built, not with the web app."""
     from analysis.advice import replayed_advice_notes
     from analysis.human import learners_finished
+    from analysis.preregistration import preregistered
     from analysis.report import write_human_report, write_report
     from study.services.episodes import (
         load_advised_steps,
@@ -276,6 +277,7 @@ def build_report(
     study = get_study(db, study_id)
     design = design_of(study)
     visits = learners = None
+    plan = None if design is None else preregistered(design.model_dump())
     if design is not None:  # the participants' measures wait for no learner
         everything = [s for s in list_sessions(db, study_id) if not s.preview and not s.pooled]
         visits = load_visits(db, everything)
@@ -290,7 +292,9 @@ def build_report(
         title = request.title or f"{study.name}: the participants"
         lines = [learners, *request.notes, f"Study {study.id} ({study.name})."]
         alpha = design.alpha if design is not None else 0.05
-        result = write_human_report(visits, out_dir, title=title, notes=lines, alpha=alpha)
+        result = write_human_report(
+            visits, out_dir, title=title, notes=lines, alpha=alpha, preregistered=plan
+        )
         return StudyReport(result, (learners,))
     group = {
         s.id: (s.condition if design and s.condition else arm(s.method, s.spec.feedback))
@@ -358,6 +362,7 @@ def build_report(
             alpha=design.alpha if design is not None else 0.05,  # write_report's default
             visits=visits if visits is not None and len(visits.visits) else None,
             strategies={s.id: strategy_of(s.spec) for s in sessions},
+            preregistered=plan,
         )
     except EpisodeTableError as error:
         reason = error.worded(request.choose.length)
