@@ -23,7 +23,7 @@ from pydantic import (
 from pydantic.json_schema import JsonSchemaValue
 from pydantic_core import core_schema
 
-from analysis.preregistration import MEASURES, problem
+from analysis.preregistration import MEASURES, Preregistered, problem
 from study.schemas.runs import given
 from study.schemas.sessions import run_model
 from study.schemas.types import KEY_NAMES, NO_NUL, Int, Key, Number, Text, Texts, plain_text
@@ -217,6 +217,13 @@ class StudyDesign(BaseModel):
                     f"({', '.join(self.conditions)})"
                 )
         return self
+
+    def preregistered(self) -> Preregistered | None:
+        """The primary test as the report reads it (None: the design fixed none)."""
+        if self.primary is None:
+            return None
+        a, b = self.primary.conditions or tuple(self.conditions)
+        return Preregistered(self.primary.measure, self.primary.test, (a, b), self.primary.effect)
 
     def code(self, outcome: str) -> str:
         return self.panel.codes[outcome]  # type: ignore[index]

@@ -262,7 +262,6 @@ def build_report(
     is built, not with the web app."""
     from analysis.advice import replayed_advice_notes
     from analysis.human import learners_finished
-    from analysis.preregistration import preregistered
     from analysis.report import write_human_report, write_report
     from study.services.episodes import (
         load_advised_steps,
@@ -277,7 +276,7 @@ def build_report(
     study = get_study(db, study_id)
     design = design_of(study)
     visits = learners = None
-    plan = None if design is None else preregistered(design.model_dump())
+    plan = None if design is None else design.preregistered()
     if design is not None:  # the participants' measures wait for no learner
         everything = [s for s in list_sessions(db, study_id) if not s.preview and not s.pooled]
         visits = load_visits(db, everything)

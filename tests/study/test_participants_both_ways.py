@@ -97,7 +97,14 @@ def _finish(db: Session, session: StudySession, rng: random.Random) -> None:
         )  # fmt: skip
 
 
+def _primary(report: Path) -> str:
+    text = (report / "report.md").read_text()
+    return text[text.index("## Primary test") :].split("\n## ")[0]
+
+
 def _same_tables(database: Path, exported: Path, learning: bool = False) -> None:
+    assert _primary(database) == _primary(exported)
+    assert "power" in _primary(exported) and "statistic" in _primary(exported)
     names = [*TABLE_FILES.values()]
     if learning:
         names += [COMPARABLE_FILES["scores"], COMPARABLE_FILES["timing"]]
@@ -117,6 +124,7 @@ def test_the_export_gives_the_databases_participants_section(tmp_path: Path) -> 
             },
             "alpha": 0.1,
             "capacity": 10,
+            "primary": {"measure": "nasa_tlx", "test": "welch", "effect": 10},
         }
     )
     rng = random.Random(44)
