@@ -157,9 +157,12 @@ def test_the_export_gives_the_databases_participants_section(tmp_path: Path) -> 
         db.commit()
         build_report(db, study.id, tmp_path / "database-4")
         export_study(db, study.id, tmp_path / "export-4")
+        export_study(db, study.id, tmp_path / "parquet-4", fmt="parquet")
     engine.dispose()
     assert analyse([str(tmp_path / "export-4"), str(tmp_path / "exported-4")]) == 0
     _same_tables(tmp_path / "database-4", tmp_path / "exported-4", learning=True)
+    assert analyse([str(tmp_path / "parquet-4"), str(tmp_path / "from-parquet")]) == 0
+    _same_tables(tmp_path / "database-4", tmp_path / "from-parquet", learning=True)
     text = (tmp_path / "exported-4" / "report.md").read_text()
     assert "Learners finished: 4 of the 7 completed visits" in text
     assert "## The participants" in text and "## Learning outcomes that compare like" in text
