@@ -6,7 +6,10 @@ made-up curves.
 The `ideeprl report --study ID` command reads the database; this one needs only the files,
 and chooses an export's sessions as that one does: the finished ones, except trained
 advisors (the export's `status` and `advises`) and unchanged replays (`replay_of`), or those
-given with `--sessions`. Its exit status is that one's: 0 done, 1 nothing to analyse (no
+given with `--sessions`. An online study's export adds its participants' section
+(`analysis.human_report`), every completed visit whether or not its learner has finished;
+with no learner finished it is that section alone, as `ideeprl report` writes it then.
+Its exit status is that one's: 0 done, 1 nothing to analyse (no
 finished session, sessions that cannot be compared as they are), 2 a usage error (no such
 file, not an export or an episode CSV, an option or a value that is not acceptable).
 """
@@ -33,10 +36,12 @@ from analysis.baseline import (
 )
 from analysis.demo_curves import demo_episodes
 from analysis.episodes import CONTRACT, REQUIRED_COLUMNS, EpisodeTableError, arm
-from analysis.exported import ExportError, export_of_table, read_export
+from analysis.exported import Exported, ExportError, export_of_table, read_export
 from analysis.finished import Choice, left_out_notes, nothing_finished
+from analysis.human import Visits, learners_finished
+from analysis.preregistration import preregistered
 from analysis.replays import REPLAYED, unchanged_replays_note
-from analysis.report import write_report
+from analysis.report import write_human_report, write_report
 
 CHOOSE = Choice("`--sessions ID ...` and `--episodes N`", "`--episodes {n}`")
 """How this command includes sessions not finished yet, and cuts sessions to a length."""
@@ -71,6 +76,20 @@ def _read_csv(path: Path) -> pd.DataFrame | str:
             f"a study's export (its folder or zip) or a CSV of {CONTRACT}"
         )
     return episodes
+
+
+def _participants_alone(export: Exported, visits: Visits, args: argparse.Namespace) -> int:
+    """The report of an online study's participants while none of their learners has
+    finished (as `ideeprl report` writes it then)."""
+    title = args.title or f"{export.name or 'IDeepRL study'}: the participants"
+    notes = [learners_finished(visits), f"Sessions from the export `{args.episodes}`."]
+    result = write_human_report(
+        visits, args.out_dir, title=title, notes=notes, alpha=export.alpha,
+        preregistered=preregistered(export.design),
+    )  # fmt: skip
+    for path in result.files:
+        print(path)
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -129,11 +148,21 @@ def main(argv: Sequence[str] | None = None) -> int:
             export = read_export(Path(args.episodes), sessions=args.sessions)
         except ExportError as error:
             return _fail(str(error))
+        visits = export.visits
+        if visits is not None and visits.visits.empty:
+            visits = None
         if not export.runs and export.not_finished:
-            message = nothing_finished("the export", export.not_finished, CHOOSE.sessions, AFTER)
-            return _fail(message, EXIT_RUNTIME)
+            if visits is None or visits.completed.empty or args.sessions:
+                message = nothing_finished(
+                    "the export", export.not_finished, CHOOSE.sessions, AFTER
+                )
+                return _fail(message, EXIT_RUNTIME)
+            return _participants_alone(export, visits, args)
         episodes, settings = export.episodes, export.settings
-        notes = [f"Sessions from the export `{args.episodes}`."]
+        notes = [
+            *([learners_finished(visits)] if visits is not None else []),
+            f"Sessions from the export `{args.episodes}`.",
+        ]
         left_out = [advisors_left_out(export.advisors)] if export.advisors else []
         if export.unchanged_replays:
             left_out.append(unchanged_replays_note(export.unchanged_replays))
@@ -156,6 +185,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             "steps": export.steps,
             "alpha": export.alpha,
             "advice": export.advice,
+            "visits": visits,
+            "strategies": {i: r.strategy if r.advised else None for i, r in export.runs.items()},
+            "preregistered": preregistered(export.design),
         }
         title = export.name or title
     else:

@@ -16,8 +16,9 @@ from scipy import stats
 
 from analysis.episodes import method_name
 
-ADVICE_COLUMNS = ["session_id", "global_step", "action", "outcome"]
-"""The advised steps a report needs, in step order per session."""
+ADVICE_COLUMNS = ["session_id", "global_step", "action", "outcome", "stage", "episode", "reward"]
+"""The advised steps a report needs, in step order per session (`stage` as
+`learner.records` spells it: `pretrain`, `train`)."""
 REPLAYED_ADVICE_COLUMNS = ["session_id", "action", "same_observation"]
 """A replay's advice rows: `action` missing for a request past the recorded stream,
 `same_observation` whether the replayed advice met the image its advisor saw."""

@@ -28,6 +28,7 @@ import pandas as pd
 from analysis.advice import ADVICE_COLUMNS, REPLAYED_ADVICE_COLUMNS
 from analysis.episodes import EPISODE_TABLE_COLUMNS, arm
 from analysis.finished import not_finished, status_of
+from analysis.human import Visits
 from analysis.replays import REPLAYED, unchanged_replays
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
@@ -74,6 +75,9 @@ class Exported:
     replayed_advice: pd.DataFrame | None = None
     """The advice rows of the replays compared (`analysis.advice.REPLAYED_ADVICE_COLUMNS`,
     from the export's advice table; None without replays or without the table)."""
+    visits: Visits | None = None
+    """What an online study's participants did, every visit whatever its learner's status
+    (`analysis.human`; None without a design)."""
 
     @property
     def alpha(self) -> float:
@@ -139,6 +143,7 @@ def read_export(path: Path, sessions: Collection[int] | None = None) -> Exported
     return Exported(
         design=design,
         conditions=conditions,
+        visits=None if design is None else read_visits(path, every),
         advice=_advised(every_step),
         name=_study(path).get("name"),
         advisors=advisors,
@@ -154,6 +159,57 @@ def read_export(path: Path, sessions: Collection[int] | None = None) -> Exported
         ),
         settings=settings_table(sorted(runs.items()), _provenance(table)),
     )
+
+
+VISIT_COLUMNS = {
+    "sessions": {"session_id": int, "condition": str, "outcome": str, "consented_at": str,
+                 "status": str},
+    "advice": {"session_id": int, "advisor": str, "action": float, "decision_time_s": float,
+               "correct_action": float},
+    "check": {"session_id": int, "attempt": int, "question": str, "correct": bool},
+    "questionnaire": {"session_id": int, "instrument": str, "item": str,
+                      "value_number": float},
+    "scales": {"session_id": int, "scale": str, "score": float},
+}  # fmt: skip
+"""The columns of each table `analysis.human.Visits` reads, typed as the database's are
+(a missing cell None, or NaN for a number); `correct_action` only where the export has it."""
+
+
+def read_visits(path: Path, sessions: pd.DataFrame | None = None) -> Visits:
+    """The participants' tables of the export folder at `path` (`sessions`: its sessions
+    table, read already). A table the export lacks (one written before the visits had
+    it) reads as empty."""
+    frames = {}
+    for name, columns in VISIT_COLUMNS.items():
+        if name == "sessions" and sessions is not None:
+            table = sessions
+        else:
+            try:
+                table = _table(path, name)
+            except ExportError:
+                table = pd.DataFrame(columns=list(columns))
+        typed = {}
+        for column, kind in columns.items():
+            if column not in table:
+                if column == "correct_action":
+                    continue
+                table = table.assign(**{column: None})
+            typed[column] = table[column].map(lambda v, k=kind: _cell(v, k))
+        frames[name] = pd.DataFrame(typed, index=table.index).reset_index(drop=True)
+    for name in ("advice", "questionnaire", "scales"):
+        frame = frames[name]
+        numbers = [c for c, kind in VISIT_COLUMNS[name].items() if kind is float and c in frame]
+        frames[name] = frame.astype({c: "float64" for c in numbers})
+    return Visits(**frames)
+
+
+def _cell(value: Any, kind: type) -> Any:
+    """A visit table's cell as the database gives it (None where missing)."""
+    if value is pd.NA or value is pd.NaT or _missing(value):
+        return None
+    if kind is str:
+        return str(value)
+    return _typed(kind, value)
 
 
 def export_of_table(path: Path) -> Path | None:

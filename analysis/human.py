@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.between import Tested, fisher, holm, mann_whitney, welch
+from analysis.finished import is_finished
 
 FLOW = ("arrived", "declined", "consented", "excluded", "timed_out", "completed", "under_way")
 """The flow's counts per condition, in the order a CONSORT diagram reads them."""
@@ -70,6 +71,18 @@ class Visits:
     def correct_action_recorded(self) -> bool:
         """Whether the advice table records the task's correct action for each advice."""
         return "correct_action" in self.advice and self.advice["correct_action"].notna().any()
+
+
+def learners_finished(visits: Visits) -> str:
+    """The report's first line: how many of the completed visits' learners have finished,
+    and what that means for the two sections."""
+    done = visits.completed
+    finished = sum(is_finished(status) for status in done["status"])
+    return (
+        f"Learners finished: {finished} of the {len(done)} completed visits' learners; "
+        "the participants' section covers every completed visit, the learners' R_T only "
+        "the finished ones."
+    )
 
 
 def flow(visits: Visits) -> pd.DataFrame:

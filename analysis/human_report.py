@@ -118,11 +118,16 @@ def _interval(row: pd.Series) -> str:
     return f"{row['estimate']:.2f} [{row['low']:.2f}, {row['high']:.2f}]"
 
 
-def human_section(visits: Visits, out: Path, alpha: float) -> tuple[list[str], list[Path]]:
-    """Write the section's tables and figures into `out`; its Markdown lines and files."""
+def human_section(
+    visits: Visits, out: Path, alpha: float, exploratory: bool = False
+) -> tuple[list[str], list[Path]]:
+    """Write the section's tables and figures into `out`; its Markdown lines and files.
+    `exploratory`: a primary test leads the report, and these tests say they are not it."""
     counts = flow(visits)
     people = participants(visits)
     tests = between_conditions(visits, alpha)
+    if exploratory:
+        tests["role"] = "exploratory"
     files = []
     for name, frame in (("flow", counts), ("participants", people), ("tests", tests)):
         path = out / TABLE_FILES[name]
@@ -145,8 +150,8 @@ def human_section(visits: Visits, out: Path, alpha: float) -> tuple[list[str], l
     accuracy = (
         "Accuracy is the share of a participant's advice that named the task's correct action."
         if visits.correct_action_recorded
-        else "No accuracy: the export records no correct action for the advice (the task's "
-        "correct action is not stored beside it), so none is given."
+        else "No accuracy: no correct action is recorded beside the advice (the task cannot "
+        "say, or the advice was stored before it was recorded), so none is given."
     )
     lines = [
         "## The participants (the unit of the human study)",
@@ -162,7 +167,12 @@ def human_section(visits: Visits, out: Path, alpha: float) -> tuple[list[str], l
         "",
         f"![Decision times by condition]({FIGURE_FILES['decision_times']})",
         "",
-        f"Tests between conditions, the participant as the unit, at α = {alpha:g}, Holm's "
+        (
+            "Exploratory tests (the pre-registered primary test leads the report): "
+            if exploratory
+            else ""
+        )
+        + f"Tests between conditions, the participant as the unit, at α = {alpha:g}, Holm's "
         "correction within each family (advice; scales; items; rates): Welch's t for "
         "continuous measures (decision times on a log scale), Mann-Whitney's U for Likert "
         "items and NASA-TLX subscales, Fisher's exact test for rates; the effect with its "

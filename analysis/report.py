@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import platform
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +21,8 @@ import scipy
 from analysis import markdown as md
 from analysis.advice import advice_quality, quality_correlations
 from analysis.audit import Audit, audit, label
+from analysis.comparable import comparable
+from analysis.comparable_report import COMPARABLE_FILES, comparable_section
 from analysis.comparisons import compare
 from analysis.csvsafe import safe_frame
 from analysis.episodes import EpisodeTableError, agents_of, method_name
@@ -43,6 +45,8 @@ from analysis.human_report import HUMAN_FILES, human_section
 from analysis.markdown import REPORT_FILE
 from analysis.paper import PAPER_AGENTS, PAPER_EPISODES, paper_comparison
 from analysis.power import DEFAULT_DRAWS, MIN_AGENTS, PowerAnalysis, power_analysis
+from analysis.preregistration import Preregistered
+from analysis.primary import primary_lines
 from analysis.reference import REFERENCES, authors_totals, overlay_authors
 from analysis.rescoring import rescored_totals, rescoring_table
 from analysis.stats import AGENT_TOTALS, EPISODE_MEANS
@@ -85,6 +89,7 @@ logs (rescoring), a reference, two agents per arm and a baseline (power)."""
 REPORT_FILES = (
     "report.md",
     *HUMAN_FILES,
+    *COMPARABLE_FILES.values(),
     *FIGURE_FILES.values(),
     *TABLE_FILES.values(),
     *OPTIONAL_TABLE_FILES.values(),
@@ -596,6 +601,8 @@ def write_report(
     power_draws: int = DEFAULT_DRAWS,
     power_seed: int = 0,
     visits: Visits | None = None,
+    strategies: Mapping[int, str | None] | None = None,
+    preregistered: Preregistered | None = None,
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -620,7 +627,11 @@ def write_report(
     test of the agents' R_T, or the paired t-test where seeds pair; the rest are secondary.
     The Power section plans a future study from these agents' R_T (`analysis.power`,
     `power_draws` simulated studies per size, seeded by `power_seed`) at `alpha`.
-    `visits` (an online study's) adds the participants' section (`analysis.human_report`).
+    `visits` (an online study's) adds the participants' section (`analysis.human_report`),
+    and with `advice` and each session's strategy (`strategies`, None: no advice) the
+    learning outcomes that compare like with like (`analysis.comparable`); `preregistered`
+    (the design's primary measure and test) leads the report (`analysis.primary`) and
+    makes every other test exploratory.
     """
     if reference is not None and reference not in REFERENCES:
         raise EpisodeTableError(
@@ -746,8 +757,17 @@ def write_report(
     )  # fmt: skip
     text = _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra)
     if visits is not None:
-        lines, files = human_section(visits, out, alpha)
+        marked = preregistered is not None
+        lines, files = human_section(visits, out, alpha, marked)
+        scores = None
+        if advice is not None and strategies is not None:
+            found = comparable(analysis.episodes, advice, strategies)
+            learning, more = comparable_section(found, strategies, out, alpha, marked)
+            lines, files = [*learning, *lines], [*more, *files]
+            scores = None if found.empty else found.scores
         text = text.rstrip("\n") + "\n\n" + "\n".join(lines)
+        if preregistered is not None:
+            text = leading(text, primary_lines(preregistered, visits, scores, alpha))
         figure_paths |= {p.stem: p for p in files if p.suffix == ".png"}
         table_paths |= {p.stem: p for p in files if p.suffix == ".csv"}
     report.write_text(text, encoding="utf-8")
@@ -765,21 +785,33 @@ def write_human_report(
     title: str,
     notes: Sequence[str] = (),
     alpha: float = 0.05,
+    preregistered: Preregistered | None = None,
 ) -> ReportResult:
     """The report of the participants alone, while no learner has finished: the section
-    of `analysis.human_report` under the title and `notes`."""
+    of `analysis.human_report` under the title and `notes`, led by the primary test where
+    the design fixed one."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for name in REPORT_FILES:
         (out / name).unlink(missing_ok=True)
-    lines, files = human_section(visits, out, alpha)
+    lines, files = human_section(visits, out, alpha, preregistered is not None)
     report = out / REPORT_FILE
     head = [f"# {title}", "", *(f"- {n}" for n in notes), ""]
+    if preregistered is not None:
+        head += primary_lines(preregistered, visits, None, alpha)
     report.write_text("\n".join([*head, *lines]), encoding="utf-8")
     return ReportResult(
         out, report, {p.stem: p for p in files if p.suffix == ".png"},
         {p.stem: p for p in files if p.suffix == ".csv"}, (), None,
     )  # fmt: skip
+
+
+def leading(text: str, lines: Sequence[str]) -> str:
+    """`text` with `lines` before its first section (after the title and notes)."""
+    at = text.find("\n## ")
+    if at < 0:
+        return text.rstrip("\n") + "\n\n" + "\n".join(lines)
+    return text[: at + 1] + "\n".join(lines) + "\n" + text[at + 1 :]
 
 
 def _bands_notes(analysis: Analysis) -> list[str]:

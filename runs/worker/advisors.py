@@ -21,6 +21,9 @@ from study.services.feedback import FeedbackGiven
 from study.services.observations import encode_png
 
 log = logging.getLogger(__name__)
+Correct = Callable[[dict[str, Any]], int | None]
+"""The task's correct action in the state an `info` describes (`tasks.Task.correct` with the
+run's options), stored beside each advice for its accuracy."""
 
 
 class HumanAdvisor:
@@ -40,8 +43,10 @@ class HumanAdvisor:
         advice_budget: int,
         idle_limit_s: float,
         frames: Callable[[], Any] | None = None,
+        correct: Correct | None = None,
     ) -> None:
         self._link = link
+        self._correct = correct
         self._frames = frames
         """A task without a live 3-D view: what people see now (an RGB image)."""
         self._reporter = reporter
@@ -83,6 +88,7 @@ class HumanAdvisor:
                 info=dict(moment.info),
                 advice_budget=self._budget,
                 frame_png=encode_png(self._frames()) if self._frames is not None else None,
+                correct_action=self._correct(moment.info) if self._correct else None,
             )
             self._until_participant_ready()
             # The request first: the flush of the steps before it then overlaps the
@@ -127,12 +133,14 @@ class RecordingAdvisor:
         kind: str,
         start_index: int,
         log: AdviceLog,
+        correct: Correct | None = None,
     ) -> None:
         self._inner = inner
         self._session_id = session_id
         self._kind = kind
         self.count = start_index
         self._log = log
+        self._correct = correct
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._inner, name)  # q_values, for importance advising
@@ -167,6 +175,7 @@ class RecordingAdvisor:
                 requested_at=requested_at,
                 answered_at=requested_at + timedelta(seconds=elapsed),
                 same_observation=getattr(self._inner, "same_observation", None),
+                correct_action=self._correct(moment.info) if self._correct else None,
             )
         )
         self.count += 1

@@ -62,6 +62,9 @@ class AdviceRequest:
     """Advice the strategy may ask for in all."""
     frame_png: bytes | None = None
     """A task without a live 3-D view: what people see at this step, PNG."""
+    correct_action: int | None = None
+    """The task's correct action at this step (stored with the advice for its accuracy;
+    never shown to the participant); None where the task cannot say."""
 
 
 @dataclass(frozen=True)

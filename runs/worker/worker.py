@@ -25,7 +25,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from learner import provenance
 from learner.advisors import RecordedAdvisor
 from learner.run import RunSpec, declare, declared
-from runs.worker.advisors import HumanAdvisor, RecordingAdvisor, RecordingEvaluator
+from runs.worker.advisors import Correct, HumanAdvisor, RecordingAdvisor, RecordingEvaluator
 from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
 from runs.worker.messages import StatusChanged, TrainingWanted
 from runs.worker.priority import lower_priority
@@ -158,6 +158,9 @@ class _Run:
         self.reporter = Reporter(
             self.link, self.recorder, env, spec.config.episodes, self.advice_budget
         )
+        task, task_options = spec.the_task, spec.env_options()
+        self.correct: Correct = lambda info: task.correct(info, task_options)
+        """The task's correct action at a step, stored beside each advice."""
         advisor = self._advisor(spec.make_advisor())  # None for sb3-dqn, which takes none
         evaluator = self._evaluator(spec.make_evaluator())  # evaluative feedback's, or None
         self.reporter.advisor = self.advisor
@@ -193,6 +196,7 @@ class _Run:
                 self.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
                 frames=None if self.live_view else self.env.render,
+                correct=self.correct,
             )
             self.env.after_step.append(self.advisor.after_step)
             self.env.participant = self.advisor
@@ -209,10 +213,11 @@ class _Run:
                 s.method,
                 self.start_advice,
                 self.recorder,
+                self.correct,
             )
         elif machine is not None:
             self.advisor = RecordingAdvisor(
-                machine, s.id, s.method, self.start_advice, self.recorder
+                machine, s.id, s.method, self.start_advice, self.recorder, self.correct
             )
         return self.advisor
 

@@ -362,6 +362,9 @@ class Advice(Base):
     """Replayed advice: whether the replay showed the advice the image its advisor saw
     (equal observation hashes); NULL for advice given live, and for requests beyond the
     stream."""
+    correct_action: Mapped[int | None] = mapped_column(Integer)
+    """The task's correct action at the advised step (`tasks.Task.correct`), for the advice's
+    accuracy; NULL where the task cannot say, and in rows stored before 0018."""
 
 
 class Feedback(Base):

@@ -23,6 +23,7 @@ from pydantic import (
 from pydantic.json_schema import JsonSchemaValue
 from pydantic_core import core_schema
 
+from analysis.preregistration import MEASURES, Preregistered, problem
 from study.schemas.runs import given
 from study.schemas.sessions import run_model
 from study.schemas.types import KEY_NAMES, NO_NUL, Int, Key, Number, Text, Texts, plain_text
@@ -136,6 +137,35 @@ class Panel(BaseModel):
         return self
 
 
+class Primary(BaseModel):
+    """The primary measure and test, fixed before the data (pre-registration): the report
+    leads with it, marks every other test exploratory, and states the power the study had
+    for its observed spread (`analysis.primary`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    measure: Literal[tuple(MEASURES)]  # type: ignore[valid-type]
+    """One of `analysis.preregistration.MEASURES`."""
+    test: Literal["welch", "mann_whitney", "fisher"]
+    """A test that fits the measure: welch or mann_whitney for a continuous one, fisher for
+    a rate."""
+    conditions: tuple[Key, Key] | None = None
+    """The two conditions compared (the effect is the first's minus the second's); may be
+    left out in a design of exactly two conditions."""
+    effect: Number | None = Field(default=None, gt=0)
+    """The smallest difference worth detecting, in the measure's units (the power stated
+    is for it; without it, the report states the difference detectable at 80 %)."""
+
+    @model_validator(mode="after")
+    def _fits(self) -> Primary:
+        why = problem(self.measure, self.test)
+        if why is not None:
+            raise ValueError(why)
+        if self.conditions is not None and self.conditions[0] == self.conditions[1]:
+            raise ValueError("primary.conditions must name two different conditions")
+        return self
+
+
 class StudyDesign(BaseModel):
     """Stored with every default written out (`model_dump()` of the validated design), so
     what a study does never changes when a default in this file does."""
@@ -165,6 +195,35 @@ class StudyDesign(BaseModel):
     panel: Panel = Field(default_factory=Panel)
     check: CheckSpec | None = Field(default_factory=CheckSpec.default)
     questionnaire: QuestionnaireSpec | None = Field(default_factory=QuestionnaireSpec.default)
+    primary: Primary | None = None
+    """The pre-registered primary measure and test (None: every test is as the report
+    makes it, none primary)."""
+
+    @model_validator(mode="after")
+    def _primary_conditions(self) -> StudyDesign:
+        if self.primary is None:
+            return self
+        if self.primary.conditions is None:
+            if len(self.conditions) != 2:
+                raise ValueError(
+                    "primary.conditions: name the two conditions the primary test compares "
+                    f"(the design has {len(self.conditions)})"
+                )
+        else:
+            unknown = [c for c in self.primary.conditions if c not in self.conditions]
+            if unknown:
+                raise ValueError(
+                    f"primary.conditions: {unknown[0]!r} is not one of the design's conditions "
+                    f"({', '.join(self.conditions)})"
+                )
+        return self
+
+    def preregistered(self) -> Preregistered | None:
+        """The primary test as the report reads it (None: the design fixed none)."""
+        if self.primary is None:
+            return None
+        a, b = self.primary.conditions or tuple(self.conditions)
+        return Preregistered(self.primary.measure, self.primary.test, (a, b), self.primary.effect)
 
     def code(self, outcome: str) -> str:
         return self.panel.codes[outcome]  # type: ignore[index]

@@ -262,3 +262,8 @@ class AdvicePublic(BaseModel):
         description="Replayed advice: whether it met the image its advisor saw; null for "
         "advice given live and for requests beyond the stream.",
     )
+    correct_action: int | None = Field(
+        default=None,
+        description="The task's correct action at the advised step (the advice is accurate "
+        "when action equals it); null where the task cannot say.",
+    )

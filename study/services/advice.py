@@ -46,6 +46,9 @@ class AdviceGiven:
     answered_at: datetime
     same_observation: bool | None = None
     """Replayed advice: whether it met the image its advisor saw; None otherwise."""
+    correct_action: int | None = None
+    """The task's correct action at the advised step (`tasks.Task.correct`); None where the
+    task cannot say."""
 
 
 def write_advice(db: Session, advice: Sequence[AdviceGiven]) -> None:

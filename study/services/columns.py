@@ -152,6 +152,13 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
         "Replayed advice: whether the replay showed it the image its advisor saw (equal "
         "observation hashes); empty for advice given live and for requests beyond the stream.",
     ),
+    "correct_action": (
+        "integer",
+        "The task's correct action at the advised step, its index as in action (the sorting "
+        "rule's for the sorting robot, the shortest path's in the grid world): the advice is "
+        "accurate when action equals it; empty where the task cannot say, and for advice "
+        "stored before it was recorded.",
+    ),
 }
 FEEDBACK_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session the judgement belongs to (its run's feedback: evaluative)."),

@@ -17,7 +17,7 @@ from analysis.advice import ADVICE_COLUMNS, REPLAYED_ADVICE_COLUMNS
 from analysis.episodes import EPISODE_TABLE_COLUMNS, arm
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
-from learner.records import TRAINING
+from learner.records import TRAINING, stage_of
 from study.db.models import Advice, Episode, Step, StudySession
 
 if TYPE_CHECKING:
@@ -71,12 +71,21 @@ def load_training_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame
 def load_advised_steps(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
     """The steps whose action came from the advisor (`analysis.advice.ADVICE_COLUMNS`)."""
     query = (
-        select(Step.session_id, Step.global_step, Step.action, Step.outcome)
+        select(
+            Step.session_id,
+            Step.global_step,
+            Step.action,
+            Step.outcome,
+            Step.stage,
+            Step.episode,
+            Step.reward,
+        )
         .where(Step.session_id.in_(list(session_ids)), Step.action_source == "advisor")
         .order_by(Step.session_id, Step.global_step)
     )
     rows = [tuple(row) for row in db.execute(query)]
-    return pd.DataFrame(rows, columns=ADVICE_COLUMNS)
+    advised = pd.DataFrame(rows, columns=ADVICE_COLUMNS)
+    return advised.assign(stage=advised["stage"].map(stage_of))
 
 
 def load_replayed_advice(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
@@ -102,13 +111,19 @@ def load_visits(db: Session, sessions: Sequence[StudySession]) -> Visits:
         columns=["session_id", "condition", "outcome", "consented_at", "status"],
     )
     query = (
-        select(Advice.session_id, Advice.advisor, Advice.action, Advice.decision_time_s)
+        select(
+            Advice.session_id,
+            Advice.advisor,
+            Advice.action,
+            Advice.decision_time_s,
+            Advice.correct_action,
+        )
         .where(Advice.session_id.in_([s.id for s in sessions]))
         .order_by(Advice.session_id, Advice.advice_index)
     )
     advice = pd.DataFrame(
         [tuple(row) for row in db.execute(query)],
-        columns=["session_id", "advisor", "action", "decision_time_s"],
+        columns=["session_id", "advisor", "action", "decision_time_s", "correct_action"],
     )
     check = pd.DataFrame(
         list(check_rows(db, list(sessions))),

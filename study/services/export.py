@@ -196,6 +196,7 @@ def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterat
                 "answered_at": a.answered_at,
                 "observation_file": f"advice/{name}",
                 "same_observation": a.same_observation,
+                "correct_action": a.correct_action,
             }
 
 

@@ -249,6 +249,11 @@ class StudyReport:
     """What the choice of sessions and baseline left out or decided (also in the report)."""
 
 
+def strategy_of(spec: RunSpec) -> str | None:
+    """The run's advising strategy; None for a run without advice."""
+    return spec.strategy if spec.advised else None
+
+
 def build_report(
     db: Session, study_id: int, out_dir: str | Path, request: ReportRequest | None = None
 ) -> StudyReport:
@@ -256,6 +261,7 @@ def build_report(
     analysis (pandas' tables, scipy's tests, matplotlib's figures) loads here, when a report
     is built, not with the web app."""
     from analysis.advice import replayed_advice_notes
+    from analysis.human import learners_finished
     from analysis.report import write_human_report, write_report
     from study.services.episodes import (
         load_advised_steps,
@@ -270,17 +276,12 @@ def build_report(
     study = get_study(db, study_id)
     design = design_of(study)
     visits = learners = None
+    plan = None if design is None else design.preregistered()
     if design is not None:  # the participants' measures wait for no learner
         everything = [s for s in list_sessions(db, study_id) if not s.preview and not s.pooled]
         visits = load_visits(db, everything)
     if visits is not None and len(visits.visits):
-        done = visits.completed
-        finished = sum(is_finished(status) for status in done["status"])
-        learners = (
-            f"Learners finished: {finished} of the {len(done)} completed visits' learners; "
-            "the participants' section covers every completed visit, the learners' R_T only "
-            "the finished ones."
-        )
+        learners = learners_finished(visits)
     try:
         sessions, notes = select_sessions(db, study_id, request)
     except Conflict:
@@ -290,7 +291,9 @@ def build_report(
         title = request.title or f"{study.name}: the participants"
         lines = [learners, *request.notes, f"Study {study.id} ({study.name})."]
         alpha = design.alpha if design is not None else 0.05
-        result = write_human_report(visits, out_dir, title=title, notes=lines, alpha=alpha)
+        result = write_human_report(
+            visits, out_dir, title=title, notes=lines, alpha=alpha, preregistered=plan
+        )
         return StudyReport(result, (learners,))
     group = {
         s.id: (s.condition if design and s.condition else arm(s.method, s.spec.feedback))
@@ -357,6 +360,8 @@ def build_report(
             primary=request.primary,
             alpha=design.alpha if design is not None else 0.05,  # write_report's default
             visits=visits if visits is not None and len(visits.visits) else None,
+            strategies={s.id: strategy_of(s.spec) for s in sessions},
+            preregistered=plan,
         )
     except EpisodeTableError as error:
         reason = error.worded(request.choose.length)

@@ -63,6 +63,12 @@ def test_run_session_runs_a_session_to_its_end_in_this_process(tmp_path: Path) -
             ).all()
         assert len(advised) == 10, "each machine advice written once, with its step"
         assert all(row[1] == row[2] for row in advised), "the greedy action of its step"
+        with factory() as db:
+            stored = db.execute(
+                select(Advice.action, Advice.correct_action).where(Advice.session_id == session.id)
+            ).all()
+        assert all(action == correct for action, correct in stored), "an oracle never errs"
+        assert {correct for _, correct in stored} <= {0, 1, 2, 3}, "each one known"
         assert Path(done.checkpoint_path or "").name == "final.pt"
         assert Path(done.checkpoint_path or "").is_file(), "usable as an agent advisor"
 

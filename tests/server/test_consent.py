@@ -213,5 +213,6 @@ def test_decision_times_are_validated_and_stored(server: LiveServer, api: httpx.
     assert given.status_code == 200, given.text
     stored = api.get(f"/api/sessions/{session['id']}/advice").json()
     assert len(stored) == 1 and stored[0]["decision_time_s"] == 0.75
+    assert stored[0]["correct_action"] in (0, 1, 2, 3), "the task's correct action, kept"
     api.post(f"/api/sessions/{session['id']}/stop")
     participant.close()

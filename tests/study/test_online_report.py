@@ -112,13 +112,14 @@ def test_the_participants_are_reported_before_any_learner_finishes(tmp_path: Pat
                 session.consented_at = now
             if outcome == "completed":
                 by_condition[session.condition] = by_condition.get(session.condition, 0) + 1
-                for k, seconds in enumerate((1.0, 3.0)):
+                # action 0 each time; correct: 0, then 3 (accuracy 1/2), then unknown
+                for k, (seconds, right) in enumerate(((1.0, 0), (3.0, 3), (2.0, None))):
                     db.add(
                         Advice(
                             session_id=session.id, advice_index=k, global_step=k + 1,
                             advisor="human", action=0, observation_png=b"",
                             response_time_s=seconds, decision_time_s=seconds,
-                            requested_at=now,
+                            requested_at=now, correct_action=right,
                         )
                     )  # fmt: skip
         db.commit()
@@ -133,6 +134,7 @@ def test_the_participants_are_reported_before_any_learner_finishes(tmp_path: Pat
     assert flow["declined"].sum() == 1 and flow["excluded"].sum() == 1
     assert flow["timed_out"].sum() == 1 and flow["consented"].sum() == 5
     people = pd.read_csv(tmp_path / "report" / "participants.csv")
-    assert list(people["advice"]) == [2, 2, 2] and list(people["median_decision_s"]) == [2.0] * 3
-    assert "no correct action" in text
+    assert list(people["advice"]) == [3, 3, 3] and list(people["median_decision_s"]) == [2.0] * 3
+    assert list(people["accuracy"]) == [0.5] * 3, "of the advice whose correct action is known"
+    assert "Accuracy is the share" in text
     engine.dispose()
