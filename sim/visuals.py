@@ -6,6 +6,9 @@ named by their files), in the colours PyBullet draws them, and `poses()` says wh
 shape is now. A shape's pose is its link's frame (the URDF's, not the centre of mass that
 PyBullet reports for a base) composed with the shape's own local frame, so a viewer only
 places each shape, with no knowledge of links or joints.
+
+A task whose camera renders simplified meshes (TinyRenderer's time grows with triangles)
+names the full ones people should see instead (`shown_meshes`).
 """
 
 from __future__ import annotations
@@ -58,8 +61,15 @@ def geometry(kind: int, dimensions: Iterable[float], mesh: bytes) -> Geometry | 
 class BulletScene:
     """The visual shapes of named PyBullet bodies, read once; their poses on demand."""
 
-    def __init__(self, p: Client, bodies: Mapping[str, int], still: Iterable[str] = ()) -> None:
-        """`bodies`: a scene name for each body; `still`: those that never move."""
+    def __init__(
+        self,
+        p: Client,
+        bodies: Mapping[str, int],
+        still: Iterable[str] = (),
+        shown_meshes: Mapping[str, str] | None = None,
+    ) -> None:
+        """`bodies`: a scene name for each body; `still`: those that never move;
+        `shown_meshes`: the file people see for a mesh file PyBullet loaded, where another."""
         self.p = p
         self.shapes: list[Shape] = []
         self.specs: list[BodySpec] = []
@@ -74,6 +84,8 @@ class BulletScene:
             for entry in data:
                 link, kind, dims, mesh, pos, orn, rgba = entry[1:8]
                 shape = geometry(kind, dims, mesh)
+                if isinstance(shape, MeshFile) and shape.path in (shown_meshes or {}):
+                    shape = MeshFile((shown_meshes or {})[shape.path], shape.scale)
                 if shape is None:
                     continue
                 path = name if len(links) == 1 else f"{name}/{links[link]}"

@@ -24,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 import pybullet_data
 
+from sim import meshes
 from sim.bodies import MotionFrame, Pose
 from sim.bullet import pybullet
 from sim.camera import Camera
@@ -43,6 +44,19 @@ HAND_DOWN = (0.0, 1.0, 0.0, 0.0)
 """The hand's orientation, pointing down (x, y, z, w)."""
 REST = (0.0, 0.5, 0.0, -1.6, 0.0, 1.0, 0.0)
 """The iiwa's joints when a solve starts: elbow up, hand forward and down."""
+IIWA_RGBA = (
+    (0.2, 0.2, 0.2, 1.0),
+    *[(0.5, 0.7, 1.0, 1.0)] * 2,
+    (1.0, 0.4235, 0.0392, 1.0),
+    *[(0.5, 0.7, 1.0, 1.0)] * 2,
+    (1.0, 0.4235, 0.0392, 1.0),
+    (0.2, 0.2, 0.2, 1.0),
+)
+"""The stock URDF's colours of links 0 to 7, kept."""
+HULL_POINTS = 64
+"""The camera's iiwa: each link the convex hull of 64 of its points (as the sorting robot's,
+`sim.meshes`), a twentieth of the triangles and the same 64x64 image; people see the full
+meshes."""
 BALL_RADIUS = 0.035
 BALL_RGBA = (0.9, 0.1, 0.08, 1.0)
 FLOOR_RGBA = (0.78, 0.78, 0.74, 1.0)
@@ -74,8 +88,15 @@ class ReachEnv(gym.Env[np.ndarray, int]):
         world.p.setGravity(0, 0, 0)
         self.world, self.p = world, world.p
         self.arm, self.ball = self._build(self.p)
-        self.scene = BulletScene(self.p, {"floor": self.floor, "arm": self.arm, "ball": self.ball},
-                                 still=("floor",))  # fmt: skip
+        self.scene = BulletScene(
+            self.p,
+            {"floor": self.floor, "arm": self.arm, "ball": self.ball},
+            still=("floor",),
+            shown_meshes={
+                str(self._hull_folder / f"link_{link}.obj"): str(meshes.link_mesh_path(link))
+                for link in range(meshes.ARM_LINKS)
+            },
+        )
         self.top = Camera(world, TOP_VIEW, 64, 32)
         self.side = Camera(world, SIDE_VIEW, 64, 32)
         self.people = Camera(world, PEOPLE_VIEW, 256)
@@ -92,7 +113,9 @@ class ReachEnv(gym.Env[np.ndarray, int]):
             pybullet.GEOM_BOX, halfExtents=(0.9, 0.7, 0.01), rgbaColor=FLOOR_RGBA
         )
         self.floor = p.createMultiBody(0, -1, floor_shape, (0.3, 0.0, -0.01))
-        arm = p.loadURDF("kuka_iiwa/model.urdf", useFixedBase=True)
+        urdf = meshes.arm_urdf("", IIWA_RGBA, HULL_POINTS)
+        self._hull_folder = urdf.parent
+        arm = p.loadURDF(str(urdf), useFixedBase=True)
         ball_shape = p.createVisualShape(
             pybullet.GEOM_SPHERE, radius=BALL_RADIUS, rgbaColor=BALL_RGBA
         )

@@ -1,6 +1,6 @@
 """The 3-D view of a PyBullet task built from the simulation's own bodies (the reach task's
 iiwa, floor and ball): one viser node for each visual shape PyBullet has, of its kind, with
-the file's own mesh, and after the arm moves each node where PyBullet has its shape.
+the URDF's own mesh, and after the arm moves each node where PyBullet has its shape.
 
 The nodes are real viser handles, in a viser server's scene (what a client's scene is
 built with); where each shape is comes from PyBullet's own bounding boxes, computed apart
@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 from server.viewer import meshes
 from server.viewer.mirror import SceneMirror
 from sim.bullet import pybullet
+from sim.meshes import link_mesh_path
 from tasks import get_task
 from tasks.reach.env import ReachEnv
 
@@ -65,11 +66,12 @@ def test_the_views_nodes_are_pybullets_visual_shapes_and_follow_them(
     assert len(mirror.handles) == len(shapes) == 10  # floor, the iiwa's 8 links, ball
     kinds = sorted(type(h).__name__ for h in mirror.handles.values())
     assert kinds == sorted(KIND[s[2]] for s in shapes)
-    for shape in shapes:
+    for shape in shapes:  # the camera's hulls in PyBullet, the URDF's own meshes shown
         if shape[2] == pybullet.GEOM_MESH:
             handle = mirror.handles[f"arm/lbr_iiwa_link_{shape[1] + 1}"]
-            vertices, faces = meshes.read_mesh(shape[4].decode())
-            assert len(handle.vertices) == len(vertices) > 100 and len(faces) > 100
+            vertices, faces = meshes.read_mesh(str(link_mesh_path(shape[1] + 1)))
+            assert len(handle.vertices) == len(vertices) and len(faces) > 1000
+            assert len(meshes.read_mesh(shape[4].decode())[1]) < len(faces) / 5
 
     for action in (0, 4, 2, 2, 5):  # the arm moves; the view is told only the new poses
         env.step(action)
