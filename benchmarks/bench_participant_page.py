@@ -12,7 +12,8 @@ Median of `--runs`, with the machine's load average.
 `weight`: the advice page over a throttled phone connection (Chromium's CDP
 `Network.emulateNetworkConditions`: 1.6 Mbit/s down, 750 kbit/s up, 150 ms latency, the
 DevTools' "Slow 4G"): bytes on the wire per kind (the page and its files, viser's client
-in the frame, the scene over the websocket, the KUKA meshes included) and the times to the
+in the frame, the scene over the websocket, the KUKA meshes included; `--task` picks the
+task, `reach` for the other PyBullet scene) and the times to the
 page's first contentful paint, to its buttons, and to the scene's arrival (when 90 % of
 the websocket's bytes of the first 20 s had come).
 
@@ -179,7 +180,7 @@ class Wire:
 
 
 def weight(browser: Any, server: LiveServer, study: int, args: argparse.Namespace) -> None:
-    session = _session(server, study, 200, budget=5)
+    session = _session(server, study, 200, budget=5, task=args.task)
     SimulatedParticipant(server.url, session["participant_token"]).begin()
     context = browser.new_context(viewport={"width": 390, "height": 844}, is_mobile=True)
     page = context.new_page()
@@ -220,7 +221,7 @@ def idle(browser: Any, server: LiveServer, study: int, args: argparse.Namespace)
     window_s, settle_s = 15.0, 8.0
     cores: dict[str, list[float]] = {"shown": [], "hidden": []}
     for _ in range(args.runs):
-        session = _session(server, study, 200, budget=5)
+        session = _session(server, study, 200, budget=5, task=args.task)
         SimulatedParticipant(server.url, session["participant_token"]).begin()
         for view in ("shown", "hidden"):
             context = browser.new_context(viewport={"width": 1280, "height": 800})
@@ -255,7 +256,7 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--pretraining-steps", type=int, default=1000)
     parser.add_argument("--head-start", type=float, default=0.0)
-    parser.add_argument("--task", default="sorting", help="the run's task (first-turn only)")
+    parser.add_argument("--task", default="sorting", help="the run's task (first-turn and weight)")
     args = parser.parse_args([] if __name__ != "__main__" else None)
     from playwright.sync_api import sync_playwright
 

@@ -12,7 +12,7 @@ from typing import Any
 import gymnasium
 
 from sim.actions import ACTION_NAMES, Action
-from sim.bodies import BodySpec, Box, Cylinder, Mesh, MotionFrame, Pose
+from sim.bodies import BodySpec, Box, Cylinder, Geometry, Mesh, MeshFile, MotionFrame, Pose, Sphere
 from sim.rewards import REWARD_SCHEMES, rescore, step_penalty
 from sim.rules import COLORS, OBJECTS, SHAPES, SortRule, oracle_action
 from sim.scenario import ScenarioOptions
@@ -43,12 +43,15 @@ __all__ = [
     "BodySpec",
     "Box",
     "Cylinder",
+    "Geometry",
     "Mesh",
+    "MeshFile",
     "MotionFrame",
     "Pose",
     "ScenarioOptions",
     "SortRule",
     "SortingEnv",
+    "Sphere",
     "oracle_action",
     "rescore",
     "step_penalty",

@@ -53,13 +53,36 @@ class Mesh:
 
 
 @dataclass(frozen=True)
+class Sphere:
+    """A sphere centred on its frame's origin."""
+
+    radius: float
+    """Metres."""
+
+
+@dataclass(frozen=True)
+class MeshFile:
+    """A mesh the simulation loaded from a file (an URDF's OBJ or STL), named rather than
+    sent: the viewer reads the file from this machine's disk once, and scales it."""
+
+    path: str
+    """Absolute path of the file, as PyBullet reports it."""
+    scale: tuple[float, float, float]
+    """Scale along the frame's x, y, z (the URDF's `scale`)."""
+
+
+Geometry = Box | Cylinder | Sphere | Mesh | MeshFile
+"""Every shape a body can have."""
+
+
+@dataclass(frozen=True)
 class BodySpec:
     """One body of the scene: its name, shape and colour (fixed for the whole scene)."""
 
     name: str
     """A stable scene path, e.g. `tables/center`, `objects/cube_red`, `arm/link_3`,
     `arm/suction_cup`; the key of this body in `body_poses()`."""
-    geometry: Box | Cylinder | Mesh
+    geometry: Geometry
     """The shape, in the body's frame."""
     rgba: Color
     """Colour as the camera sees it."""

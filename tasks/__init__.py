@@ -4,7 +4,8 @@ uint8 RGB images (H, W, 3), H and W multiples of 8; the learner sees it only thr
 Gymnasium API.
 
 A task is named in a run (`RunSpec.task`) by one of:
-- a built-in name: `sorting` (the paper's robot, the default) or `gridworld` (MiniGrid);
+- a built-in name: `sorting` (the paper's robot, the default), `gridworld` (MiniGrid) or
+  `reach` (a robot arm reaching a ball, PyBullet);
 - `package.module:callable`, a researcher's own: the module is imported (it must be
   importable by the server and its worker processes, e.g. installed, or on `PYTHONPATH`)
   and the callable, marked with `@task_factory`, returns a `Task`.
@@ -30,7 +31,11 @@ from typing import Any
 
 import gymnasium as gym
 
-BUILT_IN = {"sorting": "tasks.sorting:sorting_task", "gridworld": "tasks.gridworld:gridworld_task"}
+BUILT_IN = {
+    "sorting": "tasks.sorting:sorting_task",
+    "gridworld": "tasks.gridworld:gridworld_task",
+    "reach": "tasks.reach:reach_task",
+}
 """The tasks this package brings, by name."""
 
 _OWN = re.compile(r"^[A-Za-z_][\w]*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*$")
@@ -89,6 +94,16 @@ class TaskAction:
 
 
 @dataclass(frozen=True)
+class ViewCamera:
+    """Where a task's live 3-D view looks from when it opens (metres, world frame, z up)."""
+
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float]
+    fov: float = 50.0
+    """Vertical, degrees."""
+
+
+@dataclass(frozen=True)
 class Task:
     """A task: how to make its environment, and what people see of it."""
 
@@ -111,7 +126,11 @@ class Task:
     """An episode's reward a competent policy collects; an agent advisor's check asks for
     it (None: the check judges only that the advisor does not repeat one action)."""
     live_view: bool = False
-    """The web page shows the task's live 3-D view (the sorting robot's); else frames."""
+    """The web page shows the task's live 3-D view; else frames. Its environment then has
+    `scene_bodies()` and `body_poses()` (`sim.BodySpec`, `sim.Pose`; `sim.visuals` reads
+    them from any PyBullet scene) and may have `last_motion`."""
+    camera: ViewCamera | None = None
+    """Where the live view looks from when it opens (None: the sorting robot's camera)."""
     check_questions: tuple[CheckQuestion, ...] = ()
     """The comprehension check's questions for a study of this task (an online study whose
     design keeps the default check asks these; none: one question on the task's goal)."""
@@ -224,6 +243,7 @@ __all__ = [
     "TaskAction",
     "TaskError",
     "TaskOptions",
+    "ViewCamera",
     "get_task",
     "task_factory",
 ]

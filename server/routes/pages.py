@@ -30,7 +30,7 @@ from starlette.concurrency import run_in_threadpool
 
 import sim
 from server.live.visits import end_visit
-from server.viewer.camera import viser_camera_params
+from server.viewer.camera import VIEWER_CAMERA, viser_camera_params
 from study.db.models import Advice, Outcome, PanelId, Status
 from study.schemas.design import StudyDesign
 from study.schemas.instruments import PREFER_NOT_TO_SAY
@@ -474,7 +474,7 @@ def advise(request: Request, token: str) -> Response:
         request,
         "participant/advise.html",
         visit,
-        scene_src=scene_src(request),
+        scene_src=scene_src(request, get_task(visit.task)),
         task=get_task(visit.task),
         task_keys=_task_keys,
     )
@@ -606,12 +606,14 @@ def _panel_params(request: Request, token: str) -> dict[str, str]:
         return dict(db.scalar(query) or {})
 
 
-def scene_src(request: Request) -> str:
-    """viser's client under /viewer/ of this server, with the participant's camera; the
-    page adds the websocket (`/viewer/p/TOKEN` on the same host, ws or wss as loaded)."""
+def scene_src(request: Request, task: Task | None = None) -> str:
+    """viser's client under /viewer/ of this server, with the task's camera for people (the
+    sorting robot's where it names none); the page adds the websocket (`/viewer/p/TOKEN` on
+    the same host, ws or wss as loaded)."""
     base = request.app.state.settings.viewer_public_url or "/viewer/"
     base = base.rstrip("/") + "/"
-    params = "&".join(f"{k}={v}" for k, v in viser_camera_params().items())
+    camera = task.camera if task is not None and task.camera is not None else VIEWER_CAMERA
+    params = "&".join(f"{k}={v}" for k, v in viser_camera_params(camera).items())
     return f"{base}?hideViserLogo&{params}"
 
 

@@ -72,7 +72,7 @@ def playback_page(request: Request, db: DbDep, session_id: SessionId) -> Respons
         {
             "site_title": "IDeepRL dashboard",
             "session": session,
-            "scene_src": scene_src(request),
+            "scene_src": scene_src(request, session.spec.the_task),
             "action_names": session.spec.the_task.action_words,
         },
     )

@@ -14,12 +14,13 @@ from __future__ import annotations
 import math
 
 from sim.layout import CameraPose
+from tasks import ViewCamera
 
 VIEWER_CAMERA = CameraPose(eye=(-0.5, -0.95, 1.57), target=(0.45, 0.0, 0.45), fov=50.0)
 """Metres in the world frame (z up); `fov` vertical, degrees (viser's own default is 75)."""
 
 
-def viser_camera_params(camera: CameraPose = VIEWER_CAMERA) -> dict[str, str]:
+def viser_camera_params(camera: CameraPose | ViewCamera = VIEWER_CAMERA) -> dict[str, str]:
     """The camera as viser's client reads it from its URL (fov in radians)."""
 
     def vec(v: tuple[float, float, float]) -> str:

@@ -1,9 +1,9 @@
 """The scene of one viser client: the simulation's bodies as client-scoped viser nodes.
 
-Bodies are built once per scene (`sim.BodySpec`: boxes, cylinders, meshes in their
-colours) under their stable names as scene paths (`/tables/left`, `/arm/link_3`), and
-then only moved. Nothing goes into viser's shared scene, so a client without a session
-sees nothing.
+Bodies are built once per scene (`sim.BodySpec`: boxes, cylinders, spheres, meshes given
+or named by their files, in their colours) under their stable names as scene paths
+(`/tables/left`, `/arm/link_3`), and then only moved. Nothing goes into viser's shared
+scene, so a client without a session sees nothing.
 
 Seen at an angle, an arm over a side table can look as if it were over the center table.
 Two markers that are not part of the simulation settle it: a plumb line straight down from
@@ -20,6 +20,7 @@ import numpy as np
 import viser
 
 import sim
+from server.viewer import meshes
 from sim.layout import Layout
 
 POSITION_EPS = 1e-5
@@ -93,11 +94,25 @@ def add_body(scene: viser.SceneApi, body: sim.BodySpec) -> Any:
             cast_shadow=SHADOWS,
             receive_shadow=SHADOWS,
         )
-    assert isinstance(geometry, sim.Mesh), f"unknown geometry {type(geometry).__name__}"
+    if isinstance(geometry, sim.Sphere):
+        return scene.add_icosphere(
+            name,
+            radius=float(geometry.radius),
+            color=color,
+            opacity=opacity,
+            cast_shadow=SHADOWS,
+            receive_shadow=SHADOWS,
+        )
+    if isinstance(geometry, sim.MeshFile):
+        vertices, faces = meshes.scaled(geometry.path, geometry.scale)
+    else:
+        assert isinstance(geometry, sim.Mesh), f"unknown geometry {type(geometry).__name__}"
+        vertices = np.asarray(geometry.vertices, dtype=np.float32)
+        faces = np.asarray(geometry.faces, dtype=np.uint32)
     return scene.add_mesh_simple(
         name,
-        np.asarray(geometry.vertices, dtype=np.float32),
-        np.asarray(geometry.faces, dtype=np.uint32),
+        vertices,
+        faces,
         color=color,
         opacity=opacity,
         flat_shading=False,

@@ -10,6 +10,7 @@
   // the sorting robot's keys; another task's come with the page
   const KEYS = config.keys || { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
   const LIVE = config.liveView !== false; // the task has a live 3-D view, else frames
+  const SORTING = config.sorting !== false; // the sorting robot's words for its arm and rewards
   const AGENT = config.agent || "robot"; // what the page calls the learner
   const LAST_MOVE_MS = 4000;
   const FIRST_VIEW_WAIT_MS = 2000; // the longest a turn waits for the 3-D view's first frame
@@ -65,6 +66,7 @@
   function rewardWords(reward) {
     if (reward === null || reward === undefined) return ["—", "", ""];
     const shown = (reward > 0 ? "+" : "") + String(Math.round(reward * 100) / 100);
+    if (!SORTING) return [shown, reward > 0 ? "points gained" : reward < 0 ? "points lost" : "no points this time", reward > 0 ? "good" : reward < 0 ? "bad" : "neutral"];
     if (reward >= 0.99) return [shown, "all objects sorted: round complete!", "good"];
     if (reward > 0) return [shown, "correct placement", "good"];
     if (reward <= -0.99) return [shown, "wrong table: the objects are laid out again", "bad"];
@@ -130,7 +132,7 @@
   // The sentence, and beside the camera image a small map of the three tables with the
   // arm's one lit: the image alone can make a side table look like the center one.
   function showArm(s, on) {
-    if (!LIVE) {  // the arm's words and map are the sorting robot's
+    if (!SORTING) {  // the arm's words and map are the sorting robot's
       $("holding").hidden = !on || !s.own_moves;
       $("arm-words").textContent = "";
       $("own-moves").textContent = on ? ownMovesWords(s.own_moves).trim() : "";
