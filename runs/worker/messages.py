@@ -2,7 +2,7 @@
 
 Plain frozen dataclasses, pickled by multiprocessing. Worker -> web: `Progress`,
 `AdviceRequest`, `AdviceResult`, `EpisodeDone`, `SceneReset`, `SceneStep`, `StatusChanged`,
-`TrainingWanted`. Web -> worker: `AdviceAnswer`, `Command` (`ready`: the participant
+`TrainingWanted`. Web -> worker: `AdviceAnswer`, `RatingAnswer`, `Command` (`ready`: the participant
 consented and finished the induction; `train`: a trainer slot is free; `handover`: a
 trainer slot is free for a population, see `runs.worker.population`). A population's
 worker sends its sessions' messages `Tagged` with their session over its one channel.
@@ -62,6 +62,12 @@ class AdviceRequest:
     """Advice the strategy may ask for in all."""
     frame_png: bytes | None = None
     """A task without a live 3-D view: what people see at this step, PNG."""
+    rated_action: int | None = None
+    """Evaluative feedback: the action the learner took at this step, for the person to rate
+    (good, bad, or no answer); None: advice is asked for (`runs.worker.rating`)."""
+    rating_time_out_s: float = 0.0
+    """Evaluative feedback: how long the learner waits for the rating (the run's
+    `rating_time_out_s`); after it the web process records no answer."""
 
 
 @dataclass(frozen=True)
@@ -135,6 +141,13 @@ class Tagged:
 class AdviceAnswer:
     advice_index: int
     action: int
+
+
+@dataclass(frozen=True)
+class RatingAnswer:
+    advice_index: int
+    judgement: float | None
+    """+1 good, -1 bad; None: no answer within the time-out."""
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ from study.schemas.visit import Section
 from study.services import consent as consent_service
 from study.services import visit as visit_service
 from study.services.errors import Conflict, Invalid
+from study.services.feedback import judgements_given
 from study.services.sessions import session_for_token
 from study.services.visit import CheckProgress
 from tasks import Task, get_task
@@ -260,6 +261,7 @@ def _visit(request: Request, token: str) -> Visit | None:
         if session is None:
             return None
         given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+        given += judgements_given(db, session.id)  # a rating session's turns
         version = session.texts_version
         questionnaire = visit_service.questionnaire_progress(db, session)
         return Visit(

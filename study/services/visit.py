@@ -20,7 +20,13 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from sim.rules import SortRule
-from study.db.models import Advice, CheckAttempt, QuestionnaireAnswer, Status, StudySession
+from study.db.models import (
+    Advice,
+    CheckAttempt,
+    QuestionnaireAnswer,
+    Status,
+    StudySession,
+)
 from study.schemas.design import StudyDesign
 from study.schemas.instruments import PREFER_NOT_TO_SAY
 from study.schemas.participant import Answer
@@ -34,6 +40,7 @@ from study.schemas.visit import (
     default_questions,
 )
 from study.services.errors import Conflict, Invalid
+from study.services.feedback import judgements_given
 from tasks import CheckQuestion as TaskQuestion
 from tasks import Task, get_task
 
@@ -216,6 +223,7 @@ def _validate_check_answers(spec: CheckSpec, answers: Mapping[str, str]) -> None
 def advice_done(db: Session, session: StudySession) -> bool:
     """The advice budget is spent (or the run finished): the questionnaire may come."""
     given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+    given += judgements_given(db, session.id)  # a session's turns are advice or ratings
     return given >= session.spec.advice_budget or session.status == Status.finished
 
 
