@@ -108,9 +108,30 @@ def check_of(session: StudySession) -> CheckSpec | None:
     if design is None or design.check is None:
         return None
     task = session.spec.task
-    if task == "sorting" or design.check.questions != default_questions():
-        return design.check
-    return design.check.model_copy(update={"questions": task_questions(get_task(task))})
+    check = design.check
+    if task != "sorting" and check.questions == default_questions():
+        check = check.model_copy(update={"questions": task_questions(get_task(task))})
+    if session.spec.feedback == "evaluative" and design.check.questions == default_questions():
+        agent = session.spec.the_task.agent
+        check = check.model_copy(update={"questions": [*check.questions, rating_question(agent)]})
+    return check
+
+
+RATINGS = (
+    "Rate the move it just made: Good or Bad",
+    "Choose its next move",
+    "Nothing: I only watch",
+)
+
+
+def rating_question(agent: str) -> CheckQuestion:
+    """The default check's question on what a person under evaluative feedback does."""
+    return CheckQuestion(
+        id="rating",
+        text=f"When the {agent} asks for you, what do you do?",
+        choices=[Choice(value=VALUES[i], label=c) for i, c in enumerate(RATINGS)],
+        answer=VALUES[0],
+    )
 
 
 def task_questions(task: Task) -> list[CheckQuestion]:
@@ -238,7 +259,7 @@ def questionnaire_progress(db: Session, session: StudySession) -> QuestionnaireP
         return QuestionnaireProgress(required=False)
     return QuestionnaireProgress(
         required=True,
-        sections=spec.sections(session.spec.the_task.agent),
+        sections=spec.sections(session.spec.the_task.agent, session.spec.feedback),
         available=advice_done(db, session),
         submitted_at=_submitted_at(db, session.id),
     )
