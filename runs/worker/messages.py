@@ -65,6 +65,8 @@ class AdviceRequest:
     rated_action: int | None = None
     """Evaluative feedback: the action the learner took at this step, for the person to rate
     (good, bad, or no answer); None: advice is asked for (`runs.worker.rating`)."""
+    rated_reward: float | None = None
+    """Evaluative feedback: the reward the rated action earned (the step is taken)."""
     rating_time_out_s: float = 0.0
     """Evaluative feedback: how long the learner waits for the rating (the run's
     `rating_time_out_s`); after it the web process records no answer."""

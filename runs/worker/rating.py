@@ -59,6 +59,8 @@ class HumanEvaluator:
         """A task without a live 3-D view: what people see now (after the rated move)."""
         self.carrying_out = False
         """The step being taken is to be rated: the 3-D view replays it as motion."""
+        self._reward: float | None = None
+        """The reward of the step just taken, shown with it."""
 
     def state_dict(self) -> dict[str, Any]:
         """Saved in the learner's checkpoint: how many ratings were asked for."""
@@ -74,6 +76,7 @@ class HumanEvaluator:
 
     def after_step(self, action: int, reward: float, episode_over: bool) -> None:
         self.carrying_out = False
+        self._reward = reward
 
     def judge_at(self, moment: AdviceMoment) -> float | None:
         index = self.count
@@ -89,6 +92,7 @@ class HumanEvaluator:
                 advice_budget=self._budget,
                 frame_png=encode_png(self._frames()) if self._frames is not None else None,
                 rated_action=moment.intended_action,
+                rated_reward=self._reward,
                 rating_time_out_s=self._time_out_s,
             )
             self._until_participant_ready()

@@ -69,6 +69,7 @@ def shown(state: ParticipantState, request: AdviceRequest | None, arrived: float
     if request is None or request.rated_action is None:
         return
     state.rated_action = request.rated_action
+    state.rated_reward = request.rated_reward
     state.rating_time_out_s = request.rating_time_out_s
     left = request.rating_time_out_s - (time.monotonic() - arrived)
     state.rating_left_s = max(0.0, left)
@@ -133,7 +134,10 @@ def _close(
     index = request.advice_index
     handle.given[index] = request.rated_action
     handle.request = None
-    handle.history.append(HistoryEntry(index, request.rated_action, request.global_step))
+    handle.history.append(
+        HistoryEntry(index, request.rated_action, request.global_step, request.rated_reward)
+    )
+    handle.last_reward = request.rated_reward
     handle.send(RatingAnswer(index, judgement))
     manager.hub.publish(handle.session_id, "rating_given", {"advice_index": index})
     manager.notify(handle.session_id)

@@ -99,6 +99,9 @@ class ParticipantState(BaseModel):
         description="Evaluative feedback: the turn asks for a rating of this action, which "
         "the learner took (POST /api/participant/rating); None: the turn asks for advice.",
     )
+    rated_reward: float | None = Field(
+        default=None, description="Evaluative feedback: the reward the rated action earned."
+    )
     rating_time_out_s: float | None = Field(
         default=None,
         description="Evaluative feedback: seconds the learner waits for the rating, from "
