@@ -194,7 +194,9 @@ async def submit_rating(
         stored = await run_in_threadpool(_stored, manager, session_id, body.advice_index)
         if stored is not None:
             return _receipt(stored, body, manager.version(session_id))
-        raise Conflict("no rating can be taken now: the session is not running")
+        if handle is None:
+            raise Conflict("no rating can be taken now: the session is not running")
+        raise Conflict(f"turn {body.advice_index} is over and was not a rating; it cannot be rated")
     async with handle.advice_lock:
         if body.advice_index in handle.given:
             stored = await run_in_threadpool(_stored, manager, session_id, body.advice_index)

@@ -21,13 +21,14 @@ BUDGET = 4
 TIME_OUT_S = 1.5
 
 
+@pytest.mark.parametrize("task", ["gridworld", "sorting"])
 def test_ratings_are_taken_in_their_window_and_a_silent_turn_is_recorded_as_none(
-    server: LiveServer, api: httpx.Client
+    server: LiveServer, api: httpx.Client, task: str
 ) -> None:
-    study = api.post("/api/studies", json={"name": "human ratings"}).json()
+    study = api.post("/api/studies", json={"name": f"human ratings {task}"}).json()
     body = session_body(
         "human",
-        task="gridworld",
+        task=task,
         advice_budget=BUDGET,
         feedback="evaluative",
         feedback_weight=0.5,
