@@ -7,8 +7,11 @@ real people.
 
 The simulated person sees only what the page shows (the arm's station and what it
 holds, in the participant state) and advises with `learner.fitted.FittedAdvisor`; it
-leaves early as often as the fitted people did (`FittedAdvisor.stop_after`). A client of
-the server's HTTP API only: it runs anywhere the participant links reach.
+leaves early as often as the fitted people did (`FittedAdvisor.stop_after`). Under
+evaluative feedback it rates the move the learner made instead: Good when it is the action
+the fitted person would have advised, else Bad, sent after the drawn decision time, or not
+at all when that time is longer than the turn's time-out (the turn lapses, as a person's).
+A client of the server's HTTP API only: it runs anywhere the participant links reach.
 """
 
 from __future__ import annotations
@@ -41,6 +44,10 @@ class Rehearsed:
     viewer_messages: int = 0
     """Scene messages the 3-D view's websocket delivered (0 without the view)."""
     viewer_bytes: int = 0
+    feedback: str = "advice"
+    """The kind of its turns: advice, or evaluative (ratings of the learner's moves)."""
+    lapsed: int = 0
+    """Rating turns left without an answer (their time-out passed first)."""
 
 
 class _Viewer(threading.Thread):
@@ -109,6 +116,7 @@ def rehearse(
     view = _Viewer(base_url, token) if viewer else None
     headers = {"Authorization": f"Bearer {token}"}
     times: list[float] = []
+    kind, lapsed = "advice", 0
     with httpx.Client(base_url=base_url, headers=headers, timeout=60) as client:
         shown = _ok(client.get("/api/participant/consent"))
         _ok(client.post("/api/participant/consent", json={"agree": True,
@@ -121,6 +129,14 @@ def rehearse(
         while state["status"] not in ENDED and time.monotonic() < deadline:
             if stop_after is not None and len(times) >= stop_after:
                 break  # this person leaves: the session's idle limit will abandon it
+            if state["advice_wanted"] and state.get("rated_action") is not None:
+                kind = "evaluative"
+                answered, state = _rate(client, advisor, state, speed)
+                if answered is None:
+                    lapsed += 1
+                else:
+                    times.append(answered)
+                continue
             if state["advice_wanted"] and state["advice_index"] is not None:
                 action = advisor.advise(NO_IMAGE, _info(state))
                 drawn = advisor.last_decision_time_s or 0.0
@@ -147,7 +163,30 @@ def rehearse(
         status=str(state["status"]),
         viewer_messages=view.messages if view is not None else 0,
         viewer_bytes=view.bytes if view is not None else 0,
+        feedback=kind,
+        lapsed=lapsed,
     )
+
+
+def _rate(
+    client: httpx.Client, advisor: FittedAdvisor, state: dict[str, Any], speed: float
+) -> tuple[float | None, dict[str, Any]]:
+    """One rating turn: (the decision time sent, or None for a turn left to lapse; the
+    state after it)."""
+    index = state["advice_index"]
+    would = advisor.advise(NO_IMAGE, _info(state))
+    drawn = advisor.last_decision_time_s or 0.0
+    left = float(state.get("rating_left_s") or 0.0)
+    if drawn / speed >= left:  # too slow: the turn goes on without an answer
+        while state["advice_index"] == index and state["status"] not in ENDED:
+            state = _ok(client.get("/api/participant/state",
+                                   params={"after": state["version"], "timeout": 20}))  # fmt: skip
+        return None, state
+    time.sleep(drawn / speed)
+    rating = "good" if would == state["rated_action"] else "bad"
+    body = {"advice_index": index, "rating": rating, "decision_time_s": drawn}
+    receipt = _ok(client.post("/api/participant/rating", params={"wait": 20}, json=body))
+    return drawn, receipt["state"] or _ok(client.get("/api/participant/state"))
 
 
 def _ok(response: httpx.Response) -> dict[str, Any]:

@@ -1,7 +1,8 @@
 """`ideeprl rehearse --model FILE --link URL [--link URL ...]`: rehearse a study's load with
 fitted advisors (`ideeprl fit`) answering human sessions through the participant links,
-as people would: consent, the induction's Start, then each advice after its drawn
-decision time, leaving early as often as the fitted people did (`runs.rehearsal`).
+as people would: consent, the induction's Start, then each advice (or, under evaluative
+feedback, each rating) after its drawn decision time, leaving early as often as the fitted
+people did (`runs.rehearsal`); a summary per kind of feedback.
 Create the human sessions first (dashboard, or POST /api/studies/ID/sessions) and pass
 their links; each simulated participant runs in its own thread."""
 
@@ -74,5 +75,15 @@ def rehearse_command(args: argparse.Namespace) -> int:
         return 0
     for r in done:
         left = ", left early" if r.left_early else ""
-        print(f"participant ...{r.token_tail}: {r.advice} advice{left}; session {r.status}")
+        if r.feedback == "evaluative":
+            given = f"{r.advice} ratings, {r.lapsed} without an answer"
+        else:
+            given = f"{r.advice} advice"
+        print(f"participant ...{r.token_tail}: {given}{left}; session {r.status}")
+    for kind in sorted({r.feedback for r in done}):
+        these = [r for r in done if r.feedback == kind]
+        times = sorted(t for r in these for t in r.decision_times_s)
+        median = f"{times[len(times) // 2]:.2f} s" if times else "none"
+        print(f"{kind}: {len(these)} participants, {sum(r.advice for r in these)} answered, "
+              f"median decision time {median}")  # fmt: skip
     return 0
