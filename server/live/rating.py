@@ -31,6 +31,7 @@ from study.services.observations import decode_png
 
 JUDGEMENTS = {"good": GOOD, "bad": BAD}
 EVALUATOR = "human"
+_TIMING_OUT: set[asyncio.Task[None]] = set()
 
 
 def install(manager: SessionManager) -> None:
@@ -44,10 +45,13 @@ def asked(manager: SessionManager, handle: WorkerHandle, request: AdviceRequest)
     if request.rated_action is None:
         return
     loop = asyncio.get_running_loop()
-    loop.call_later(
-        request.rating_time_out_s,
-        lambda: loop.create_task(_time_out(manager, handle, request)),
-    )
+
+    def time_out() -> None:
+        task = loop.create_task(_time_out(manager, handle, request))
+        _TIMING_OUT.add(task)  # held until done (the loop keeps only a weak reference)
+        task.add_done_callback(_TIMING_OUT.discard)
+
+    loop.call_later(request.rating_time_out_s, time_out)
 
 
 def resumed(manager: SessionManager, handle: WorkerHandle) -> None:
@@ -91,6 +95,8 @@ async def _time_out(manager: SessionManager, handle: WorkerHandle, request: Advi
             return  # rated in time
         if handle.status == Status.paused:  # the worker's clock stops too
             asked(manager, handle, request)
+            return
+        if handle.status != Status.running:  # stopped or gone: a resumed worker asks again
             return
         response = time.monotonic() - (handle.shown_at or handle.request_arrived)
         weight = await run_in_threadpool(_weight, manager, handle)
