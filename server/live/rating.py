@@ -32,6 +32,9 @@ from study.services.observations import decode_png
 JUDGEMENTS = {"good": GOOD, "bad": BAD}
 EVALUATOR = "human"
 _TIMING_OUT: set[asyncio.Task[None]] = set()
+_DEADLINES: dict[tuple[int, int], float] = {}
+"""(session, turn) -> `time.monotonic()` when its rating may no longer come: the request's
+arrival plus the time-out, or a resume plus the time-out after a pause."""
 
 
 def install(manager: SessionManager) -> None:
@@ -45,6 +48,8 @@ def asked(manager: SessionManager, handle: WorkerHandle, request: AdviceRequest)
     if request.rated_action is None:
         return
     loop = asyncio.get_running_loop()
+    key = (handle.session_id, request.advice_index)
+    _DEADLINES[key] = time.monotonic() + request.rating_time_out_s
 
     def time_out() -> None:
         task = loop.create_task(_time_out(manager, handle, request))
@@ -75,8 +80,12 @@ def shown(state: ParticipantState, request: AdviceRequest | None, arrived: float
     state.rated_action = request.rated_action
     state.rated_reward = request.rated_reward
     state.rating_time_out_s = request.rating_time_out_s
-    left = request.rating_time_out_s - (time.monotonic() - arrived)
-    state.rating_left_s = max(0.0, left)
+    state.rating_left_s = max(0.0, _deadline(state.session_id, request, arrived) - time.monotonic())
+
+
+def _deadline(session_id: int, request: AdviceRequest, arrived: float) -> float:
+    default = arrived + request.rating_time_out_s
+    return _DEADLINES.get((session_id, request.advice_index), default)
 
 
 def refuses_advice(request: AdviceRequest) -> None:
@@ -90,14 +99,20 @@ def refuses_advice(request: AdviceRequest) -> None:
 
 async def _time_out(manager: SessionManager, handle: WorkerHandle, request: AdviceRequest) -> None:
     index = request.advice_index
-    async with handle.advice_lock:
-        if index in handle.given or handle.request is not request:
-            return  # rated in time
-        if handle.status == Status.paused:  # the worker's clock stops too
+    if handle.status == Status.paused:  # a whole time-out again once it goes on
+        while handle.status == Status.paused:
+            await asyncio.sleep(0.2)
+        if handle.request is request and index not in handle.given:
             asked(manager, handle, request)
             return
+    async with handle.advice_lock:
+        if index in handle.given or handle.request is not request:
+            _DEADLINES.pop((handle.session_id, index), None)
+            return  # rated in time
         if handle.status != Status.running:  # stopped or gone: a resumed worker asks again
+            _DEADLINES.pop((handle.session_id, index), None)
             return
+        _DEADLINES.pop((handle.session_id, index), None)
         response = time.monotonic() - (handle.shown_at or handle.request_arrived)
         weight = await run_in_threadpool(_weight, manager, handle)
         given = _given(handle.session_id, request, None, weight, response, None)
@@ -224,7 +239,7 @@ async def submit_rating(
                 "send advice_index from the latest state"
             )
         now = time.monotonic()
-        if now - handle.request_arrived > request.rating_time_out_s:
+        if now > _deadline(session_id, request, handle.request_arrived):
             raise Conflict(
                 f"the time to rate turn {body.advice_index} ({request.rating_time_out_s:g} s) "
                 "is over: the learner went on with no answer"
@@ -238,6 +253,7 @@ async def submit_rating(
             assert stored is not None
             return _receipt(stored, body, manager.version(session_id))
         _close(manager, handle, request, judgement)
+        _DEADLINES.pop((session_id, body.advice_index), None)
         return RatingReceipt(
             advice_index=body.advice_index,
             action=given.action,

@@ -110,3 +110,31 @@ def test_ratings_are_taken_in_their_window_and_a_silent_turn_is_recorded_as_none
         assert server_s >= ours - round_trip - 0.05, (index, server_s, ours, round_trip)
     assert all(len(r["observation_hash"]) == 16 for r in rows)
     participant.close()
+
+
+def test_a_pause_stops_a_ratings_clock_and_gives_it_a_whole_time_out_after(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    study = api.post("/api/studies", json={"name": "paused rating"}).json()
+    body = session_body("human", task="gridworld", advice_budget=2, feedback="evaluative",
+                        rating_time_out_s=TIME_OUT_S)  # fmt: skip
+    created = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+    participant = SimulatedParticipant(server.url, created["participant_token"])
+    assert participant.begin().status_code == 200
+    state = participant.next_request()
+    assert state["advice_index"] == 0 and state["rated_action"] is not None
+    assert api.post(f"/api/sessions/{created['id']}/pause").status_code == 200
+    time.sleep(TIME_OUT_S + 1.0)
+    paused = participant.client.post(
+        "/api/participant/rating", json={"advice_index": 0, "rating": "good"}
+    )
+    assert paused.status_code == 409 and "paused" in paused.text
+    assert api.post(f"/api/sessions/{created['id']}/resume").status_code == 200
+    time.sleep(0.5)
+    state = participant.state()
+    assert state["advice_index"] == 0 and state["rating_left_s"] > 0.2, state
+    rated = participant.client.post(
+        "/api/participant/rating", json={"advice_index": 0, "rating": "good"}
+    )
+    assert rated.status_code == 200, rated.text
+    participant.close()

@@ -195,7 +195,7 @@
     const ready =
       s.status === "running" && s.advice_wanted && !s.robot_moving && s.advice_index !== sentIndex;
     if (!ready) {
-      if (RATING && enabledFor !== null && sentIndex !== enabledFor) noAnswer();
+      if (RATING && enabledFor !== null && sentIndex !== enabledFor && s.status === "running") noAnswer();
       enabledFor = null;
       beforeFirstTurn = false;
       setButtons(false);
