@@ -113,9 +113,9 @@ FEEDBACK_KINDS = ("advice", "evaluative")
 (policy shaping: the advisor names the action taken) or evaluative feedback (reward
 shaping: the advisor judges the learner's own action, `learner.evaluators`)."""
 Feedback = Literal["advice", "evaluative"]
-EVALUATORS = ("agent", "oracle")
-"""Methods whose advisor can judge an action (evaluative feedback): those that name the
-right one. A person's judgement needs its page (not built yet)."""
+EVALUATORS = ("agent", "oracle", "human")
+"""Methods whose advisor can judge an action (evaluative feedback): the machines that name
+the right one, and a person rating on the advice page (`runs.worker.rating`)."""
 MAX_SEED = 2**31 - 1
 FRAME_BYTES = 64 * 64 * 3
 """One stored observation (uint8)."""
@@ -201,13 +201,16 @@ class RunSpec:
     """The kind of feedback the advisor gives (the paper's section 2): advice (policy
     shaping, the paper's: the advised action is taken) or evaluative (reward shaping: the
     learner takes its own action and the advisor judges it, good +1 or bad -1, on the
-    steps the strategy and the advice budget give it); evaluative takes method oracle or
-    agent, strategy early, alternating or importance."""
+    steps the strategy and the advice budget give it); evaluative takes method oracle,
+    agent or human, strategy early, alternating or importance."""
     feedback_weight: float = bounded(1.0, 0.0, 100.0, role="treatment")
     """Evaluative feedback: w in the reward the learner remembers for a judged step, the
     environment's plus w times the judgement (TAMER+RL's reward shaping). 1: a judgement
     weighs as much as the task's largest rewards (a placement's +1, a misplacement's -1),
     so that it counts where the environment rewards nothing (a grab, a move)."""
+    rating_time_out_s: float = bounded(10.0, 1.0, 600.0, role="treatment")
+    """Evaluative feedback from a person: how long the learner waits for a rating of its
+    action (good or bad) before it goes on with none (recorded as no answer)."""
     advisor_checkpoint: str | None = bounded(None, role="treatment", max_length=1000)
     """The trained learner whose checkpoint advises (method agent): `session:ID` (a session
     of this installation), or a checkpoint file's path."""
@@ -417,6 +420,7 @@ class RunSpec:
             decision_time_sigma=self.decision_time_sigma if oracle else 0.5,
             feedback="evaluative" if evaluative else "advice",
             feedback_weight=self.feedback_weight if evaluative else 1.0,
+            rating_time_out_s=self.rating_time_out_s if evaluative else 10.0,
         )
 
     @property
@@ -522,9 +526,8 @@ class RunSpec:
         if self.method not in EVALUATORS:
             raise RunSpecError(
                 "feedback",
-                f"evaluative feedback is judged by a machine, method {' or '.join(EVALUATORS)}"
-                f"; method {self.method} cannot judge (a person's judgement needs its page, "
-                "which is not built yet)",
+                f"evaluative feedback is judged by method {' or '.join(EVALUATORS)}"
+                f"; method {self.method} cannot judge",
             )
         if not _STRATEGIES[self.strategy].judges:
             raise RunSpecError(
@@ -604,10 +607,10 @@ class RunSpec:
         """Under evaluative feedback, the machine evaluator: the oracle's correct action or
         the agent's greedy one is good, any other bad, each judgement wrong with the
         oracle's error rate (`learner.evaluators.AdvisorEvaluator`); else None."""
-        if self.feedback != "evaluative" or not self.advised:
-            return None
+        if self.feedback != "evaluative" or not self.advised or self.method == "human":
+            return None  # a person's ratings come through the worker (`runs.worker.rating`)
         advisor = self.replace(error_rate=0.0)._machine_advisor()
-        assert advisor is not None, "validate() admits evaluative feedback from machines only"
+        assert advisor is not None, "validate() admits evaluative feedback from evaluators only"
         return AdvisorEvaluator(advisor, self.error_rate, self.seed)
 
     def _machine_advisor(self) -> Advisor | None:

@@ -177,6 +177,9 @@ class _Window:
         self._evaluator = evaluator
 
     def advise_at(self, moment: AdviceMoment) -> NoAdvice:
+        opens = getattr(self._evaluator, "window_opens", None)  # a person's: shows the step
+        if opens is not None:
+            opens(moment)
         return NO_ADVICE
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:

@@ -7,8 +7,18 @@ real people.
 
 The simulated person sees only what the page shows (the arm's station and what it
 holds, in the participant state) and advises with `learner.fitted.FittedAdvisor`; it
-leaves early as often as the fitted people did (`FittedAdvisor.stop_after`). A client of
-the server's HTTP API only: it runs anywhere the participant links reach.
+leaves early as often as the fitted people did (`FittedAdvisor.stop_after`). Under
+evaluative feedback it rates the move the learner made instead: Good when it is the action
+the fitted person would have advised, else Bad, sent after the drawn decision time, or not
+at all when that time is longer than the turn's time-out (the turn lapses, as a person's).
+A client of the server's HTTP API only: it runs anywhere the participant links reach.
+
+Through an online study's link (`join`) a simulated participant arrives as a panel's
+would, with its own panel id, and goes through the whole visit: the comprehension check
+(answered from what the induction tells a person: the sort rule, what Drop does over the
+center table, what to do when asked; a question it cannot know it guesses, and guesses
+again where the check says it was wrong) and, after its turns, the questionnaire (each
+item answered in the middle of its scale).
 """
 
 from __future__ import annotations
@@ -17,11 +27,13 @@ import threading
 import time
 from dataclasses import dataclass
 from typing import Any
+from urllib.parse import urlsplit
 
 import httpx
 import numpy as np
 
 from learner.fitted import FittedAdvisor, FittedModel
+from sim.rules import SortRule
 
 ENDED = ("finished", "stopped", "interrupted", "abandoned", "failed")
 NO_IMAGE = np.zeros((64, 64, 3), np.uint8)
@@ -41,6 +53,14 @@ class Rehearsed:
     viewer_messages: int = 0
     """Scene messages the 3-D view's websocket delivered (0 without the view)."""
     viewer_bytes: int = 0
+    feedback: str = "advice"
+    """The kind of its turns: advice, or evaluative (ratings of the learner's moves)."""
+    lapsed: int = 0
+    """Rating turns left without an answer (their time-out passed first)."""
+    check_tries: int = 0
+    """Tries at an online study's comprehension check (0: none asked)."""
+    questionnaire: bool = False
+    """It submitted an online study's questionnaire (which completes the visit)."""
 
 
 class _Viewer(threading.Thread):
@@ -109,10 +129,16 @@ def rehearse(
     view = _Viewer(base_url, token) if viewer else None
     headers = {"Authorization": f"Bearer {token}"}
     times: list[float] = []
+    kind, lapsed = "advice", 0
     with httpx.Client(base_url=base_url, headers=headers, timeout=60) as client:
         shown = _ok(client.get("/api/participant/consent"))
         _ok(client.post("/api/participant/consent", json={"agree": True,
                         "texts_version": shown["texts_version"]}))  # fmt: skip
+        check = _ok(client.get("/api/participant/check"))
+        asked = check["required"] and not check["passed"]  # (passed: a participant back)
+        tries, passed = _pass_check(client, check, sort_rule) if asked else (0, True)
+        if not passed:  # every try wrong: the visit ended `excluded`
+            return Rehearsed(token[-4:], 0, [], False, "excluded", check_tries=tries)
         state = _ok(client.post("/api/participant/start"))
         if view is not None:
             view.start()
@@ -121,6 +147,14 @@ def rehearse(
         while state["status"] not in ENDED and time.monotonic() < deadline:
             if stop_after is not None and len(times) >= stop_after:
                 break  # this person leaves: the session's idle limit will abandon it
+            if state["advice_wanted"] and state.get("rated_action") is not None:
+                kind = "evaluative"
+                answered, state = _rate(client, advisor, state, speed)
+                if answered is None:
+                    lapsed += 1
+                else:
+                    times.append(answered)
+                continue
             if state["advice_wanted"] and state["advice_index"] is not None:
                 action = advisor.advise(NO_IMAGE, _info(state))
                 drawn = advisor.last_decision_time_s or 0.0
@@ -137,17 +171,112 @@ def rehearse(
                 break  # the advice is over; the learner trains on without the person
             state = _ok(client.get("/api/participant/state",
                                    params={"after": state["version"], "timeout": 20}))  # fmt: skip
+        left_early = stop_after is not None and len(times) >= stop_after
+        answered = not left_early and _questionnaire(client, deadline)
     if view is not None:
         view.close()
     return Rehearsed(
         token_tail=token[-4:],
         advice=len(times),
         decision_times_s=times,
-        left_early=stop_after is not None and len(times) >= stop_after,
+        left_early=left_early,
         status=str(state["status"]),
         viewer_messages=view.messages if view is not None else 0,
         viewer_bytes=view.bytes if view is not None else 0,
+        feedback=kind,
+        lapsed=lapsed,
+        check_tries=tries,
+        questionnaire=answered,
     )
+
+
+def join(link: str, panel_id: str, panel_param: str = "PROLIFIC_PID") -> tuple[str, str]:
+    """Arrive through an online study's link as the panel's participant `panel_id`: (the
+    server's base URL, the session's token), as the link's redirect gives them."""
+    parts = urlsplit(link)
+    prefix = parts.path.rpartition("/join/")[0]
+    base = f"{parts.scheme}://{parts.netloc}{prefix}"
+    query = {panel_param: panel_id, "STUDY_ID": "rehearsal", "SESSION_ID": f"r-{panel_id}"}
+    with httpx.Client(timeout=60) as client:
+        response = client.get(link, params=query)
+    target = response.headers.get("location", "")
+    if response.status_code != 303 or "/p/" not in target:
+        raise RuntimeError(
+            f"the study link did not admit {panel_id} ({response.status_code}): is it an "
+            "online study's join link with places left?"
+        )
+    return base, target.rpartition("/p/")[2]
+
+
+def _pass_check(client: httpx.Client, check: dict[str, Any], sort_rule: Any) -> tuple[int, bool]:
+    """The comprehension check, answered as the induction taught (other questions
+    guessed, each wrong one guessed again): the tries it took, and whether it passed."""
+    rule = SortRule.parse(sort_rule)
+    taught = {"blue_cube": rule.side("cube", "blue"), "red_disk": rule.side("disk", "red"),
+              "drop_at_centre": "keep", "rating": "a"}  # fmt: skip
+    guess = {q["id"]: 0 for q in check["questions"]}
+    tries = 0
+    while True:
+        answers = {}
+        for q in check["questions"]:
+            values = [c["value"] for c in q["choices"]]
+            known = taught.get(q["id"])
+            answers[q["id"]] = known if known in values else values[guess[q["id"]] % len(values)]
+        result = _ok(client.post("/api/participant/check", json={"answers": answers}))
+        tries += 1
+        if result["passed"] or result["excluded"]:
+            return tries, bool(result["passed"])
+        for wrong in result["wrong"]:
+            guess[wrong] += 1
+
+
+def _questionnaire(client: httpx.Client, deadline: float) -> bool:
+    """An online study's questionnaire once it may be answered, every item in the middle of
+    its scale; whether it was submitted (False: none asked)."""
+    state = _ok(client.get("/api/participant/questionnaire"))
+    while state["required"] and not state["available"] and time.monotonic() < deadline:
+        time.sleep(0.5)
+        state = _ok(client.get("/api/participant/questionnaire"))
+    if not state["required"] or state["submitted_at"] is not None or not state["available"]:
+        return False
+    answers = {
+        section["instrument"]: {item["id"]: _middle(item) for item in section["items"]}
+        for section in state["sections"]
+    }
+    _ok(client.post("/api/participant/questionnaire", json={"answers": answers}))
+    return True
+
+
+def _middle(item: dict[str, Any]) -> Any:
+    if item["kind"] == "likert":
+        return item["points"] // 2 + 1
+    if item["kind"] == "choice":
+        return item["choices"][0]
+    if item["kind"] == "number":
+        low, high, step = item["minimum"], item["maximum"], item.get("step") or 1
+        return low + round((high - low) / 2 / step) * step
+    return "rehearsal"
+
+
+def _rate(
+    client: httpx.Client, advisor: FittedAdvisor, state: dict[str, Any], speed: float
+) -> tuple[float | None, dict[str, Any]]:
+    """One rating turn: (the decision time sent, or None for a turn left to lapse; the
+    state after it)."""
+    index = state["advice_index"]
+    would = advisor.advise(NO_IMAGE, _info(state))
+    drawn = advisor.last_decision_time_s or 0.0
+    left = float(state.get("rating_left_s") or 0.0)
+    if drawn / speed >= left:  # too slow: the turn goes on without an answer
+        while state["advice_index"] == index and state["status"] not in ENDED:
+            state = _ok(client.get("/api/participant/state",
+                                   params={"after": state["version"], "timeout": 20}))  # fmt: skip
+        return None, state
+    time.sleep(drawn / speed)
+    rating = "good" if would == state["rated_action"] else "bad"
+    body = {"advice_index": index, "rating": rating, "decision_time_s": drawn}
+    receipt = _ok(client.post("/api/participant/rating", params={"wait": 20}, json=body))
+    return drawn, receipt["state"] or _ok(client.get("/api/participant/state"))
 
 
 def _ok(response: httpx.Response) -> dict[str, Any]:

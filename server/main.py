@@ -29,6 +29,7 @@ from server.guard import (
     without_input,
 )
 from server.limits import WindowLimit
+from server.live import rating
 from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.live.playbacks import Playbacks
@@ -134,6 +135,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         settings.max_trainers,
         settings.training_population,
     )
+    rating.install(manager)
     pools = Pools(
         manager,
         settings.pool_limit,

@@ -66,6 +66,7 @@ EXTRA_ERRORS: dict[str, tuple[int, ...]] = {
     "participant_get_consent": (409,),
     "participant_give_consent": (409,),
     "participant_give_advice": (409,),
+    "participant_give_rating": (409,),
     "participant_start": (409,),
     "participant_answer_check": (409,),
     "participant_submit_questionnaire": (409,),

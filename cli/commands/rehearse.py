@@ -1,7 +1,9 @@
-"""`ideeprl rehearse --model FILE --link URL [--link URL ...]`: rehearse a study's load with
+"""`ideeprl rehearse --model FILE --link URL [--link URL ...]` (or `--study-link URL
+--participants N`, an online study's whole visits): rehearse a study's load with
 fitted advisors (`ideeprl fit`) answering human sessions through the participant links,
-as people would: consent, the induction's Start, then each advice after its drawn
-decision time, leaving early as often as the fitted people did (`runs.rehearsal`).
+as people would: consent, the induction's Start, then each advice (or, under evaluative
+feedback, each rating) after its drawn decision time, leaving early as often as the fitted
+people did (`runs.rehearsal`); a summary per kind of feedback.
 Create the human sessions first (dashboard, or POST /api/studies/ID/sessions) and pass
 their links; each simulated participant runs in its own thread."""
 
@@ -34,8 +36,20 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--model", type=Path, required=True, help="a fitted model's JSON file")
     parser.add_argument(
-        "--link", dest="links", type=_link, action="append", required=True,
+        "--link", dest="links", type=_link, action="append", default=[],
         metavar="URL", help="a human session's participant link (repeatable)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--study-link", metavar="URL",
+        help="an online study's join link: --participants arrive through it, each with a "
+        "panel id of its own, and go through the whole visit (check, questionnaire)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--participants", type=int, default=0, help="how many arrive through --study-link"
+    )
+    parser.add_argument(
+        "--panel-param", default="PROLIFIC_PID",
+        help="the study link's panel id parameter (the design's panel: Prolific's by default)",
     )  # fmt: skip
     parser.add_argument("--sort-rule", default="color", help="the study's sort rule")
     parser.add_argument("--seed", type=int, default=0, help="participant i draws with seed+i")
@@ -51,22 +65,32 @@ def rehearse_command(args: argparse.Namespace) -> int:
     import httpx
 
     from learner.fitted import read_model
-    from runs.rehearsal import rehearse
+    from runs.rehearsal import join, rehearse
 
     if not args.speed > 0:
         raise CommandError("--speed must be above 0", code=2)
+    if bool(args.study_link) != (args.participants > 0) or (args.links and args.study_link):
+        raise CommandError(
+            "pass participant links (--link URL ...), or an online study's link with how "
+            "many arrive (--study-link URL --participants N)",
+            code=2,
+        )
     try:
         model = read_model(args.model)
     except ValueError as error:
         raise CommandError(str(error), code=2) from None
 
     def one(i: int) -> Any:
-        base, token = args.links[i]
+        if args.study_link:
+            base, token = join(args.study_link, f"rehearsal-{args.seed + i}", args.panel_param)
+        else:
+            base, token = args.links[i]
         return rehearse(base, token, model, args.sort_rule, args.seed + i, args.speed)
 
+    count = args.participants or len(args.links)
     try:
-        with ThreadPoolExecutor(max_workers=len(args.links)) as pool:
-            done = list(pool.map(one, range(len(args.links))))
+        with ThreadPoolExecutor(max_workers=count) as pool:
+            done = list(pool.map(one, range(count)))
     except (RuntimeError, OSError, httpx.HTTPError) as error:
         raise CommandError(f"the rehearsal stopped: {error}") from None
     if args.json:
@@ -74,5 +98,17 @@ def rehearse_command(args: argparse.Namespace) -> int:
         return 0
     for r in done:
         left = ", left early" if r.left_early else ""
-        print(f"participant ...{r.token_tail}: {r.advice} advice{left}; session {r.status}")
+        if r.feedback == "evaluative":
+            given = f"{r.advice} ratings, {r.lapsed} without an answer"
+        else:
+            given = f"{r.advice} advice"
+        visit = f", check in {r.check_tries}" if r.check_tries else ""
+        visit += ", questionnaire" if r.questionnaire else ""
+        print(f"participant ...{r.token_tail}: {given}{left}{visit}; session {r.status}")
+    for kind in sorted({r.feedback for r in done}):
+        these = [r for r in done if r.feedback == kind]
+        times = sorted(t for r in these for t in r.decision_times_s)
+        median = f"{times[len(times) // 2]:.2f} s" if times else "none"
+        print(f"{kind}: {len(these)} participants, {sum(r.advice for r in these)} answered, "
+              f"median decision time {median}")  # fmt: skip
     return 0

@@ -12,7 +12,14 @@ import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 
-from runs.worker.messages import AdviceAnswer, Command, StatusChanged, Tagged, WorkerMessage
+from runs.worker.messages import (
+    AdviceAnswer,
+    Command,
+    RatingAnswer,
+    StatusChanged,
+    Tagged,
+    WorkerMessage,
+)
 
 
 class WorkerExit(Exception):
@@ -138,6 +145,21 @@ class WorkerLink:
     def wait_for_answer(self, advice_index: int, idle_limit_s: float) -> int:
         """Block until the participant answers `advice_index`; no limit per action, but
         `idle_limit_s` without an answer (pauses not counted) abandons the session."""
+        answer = self._wait_for(AdviceAnswer, advice_index, idle_limit_s)
+        assert isinstance(answer, AdviceAnswer)
+        return answer.action
+
+    def wait_for_rating(self, advice_index: int, idle_limit_s: float) -> float | None:
+        """Block until the web process answers the rating `advice_index`: the person's, or
+        no answer once its time-out has passed (the web process keeps that clock, so a
+        rating is either recorded and used, or refused)."""
+        answer = self._wait_for(RatingAnswer, advice_index, idle_limit_s)
+        assert isinstance(answer, RatingAnswer)
+        return answer.judgement
+
+    def _wait_for(
+        self, kind: type[AdviceAnswer | RatingAnswer], advice_index: int, idle_limit_s: float
+    ) -> AdviceAnswer | RatingAnswer:
         waited = 0.0
         while True:
             started = time.monotonic()
@@ -147,9 +169,9 @@ class WorkerLink:
             self._on_idle()
             if ready:
                 message = self._recv()
-                if isinstance(message, AdviceAnswer):
+                if isinstance(message, kind):
                     if message.advice_index == advice_index:
-                        return message.action
+                        return message
                     continue
                 self._handle(message, waiting_for_advice=True)
             elif waited >= idle_limit_s:
@@ -170,7 +192,7 @@ class WorkerLink:
             raise ParentGone("the web process closed the channel") from error
 
     def _handle(self, message: object, waiting_for_advice: bool = False) -> None:
-        if isinstance(message, AdviceAnswer):
+        if isinstance(message, AdviceAnswer | RatingAnswer):
             return  # a late duplicate of an answer already used
         assert isinstance(message, Command), message
         if message.name == "ready":

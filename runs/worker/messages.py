@@ -2,7 +2,7 @@
 
 Plain frozen dataclasses, pickled by multiprocessing. Worker -> web: `Progress`,
 `AdviceRequest`, `AdviceResult`, `EpisodeDone`, `SceneReset`, `SceneStep`, `StatusChanged`,
-`TrainingWanted`. Web -> worker: `AdviceAnswer`, `Command` (`ready`: the participant
+`TrainingWanted`. Web -> worker: `AdviceAnswer`, `RatingAnswer`, `Command` (`ready`: the participant
 consented and finished the induction; `train`: a trainer slot is free; `handover`: a
 trainer slot is free for a population, see `runs.worker.population`). A population's
 worker sends its sessions' messages `Tagged` with their session over its one channel.
@@ -65,6 +65,14 @@ class AdviceRequest:
     correct_action: int | None = None
     """The task's correct action at this step (stored with the advice for its accuracy;
     never shown to the participant); None where the task cannot say."""
+    rated_action: int | None = None
+    """Evaluative feedback: the action the learner took at this step, for the person to rate
+    (good, bad, or no answer); None: advice is asked for (`runs.worker.rating`)."""
+    rated_reward: float | None = None
+    """Evaluative feedback: the reward the rated action earned (the step is taken)."""
+    rating_time_out_s: float = 0.0
+    """Evaluative feedback: how long the learner waits for the rating (the run's
+    `rating_time_out_s`); after it the web process records no answer."""
 
 
 @dataclass(frozen=True)
@@ -138,6 +146,13 @@ class Tagged:
 class AdviceAnswer:
     advice_index: int
     action: int
+
+
+@dataclass(frozen=True)
+class RatingAnswer:
+    advice_index: int
+    judgement: float | None
+    """+1 good, -1 bad; None: no answer within the time-out."""
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ from runs.worker.messages import SceneReset, SceneStep
 
 if TYPE_CHECKING:
     from runs.worker.advisors import HumanAdvisor
+    from runs.worker.rating import HumanEvaluator
     from sim.env import SortingEnv
 
 
@@ -27,9 +28,10 @@ class SceneBroadcast(gym.Wrapper):
         self.episode = -1
         self.after_step: list[Callable[[int, float, bool], None]] = []
         """Called with (action, reward, episode_over) after every step."""
-        self.participant: HumanAdvisor | None = None
-        """A human session's advisor: whether the step being taken carries out its advice
-        (asked before `after_step` runs) tells the view which steps to animate."""
+        self.participant: HumanAdvisor | HumanEvaluator | None = None
+        """A human session's advisor: whether the step being taken carries out its advice,
+        or is the one they will rate (asked before `after_step` runs), tells the view which
+        steps to animate."""
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)

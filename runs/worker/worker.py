@@ -29,6 +29,7 @@ from runs.worker.advisors import Correct, HumanAdvisor, RecordingAdvisor, Record
 from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
 from runs.worker.messages import StatusChanged, TrainingWanted
 from runs.worker.priority import lower_priority
+from runs.worker.rating import HumanEvaluator, given_ratings
 from runs.worker.recorder import Checkpointable, LeaseLost, Recorder, Reporter
 from runs.worker.scene import SceneBroadcast
 from study.db.engine import make_engine, make_session_factory
@@ -186,6 +187,8 @@ class _Run:
         """The session's advisor: a person through the web process (human), or the machine
         advisor with its advice recorded."""
         s = self.session
+        if s.method == "human" and self.spec.feedback == "evaluative":
+            return None  # `_evaluator` makes the person's
         if s.method == "human":
             assert self.link is not None
             self.advisor = HumanAdvisor(
@@ -221,16 +224,36 @@ class _Run:
             )
         return self.advisor
 
-    def _evaluator(self, machine: Any) -> RecordingEvaluator | None:
+    def _evaluator(self, machine: Any) -> RecordingEvaluator | HumanEvaluator | None:
         """Under evaluative feedback, the machine evaluator with its judgements recorded;
         it stands as the session's advisor (its count is the feedback given)."""
+        s = self.session
+        if s.method == "human" and self.spec.feedback == "evaluative":
+            return self._person_rates()
         if machine is None:
             return None
-        s = self.session
         self.advisor = RecordingEvaluator(
             machine, s.id, s.method, self.start_advice, self.spec.feedback_weight, self.recorder
         )
         return self.advisor
+
+    def _person_rates(self) -> HumanEvaluator:
+        """Evaluative feedback from the participant, on the advice page."""
+        assert self.link is not None
+        evaluator = HumanEvaluator(
+            self.link,
+            self.reporter,
+            given_ratings(self.factory, self.session_id),
+            self.start_advice,
+            self.advice_budget,
+            self.session.idle_limit_s or self.options.idle_limit_s,
+            self.spec.rating_time_out_s,
+            frames=None if self.live_view else self.env.render,
+        )
+        self.env.after_step.append(evaluator.after_step)
+        self.env.participant = evaluator
+        self.advisor = evaluator
+        return evaluator
 
     @property
     def advice_given(self) -> int:

@@ -20,6 +20,7 @@ from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
 
 from runs.worker.messages import AdviceAnswer, AdviceRequest
+from server.live import rating
 from server.live.manager import HistoryEntry, SessionManager
 from study.db.models import Advice, Status, StudySession
 from study.schemas.participant import (
@@ -32,6 +33,7 @@ from study.schemas.participant import (
 from study.services.advice import AdviceGiven, write_advice
 from study.services.consent import NOT_CONSENTED
 from study.services.errors import Conflict, Invalid, NotFound
+from study.services.feedback import judgements_given
 from tasks import get_task
 
 
@@ -113,6 +115,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
     if handle is None:
         with manager.factory() as db:
             given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+            given += judgements_given(db, session.id)  # a rating session's turns
             row = db.get(StudySession, session.id)
             if row is None:
                 raise NotFound("this session no longer exists")
@@ -140,7 +143,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
         handle.shown_at = time.monotonic()
     shown = handle.progress
     given = len(handle.given)
-    return ParticipantState(
+    state = ParticipantState(
         session_id=session.id,
         status=handle.status,
         message=MESSAGES.get(Status(handle.status), ""),
@@ -169,6 +172,8 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             else None
         ),
     )
+    rating.shown(state, request, handle.request_arrived)
+    return state
 
 
 def observation_png(manager: SessionManager, session: ParticipantSession) -> bytes | None:
@@ -260,6 +265,7 @@ async def submit_advice(
                 "no advice is wanted right now (the learner is acting or is on its own); "
                 "wait for the next observation from GET /api/participant/state"
             )
+        rating.refuses_advice(request)
         if request.advice_index != body.advice_index:
             raise Conflict(
                 f"advice {request.advice_index} is wanted now, not {body.advice_index}; "

@@ -27,6 +27,7 @@ KINDS = (
     "progress",
     "advice_request",
     "advice_given",
+    "rating_given",
     "advice_result",
     "episode",
     "scene_reset",
@@ -42,7 +43,8 @@ class HubEvent:
     kind: str
     """One of `KINDS`."""
     payload: Any
-    """The worker's message (`runs.worker.messages`), or a dict for `advice_given`."""
+    """The worker's message (`runs.worker.messages`), or a dict for `advice_given` and
+    `rating_given`."""
     seq: int
     """Hub-wide sequence number: later events have larger numbers."""
     time: float

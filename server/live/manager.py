@@ -264,6 +264,10 @@ class SessionManager:
         self._reaper: asyncio.Task[None] | None = None
         self._ending: set[asyncio.Task[None]] = set()
         """Visits ending after their worker gave up waiting (kept until done)."""
+        self.on_request: Callable[[WorkerHandle, AdviceRequest], None] = lambda h, r: None
+        """Called on the event loop as a turn's request arrives (`server.live.rating`)."""
+        self.on_start: Callable[[WorkerHandle], None] = lambda handle: None
+        """Called as a session's worker starts, its handle made (`server.live.rating`)."""
         hub.on_watchers_changed(self._watch)
 
     # --- lifecycle ---------------------------------------------------------------------
@@ -461,6 +465,7 @@ class SessionManager:
         given = {index: action for index, action, _ in answered}
         handle = WorkerHandle(session_id, token, process, parent, budget, given)
         handle.history.extend(HistoryEntry(*row) for row in answered)
+        self.on_start(handle)
         handle.steps_before_first_turn = first_turn
         handle.human, handle.pooled = human, pooled
         handle.run = run
@@ -939,6 +944,7 @@ class SessionManager:
             handle.request_arrived = time.monotonic()
             handle.shown_at = None
             handle.moving = False
+            self.on_request(handle, message)
         elif isinstance(message, AdviceResult):
             handle.moving = False
             handle.last_reward = message.reward

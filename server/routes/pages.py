@@ -39,6 +39,7 @@ from study.schemas.visit import Section
 from study.services import consent as consent_service
 from study.services import visit as visit_service
 from study.services.errors import Conflict, Invalid
+from study.services.feedback import judgements_given
 from study.services.sessions import session_for_token
 from study.services.visit import CheckProgress
 from tasks import Task, get_task
@@ -83,8 +84,16 @@ def task_words(task: Task) -> dict[str, str]:
     }
 
 
-def default_text(key: str, task: Task) -> str:
-    """A page text before a study's: the task's own, else the one for any task."""
+def default_text(key: str, task: Task, feedback: str = "advice") -> str:
+    """A page text before a study's: the task's own, else the one for any task; under
+    evaluative feedback, its version for ratings (KEY.evaluative) where there is one."""
+    if feedback != "advice":
+        kind = task.texts.get(f"{key}.{feedback}")
+        if kind is None and task.texts.get(key) is None:
+            path = WEB_DIR / "texts" / f"{key}.{feedback}.txt"
+            kind = path.read_text() if path.exists() else None
+        if kind is not None:
+            return kind
     return task.texts.get(key) or (WEB_DIR / "texts" / f"{key}.txt").read_text()
 
 
@@ -145,6 +154,11 @@ class Visit:
     """The alternating strategy's: one advised action in every `interval`."""
     task: str = "sorting"
     """The run's task (`tasks`): the advice page's buttons and view, the pages' words."""
+    feedback: str = "advice"
+    """The run's kind of feedback (`RunSpec.feedback`): the page asks for advice, or for
+    ratings of the learner's own actions (evaluative)."""
+    rating_time_out_s: float = 10.0
+    """Evaluative feedback: the time a rating may take before the learner goes on."""
 
     @property
     def the_task(self) -> Task:
@@ -175,8 +189,11 @@ class Visit:
         return self.advice_given >= self.advice_budget or self.status == Status.finished
 
     def advice_plan(self) -> str:
-        """When this person advises, as the robot's strategy has it (`{advice_plan}`)."""
+        """When this person advises, as the robot's strategy has it (`{advice_plan}`); under
+        evaluative feedback, when they rate its moves."""
         n = self.advice_budget
+        if self.feedback == "evaluative":
+            return self._rating_plan()
         if self.strategy == "early" or (self.strategy == "alternating" and self.interval == 1):
             return (
                 # the next, not its first: early advice ends the random practice, which
@@ -195,6 +212,23 @@ class Visit:
             "between and after, it acts on its own"
         )
 
+    def _rating_plan(self) -> str:
+        n = self.advice_budget
+        seconds = f"{self.rating_time_out_s:g} seconds"
+        if self.strategy == "early" or (self.strategy == "alternating" and self.interval == 1):
+            when = f"For the next {n} actions, the {self.agent} chooses and **you** rate"
+        elif self.strategy == "alternating":
+            when = (
+                f"For {n} of its actions, one in every {self.interval or 2}, **you** rate "
+                f"what the {self.agent} chose"
+            )
+        else:
+            when = f"For {n} of its actions, at moments it picks itself, **you** rate"
+        return (
+            f"{when} each move: **Good** or **Bad**, within {seconds} (no answer is fine: it "
+            "goes on). After that it continues on its own"
+        )
+
     @property
     def idle_limit_s(self) -> float | None:
         """An online study's limit on waiting for an answer (the visit ends `timed_out`);
@@ -204,6 +238,11 @@ class Visit:
     def time_rule(self) -> str:
         """How long a choice may take (`{time_rule}`): no limit in a lab study; an online
         study ends a visit that gives no answer for its design's `idle_limit_s`."""
+        if self.feedback == "evaluative":
+            return (
+                f"You have **{self.rating_time_out_s:g} seconds** for each rating; without one "
+                f"the {self.agent} goes on by itself."
+            )
         if self.design is None:
             return "There is **no time limit**. Take the time you need for each choice."
         minutes = max(1, round((self.idle_limit_s or 600) / 60))
@@ -241,7 +280,7 @@ class Visit:
         }
         out = {}
         for key in TEXT_KEYS:
-            raw = self.texts.get(key) or default_text(key, task)
+            raw = self.texts.get(key) or default_text(key, task, self.feedback)
             for name, value in fill.items():
                 raw = raw.replace(name, value)
             out[key] = raw
@@ -260,6 +299,7 @@ def _visit(request: Request, token: str) -> Visit | None:
         if session is None:
             return None
         given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+        given += judgements_given(db, session.id)  # a rating session's turns
         version = session.texts_version
         questionnaire = visit_service.questionnaire_progress(db, session)
         return Visit(
@@ -285,6 +325,8 @@ def _visit(request: Request, token: str) -> Visit | None:
             design=session.study.design,
             strategy=session.spec.strategy,
             interval=session.spec.strategy_options.interval,
+            feedback=session.spec.feedback,
+            rating_time_out_s=session.spec.rating_time_out_s,
         )
 
 

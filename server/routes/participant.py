@@ -9,7 +9,7 @@ from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from server.deps import ManagerDep, ParticipantDep
-from server.live import advising
+from server.live import advising, rating
 from server.live.visits import end_visit
 from server.routes.pages import check_state, visit_for_token
 from study.db.models import Outcome, StudySession
@@ -24,6 +24,8 @@ from study.schemas.participant import (
     ParticipantState,
     QuestionnaireCreate,
     QuestionnaireState,
+    RatingCreate,
+    RatingReceipt,
     Readiness,
 )
 from study.services import consent as consent_service
@@ -152,6 +154,31 @@ async def give_advice(
     ),
 ) -> AdviceReceipt:
     receipt = await advising.submit_advice(manager, session, body)
+    last = not receipt.duplicate and receipt.advice_index + 1 >= session.advice_budget
+    if last and await run_in_threadpool(_visit_ends_with_advice, manager, session.id):
+        await end_visit(manager, session.id, Outcome.completed)
+    if wait > 0:
+        await manager.wait_change(session.id, receipt.version, wait)
+        receipt.state = await advising.current_state(manager, session)
+    return receipt
+
+
+@router.post("/rating")
+async def give_rating(
+    session: ParticipantDep,
+    manager: ManagerDep,
+    body: RatingCreate,
+    wait: float = Query(
+        default=0.0,
+        ge=0.0,
+        le=MAX_WAIT_S,
+        description="Seconds to wait for what happens next (the next turn, usually) and "
+        "return it as `state`.",
+    ),
+) -> RatingReceipt:
+    """Evaluative feedback: rate the action the learner took on this turn, good or bad,
+    within the run's time-out (409 outside it, or on a turn that asks for advice)."""
+    receipt = await rating.submit_rating(manager, session.id, body)
     last = not receipt.duplicate and receipt.advice_index + 1 >= session.advice_budget
     if last and await run_in_threadpool(_visit_ends_with_advice, manager, session.id):
         await end_visit(manager, session.id, Outcome.completed)

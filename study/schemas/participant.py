@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
@@ -94,6 +94,22 @@ class ParticipantState(BaseModel):
         description="A task without a live 3-D view: what people see at this request, PNG "
         "in base64 (None for the sorting robot, whose scene the 3-D view shows).",
     )
+    rated_action: int | None = Field(
+        default=None,
+        description="Evaluative feedback: the turn asks for a rating of this action, which "
+        "the learner took (POST /api/participant/rating); None: the turn asks for advice.",
+    )
+    rated_reward: float | None = Field(
+        default=None, description="Evaluative feedback: the reward the rated action earned."
+    )
+    rating_time_out_s: float | None = Field(
+        default=None,
+        description="Evaluative feedback: seconds the learner waits for the rating, from "
+        "when it asked; after them it goes on with no answer.",
+    )
+    rating_left_s: float | None = Field(
+        default=None, description="Evaluative feedback: seconds left to rate, now."
+    )
 
 
 class AdviceReceipt(BaseModel):
@@ -102,6 +118,36 @@ class AdviceReceipt(BaseModel):
     duplicate: bool = Field(description="True if this advice had been received already.")
     response_time_s: float
     version: int = Field(description="State version after this advice: long-poll after it.")
+    state: ParticipantState | None = Field(
+        default=None, description="With ?wait=S: the state after what happened next."
+    )
+
+
+class RatingCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    advice_index: Int = Field(
+        ge=0, le=2**31 - 1, description="Index of the turn rated (the state's advice_index)."
+    )
+    rating: Literal["good", "bad"] = Field(description="The participant's rating of the action.")
+    decision_time_s: Number | None = Field(
+        default=None,
+        ge=0.0,
+        le=MAX_DECISION_TIME_S,
+        allow_inf_nan=False,
+        description="Seconds from the moment the page asked for the rating to the click or "
+        "key, on the browser's monotonic clock (performance.now()).",
+    )
+
+
+class RatingReceipt(BaseModel):
+    advice_index: int
+    action: int = Field(description="The action rated.")
+    judgement: float | None = Field(description="+1 good, -1 bad (None: no answer).")
+    shaping: float = Field(description="What the rating added to the learner's reward.")
+    duplicate: bool = Field(description="True if this rating had been received already.")
+    response_time_s: float = Field(description="The server's time from showing to receiving.")
+    version: int
     state: ParticipantState | None = Field(
         default=None, description="With ?wait=S: the state after what happened next."
     )

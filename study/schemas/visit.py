@@ -233,13 +233,14 @@ class QuestionnaireSpec(BaseModel):
         """The SPEC's default: NASA-TLX raw, the trust checklist, optional demographics."""
         return cls()
 
-    def sections(self, agent: str = "robot") -> list[Section]:
-        """What the page asks, in order."""
+    def sections(self, agent: str = "robot", feedback: str = "advice") -> list[Section]:
+        """What the page asks, in order; its words for the session's kind of feedback
+        (advice, or ratings of the agent's moves: evaluative)."""
         out = []
         if self.nasa_tlx:
-            out.append(_nasa_tlx())
+            out.append(_nasa_tlx(feedback))
         if self.trust:
-            out.append(_trust(agent))
+            out.append(_trust(agent, feedback))
         if self.items:
             out.append(
                 Section(
@@ -254,7 +255,12 @@ class QuestionnaireSpec(BaseModel):
         return out
 
 
-def _nasa_tlx() -> Section:
+GAVE = {"advice": "the advice you just gave", "evaluative": "the ratings you just gave"}
+"""What the participant did, by the run's kind of feedback, in the questionnaire's words."""
+DID = {"advice": "advised", "evaluative": "rated"}
+
+
+def _nasa_tlx(feedback: str = "advice") -> Section:
     items = [
         Item(
             id=s.id,
@@ -268,11 +274,11 @@ def _nasa_tlx() -> Section:
         )
         for s in inst.NASA_TLX
     ]
-    intro = "About the advice you just gave: move each slider to where it fits best."
+    intro = f"About {GAVE[feedback]}: move each slider to where it fits best."
     return Section(instrument="nasa_tlx", title="Workload", intro=intro, items=items)
 
 
-def _trust(agent: str = "robot") -> Section:
+def _trust(agent: str = "robot", feedback: str = "advice") -> Section:
     """The trust checklist about what the participant advised: the sorting robot, or the
     task's own agent (`tasks.Task.agent`), its items' words taken from it."""
     items = [
@@ -286,7 +292,7 @@ def _trust(agent: str = "robot") -> Section:
         )
         for n, text in enumerate(inst.TRUST_ITEMS, start=1)
     ]
-    intro = f"How much does each statement fit your impression of the {agent} you advised?"
+    intro = f"How much does each statement fit your impression of the {agent} you {DID[feedback]}?"
     return Section(instrument="trust", title=f"The {agent}", intro=intro, items=items)
 
 

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
 
-from sqlalchemy import insert
+from sqlalchemy import func, insert, select
 from sqlalchemy.orm import Session
 
 from study.db.models import Feedback
@@ -50,3 +50,10 @@ def write_feedback(db: Session, feedback: Sequence[FeedbackGiven]) -> None:
     (session, feedback_index) raises `IntegrityError`: a judgement is written once."""
     if feedback:
         db.execute(insert(Feedback), [dataclasses.asdict(f) for f in feedback])
+
+
+def judgements_given(db: Session, session_id: int) -> int:
+    """How many of the session's turns were judged (answered or not): a rating session's
+    count of turns, as its advice rows are an advice session's."""
+    query = select(func.count()).where(Feedback.session_id == session_id)
+    return db.scalar(query) or 0

@@ -20,7 +20,13 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from sim.rules import SortRule
-from study.db.models import Advice, CheckAttempt, QuestionnaireAnswer, Status, StudySession
+from study.db.models import (
+    Advice,
+    CheckAttempt,
+    QuestionnaireAnswer,
+    Status,
+    StudySession,
+)
 from study.schemas.design import StudyDesign
 from study.schemas.instruments import PREFER_NOT_TO_SAY
 from study.schemas.participant import Answer
@@ -34,6 +40,7 @@ from study.schemas.visit import (
     default_questions,
 )
 from study.services.errors import Conflict, Invalid
+from study.services.feedback import judgements_given
 from tasks import CheckQuestion as TaskQuestion
 from tasks import Task, get_task
 
@@ -101,9 +108,30 @@ def check_of(session: StudySession) -> CheckSpec | None:
     if design is None or design.check is None:
         return None
     task = session.spec.task
-    if task == "sorting" or design.check.questions != default_questions():
-        return design.check
-    return design.check.model_copy(update={"questions": task_questions(get_task(task))})
+    check = design.check
+    if task != "sorting" and check.questions == default_questions():
+        check = check.model_copy(update={"questions": task_questions(get_task(task))})
+    if session.spec.feedback == "evaluative" and design.check.questions == default_questions():
+        agent = session.spec.the_task.agent
+        check = check.model_copy(update={"questions": [*check.questions, rating_question(agent)]})
+    return check
+
+
+RATINGS = (
+    "Rate the move it just made: Good or Bad",
+    "Choose its next move",
+    "Nothing: I only watch",
+)
+
+
+def rating_question(agent: str) -> CheckQuestion:
+    """The default check's question on what a person under evaluative feedback does."""
+    return CheckQuestion(
+        id="rating",
+        text=f"When the {agent} asks for you, what do you do?",
+        choices=[Choice(value=VALUES[i], label=c) for i, c in enumerate(RATINGS)],
+        answer=VALUES[0],
+    )
 
 
 def task_questions(task: Task) -> list[CheckQuestion]:
@@ -216,6 +244,7 @@ def _validate_check_answers(spec: CheckSpec, answers: Mapping[str, str]) -> None
 def advice_done(db: Session, session: StudySession) -> bool:
     """The advice budget is spent (or the run finished): the questionnaire may come."""
     given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
+    given += judgements_given(db, session.id)  # a session's turns are advice or ratings
     return given >= session.spec.advice_budget or session.status == Status.finished
 
 
@@ -230,7 +259,7 @@ def questionnaire_progress(db: Session, session: StudySession) -> QuestionnaireP
         return QuestionnaireProgress(required=False)
     return QuestionnaireProgress(
         required=True,
-        sections=spec.sections(session.spec.the_task.agent),
+        sections=spec.sections(session.spec.the_task.agent, session.spec.feedback),
         available=advice_done(db, session),
         submitted_at=_submitted_at(db, session.id),
     )

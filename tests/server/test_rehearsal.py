@@ -3,8 +3,11 @@ calls, and the session stores its advice with the decision times it drew."""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import httpx
 import pytest
@@ -12,7 +15,7 @@ import pytest
 from cli.main import main
 from learner.fitted import HELD, Count, FittedModel
 from tests.server.live import LiveServer
-from tests.server.scale import session_body, wait_for_status
+from tests.server.scale import export, session_body, wait_for_status
 
 pytestmark = pytest.mark.slow
 BUDGET = 5
@@ -50,3 +53,98 @@ def test_a_fitted_advisor_advises_a_human_session_through_its_link(
     assert [a["decision_time_s"] for a in advice] == pytest.approx(done["decision_times_s"])
     waited = zip(advice, done["decision_times_s"], strict=True)
     assert all(a["response_time_s"] >= t / 4 for a, t in waited)  # it waited before answering
+
+
+def test_a_rehearsal_compares_advice_and_ratings_through_their_links(
+    server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two conditions, advice against evaluation: the same fitted person advises one session
+    and rates the other's moves (Good where it would have advised the move), each answer
+    stored with its drawn decision time, the summary given per kind."""
+    model = FittedModel(
+        advice=300, sessions=[1], methods=["human"], overall=Count(300, 0),
+        by_held={h: Count(100, 0) for h in HELD}, by_situation={},
+        wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=0.2,
+        decision_time_sigma=0.3, decision_time_quantiles=[], budget_used=[1.0],
+    )  # fmt: skip
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(model.to_json()))
+    study = api.post("/api/studies", json={"name": "rehearsal by kind"}).json()
+    made = {}
+    for kind in ("advice", "evaluative"):
+        body = session_body("human", advice_budget=BUDGET, pretraining_steps=16, episodes=1,
+                            max_episode_steps=20, feedback=kind)  # fmt: skip
+        response = api.post(f"/api/studies/{study['id']}/sessions", json=body)
+        assert response.status_code == 201, response.text
+        made[kind] = response.json()
+    links = [f"{server.url}/p/{made[k]['participant_token']}" for k in ("advice", "evaluative")]
+
+    argv = ["rehearse", "--model", str(path), "--speed", "4"]
+    code = main([*argv, "--link", links[0], "--link", links[1], "--json"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    advised, rated = json.loads(out)["participants"]
+    assert advised["feedback"] == "advice" and rated["feedback"] == "evaluative"
+    assert advised["advice"] == BUDGET and rated["advice"] + rated["lapsed"] == BUDGET
+
+    wait_for_status(api, made["evaluative"]["id"], {"finished"})
+    files = export(api, study["id"])
+    rows = list(csv.DictReader(io.StringIO(files["feedback.csv"].decode())))
+    assert [r["session_id"] for r in rows] == [str(made["evaluative"]["id"])] * BUDGET
+    sent = [float(r["decision_time_s"]) for r in rows if r["decision_time_s"]]
+    assert sent == pytest.approx(rated["decision_times_s"])
+    assert all(r["judgement"] in ("1.0", "-1.0") for r in rows if r["decision_time_s"])
+    advice = list(csv.DictReader(io.StringIO(files["advice.csv"].decode())))
+    assert [r["session_id"] for r in advice] == [str(made["advice"]["id"])] * BUDGET
+
+
+def test_an_online_study_of_advice_against_evaluation_is_rehearsed_through_its_link(
+    server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two conditions, advice and evaluative feedback: synthetic participants arrive through
+    the study link with panel ids of their own, pass the check (the rating question in
+    the evaluative condition), give their turns, answer the questionnaire and complete
+    their visits; the summary and the export are per condition."""
+    model = FittedModel(
+        advice=300, sessions=[1], methods=["human"], overall=Count(300, 0),
+        by_held={h: Count(100, 0) for h in HELD}, by_situation={},
+        wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=0.2,
+        decision_time_sigma=0.3, decision_time_quantiles=[], budget_used=[1.0],
+    )  # fmt: skip
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(model.to_json()))
+    run = {"method": "human", "seed": 3, "config": {
+        "pretraining_steps": 16, "batch_size": 8, "memory_size": 500, "episodes": 1,
+        "max_episode_steps": 20, "advice_budget": BUDGET}}  # fmt: skip
+    design = {
+        "conditions": {"advice": {"run": run, "target": 1},
+                       "evaluation": {"run": {**run, "feedback": "evaluative"}, "target": 1}},
+        "panel": {"kind": "prolific", "codes": {"completed": "C-DONE"}},
+    }  # fmt: skip
+    made = api.post("/api/studies", json={"name": "advice or ratings", "design": design})
+    assert made.status_code == 201, made.text
+    study = made.json()
+    link = server.url + urlsplit(study["join_url"]).path
+
+    argv = ["rehearse", "--model", str(path), "--speed", "4", "--study-link", link]
+    code = main([*argv, "--participants", "2", "--json"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    done = json.loads(out)["participants"]
+    assert sorted(r["feedback"] for r in done) == ["advice", "evaluative"]
+    assert all(r["check_tries"] == 1 and r["questionnaire"] for r in done), done
+
+    files = export(api, study["id"])
+    sessions = list(csv.DictReader(io.StringIO(files["sessions.csv"].decode())))
+    assert sorted(r["condition"] for r in sessions) == ["advice", "evaluation"]
+    assert [r["outcome"] for r in sessions] == ["completed", "completed"]
+    by_condition = {r["condition"]: r["session_id"] for r in sessions}
+    feedback = list(csv.DictReader(io.StringIO(files["feedback.csv"].decode())))
+    advice = list(csv.DictReader(io.StringIO(files["advice.csv"].decode())))
+    assert {r["session_id"] for r in feedback} == {by_condition["evaluation"]}
+    assert {r["session_id"] for r in advice} == {by_condition["advice"]}
+    assert len(advice) == BUDGET and len(feedback) == BUDGET
+
+    code = main([*argv, "--participants", "1", "--seed", "7"])  # a third panel id
+    printed = capsys.readouterr()
+    assert code == 1 and "did not admit" in printed.err + printed.out  # the study is full

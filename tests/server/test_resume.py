@@ -132,6 +132,70 @@ def test_a_human_session_survives_a_server_crash_without_asking_again(live: Live
     other.close()
 
 
+def test_a_rating_session_survives_a_server_crash_without_asking_again(live: LiveServer) -> None:
+    """Evaluative feedback: the ratings given before the crash are replayed to the learner,
+    never asked again, and the resumed run's records equal an uninterrupted one's."""
+    budget, before_crash = 6, 3
+    ratings = ["good", "bad", "good", "bad", "bad", "good"]
+    with live.client() as api:
+        study = api.post("/api/studies", json={"name": "rating crash"}).json()
+        body = session_body("human", advice_budget=budget, episodes=1, feedback="evaluative")
+        crashed = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+        reference = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+        participant = SimulatedParticipant(live.url, crashed["participant_token"])
+        participant.begin()
+        for index in range(before_crash):
+            assert rate(participant, ratings[index]) == index
+        worker = api.get(f"/api/sessions/{crashed['id']}").json()["worker_pid"]
+
+    live.stop(kill=True)
+    deadline = time.monotonic() + 30
+    while _alive(worker):
+        assert time.monotonic() < deadline, "the worker outlived its server"
+        time.sleep(0.1)
+    live.start()
+    with live.client() as api:
+        assert wait_for_status(api, crashed["id"], {"interrupted"}, timeout=30)
+        api.post(f"/api/sessions/{crashed['id']}/resume")
+        participant.version = None
+        state = participant.next_request()
+        assert state["advice_index"] == before_crash and state["advice_given"] == before_crash
+        for index in range(before_crash, budget):
+            assert rate(participant, ratings[index]) == index
+        other = SimulatedParticipant(live.url, reference["participant_token"])
+        other.begin()
+        for index in range(budget):
+            assert rate(other, ratings[index]) == index
+        wait_for_status(api, crashed["id"], {"finished"})
+        wait_for_status(api, reference["id"], {"finished"})
+        files = export(api, study["id"])
+    resumed, uninterrupted = records(files, crashed["id"]), records(files, reference["id"])
+    for name in resumed:
+        assert resumed[name] == uninterrupted[name], name
+    judged = list(csv.DictReader(io.StringIO(files["feedback.csv"].decode())))
+    for session in (crashed, reference):
+        mine = [r for r in judged if r["session_id"] == str(session["id"])]
+        assert [r["judgement"] for r in mine] == ["1.0" if r == "good" else "-1.0" for r in ratings]
+    participant.close()
+    other.close()
+
+
+def rate(participant: SimulatedParticipant, rating: str) -> int:
+    """Rate the next turn's move; the turn's index."""
+    state = participant.next_request()
+    assert state["rated_action"] is not None, state
+    index = state["advice_index"]
+    response = participant.client.post(
+        "/api/participant/rating",
+        params={"wait": 10},
+        json={"advice_index": index, "rating": rating},
+    )
+    assert response.status_code == 200, response.text
+    participant.version = response.json()["version"]
+    participant.pending = response.json()["state"]
+    return int(index)
+
+
 def test_a_restart_resumes_a_participants_session_by_itself(live: LiveServer) -> None:
     """An update or `systemctl restart` in the middle of a visit: the participant goes on
     where they were, with nobody there to resume their session; a machine session stays

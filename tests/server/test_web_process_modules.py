@@ -210,6 +210,8 @@ def _sessions(ask: Requests) -> None:
         assert wanted["advice_wanted"], wanted
         advice = {"advice_index": wanted["advice_index"], "action": 0}
         assert ask("POST", "/api/participant/advice", person, json=advice).status_code == 200
+        rating = {"advice_index": wanted["advice_index"], "rating": "good"}
+        assert ask("POST", "/api/participant/rating", person, json=rating).status_code == 409
     ask.socket("/viewer/p/{token}")
     ask.socket("/viewer/p/{token}/")
     ask.values |= {"human_id": str(human["id"]), "advice_index": "0", "fitted_id": "1"}

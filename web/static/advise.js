@@ -1,12 +1,17 @@
 // The advice page: follows the session's state by long-polling, enables the action
 // buttons when the robot waits for advice and the 3-D view has finished showing its last
 // move, and sends one advice per click or key press. After the last it follows on until
-// that choice's result is shown (or the last move's time is up), then moves on.
+// that choice's result is shown (or the last move's time is up), then moves on. Under
+// evaluative feedback a turn shows the move the learner made and asks for a rating instead:
+// Good or Bad (click, touch, Y or N), within the run's time-out, counted down on the page.
 "use strict";
 (() => {
   const config = JSON.parse(document.getElementById("page-config").textContent);
   const $ = (id) => document.getElementById(id);
-  const buttons = [...document.querySelectorAll("button.action")];
+  const buttons = [...document.querySelectorAll("button.action:not(.rate)")];
+  const rates = [...document.querySelectorAll("button.rate")];
+  const RATING = config.feedback === "evaluative"; // turns ask for ratings, not advice
+  const RATE_KEYS = { y: "good", "+": "good", n: "bad", "-": "bad" };
   // the sorting robot's keys; another task's come with the page
   const KEYS = config.keys || { g: 0, r: 1, arrowright: 1, l: 2, arrowleft: 2, d: 3, 1: 0, 2: 1, 3: 2, 4: 3 };
   const LIVE = config.liveView !== false; // the task has a live 3-D view, else frames
@@ -42,7 +47,7 @@
   }
 
   function setButtons(on) {
-    for (const b of buttons) {
+    for (const b of RATING ? rates : buttons) {
       b.disabled = !on;
       // a new turn shows no choice made yet: the last one's green mark (kept 900 ms) would
       // read as a button already chosen when the turn comes sooner
@@ -192,6 +197,7 @@
     const ready =
       s.status === "running" && s.advice_wanted && !s.robot_moving && s.advice_index !== sentIndex;
     if (!ready) {
+      if (RATING && enabledFor !== null && sentIndex !== enabledFor && s.status === "running") noAnswer();
       enabledFor = null;
       beforeFirstTurn = false;
       setButtons(false);
@@ -206,6 +212,7 @@
     hideReadiness();
     if (enabledFor === s.advice_index) return;
     setButtons(false);
+    if (RATING) return askRating(s, gen);
     setStatus(`The ${AGENT} is moving…`, "busy");
     await waitForPlayback(gen);
     if (!sceneShown) {
@@ -223,6 +230,108 @@
     setButtons(true);
     activeSince = performance.now();
     setStatus(`Your turn: what should the ${AGENT} do?`, "turn");
+  }
+
+  // A rating turn: the move is shown (the 3-D view replays it; a task's frame shows where it
+  // led), then Good and Bad light up until the learner's time-out, counted from when it
+  // asked (the state says how much of it was left when it was read).
+  let clock = null;
+  async function askRating(s, gen) {
+    const deadline = s.receivedAt + 1000 * (s.rating_left_s ?? config.ratingTimeOutS);
+    setStatus(`The ${AGENT} is moving…`, "busy");
+    await waitForPlayback(gen);
+    if (gen !== generation) return;
+    showObservation(s);
+    showArm(s, false);
+    const name = capital(config.actionNames[s.rated_action]);
+    $("rating-question").textContent = `The ${AGENT} chose “${name}”${rewardNote(s.rated_reward)}. Was that a good choice?`;
+    if (enabledFor !== null && sentIndex !== enabledFor) noAnswer(); // the last turn lapsed
+    enabledFor = s.advice_index;
+    sentIndex = null;
+    $("rating").dataset.turn = String(s.advice_index);
+    $("feedback").textContent = lapsed ? `No answer to the last move: the ${AGENT} went on.` : "";
+    delete $("feedback").dataset.mood;
+    lapsed = false;
+    setButtons(true);
+    activeSince = performance.now();
+    setStatus(`Your turn: rate the ${AGENT}'s move`, "turn");
+    clearInterval(clock);
+    const tick = () => {
+      const left = Math.max(0, deadline - performance.now());
+      const total = 1000 * config.ratingTimeOutS;
+      $("rating-clock").style.width = `${((100 * left) / total).toFixed(1)}%`;
+      $("rating-left").textContent = `${Math.ceil(left / 1000)} s left to rate`;
+      if (left > 0 && enabledFor === s.advice_index) return;
+      clearInterval(clock);
+      $("rating-clock").style.width = "0%";
+      $("rating-left").textContent = "";
+      if (enabledFor !== s.advice_index) return;
+      noAnswer();
+      enabledFor = null;
+      setButtons(false);
+    };
+    clock = setInterval(tick, 100);
+    tick();
+  }
+
+  // A rating turn closed without an answer (its time-out): said until the next turn's.
+  let lapsed = false;
+  function noAnswer() {
+    lapsed = true;
+    clearInterval(clock);
+    $("rating-clock").style.width = "0%";
+    $("rating-left").textContent = "";
+    $("feedback").textContent = `No answer: the ${AGENT} goes on.`;
+    delete $("feedback").dataset.mood;
+    setStatus(`The ${AGENT} is moving…`, "busy");
+  }
+
+  function rewardNote(reward) {
+    if (reward === null || reward === undefined) return "";
+    const [shown, words] = rewardWords(reward);
+    return ` (${shown}: ${words})`;
+  }
+
+  async function rate(rating) {
+    if (enabledFor === null) return;
+    // the decision time: from Good and Bad lighting up to this click, touch or key
+    const decision = activeSince === null ? null : (performance.now() - activeSince) / 1000;
+    activeSince = null;
+    const index = enabledFor;
+    enabledFor = null;
+    sentIndex = index;
+    setButtons(false);
+    const button = rates.find((b) => b.dataset.rating === rating);
+    button.classList.add("chosen");
+    setTimeout(() => button.classList.remove("chosen"), 900);
+    const word = capital(rating);
+    $("feedback").textContent = `Sending “${word}”…`;
+    for (let attempt = 0; attempt < 5; attempt++) {
+      let response;
+      try {
+        response = await api("/api/participant/rating", {
+          method: "POST",
+          body: JSON.stringify({ advice_index: index, rating, decision_time_s: decision }),
+        });
+      } catch {
+        await sleep(1000 * (attempt + 1));
+        continue; // the same rating again is stored once
+      }
+      if (response.ok) {
+        $("feedback").textContent = `✓ Rated: ${word}`;
+        $("feedback").dataset.mood = "good";
+        setStatus(`The ${AGENT} is moving…`, "busy");
+        return;
+      }
+      const body = await response.json().catch(() => ({}));
+      $("feedback").textContent = typeof body.detail === "string" ? body.detail : `Not sent (error ${response.status}).`;
+      $("feedback").dataset.mood = "bad";
+      version = null;
+      return;
+    }
+    $("feedback").textContent = "Not sent: the connection is lost.";
+    $("feedback").dataset.mood = "bad";
+    version = null;
   }
 
   async function finish(gen) {
@@ -338,6 +447,7 @@
         }
         if (!response.ok) throw new Error(String(response.status));
         const s = await response.json();
+        s.receivedAt = performance.now();
         failures = 0;
         version = s.version;
         render(s);
@@ -353,8 +463,15 @@
   }
 
   for (const b of buttons) b.addEventListener("click", () => send(Number(b.dataset.action)));
+  for (const b of rates) b.addEventListener("click", () => rate(b.dataset.rating));
   document.addEventListener("keydown", (event) => {
     if (event.ctrlKey || event.metaKey || event.altKey) return;
+    if (RATING) {
+      const rating = RATE_KEYS[event.key.toLowerCase()];
+      if (rating === undefined) return;
+      event.preventDefault();
+      return rate(rating);
+    }
     const action = KEYS[event.key.toLowerCase()];
     if (action === undefined) return;
     event.preventDefault();
