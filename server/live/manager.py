@@ -1,9 +1,10 @@
 """The web process's side of the running sessions: starts worker processes, talks to them
 over their pipes, publishes what they say on the hub, and notices when one dies.
 
-State that the participant endpoints read (the pending advice request, whether the robot
-moves, recent history) lives on a `WorkerHandle` and changes only on the event loop's
-thread; each pipe has a reader thread that publishes to the hub and hands messages over.
+What the participant endpoints read (the pending advice request, whether the robot
+moves, recent history) is each session's `LiveSession`, which changes only on the event
+loop's thread; each pipe has a reader thread that publishes to the hub and hands messages
+over.
 
 A human session asks for advice only once its participant is ready (consent and induction
 recorded; the manager then sends `Command("ready")`), and trains after its advice only in
@@ -22,7 +23,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import itertools
 import logging
 import multiprocessing
 import os
@@ -63,8 +63,10 @@ from runs.worker.population import (
 )
 from runs.worker.worker import WorkerOptions, worker_main
 from server.live import visits
+from server.live.changes import Changes
 from server.live.hub import Hub
 from server.live.reaping import join
+from server.live.session import LiveSession
 from study.db.models import (
     LIVE_STATUSES,
     RESUMABLE_STATUSES,
@@ -94,19 +96,8 @@ HUB_KINDS: dict[type, str] = {
     SceneStep: "scene_step",
     StatusChanged: "status",
 }
-HISTORY = 10
 COMMAND_TIMEOUT_S = 120.0
 STARTUP_LIMIT_S = 180.0
-COALESCE_S = 0.05
-
-
-@dataclass
-class HistoryEntry:
-    advice_index: int
-    action: int
-    global_step: int
-    """The step advised: the robot's own moves since are counted from it."""
-    reward: float | None = None
 
 
 @dataclass
@@ -115,18 +106,9 @@ class WorkerHandle:
     token: str
     process: Any
     conn: Connection
-    advice_budget: int
-    given: dict[int, int]
-    status: str = Status.running.value
+    live: LiveSession
     killed: bool = False
     """The web process killed its worker (`SessionManager._kill`), which records the status."""
-    progress: Progress | None = None
-    request: AdviceRequest | None = None
-    request_arrived: float = 0.0
-    shown_at: float | None = None
-    moving: bool = False
-    ready: bool = False
-    """The participant consented and finished the induction (human sessions)."""
     queued: bool = False
     """Waiting for a trainer slot after its advice."""
     training: bool = False
@@ -150,30 +132,12 @@ class WorkerHandle:
     is then replaced by one on the population's worker)."""
     in_population: bool = False
     """It trains in a population's worker (`process` and `conn` are the population's)."""
-    steps_before_first_turn: int = 0
-    """Random pretraining steps before the first advice (what the page's progress counts)."""
-    human: bool = False
-    """A person advises it."""
-    pooled: bool = False
-    """It waits in its condition's pool (the pools keep their own count)."""
-    last_reward: float | None = None
-    history: deque[HistoryEntry] = field(default_factory=lambda: deque(maxlen=HISTORY))
     started: float = field(default_factory=time.monotonic)
     reported: bool = False
     """The worker has said something: it is past its start (imports, resuming)."""
     stopping: bool = False
     """The researcher asked it to stop: if it hangs, it ends `stopped`, not `interrupted`."""
-    advice_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     send_lock: threading.Lock = field(default_factory=threading.Lock)
-
-    @property
-    def at_first_turn(self) -> bool:
-        """Its random pretraining is over: it asks for advice, or waits for its participant
-        to be ready for it."""
-        progress = self.progress
-        done = progress.global_step if progress is not None else 0
-        waiting = progress is not None and progress.waiting_for_participant
-        return self.request is not None or waiting or done >= self.steps_before_first_turn
 
     def send(self, message: Any) -> bool:
         with self.send_lock:
@@ -258,9 +222,7 @@ class SessionManager:
         """Sessions given a practice ahead of their participant, not started yet."""
         self._context = worker_context()
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._versions = itertools.count(int(time.time() * 1000))
-        self._version: dict[int, int] = {}
-        self._changed: dict[int, asyncio.Event] = {}
+        self.changes = Changes()
         self._reaper: asyncio.Task[None] | None = None
         self._ending: set[asyncio.Task[None]] = set()
         """Visits ending after their worker gave up waiting (kept until done)."""
@@ -311,7 +273,10 @@ class SessionManager:
         live = {
             session_id
             for session_id, h in self.handles.items()
-            if h.human and not h.pooled and not h.ready and h.status in LIVE_STATUSES
+            if h.live.human
+            and not h.live.pooled
+            and not h.live.ready
+            and h.live.status in LIVE_STATUSES
         }
         return len(live | self._ahead)
 
@@ -359,7 +324,7 @@ class SessionManager:
         owned = {
             sid: h
             for sid, h in self.handles.items()
-            if h.status in LIVE_STATUSES and (h.reported or h.started < starting)
+            if h.live.status in LIVE_STATUSES and (h.reported or h.started < starting)
         }
         # The silent workers are found (a read) and killed before anything is written: one
         # stopped in the middle of its own write holds the database's write lock until it
@@ -393,14 +358,14 @@ class SessionManager:
         """Kill a worker that does not answer (or is no longer needed; SIGKILL works on a
         stopped process too), then record `status`: a worker stopped in its own write holds
         the database until it dies. Its last checkpoint stays."""
-        handle.status = status.value
+        handle.live.set_status(status.value)
         handle.killed = True
         with contextlib.suppress(Exception):
             handle.process.kill()
         join(handle.process, 5)
         self._set_status(handle.session_id, status, detail, handle.token)
         log.log(level, "session %s: %s", handle.session_id, detail)
-        self._call_soon(self.notify, handle.session_id)
+        self._call_soon(self.changes.notify, handle.session_id)
 
     async def _reap_forever(self) -> None:
         while True:
@@ -427,7 +392,6 @@ class SessionManager:
             advice = db.scalars(
                 select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
             ).all()
-            budget = spec.advice_budget
             human = session.method == "human"
             ready = human and session.ready_for_advice
             strategy = spec.make_strategy() or make_strategy("early", 0)
@@ -458,11 +422,10 @@ class SessionManager:
         answered = [
             (a.advice_index, a.action, a.global_step) for a in advice if a.action is not None
         ]
-        given = {index: action for index, action, _ in answered}
-        handle = WorkerHandle(session_id, token, process, parent, budget, given)
-        handle.history.extend(HistoryEntry(*row) for row in answered)
-        handle.steps_before_first_turn = first_turn
-        handle.human, handle.pooled = human, pooled
+        live = LiveSession(
+            session_id, spec.advice_budget, answered, self.changes, first_turn, human, pooled
+        )
+        handle = WorkerHandle(session_id, token, process, parent, live)
         handle.run = run
         try:
             process.start()
@@ -479,7 +442,7 @@ class SessionManager:
         if ready:
             self.set_ready(session_id)
         self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
-        self.notify(session_id)
+        self.changes.notify(session_id)
 
     def assign(self, session_id: int) -> None:
         """A pooled session was given to an arrival: its idle limit runs from now."""
@@ -490,10 +453,9 @@ class SessionManager:
     def set_ready(self, session_id: int) -> None:
         """The participant consented and finished the induction: advice may be asked."""
         handle = self.handles.get(session_id)
-        if handle is not None and not handle.ready:
-            handle.ready = True
+        if handle is not None and not handle.live.ready:
+            handle.live.set_ready()
             handle.send(Command("ready"))
-            self.notify(session_id)
 
     def _grant_training(self) -> None:
         """Hand free trainer slots to the sessions queued longest, each with the queued
@@ -512,11 +474,13 @@ class SessionManager:
                 handle.queued = False
                 handle.training = True
                 handle.training_since = time.monotonic()
-                handle.episodes_at_slot = handle.progress.episode if handle.progress else 0
+                handle.episodes_at_slot = (
+                    handle.live.progress.episode if handle.live.progress else 0
+                )
                 handle.slot = slot
                 handle.handing_over = slot is not None
                 handle.send(Command("handover" if slot is not None else "train"))
-                self.notify(handle.session_id)
+                self.changes.notify(handle.session_id)
             if slot is not None:
                 assert self._loop is not None
                 task = self._loop.create_task(self._start_population(group, slot))
@@ -533,7 +497,7 @@ class SessionManager:
         """`next_group` of the queued sessions; a paused one takes a slot alone (granted
         like any other, it resumes where it waits)."""
 
-        keys = [h.population_key if h.status == Status.running else None for h in waiting]
+        keys = [h.population_key if h.live.status == Status.running else None for h in waiting]
         return next_group(waiting, keys, waiting[0].population_size, free)
 
     def _busy_slots(self) -> int:
@@ -586,26 +550,23 @@ class SessionManager:
                 del self.handles[old.session_id]
             old.training = False  # `handing_over` stays: its worker's exit is no death
             if not any(h is old for h in members):
-                self.notify(old.session_id)
+                self.changes.notify(old.session_id)
                 continue
-            assert process is not None and old.progress is not None
+            assert process is not None
             handle = WorkerHandle(
-                old.session_id, old.token, process, parent, old.advice_budget, old.given
+                old.session_id, old.token, process, parent, old.live.handed_over()
             )
-            handle.progress = replace(old.progress, queued=False)
-            handle.history = old.history
-            handle.last_reward, handle.ready = old.last_reward, old.ready
-            handle.steps_before_first_turn = old.steps_before_first_turn
             handle.population_key, handle.population_size = old.population_key, len(members)
             handle.training, handle.slot, handle.in_population = True, slot, True
             handle.send_lock = sending
             handle.training_since = time.monotonic()
-            handle.episodes_at_slot = handle.progress.episode
+            assert handle.live.progress is not None
+            handle.episodes_at_slot = handle.live.progress.episode
             self.handles[old.session_id] = handle
             joined[old.session_id] = handle
             if self.hub.watchers(old.session_id):  # a page still shows its training
                 handle.send(Command("watch", session_id=old.session_id))
-            self.notify(old.session_id)
+            self.changes.notify(old.session_id)
         if joined:
             threading.Thread(
                 target=self._read_population,
@@ -677,15 +638,15 @@ class SessionManager:
         now = time.monotonic()
         slots: dict[int, list[WorkerHandle]] = {}
         for h in self.handles.values():
-            if h.training and h.progress is not None:
+            if h.training and h.live.progress is not None:
                 slots.setdefault(id(h.slot or h), []).append(h)
         rates: dict[int, float] = {}  # seconds an episode, each session in its slot
         costs: list[float] = []  # seconds an agent-episode, per measured session
         for members in slots.values():
             live = max(1, sum(1 for h in members if self._episodes_left(h)))
             for h in members:
-                assert h.progress is not None
-                done = h.progress.episode - h.episodes_at_slot
+                assert h.live.progress is not None
+                done = h.live.progress.episode - h.episodes_at_slot
                 if h.training_since is not None and done > 0:
                     rates[h.session_id] = (now - h.training_since) / done
                     costs.append(rates[h.session_id] / live)
@@ -711,9 +672,9 @@ class SessionManager:
     @staticmethod
     def _episodes_left(handle: WorkerHandle) -> int:
         """Training episodes the session has yet to run (none once it has ended)."""
-        if handle.progress is None or handle.status not in LIVE_STATUSES:
+        if handle.live.progress is None or handle.live.status not in LIVE_STATUSES:
             return 0
-        return max(0, handle.progress.episodes - handle.progress.episode)
+        return max(0, handle.live.progress.episodes - handle.live.progress.episode)
 
     def _claim(
         self, session_id: int, resume: bool, override_numerics: bool = False
@@ -735,7 +696,7 @@ class SessionManager:
         read); one abandoned because they did not come before its first advice resumes.
         A start at the same moment elsewhere, or one that cannot start, is left alone."""
         handle = self.handles.get(session_id)
-        if handle is not None and handle.status in LIVE_STATUSES:
+        if handle is not None and handle.live.status in LIVE_STATUSES:
             return
         with self.factory() as db:
             session = get_session(db, session_id)
@@ -755,16 +716,16 @@ class SessionManager:
                 f"session {session_id} trains together with other sessions in one process "
                 "and cannot pause alone; stop it instead (it resumes from its last checkpoint)"
             )
-        if handle.status != Status.paused:
+        if handle.live.status != Status.paused:
             handle.send(Command("pause"))
-            await self._until(session_id, lambda h: h.status != Status.running)
+            await self._until(session_id, lambda h: h.live.status != Status.running)
 
     async def resume(self, session_id: int, override_numerics: bool = False) -> None:
         handle = self.handles.get(session_id)
-        if handle is not None and handle.status in LIVE_STATUSES:
-            if handle.status == Status.paused:
+        if handle is not None and handle.live.status in LIVE_STATUSES:
+            if handle.live.status == Status.paused:
                 handle.send(Command("resume"))
-                await self._until(session_id, lambda h: h.status != Status.paused)
+                await self._until(session_id, lambda h: h.live.status != Status.paused)
             return
         with self.factory() as db:
             status = get_session(db, session_id).status
@@ -774,12 +735,12 @@ class SessionManager:
 
     async def stop(self, session_id: int) -> None:
         handle = self.handles.get(session_id)
-        if handle is None or handle.status not in LIVE_STATUSES:
+        if handle is None or handle.live.status not in LIVE_STATUSES:
             with self.factory() as db:
                 session = get_session(db, session_id)
                 if session.status in (Status.created, *RESUMABLE_STATUSES):
                     set_status(db, session_id, Status.stopped, "stopped by the researcher")
-                    self.notify(session_id)
+                    self.changes.notify(session_id)
                     return
             raise Conflict(f"session {session_id} is {session.status}; there is nothing to stop")
         if handle.handing_over:  # stop it where it goes on
@@ -788,7 +749,7 @@ class SessionManager:
         handle.stopping = True
         if handle.in_population:  # the others go on
             handle.send(Command("stop", session_id=session_id))
-            await self._until(session_id, lambda h: h.status not in LIVE_STATUSES)
+            await self._until(session_id, lambda h: h.live.status not in LIVE_STATUSES)
             return
         handle.send(Command("stop"))
         await run_in_threadpool(join, handle.process, self.command_timeout_s)
@@ -804,7 +765,7 @@ class SessionManager:
         """End a session for good now (a visit that ended early): its worker, if one runs,
         is killed at once (nothing of it is needed again) and the status recorded."""
         handle = self.handles.get(session_id)
-        if handle is not None and handle.status in LIVE_STATUSES:
+        if handle is not None and handle.live.status in LIVE_STATUSES:
             await run_in_threadpool(self._kill, handle, status, detail, logging.INFO)
         else:
             with self.factory() as db:
@@ -813,7 +774,7 @@ class SessionManager:
 
     def _live(self, session_id: int, verb: str) -> WorkerHandle:
         handle = self.handles.get(session_id)
-        if handle is None or handle.status not in LIVE_STATUSES:
+        if handle is None or handle.live.status not in LIVE_STATUSES:
             with self.factory() as db:
                 status = get_session(db, session_id).status
             raise Conflict(f"session {session_id} is {status}; only a running session can {verb}")
@@ -825,48 +786,27 @@ class SessionManager:
             handle = self.handles.get(session_id)
             if handle is None or done(handle):
                 return
-            await self.wait_change(session_id, self.version(session_id), 1.0)
+            await self.changes.wait(session_id, self.changes.version(session_id), 1.0)
         raise Conflict(f"session {session_id} did not answer within {self.command_timeout_s:.0f} s")
+
+    def live(self, session_id: int) -> LiveSession | None:
+        """The session's advice turn as its page sees it, while a worker of this process
+        runs it."""
+        handle = self.handles.get(session_id)
+        return handle.live if handle is not None else None
+
+    def queued(self, session_id: int) -> bool:
+        """The session waits for a trainer slot after its advice."""
+        handle = self.handles.get(session_id)
+        return handle is not None and handle.queued
 
     def status(self, session_id: int) -> str:
         """The live status if a worker runs, else the stored one."""
         handle = self.handles.get(session_id)
         if handle is not None:
-            return handle.status
+            return handle.live.status
         with self.factory() as db:
             return get_session(db, session_id).status
-
-    # --- change notification (long-poll) ------------------------------------------------
-    def version(self, session_id: int) -> int:
-        if session_id not in self._version:
-            self._version[session_id] = next(self._versions)
-        return self._version[session_id]
-
-    async def wait_change(self, session_id: int, after: int, timeout: float) -> None:
-        """Return when the session's participant-visible state is newer than `after`."""
-        if self.version(session_id) > after:
-            return
-        event = self._changed.setdefault(session_id, asyncio.Event())
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(event.wait(), timeout)
-
-    def _notify_soon(self, session_id: int) -> None:
-        """Notify unless something else does first: the next advice request usually follows
-        an advice's result within milliseconds, and one wake-up then serves both."""
-        assert self._loop is not None
-        version = self.version(session_id)
-
-        def later() -> None:
-            if self.version(session_id) == version:
-                self.notify(session_id)
-
-        self._loop.call_later(COALESCE_S, later)
-
-    def notify(self, session_id: int) -> None:
-        self._version[session_id] = next(self._versions)
-        event = self._changed.pop(session_id, None)
-        if event is not None:
-            event.set()
 
     # --- messages from workers ---------------------------------------------------------
     def _read(self, handle: WorkerHandle) -> None:
@@ -931,24 +871,8 @@ class SessionManager:
 
     def _apply(self, handle: WorkerHandle, message: Any) -> None:
         handle.reported = True
-        if isinstance(message, Progress):
-            handle.progress = message
-            return
-        if isinstance(message, AdviceRequest):
-            handle.request = message
-            handle.request_arrived = time.monotonic()
-            handle.shown_at = None
-            handle.moving = False
-        elif isinstance(message, AdviceResult):
-            handle.moving = False
-            handle.last_reward = message.reward
-            for entry in handle.history:
-                if entry.advice_index == message.advice_index:
-                    entry.reward = message.reward
-            self._notify_soon(handle.session_id)
-            return
-        elif isinstance(message, StatusChanged):
-            handle.status = message.status
+        handle.live.receive(message)
+        if isinstance(message, StatusChanged):
             if message.status == Status.abandoned:
                 assert self._loop is not None
                 task = self._loop.create_task(visits.abandoned(self, handle.session_id))
@@ -963,9 +887,7 @@ class SessionManager:
             handle.queued = True
             self._train_queue.append(handle.session_id)
             self._grant_training()
-        else:
-            return
-        self.notify(handle.session_id)
+            self.changes.notify(handle.session_id)
 
     def _drop(self, handle: WorkerHandle) -> None:
         if handle.handing_over:  # `_start_population` replaces it
@@ -975,7 +897,7 @@ class SessionManager:
         if handle.training or handle.queued:
             handle.training = handle.queued = False
             self._grant_training()
-        self.notify(handle.session_id)
+        self.changes.notify(handle.session_id)
 
     def _watch(self, session_id: int, watched: bool) -> None:
         handle = self.handles.get(session_id)

@@ -7,16 +7,18 @@ import time
 
 import pytest
 
-from runs.worker.messages import Progress
+from runs.worker.messages import Progress, StatusChanged
 from runs.worker.worker import WorkerOptions
+from server.live.changes import Changes
 from server.live.hub import Hub
 from server.live.manager import SessionManager, WorkerHandle
+from server.live.session import LiveSession
 
 
 def _handle(session_id: int, episode: int, episodes: int = 20) -> WorkerHandle:
-    handle = WorkerHandle(session_id, f"token-{session_id}", None, None, 1, {})  # type: ignore[arg-type]
-    handle.progress = Progress("train", 0, episode, episodes, 0.1, 0.0, None, 1, 1)
-    return handle
+    live = LiveSession(session_id, 1, [], Changes())
+    live.receive(Progress("train", 0, episode, episodes, 0.1, 0.0, None, 1, 1))
+    return WorkerHandle(session_id, f"token-{session_id}", None, None, live)  # type: ignore[arg-type]
 
 
 @pytest.fixture
@@ -86,6 +88,7 @@ def test_the_estimate_counts_a_population_s_agent_episodes(manager: SessionManag
     assert manager.queue_wait_s(3) == pytest.approx(30.0, abs=0.5)
     assert manager.queue_wait_s(4) == pytest.approx(30.0, abs=0.5)
     assert manager.queue_wait_s(5) == pytest.approx(70.0, abs=0.5)
-    training[1].status = "finished"  # one left its population: the slot frees with the other
-    training[1].progress = Progress("train", 0, 20, 20, 0.1, 0.0, None, 1, 1)
+    # one left its population: the slot frees with the other
+    training[1].live.receive(StatusChanged("finished", ""))
+    training[1].live.receive(Progress("train", 0, 20, 20, 0.1, 0.0, None, 1, 1))
     assert manager.queue_wait_s(3) == pytest.approx(30.0, abs=0.5)
