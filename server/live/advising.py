@@ -159,7 +159,7 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
         episode=shown.episode if shown else 0,
         stage=shown.stage if shown else None,
         ready=live.ready,
-        queued=manager.queued(session.id),
+        queued=manager.trainers.queued(session.id),
         history=_history(list(live.history), session.action_words),
         action_names=list(session.action_words),
         frame_png=(
@@ -285,7 +285,7 @@ async def submit_advice(
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None
             return _receipt(stored, body, manager.changes.version(session.id), words)
-        live.take_advice(body.advice_index, body.action, request.global_step)
+        live.take_advice(HistoryEntry(body.advice_index, body.action, request.global_step))
         handle.send(AdviceAnswer(body.advice_index, body.action))
         manager.hub.publish(
             session.id, "advice_given", {"advice_index": body.advice_index, "action": body.action}

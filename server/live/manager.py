@@ -8,15 +8,12 @@ over.
 
 A human session asks for advice only once its participant is ready (consent and induction
 recorded; the manager then sends `Command("ready")`), and trains after its advice only in
-one of `max_trainers` slots: the others wait in a queue (`queued`), so the people still
-advising never share the cores with more trainers than there are cores. A slot that frees
-takes the session queued longest together with the queued sessions that can train with it
-(one learner configuration, up to `training_population`), by the batch's rule
-(`runs.worker.population.next_group`): one alone trains on in its own worker; several
-are handed over (`Command("handover")`: each worker checkpoints and exits, the session
-still `running` under its token) to one population worker (`population_main`), which
-sends each session's messages `Tagged` with it, so each keeps its own handle, progress,
-records, checkpoints and status.
+one of the trainer slots (`server.live.trainers`), which the manager asks for on the
+session's behalf. A slot given to one session lets its worker train on; one given to
+several hands them over (`Command("handover")`: each worker checkpoints and exits, the
+session still `running` under its token) to one population worker (`population_main`),
+which sends each session's messages `Tagged` with it, so each keeps its own handle,
+progress, records, checkpoints and status.
 """
 
 from __future__ import annotations
@@ -28,7 +25,6 @@ import multiprocessing
 import os
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from datetime import datetime
@@ -56,17 +52,14 @@ from runs.worker.messages import (
     TrainingWanted,
 )
 from runs.worker.population import (
-    default_population,
-    next_group,
-    population_key,
     population_main,
 )
 from runs.worker.worker import WorkerOptions, worker_main
 from server.live import visits
-from server.live.changes import Changes
 from server.live.hub import Hub
 from server.live.reaping import join
-from server.live.session import LiveSession
+from server.live.session import Changes, LiveSession
+from server.live.trainers import Seat, TrainerSlots
 from study.db.models import (
     LIVE_STATUSES,
     RESUMABLE_STATUSES,
@@ -107,26 +100,10 @@ class WorkerHandle:
     process: Any
     conn: Connection
     live: LiveSession
+    seat: Seat
+    """Its standing with the trainer slots."""
     killed: bool = False
     """The web process killed its worker (`SessionManager._kill`), which records the status."""
-    queued: bool = False
-    """Waiting for a trainer slot after its advice."""
-    training: bool = False
-    """Holds a trainer slot."""
-    training_since: float | None = None
-    """`time.monotonic()` when it took its slot, and the episodes done then: how fast it
-    trains, for the queue's time estimate."""
-    episodes_at_slot: int = 0
-    run: RunSpec | None = None
-    """A human session's run: its population key is taken from it when it asks to train."""
-    population_key: Any = None
-    """What it must share with other sessions to train with them in one population once its
-    advice is over (`population_key`); None: it trains alone."""
-    population_size: int = 1
-    """How many sessions its population may hold at most."""
-    slot: object | None = None
-    """The trainer slot it shares with the rest of its population (None: a slot of its
-    own, or none)."""
     handing_over: bool = False
     """Its worker checkpoints and exits, for its population's worker to go on (this handle
     is then replaced by one on the population's worker)."""
@@ -205,11 +182,14 @@ class SessionManager:
         """`max_trainers`: trainer slots for human sessions after their advice (0: the
         cores this process may use); `training_population`: sessions trained together in
         one slot at most (0: `default_population`, 1: each alone)."""
-        self.max_trainers = max_trainers or len(os.sched_getaffinity(0))
-        self.training_population = training_population
+        self.trainers = TrainerSlots(
+            max_trainers or len(os.sched_getaffinity(0)),
+            training_population,
+            self._seats,
+            self._granted,
+        )
         self._handovers: set[asyncio.Task[None]] = set()
         self._closing = False
-        self._train_queue: deque[int] = deque()
         self.factory = factory
         self.database_url = database_url
         self.hub = hub
@@ -425,8 +405,7 @@ class SessionManager:
         live = LiveSession(
             session_id, spec.advice_budget, answered, self.changes, first_turn, human, pooled
         )
-        handle = WorkerHandle(session_id, token, process, parent, live)
-        handle.run = run
+        handle = WorkerHandle(session_id, token, process, parent, live, Seat(live, run))
         try:
             process.start()
         except Exception as error:
@@ -457,52 +436,22 @@ class SessionManager:
             handle.live.set_ready()
             handle.send(Command("ready"))
 
-    def _grant_training(self) -> None:
-        """Hand free trainer slots to the sessions queued longest, each with the queued
-        sessions that can train with it in one population (`next_group`, as the batch)."""
-        while True:
-            free = self.max_trainers - self._busy_slots()
-            waiting = self._waiting()
-            self._train_queue = deque(h.session_id for h in waiting)
-            if free <= 0 or not waiting:
-                return
-            group = self._next_group(waiting, free)
-            taken = {h.session_id for h in group}
-            self._train_queue = deque(sid for sid in self._train_queue if sid not in taken)
-            slot = object() if len(group) > 1 else None
-            for handle in group:
-                handle.queued = False
-                handle.training = True
-                handle.training_since = time.monotonic()
-                handle.episodes_at_slot = (
-                    handle.live.progress.episode if handle.live.progress else 0
-                )
-                handle.slot = slot
-                handle.handing_over = slot is not None
-                handle.send(Command("handover" if slot is not None else "train"))
-                self.changes.notify(handle.session_id)
-            if slot is not None:
-                assert self._loop is not None
-                task = self._loop.create_task(self._start_population(group, slot))
-                self._handovers.add(task)
-                task.add_done_callback(self._handovers.discard)
+    def _seats(self) -> dict[int, Seat]:
+        return {session_id: h.seat for session_id, h in self.handles.items()}
 
-    def _waiting(self) -> list[WorkerHandle]:
-        """The queued sessions, longest queued first."""
-        handles = (self.handles.get(sid) for sid in dict.fromkeys(self._train_queue))
-        return [h for h in handles if h is not None and h.queued]
-
-    @staticmethod
-    def _next_group(waiting: list[WorkerHandle], free: int) -> list[WorkerHandle]:
-        """`next_group` of the queued sessions; a paused one takes a slot alone (granted
-        like any other, it resumes where it waits)."""
-
-        keys = [h.population_key if h.live.status == Status.running else None for h in waiting]
-        return next_group(waiting, keys, waiting[0].population_size, free)
-
-    def _busy_slots(self) -> int:
-        """Trainer slots taken: a session training alone, or a population."""
-        return len({id(h.slot or h) for h in self.handles.values() if h.training})
+    def _granted(self, seats: list[Seat], slot: object | None) -> None:
+        """A trainer slot for `seats`: one session trains on in its own worker; several
+        hand their sessions over to one population worker."""
+        group = [self.handles[seat.session_id] for seat in seats]
+        for handle in group:
+            handle.handing_over = slot is not None
+            handle.send(Command("handover" if slot is not None else "train"))
+            self.changes.notify(handle.session_id)
+        if slot is not None:
+            assert self._loop is not None
+            task = self._loop.create_task(self._start_population(group, slot))
+            self._handovers.add(task)
+            task.add_done_callback(self._handovers.discard)
 
     async def _start_population(self, group: list[WorkerHandle], slot: object) -> None:
         """Once the group's workers have handed their sessions over (checkpointed and
@@ -548,20 +497,16 @@ class SessionManager:
         for old in group:
             if self.handles.get(old.session_id) is old:
                 del self.handles[old.session_id]
-            old.training = False  # `handing_over` stays: its worker's exit is no death
+            self.trainers.vacate(old.seat)  # `handing_over` stays: its exit is no death
             if not any(h is old for h in members):
                 self.changes.notify(old.session_id)
                 continue
             assert process is not None
-            handle = WorkerHandle(
-                old.session_id, old.token, process, parent, old.live.handed_over()
-            )
-            handle.population_key, handle.population_size = old.population_key, len(members)
-            handle.training, handle.slot, handle.in_population = True, slot, True
+            live = old.live.handed_over()
+            seat = self.trainers.joined(old.seat, live, len(members))
+            handle = WorkerHandle(old.session_id, old.token, process, parent, live, seat)
+            handle.in_population = True
             handle.send_lock = sending
-            handle.training_since = time.monotonic()
-            assert handle.live.progress is not None
-            handle.episodes_at_slot = handle.live.progress.episode
             self.handles[old.session_id] = handle
             joined[old.session_id] = handle
             if self.hub.watchers(old.session_id):  # a page still shows its training
@@ -574,7 +519,7 @@ class SessionManager:
                 name=f"population-{'-'.join(map(str, joined))}-reader",
                 daemon=True,
             ).start()
-        self._grant_training()  # a slot of sessions that did not come is free again
+        self.trainers.grant()  # a slot of sessions that did not come is free again
 
     def _still_ours(self, group: list[WorkerHandle]) -> dict[int, str]:
         """Of the group, the sessions still `running` under their worker's token (not
@@ -592,89 +537,6 @@ class SessionManager:
         with contextlib.suppress(Exception):
             handle.process.kill()
         join(handle.process, 5)
-
-    def set_trainer_slots(self, slots: int) -> None:
-        """Change how many human sessions may train at once (0: none); freed slots go to
-        the queue at once. Sessions already training keep theirs."""
-        assert slots >= 0
-        self.max_trainers = slots
-        self._grant_training()
-
-    def _queue_plan(self) -> list[list[WorkerHandle]]:
-        """The queued sessions in the groups they will take trainer slots in, in order: as
-        `_grant_training` takes them when a slot frees (`next_group` with one free slot)."""
-        waiting, plan = self._waiting(), []
-        while waiting:
-            group = self._next_group(waiting, 1)
-            plan.append(group)
-            taken = {h.session_id for h in group}
-            waiting = [h for h in waiting if h.session_id not in taken]
-        return plan
-
-    def queue_place(self, session_id: int) -> int | None:
-        """1 for the queued sessions that take the next trainer slot to free (several
-        together, as a population), 2 for those after, ...; None when the session is not
-        queued."""
-        handle = self.handles.get(session_id)
-        if handle is None or not handle.queued:
-            return None
-        for place, group in enumerate(self._queue_plan(), 1):
-            if any(h.session_id == session_id for h in group):
-                return place
-        return None
-
-    def queue_wait_s(self, session_id: int) -> float | None:
-        """Seconds until a queued session gets a slot, estimated from how fast the sessions
-        in the slots train now. Speed is counted per agent-episode: a slot whose n sessions
-        (a population, or one alone) each take r seconds an episode runs one agent-episode
-        every r / n seconds. A slot frees when its slowest session has run its remaining
-        episodes; each group ahead in the queue (`_queue_plan`) then holds the earliest
-        free slot while its m sessions run theirs, m side by side at the typical speed. None
-        while no session in a slot has finished an episode there (nothing to estimate
-        from)."""
-        place = self.queue_place(session_id)
-        if place is None or self.max_trainers <= 0:
-            return None
-        now = time.monotonic()
-        slots: dict[int, list[WorkerHandle]] = {}
-        for h in self.handles.values():
-            if h.training and h.live.progress is not None:
-                slots.setdefault(id(h.slot or h), []).append(h)
-        rates: dict[int, float] = {}  # seconds an episode, each session in its slot
-        costs: list[float] = []  # seconds an agent-episode, per measured session
-        for members in slots.values():
-            live = max(1, sum(1 for h in members if self._episodes_left(h)))
-            for h in members:
-                assert h.live.progress is not None
-                done = h.live.progress.episode - h.episodes_at_slot
-                if h.training_since is not None and done > 0:
-                    rates[h.session_id] = (now - h.training_since) / done
-                    costs.append(rates[h.session_id] / live)
-        if not costs:
-            return None
-        typical = sum(costs) / len(costs)
-        frees = [0.0] * max(0, self.max_trainers - len(slots))
-        for members in slots.values():
-            live = max(1, sum(1 for h in members if self._episodes_left(h)))
-            frees.append(
-                max(
-                    self._episodes_left(h) * rates.get(h.session_id, typical * live)
-                    for h in members
-                )
-            )
-        frees.sort()
-        for group in self._queue_plan()[: place - 1]:
-            longest = max(self._episodes_left(h) for h in group)
-            frees[0] += longest * typical * len(group)
-            frees.sort()
-        return frees[0]
-
-    @staticmethod
-    def _episodes_left(handle: WorkerHandle) -> int:
-        """Training episodes the session has yet to run (none once it has ended)."""
-        if handle.live.progress is None or handle.live.status not in LIVE_STATUSES:
-            return 0
-        return max(0, handle.live.progress.episodes - handle.live.progress.episode)
 
     def _claim(
         self, session_id: int, resume: bool, override_numerics: bool = False
@@ -795,11 +657,6 @@ class SessionManager:
         handle = self.handles.get(session_id)
         return handle.live if handle is not None else None
 
-    def queued(self, session_id: int) -> bool:
-        """The session waits for a trainer slot after its advice."""
-        handle = self.handles.get(session_id)
-        return handle is not None and handle.queued
-
     def status(self, session_id: int) -> str:
         """The live status if a worker runs, else the stored one."""
         handle = self.handles.get(session_id)
@@ -879,14 +736,7 @@ class SessionManager:
                 self._ending.add(task)
                 task.add_done_callback(self._ending.discard)
         elif isinstance(message, TrainingWanted):
-            if handle.run is not None:
-                handle.population_key = population_key(handle.run, advice_over=True)
-                handle.population_size = self.training_population or default_population(
-                    handle.run, workers=self.max_trainers
-                )
-            handle.queued = True
-            self._train_queue.append(handle.session_id)
-            self._grant_training()
+            self.trainers.request(handle.seat)
             self.changes.notify(handle.session_id)
 
     def _drop(self, handle: WorkerHandle) -> None:
@@ -894,9 +744,7 @@ class SessionManager:
             return
         if self.handles.get(handle.session_id) is handle:
             del self.handles[handle.session_id]
-        if handle.training or handle.queued:
-            handle.training = handle.queued = False
-            self._grant_training()
+        self.trainers.release(handle.seat)
         self.changes.notify(handle.session_id)
 
     def _watch(self, session_id: int, watched: bool) -> None:

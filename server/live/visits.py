@@ -14,7 +14,7 @@ from sqlalchemy import update
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
-from server.live.changes import Changes
+from server.live.session import Changes
 from study.db.models import Outcome, Status, StudySession, utcnow
 from study.services.sessions import get_session
 

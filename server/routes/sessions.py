@@ -202,7 +202,7 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
         advice_budget=spec.advice_budget,
         advice_left=max(0, spec.advice_budget - advice_given),
         advice_wanted=current is not None and current.request is not None,
-        queued=manager.queued(session_id),
+        queued=manager.trainers.queued(session_id),
         consented=session.consented_at is not None,
     )
 
