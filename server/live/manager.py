@@ -1,10 +1,8 @@
-"""The web process's side of the running sessions: starts worker processes, talks to them
-over their pipes, publishes what they say on the hub, and notices when one dies.
-
-What the participant endpoints read (the pending advice request, whether the robot
-moves, recent history) is each session's `LiveSession`, which changes only on the event
-loop's thread; each pipe has a reader thread that publishes to the hub and hands messages
-over.
+"""The web process's side of the running sessions, coordinated: the manager starts, pauses,
+resumes, stops and kills each session's worker (the processes and their pipes are
+`server.live.workers`'), reaps the dead and the silent, and hands each message a worker
+sends to the part it concerns, on the event loop's thread: the session's `LiveSession`
+(what the participant's page reads) and the trainer slots (`server.live.trainers`).
 
 A human session asks for advice only once its participant is ready (consent and induction
 recorded; the manager then sends `Command("ready")`), and trains after its advice only in
@@ -21,15 +19,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import multiprocessing
 import os
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from datetime import datetime
-from multiprocessing import forkserver
-from multiprocessing.connection import Connection
 from typing import Any
 
 from sqlalchemy import select
@@ -39,27 +34,14 @@ from starlette.concurrency import run_in_threadpool
 from learner.run import RunSpec
 from learner.strategies import make_strategy
 from runs.worker.link import SHUTTING_DOWN, WAITED_FOR_PARTICIPANT
-from runs.worker.messages import (
-    AdviceRequest,
-    AdviceResult,
-    Command,
-    EpisodeDone,
-    Progress,
-    SceneReset,
-    SceneStep,
-    StatusChanged,
-    Tagged,
-    TrainingWanted,
-)
-from runs.worker.population import (
-    population_main,
-)
-from runs.worker.worker import WorkerOptions, worker_main
+from runs.worker.messages import Command, StatusChanged, TrainingWanted
+from runs.worker.worker import WorkerOptions
 from server.live import visits
 from server.live.hub import Hub
 from server.live.reaping import join
 from server.live.session import Changes, LiveSession
 from server.live.trainers import Seat, TrainerSlots
+from server.live.workers import WorkerHandle, Workers
 from study.db.models import (
     LIVE_STATUSES,
     RESUMABLE_STATUSES,
@@ -80,71 +62,8 @@ from study.services.sessions import (
 )
 
 log = logging.getLogger(__name__)
-HUB_KINDS: dict[type, str] = {
-    Progress: "progress",
-    AdviceRequest: "advice_request",
-    AdviceResult: "advice_result",
-    EpisodeDone: "episode",
-    SceneReset: "scene_reset",
-    SceneStep: "scene_step",
-    StatusChanged: "status",
-}
 COMMAND_TIMEOUT_S = 120.0
 STARTUP_LIMIT_S = 180.0
-
-
-@dataclass
-class WorkerHandle:
-    session_id: int
-    token: str
-    process: Any
-    conn: Connection
-    live: LiveSession
-    seat: Seat
-    """Its standing with the trainer slots."""
-    killed: bool = False
-    """The web process killed its worker (`SessionManager._kill`), which records the status."""
-    handing_over: bool = False
-    """Its worker checkpoints and exits, for its population's worker to go on (this handle
-    is then replaced by one on the population's worker)."""
-    in_population: bool = False
-    """It trains in a population's worker (`process` and `conn` are the population's)."""
-    started: float = field(default_factory=time.monotonic)
-    reported: bool = False
-    """The worker has said something: it is past its start (imports, resuming)."""
-    stopping: bool = False
-    """The researcher asked it to stop: if it hangs, it ends `stopped`, not `interrupted`."""
-    send_lock: threading.Lock = field(default_factory=threading.Lock)
-
-    def send(self, message: Any) -> bool:
-        with self.send_lock:
-            try:
-                self.conn.send(message)
-                return True
-            except (BrokenPipeError, EOFError, OSError):
-                return False
-
-
-WORKER_PRELOAD = ("torch", "pybullet", "learner.trainer", "sim.env", "runs.worker.worker")
-"""What every session worker imports, loaded once in the fork server: `import torch` alone
-leaves about 140 MB of private memory in a process; forked from a server that holds it,
-the workers share those pages (copy on write) instead of each making its own."""
-
-
-def worker_context() -> (
-    multiprocessing.context.ForkServerContext | multiprocessing.context.SpawnContext
-):
-    """Session workers are forked from a fork server that has loaded `WORKER_PRELOAD`
-    (a clean single-threaded process started for the purpose, never the web process with
-    its threads), or spawned where the platform has no fork server. Each worker still
-    owns its PyBullet client, torch threads and everything it makes after the fork."""
-    if "forkserver" not in multiprocessing.get_all_start_methods():
-        return multiprocessing.get_context("spawn")
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(list(WORKER_PRELOAD))
-    return context
-
-
 RESUME_WITHIN_S = 3600.0
 """How recent a lab session's last sign of life must be for a restart to resume it (an
 online study's own idle limit decides for its visits)."""
@@ -200,7 +119,7 @@ class SessionManager:
         self.handles: dict[int, WorkerHandle] = {}
         self._ahead: set[int] = set()
         """Sessions given a practice ahead of their participant, not started yet."""
-        self._context = worker_context()
+        self.workers = Workers(database_url, hub, self._deliver, self._exited)
         self._loop: asyncio.AbstractEventLoop | None = None
         self.changes = Changes()
         self._reaper: asyncio.Task[None] | None = None
@@ -211,9 +130,7 @@ class SessionManager:
     # --- lifecycle ---------------------------------------------------------------------
     async def open(self) -> None:
         self._loop = asyncio.get_running_loop()
-        if isinstance(self._context, multiprocessing.context.ForkServerContext):
-            # Loaded before the first participant arrives, not while they wait.
-            threading.Thread(target=forkserver.ensure_running, daemon=True).start()
+        self.workers.warm()
         await run_in_threadpool(self._reap)
         self._reaper = asyncio.create_task(self._reap_forever())
 
@@ -288,13 +205,7 @@ class SessionManager:
         self._closing = True
         if self._reaper is not None:
             self._reaper.cancel()
-        handles = list(self.handles.values())
-        for handle in handles:
-            handle.send(Command("shutdown"))
-        for handle in handles:
-            await run_in_threadpool(join, handle.process, 60)
-            if handle.process.is_alive():
-                handle.process.terminate()
+        await run_in_threadpool(self.workers.shut_down, list(self.handles.values()))
 
     def _reap(self) -> list[int]:
         """Mark sessions whose worker died, and kill our own workers that stopped beating."""
@@ -340,9 +251,7 @@ class SessionManager:
         the database until it dies. Its last checkpoint stays."""
         handle.live.set_status(status.value)
         handle.killed = True
-        with contextlib.suppress(Exception):
-            handle.process.kill()
-        join(handle.process, 5)
+        self.workers.kill(handle)
         self._set_status(handle.session_id, status, detail, handle.token)
         log.log(level, "session %s: %s", handle.session_id, detail)
         self._call_soon(self.changes.notify, handle.session_id)
@@ -366,7 +275,6 @@ class SessionManager:
         """Start (or resume) the session's worker; `pooled`: it waits in its condition's
         pool for an arrival, its idle limit off until `assign`."""
         token, spec = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
-        parent, child = self._context.Pipe(duplex=True)
         with self.factory() as db:
             session = get_session(db, session_id)
             advice = db.scalars(
@@ -391,12 +299,11 @@ class SessionManager:
             if human
             else self.options
         )
-        process = self._context.Process(
-            target=worker_main,
-            args=(session_id, self.database_url, options, token, child),
-            name=f"ideeprl-session-{session_id}",
-            daemon=True,
-        )
+        try:
+            process, parent = self.workers.start(session_id, options, token)
+        except Exception as error:
+            await run_in_threadpool(self._set_status, session_id, Status.failed, str(error), token)
+            raise
         # (an advice row without an action is a replay's request past its recorded stream:
         # nothing was given there)
         answered = [
@@ -406,16 +313,8 @@ class SessionManager:
             session_id, spec.advice_budget, answered, self.changes, first_turn, human, pooled
         )
         handle = WorkerHandle(session_id, token, process, parent, live, Seat(live, run))
-        try:
-            process.start()
-        except Exception as error:
-            await run_in_threadpool(self._set_status, session_id, Status.failed, str(error), token)
-            raise
-        child.close()
         self.handles[session_id] = handle
-        threading.Thread(
-            target=self._read, args=(handle,), name=f"session-{session_id}-reader", daemon=True
-        ).start()
+        self.workers.read(handle)
         if self.hub.watchers(session_id):
             handle.send(Command("watch"))
         if ready:
@@ -461,7 +360,7 @@ class SessionManager:
             await run_in_threadpool(join, handle.process, self.command_timeout_s)
             if handle.process.is_alive():  # it resumes from its last checkpoint
                 log.warning("session %s: its worker did not hand over; killed", handle.session_id)
-                await run_in_threadpool(self._terminate, handle)
+                await run_in_threadpool(self.workers.kill, handle)
         tokens = await run_in_threadpool(self._still_ours, group)
         members = [h for h in group if h.session_id in tokens]
         if members and self._closing:
@@ -474,24 +373,15 @@ class SessionManager:
         process = None
         if members:
             ids = [h.session_id for h in members]
-            parent, child = self._context.Pipe(duplex=True)
             options = replace(self.options, pooled=False, train_nice=0)
-            process = self._context.Process(
-                target=population_main,
-                args=(ids, tokens, self.database_url, options, child),
-                name=f"ideeprl-population-{'-'.join(map(str, ids))}",
-                daemon=True,
-            )
             try:
-                process.start()
+                process, parent = self.workers.start_population(ids, tokens, options)
             except Exception as error:
                 for handle in members:
                     await run_in_threadpool(
                         self._set_status, handle.session_id, Status.failed, str(error), handle.token
                     )
                 members, process = [], None
-            else:
-                child.close()
         joined: dict[int, WorkerHandle] = {}
         sending = threading.Lock()  # one pipe for all of them
         for old in group:
@@ -513,12 +403,7 @@ class SessionManager:
                 handle.send(Command("watch", session_id=old.session_id))
             self.changes.notify(old.session_id)
         if joined:
-            threading.Thread(
-                target=self._read_population,
-                args=(parent, process, joined),
-                name=f"population-{'-'.join(map(str, joined))}-reader",
-                daemon=True,
-            ).start()
+            self.workers.read_population(parent, process, joined)
         self.trainers.grant()  # a slot of sessions that did not come is free again
 
     def _still_ours(self, group: list[WorkerHandle]) -> dict[int, str]:
@@ -531,12 +416,6 @@ class SessionManager:
                 if session.status == Status.running and session.worker_token == handle.token:
                     tokens[handle.session_id] = handle.token
             return tokens
-
-    @staticmethod
-    def _terminate(handle: WorkerHandle) -> None:
-        with contextlib.suppress(Exception):
-            handle.process.kill()
-        join(handle.process, 5)
 
     def _claim(
         self, session_id: int, resume: bool, override_numerics: bool = False
@@ -666,39 +545,9 @@ class SessionManager:
             return get_session(db, session_id).status
 
     # --- messages from workers ---------------------------------------------------------
-    def _read(self, handle: WorkerHandle) -> None:
-        """Reader thread: one per worker, until its pipe closes."""
-        assert self._loop is not None
-        while True:
-            try:
-                message = handle.conn.recv()
-            except (EOFError, OSError):
-                break
-            kind = HUB_KINDS.get(type(message))
-            if kind is not None:
-                self.hub.publish(handle.session_id, kind, message)
-            self._call_soon(self._apply, handle, message)
-        self._exited(handle, join(handle.process, 10))
-
-    def _read_population(
-        self, conn: Connection, process: Any, members: dict[int, WorkerHandle]
-    ) -> None:
-        """Reader thread of a population's worker: each message to its session's handle."""
-        while True:
-            try:
-                message = conn.recv()
-            except (EOFError, OSError):
-                break
-            handle = members.get(message.session_id) if isinstance(message, Tagged) else None
-            if handle is None:
-                continue
-            kind = HUB_KINDS.get(type(message.message))
-            if kind is not None:
-                self.hub.publish(handle.session_id, kind, message.message)
-            self._call_soon(self._apply, handle, message.message)
-        code = join(process, 10)
-        for handle in members.values():
-            self._exited(handle, code)
+    def _deliver(self, handle: WorkerHandle, message: Any) -> None:
+        """A worker's message, from its reader thread: applied on the event loop's."""
+        self._call_soon(self._apply, handle, message)
 
     def _exited(self, handle: WorkerHandle, code: int | None) -> None:
         """The session's worker is gone: if it left the session live, it died."""
