@@ -21,7 +21,8 @@ from starlette.concurrency import run_in_threadpool
 
 from runs.worker.messages import AdviceAnswer, AdviceRequest
 from server.live import rating
-from server.live.manager import HistoryEntry, SessionManager
+from server.live.manager import SessionManager
+from server.live.session import HistoryEntry
 from study.db.models import Advice, Status, StudySession
 from study.schemas.participant import (
     AdviceCreate,
@@ -102,17 +103,17 @@ async def current_state(manager: SessionManager, session: ParticipantSession) ->
     """`participant_state` from an async route: a session without a live worker is read
     from the database in a worker thread, so a crowd polling finished or queued sessions
     never blocks the event loop (a live one is answered from memory, on the loop)."""
-    if manager.handles.get(session.id) is None:
+    if manager.live(session.id) is None:
         return await run_in_threadpool(participant_state, manager, session)
     return participant_state(manager, session)
 
 
 def participant_state(manager: SessionManager, session: ParticipantSession) -> ParticipantState:
     """The page's state; showing a pending request starts its response-time clock."""
-    version = manager.version(session.id)
-    handle = manager.handles.get(session.id)
+    version = manager.changes.version(session.id)
+    live = manager.live(session.id)
     budget = session.advice_budget
-    if handle is None:
+    if live is None:
         with manager.factory() as db:
             given = db.scalar(select(func.count()).where(Advice.session_id == session.id)) or 0
             given += judgements_given(db, session.id)  # a rating session's turns
@@ -137,34 +138,32 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             queued=bool(progress.get("queued", False)) and status == Status.running,
             action_names=list(session.action_words),
         )
-    request = handle.request if handle.ready else None
-    wanted = request is not None and handle.status == Status.running
-    if wanted and handle.shown_at is None:
-        handle.shown_at = time.monotonic()
-    shown = handle.progress
-    given = len(handle.given)
+    request = live.show()
+    wanted = request is not None and live.status == Status.running
+    shown = live.progress
+    given = len(live.given)
     state = ParticipantState(
         session_id=session.id,
-        status=handle.status,
-        message=MESSAGES.get(Status(handle.status), ""),
+        status=live.status,
+        message=MESSAGES.get(Status(live.status), ""),
         version=version,
         advice_wanted=wanted,
         advice_index=request.advice_index if request is not None else None,
         observation_png=(
             base64.b64encode(request.observation_png).decode() if request is not None else None
         ),
-        robot_moving=handle.moving,
+        robot_moving=live.moving,
         **_arm(request.info if request is not None else {}),
         advice_budget=budget,
         advice_given=given,
         advice_left=max(0, budget - given),
-        own_moves=_own_moves(request, handle.history),
-        last_reward=handle.last_reward,
+        own_moves=_own_moves(request, live.history),
+        last_reward=live.last_reward,
         episode=shown.episode if shown else 0,
         stage=shown.stage if shown else None,
-        ready=handle.ready,
-        queued=handle.queued,
-        history=_history(list(handle.history), session.action_words),
+        ready=live.ready,
+        queued=manager.trainers.queued(session.id),
+        history=_history(list(live.history), session.action_words),
         action_names=list(session.action_words),
         frame_png=(
             base64.b64encode(request.frame_png).decode()
@@ -172,15 +171,15 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             else None
         ),
     )
-    rating.shown(state, request, handle.request_arrived)
+    rating.shown(state, request, live.request_arrived)
     return state
 
 
 def observation_png(manager: SessionManager, session: ParticipantSession) -> bytes | None:
     """The image of the pending request, or of the latest advice given."""
-    handle = manager.handles.get(session.id)
-    if handle is not None and handle.request is not None:
-        return handle.request.observation_png
+    live = manager.live(session.id)
+    if live is not None and live.request is not None:
+        return live.request.observation_png
     with manager.factory() as db:
         return db.scalar(
             select(Advice.observation_png)
@@ -243,24 +242,25 @@ async def submit_advice(
     if handle is None:
         stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
         if stored is not None:
-            return _receipt(stored, body, manager.version(session.id), words)
+            return _receipt(stored, body, manager.changes.version(session.id), words)
         _refuse_over_budget(body, budget)
         if not await run_in_threadpool(_ready, manager, session.id):
             raise Conflict(NOT_CONSENTED)
         status = Status(manager.status(session.id))
         raise Conflict(f"no advice can be taken now: {MESSAGES.get(status, '')}")
-    async with handle.advice_lock:
-        if body.advice_index in handle.given:
+    live = handle.live
+    async with live.advice_lock:
+        if body.advice_index in live.given:
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None, "advice given but not stored"
-            return _receipt(stored, body, manager.version(session.id), words)
+            return _receipt(stored, body, manager.changes.version(session.id), words)
         _refuse_over_budget(body, budget)
-        if not handle.ready:
+        if not live.ready:
             raise Conflict(NOT_CONSENTED)
-        if handle.status == Status.paused:
+        if live.status == Status.paused:
             raise Conflict("the session is paused by the researcher; advise when it resumes")
-        request = handle.request
-        if request is None or handle.status != Status.running:
+        request = live.request
+        if request is None or live.status != Status.running:
             raise Conflict(
                 "no advice is wanted right now (the learner is acting or is on its own); "
                 "wait for the next observation from GET /api/participant/state"
@@ -272,7 +272,7 @@ async def submit_advice(
                 "send advice_index from the latest state"
             )
         now = time.monotonic()
-        response_time = now - (handle.shown_at or handle.request_arrived)
+        response_time = live.response_time_s(now)
         answered_at = datetime.now(UTC)
         advice = AdviceGiven(
             session_id=session.id,
@@ -291,22 +291,18 @@ async def submit_advice(
         if not await run_in_threadpool(_insert, manager, advice):
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None
-            return _receipt(stored, body, manager.version(session.id), words)
-        handle.given[body.advice_index] = body.action
-        handle.request = None
-        handle.moving = True
-        handle.history.append(HistoryEntry(body.advice_index, body.action, request.global_step))
+            return _receipt(stored, body, manager.changes.version(session.id), words)
+        live.take_advice(HistoryEntry(body.advice_index, body.action, request.global_step))
         handle.send(AdviceAnswer(body.advice_index, body.action))
         manager.hub.publish(
             session.id, "advice_given", {"advice_index": body.advice_index, "action": body.action}
         )
-        manager.notify(session.id)
         return AdviceReceipt(
             advice_index=body.advice_index,
             action=body.action,
             duplicate=False,
             response_time_s=response_time,
-            version=manager.version(session.id),
+            version=manager.changes.version(session.id),
         )
 
 

@@ -1,39 +1,30 @@
-"""The web process's side of the running sessions: starts worker processes, talks to them
-over their pipes, publishes what they say on the hub, and notices when one dies.
-
-State that the participant endpoints read (the pending advice request, whether the robot
-moves, recent history) lives on a `WorkerHandle` and changes only on the event loop's
-thread; each pipe has a reader thread that publishes to the hub and hands messages over.
+"""The web process's side of the running sessions, coordinated: the manager starts, pauses,
+resumes, stops and kills each session's worker (the processes and their pipes are
+`server.live.workers`'), reaps the dead and the silent, and hands each message a worker
+sends to the part it concerns, on the event loop's thread: the session's `LiveSession`
+(what the participant's page reads) and the trainer slots (`server.live.trainers`).
 
 A human session asks for advice only once its participant is ready (consent and induction
 recorded; the manager then sends `Command("ready")`), and trains after its advice only in
-one of `max_trainers` slots: the others wait in a queue (`queued`), so the people still
-advising never share the cores with more trainers than there are cores. A slot that frees
-takes the session queued longest together with the queued sessions that can train with it
-(one learner configuration, up to `training_population`), by the batch's rule
-(`runs.worker.population.next_group`): one alone trains on in its own worker; several
-are handed over (`Command("handover")`: each worker checkpoints and exits, the session
-still `running` under its token) to one population worker (`population_main`), which
-sends each session's messages `Tagged` with it, so each keeps its own handle, progress,
-records, checkpoints and status.
+one of the trainer slots (`server.live.trainers`), which the manager asks for on the
+session's behalf. A slot given to one session lets its worker train on; one given to
+several hands them over (`Command("handover")`: each worker checkpoints and exits, the
+session still `running` under its token) to one population worker (`population_main`),
+which sends each session's messages `Tagged` with it, so each keeps its own handle,
+progress, records, checkpoints and status.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import itertools
 import logging
-import multiprocessing
 import os
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from datetime import datetime
-from multiprocessing import forkserver
-from multiprocessing.connection import Connection
 from typing import Any
 
 from sqlalchemy import select
@@ -43,28 +34,14 @@ from starlette.concurrency import run_in_threadpool
 from learner.run import RunSpec
 from learner.strategies import make_strategy
 from runs.worker.link import SHUTTING_DOWN, WAITED_FOR_PARTICIPANT
-from runs.worker.messages import (
-    AdviceRequest,
-    AdviceResult,
-    Command,
-    EpisodeDone,
-    Progress,
-    SceneReset,
-    SceneStep,
-    StatusChanged,
-    Tagged,
-    TrainingWanted,
-)
-from runs.worker.population import (
-    default_population,
-    next_group,
-    population_key,
-    population_main,
-)
-from runs.worker.worker import WorkerOptions, worker_main
+from runs.worker.messages import AdviceRequest, Command, StatusChanged, TrainingWanted
+from runs.worker.worker import WorkerOptions
 from server.live import visits
 from server.live.hub import Hub
 from server.live.reaping import join
+from server.live.session import Changes, LiveSession
+from server.live.trainers import Seat, TrainerSlots
+from server.live.workers import WorkerHandle, Workers
 from study.db.models import (
     LIVE_STATUSES,
     RESUMABLE_STATUSES,
@@ -85,125 +62,8 @@ from study.services.sessions import (
 )
 
 log = logging.getLogger(__name__)
-HUB_KINDS: dict[type, str] = {
-    Progress: "progress",
-    AdviceRequest: "advice_request",
-    AdviceResult: "advice_result",
-    EpisodeDone: "episode",
-    SceneReset: "scene_reset",
-    SceneStep: "scene_step",
-    StatusChanged: "status",
-}
-HISTORY = 10
 COMMAND_TIMEOUT_S = 120.0
 STARTUP_LIMIT_S = 180.0
-COALESCE_S = 0.05
-
-
-@dataclass
-class HistoryEntry:
-    advice_index: int
-    action: int
-    global_step: int
-    """The step advised: the robot's own moves since are counted from it."""
-    reward: float | None = None
-
-
-@dataclass
-class WorkerHandle:
-    session_id: int
-    token: str
-    process: Any
-    conn: Connection
-    advice_budget: int
-    given: dict[int, int]
-    status: str = Status.running.value
-    killed: bool = False
-    """The web process killed its worker (`SessionManager._kill`), which records the status."""
-    progress: Progress | None = None
-    request: AdviceRequest | None = None
-    request_arrived: float = 0.0
-    shown_at: float | None = None
-    moving: bool = False
-    ready: bool = False
-    """The participant consented and finished the induction (human sessions)."""
-    queued: bool = False
-    """Waiting for a trainer slot after its advice."""
-    training: bool = False
-    """Holds a trainer slot."""
-    training_since: float | None = None
-    """`time.monotonic()` when it took its slot, and the episodes done then: how fast it
-    trains, for the queue's time estimate."""
-    episodes_at_slot: int = 0
-    run: RunSpec | None = None
-    """A human session's run: its population key is taken from it when it asks to train."""
-    population_key: Any = None
-    """What it must share with other sessions to train with them in one population once its
-    advice is over (`population_key`); None: it trains alone."""
-    population_size: int = 1
-    """How many sessions its population may hold at most."""
-    slot: object | None = None
-    """The trainer slot it shares with the rest of its population (None: a slot of its
-    own, or none)."""
-    handing_over: bool = False
-    """Its worker checkpoints and exits, for its population's worker to go on (this handle
-    is then replaced by one on the population's worker)."""
-    in_population: bool = False
-    """It trains in a population's worker (`process` and `conn` are the population's)."""
-    steps_before_first_turn: int = 0
-    """Random pretraining steps before the first advice (what the page's progress counts)."""
-    human: bool = False
-    """A person advises it."""
-    pooled: bool = False
-    """It waits in its condition's pool (the pools keep their own count)."""
-    last_reward: float | None = None
-    history: deque[HistoryEntry] = field(default_factory=lambda: deque(maxlen=HISTORY))
-    started: float = field(default_factory=time.monotonic)
-    reported: bool = False
-    """The worker has said something: it is past its start (imports, resuming)."""
-    stopping: bool = False
-    """The researcher asked it to stop: if it hangs, it ends `stopped`, not `interrupted`."""
-    advice_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
-    send_lock: threading.Lock = field(default_factory=threading.Lock)
-
-    @property
-    def at_first_turn(self) -> bool:
-        """Its random pretraining is over: it asks for advice, or waits for its participant
-        to be ready for it."""
-        progress = self.progress
-        done = progress.global_step if progress is not None else 0
-        waiting = progress is not None and progress.waiting_for_participant
-        return self.request is not None or waiting or done >= self.steps_before_first_turn
-
-    def send(self, message: Any) -> bool:
-        with self.send_lock:
-            try:
-                self.conn.send(message)
-                return True
-            except (BrokenPipeError, EOFError, OSError):
-                return False
-
-
-WORKER_PRELOAD = ("torch", "pybullet", "learner.trainer", "sim.env", "runs.worker.worker")
-"""What every session worker imports, loaded once in the fork server: `import torch` alone
-leaves about 140 MB of private memory in a process; forked from a server that holds it,
-the workers share those pages (copy on write) instead of each making its own."""
-
-
-def worker_context() -> (
-    multiprocessing.context.ForkServerContext | multiprocessing.context.SpawnContext
-):
-    """Session workers are forked from a fork server that has loaded `WORKER_PRELOAD`
-    (a clean single-threaded process started for the purpose, never the web process with
-    its threads), or spawned where the platform has no fork server. Each worker still
-    owns its PyBullet client, torch threads and everything it makes after the fork."""
-    if "forkserver" not in multiprocessing.get_all_start_methods():
-        return multiprocessing.get_context("spawn")
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(list(WORKER_PRELOAD))
-    return context
-
-
 RESUME_WITHIN_S = 3600.0
 """How recent a lab session's last sign of life must be for a restart to resume it (an
 online study's own idle limit decides for its visits)."""
@@ -241,11 +101,14 @@ class SessionManager:
         """`max_trainers`: trainer slots for human sessions after their advice (0: the
         cores this process may use); `training_population`: sessions trained together in
         one slot at most (0: `default_population`, 1: each alone)."""
-        self.max_trainers = max_trainers or len(os.sched_getaffinity(0))
-        self.training_population = training_population
+        self.trainers = TrainerSlots(
+            max_trainers or len(os.sched_getaffinity(0)),
+            training_population,
+            self._seats,
+            self._granted,
+        )
         self._handovers: set[asyncio.Task[None]] = set()
         self._closing = False
-        self._train_queue: deque[int] = deque()
         self.factory = factory
         self.database_url = database_url
         self.hub = hub
@@ -256,11 +119,9 @@ class SessionManager:
         self.handles: dict[int, WorkerHandle] = {}
         self._ahead: set[int] = set()
         """Sessions given a practice ahead of their participant, not started yet."""
-        self._context = worker_context()
+        self.workers = Workers(database_url, hub, self._deliver, self._exited)
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._versions = itertools.count(int(time.time() * 1000))
-        self._version: dict[int, int] = {}
-        self._changed: dict[int, asyncio.Event] = {}
+        self.changes = Changes()
         self._reaper: asyncio.Task[None] | None = None
         self._ending: set[asyncio.Task[None]] = set()
         """Visits ending after their worker gave up waiting (kept until done)."""
@@ -273,9 +134,7 @@ class SessionManager:
     # --- lifecycle ---------------------------------------------------------------------
     async def open(self) -> None:
         self._loop = asyncio.get_running_loop()
-        if isinstance(self._context, multiprocessing.context.ForkServerContext):
-            # Loaded before the first participant arrives, not while they wait.
-            threading.Thread(target=forkserver.ensure_running, daemon=True).start()
+        self.workers.warm()
         await run_in_threadpool(self._reap)
         self._reaper = asyncio.create_task(self._reap_forever())
 
@@ -315,7 +174,10 @@ class SessionManager:
         live = {
             session_id
             for session_id, h in self.handles.items()
-            if h.human and not h.pooled and not h.ready and h.status in LIVE_STATUSES
+            if h.live.human
+            and not h.live.pooled
+            and not h.live.ready
+            and h.live.status in LIVE_STATUSES
         }
         return len(live | self._ahead)
 
@@ -347,13 +209,7 @@ class SessionManager:
         self._closing = True
         if self._reaper is not None:
             self._reaper.cancel()
-        handles = list(self.handles.values())
-        for handle in handles:
-            handle.send(Command("shutdown"))
-        for handle in handles:
-            await run_in_threadpool(join, handle.process, 60)
-            if handle.process.is_alive():
-                handle.process.terminate()
+        await run_in_threadpool(self.workers.shut_down, list(self.handles.values()))
 
     def _reap(self) -> list[int]:
         """Mark sessions whose worker died, and kill our own workers that stopped beating."""
@@ -363,7 +219,7 @@ class SessionManager:
         owned = {
             sid: h
             for sid, h in self.handles.items()
-            if h.status in LIVE_STATUSES and (h.reported or h.started < starting)
+            if h.live.status in LIVE_STATUSES and (h.reported or h.started < starting)
         }
         # The silent workers are found (a read) and killed before anything is written: one
         # stopped in the middle of its own write holds the database's write lock until it
@@ -397,14 +253,12 @@ class SessionManager:
         """Kill a worker that does not answer (or is no longer needed; SIGKILL works on a
         stopped process too), then record `status`: a worker stopped in its own write holds
         the database until it dies. Its last checkpoint stays."""
-        handle.status = status.value
+        handle.live.set_status(status.value)
         handle.killed = True
-        with contextlib.suppress(Exception):
-            handle.process.kill()
-        join(handle.process, 5)
+        self.workers.kill(handle)
         self._set_status(handle.session_id, status, detail, handle.token)
         log.log(level, "session %s: %s", handle.session_id, detail)
-        self._call_soon(self.notify, handle.session_id)
+        self._call_soon(self.changes.notify, handle.session_id)
 
     async def _reap_forever(self) -> None:
         while True:
@@ -425,13 +279,11 @@ class SessionManager:
         """Start (or resume) the session's worker; `pooled`: it waits in its condition's
         pool for an arrival, its idle limit off until `assign`."""
         token, spec = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
-        parent, child = self._context.Pipe(duplex=True)
         with self.factory() as db:
             session = get_session(db, session_id)
             advice = db.scalars(
                 select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
             ).all()
-            budget = spec.advice_budget
             human = session.method == "human"
             ready = human and session.ready_for_advice
             strategy = spec.make_strategy() or make_strategy("early", 0)
@@ -451,40 +303,29 @@ class SessionManager:
             if human
             else self.options
         )
-        process = self._context.Process(
-            target=worker_main,
-            args=(session_id, self.database_url, options, token, child),
-            name=f"ideeprl-session-{session_id}",
-            daemon=True,
-        )
+        try:
+            process, parent = self.workers.start(session_id, options, token)
+        except Exception as error:
+            await run_in_threadpool(self._set_status, session_id, Status.failed, str(error), token)
+            raise
         # (an advice row without an action is a replay's request past its recorded stream:
         # nothing was given there)
         answered = [
             (a.advice_index, a.action, a.global_step) for a in advice if a.action is not None
         ]
-        given = {index: action for index, action, _ in answered}
-        handle = WorkerHandle(session_id, token, process, parent, budget, given)
-        handle.history.extend(HistoryEntry(*row) for row in answered)
+        live = LiveSession(
+            session_id, spec.advice_budget, answered, self.changes, first_turn, human, pooled
+        )
+        handle = WorkerHandle(session_id, token, process, parent, live, Seat(live, run))
         self.on_start(handle)
-        handle.steps_before_first_turn = first_turn
-        handle.human, handle.pooled = human, pooled
-        handle.run = run
-        try:
-            process.start()
-        except Exception as error:
-            await run_in_threadpool(self._set_status, session_id, Status.failed, str(error), token)
-            raise
-        child.close()
         self.handles[session_id] = handle
-        threading.Thread(
-            target=self._read, args=(handle,), name=f"session-{session_id}-reader", daemon=True
-        ).start()
+        self.workers.read(handle)
         if self.hub.watchers(session_id):
             handle.send(Command("watch"))
         if ready:
             self.set_ready(session_id)
         self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
-        self.notify(session_id)
+        self.changes.notify(session_id)
 
     def assign(self, session_id: int) -> None:
         """A pooled session was given to an arrival: its idle limit runs from now."""
@@ -495,55 +336,26 @@ class SessionManager:
     def set_ready(self, session_id: int) -> None:
         """The participant consented and finished the induction: advice may be asked."""
         handle = self.handles.get(session_id)
-        if handle is not None and not handle.ready:
-            handle.ready = True
+        if handle is not None and not handle.live.ready:
+            handle.live.set_ready()
             handle.send(Command("ready"))
-            self.notify(session_id)
 
-    def _grant_training(self) -> None:
-        """Hand free trainer slots to the sessions queued longest, each with the queued
-        sessions that can train with it in one population (`next_group`, as the batch)."""
-        while True:
-            free = self.max_trainers - self._busy_slots()
-            waiting = self._waiting()
-            self._train_queue = deque(h.session_id for h in waiting)
-            if free <= 0 or not waiting:
-                return
-            group = self._next_group(waiting, free)
-            taken = {h.session_id for h in group}
-            self._train_queue = deque(sid for sid in self._train_queue if sid not in taken)
-            slot = object() if len(group) > 1 else None
-            for handle in group:
-                handle.queued = False
-                handle.training = True
-                handle.training_since = time.monotonic()
-                handle.episodes_at_slot = handle.progress.episode if handle.progress else 0
-                handle.slot = slot
-                handle.handing_over = slot is not None
-                handle.send(Command("handover" if slot is not None else "train"))
-                self.notify(handle.session_id)
-            if slot is not None:
-                assert self._loop is not None
-                task = self._loop.create_task(self._start_population(group, slot))
-                self._handovers.add(task)
-                task.add_done_callback(self._handovers.discard)
+    def _seats(self) -> dict[int, Seat]:
+        return {session_id: h.seat for session_id, h in self.handles.items()}
 
-    def _waiting(self) -> list[WorkerHandle]:
-        """The queued sessions, longest queued first."""
-        handles = (self.handles.get(sid) for sid in dict.fromkeys(self._train_queue))
-        return [h for h in handles if h is not None and h.queued]
-
-    @staticmethod
-    def _next_group(waiting: list[WorkerHandle], free: int) -> list[WorkerHandle]:
-        """`next_group` of the queued sessions; a paused one takes a slot alone (granted
-        like any other, it resumes where it waits)."""
-
-        keys = [h.population_key if h.status == Status.running else None for h in waiting]
-        return next_group(waiting, keys, waiting[0].population_size, free)
-
-    def _busy_slots(self) -> int:
-        """Trainer slots taken: a session training alone, or a population."""
-        return len({id(h.slot or h) for h in self.handles.values() if h.training})
+    def _granted(self, seats: list[Seat], slot: object | None) -> None:
+        """A trainer slot for `seats`: one session trains on in its own worker; several
+        hand their sessions over to one population worker."""
+        group = [self.handles[seat.session_id] for seat in seats]
+        for handle in group:
+            handle.handing_over = slot is not None
+            handle.send(Command("handover" if slot is not None else "train"))
+            self.changes.notify(handle.session_id)
+        if slot is not None:
+            assert self._loop is not None
+            task = self._loop.create_task(self._start_population(group, slot))
+            self._handovers.add(task)
+            task.add_done_callback(self._handovers.discard)
 
     async def _start_population(self, group: list[WorkerHandle], slot: object) -> None:
         """Once the group's workers have handed their sessions over (checkpointed and
@@ -553,7 +365,7 @@ class SessionManager:
             await run_in_threadpool(join, handle.process, self.command_timeout_s)
             if handle.process.is_alive():  # it resumes from its last checkpoint
                 log.warning("session %s: its worker did not hand over; killed", handle.session_id)
-                await run_in_threadpool(self._terminate, handle)
+                await run_in_threadpool(self.workers.kill, handle)
         tokens = await run_in_threadpool(self._still_ours, group)
         members = [h for h in group if h.session_id in tokens]
         if members and self._closing:
@@ -566,59 +378,38 @@ class SessionManager:
         process = None
         if members:
             ids = [h.session_id for h in members]
-            parent, child = self._context.Pipe(duplex=True)
             options = replace(self.options, pooled=False, train_nice=0)
-            process = self._context.Process(
-                target=population_main,
-                args=(ids, tokens, self.database_url, options, child),
-                name=f"ideeprl-population-{'-'.join(map(str, ids))}",
-                daemon=True,
-            )
             try:
-                process.start()
+                process, parent = self.workers.start_population(ids, tokens, options)
             except Exception as error:
                 for handle in members:
                     await run_in_threadpool(
                         self._set_status, handle.session_id, Status.failed, str(error), handle.token
                     )
                 members, process = [], None
-            else:
-                child.close()
         joined: dict[int, WorkerHandle] = {}
         sending = threading.Lock()  # one pipe for all of them
         for old in group:
             if self.handles.get(old.session_id) is old:
                 del self.handles[old.session_id]
-            old.training = False  # `handing_over` stays: its worker's exit is no death
+            self.trainers.vacate(old.seat)  # `handing_over` stays: its exit is no death
             if not any(h is old for h in members):
-                self.notify(old.session_id)
+                self.changes.notify(old.session_id)
                 continue
-            assert process is not None and old.progress is not None
-            handle = WorkerHandle(
-                old.session_id, old.token, process, parent, old.advice_budget, old.given
-            )
-            handle.progress = replace(old.progress, queued=False)
-            handle.history = old.history
-            handle.last_reward, handle.ready = old.last_reward, old.ready
-            handle.steps_before_first_turn = old.steps_before_first_turn
-            handle.population_key, handle.population_size = old.population_key, len(members)
-            handle.training, handle.slot, handle.in_population = True, slot, True
+            assert process is not None
+            live = old.live.handed_over()
+            seat = self.trainers.joined(old.seat, live, len(members))
+            handle = WorkerHandle(old.session_id, old.token, process, parent, live, seat)
+            handle.in_population = True
             handle.send_lock = sending
-            handle.training_since = time.monotonic()
-            handle.episodes_at_slot = handle.progress.episode
             self.handles[old.session_id] = handle
             joined[old.session_id] = handle
             if self.hub.watchers(old.session_id):  # a page still shows its training
                 handle.send(Command("watch", session_id=old.session_id))
-            self.notify(old.session_id)
+            self.changes.notify(old.session_id)
         if joined:
-            threading.Thread(
-                target=self._read_population,
-                args=(parent, process, joined),
-                name=f"population-{'-'.join(map(str, joined))}-reader",
-                daemon=True,
-            ).start()
-        self._grant_training()  # a slot of sessions that did not come is free again
+            self.workers.read_population(parent, process, joined)
+        self.trainers.grant()  # a slot of sessions that did not come is free again
 
     def _still_ours(self, group: list[WorkerHandle]) -> dict[int, str]:
         """Of the group, the sessions still `running` under their worker's token (not
@@ -630,95 +421,6 @@ class SessionManager:
                 if session.status == Status.running and session.worker_token == handle.token:
                     tokens[handle.session_id] = handle.token
             return tokens
-
-    @staticmethod
-    def _terminate(handle: WorkerHandle) -> None:
-        with contextlib.suppress(Exception):
-            handle.process.kill()
-        join(handle.process, 5)
-
-    def set_trainer_slots(self, slots: int) -> None:
-        """Change how many human sessions may train at once (0: none); freed slots go to
-        the queue at once. Sessions already training keep theirs."""
-        assert slots >= 0
-        self.max_trainers = slots
-        self._grant_training()
-
-    def _queue_plan(self) -> list[list[WorkerHandle]]:
-        """The queued sessions in the groups they will take trainer slots in, in order: as
-        `_grant_training` takes them when a slot frees (`next_group` with one free slot)."""
-        waiting, plan = self._waiting(), []
-        while waiting:
-            group = self._next_group(waiting, 1)
-            plan.append(group)
-            taken = {h.session_id for h in group}
-            waiting = [h for h in waiting if h.session_id not in taken]
-        return plan
-
-    def queue_place(self, session_id: int) -> int | None:
-        """1 for the queued sessions that take the next trainer slot to free (several
-        together, as a population), 2 for those after, ...; None when the session is not
-        queued."""
-        handle = self.handles.get(session_id)
-        if handle is None or not handle.queued:
-            return None
-        for place, group in enumerate(self._queue_plan(), 1):
-            if any(h.session_id == session_id for h in group):
-                return place
-        return None
-
-    def queue_wait_s(self, session_id: int) -> float | None:
-        """Seconds until a queued session gets a slot, estimated from how fast the sessions
-        in the slots train now. Speed is counted per agent-episode: a slot whose n sessions
-        (a population, or one alone) each take r seconds an episode runs one agent-episode
-        every r / n seconds. A slot frees when its slowest session has run its remaining
-        episodes; each group ahead in the queue (`_queue_plan`) then holds the earliest
-        free slot while its m sessions run theirs, m side by side at the typical speed. None
-        while no session in a slot has finished an episode there (nothing to estimate
-        from)."""
-        place = self.queue_place(session_id)
-        if place is None or self.max_trainers <= 0:
-            return None
-        now = time.monotonic()
-        slots: dict[int, list[WorkerHandle]] = {}
-        for h in self.handles.values():
-            if h.training and h.progress is not None:
-                slots.setdefault(id(h.slot or h), []).append(h)
-        rates: dict[int, float] = {}  # seconds an episode, each session in its slot
-        costs: list[float] = []  # seconds an agent-episode, per measured session
-        for members in slots.values():
-            live = max(1, sum(1 for h in members if self._episodes_left(h)))
-            for h in members:
-                assert h.progress is not None
-                done = h.progress.episode - h.episodes_at_slot
-                if h.training_since is not None and done > 0:
-                    rates[h.session_id] = (now - h.training_since) / done
-                    costs.append(rates[h.session_id] / live)
-        if not costs:
-            return None
-        typical = sum(costs) / len(costs)
-        frees = [0.0] * max(0, self.max_trainers - len(slots))
-        for members in slots.values():
-            live = max(1, sum(1 for h in members if self._episodes_left(h)))
-            frees.append(
-                max(
-                    self._episodes_left(h) * rates.get(h.session_id, typical * live)
-                    for h in members
-                )
-            )
-        frees.sort()
-        for group in self._queue_plan()[: place - 1]:
-            longest = max(self._episodes_left(h) for h in group)
-            frees[0] += longest * typical * len(group)
-            frees.sort()
-        return frees[0]
-
-    @staticmethod
-    def _episodes_left(handle: WorkerHandle) -> int:
-        """Training episodes the session has yet to run (none once it has ended)."""
-        if handle.progress is None or handle.status not in LIVE_STATUSES:
-            return 0
-        return max(0, handle.progress.episodes - handle.progress.episode)
 
     def _claim(
         self, session_id: int, resume: bool, override_numerics: bool = False
@@ -740,7 +442,7 @@ class SessionManager:
         read); one abandoned because they did not come before its first advice resumes.
         A start at the same moment elsewhere, or one that cannot start, is left alone."""
         handle = self.handles.get(session_id)
-        if handle is not None and handle.status in LIVE_STATUSES:
+        if handle is not None and handle.live.status in LIVE_STATUSES:
             return
         with self.factory() as db:
             session = get_session(db, session_id)
@@ -760,16 +462,16 @@ class SessionManager:
                 f"session {session_id} trains together with other sessions in one process "
                 "and cannot pause alone; stop it instead (it resumes from its last checkpoint)"
             )
-        if handle.status != Status.paused:
+        if handle.live.status != Status.paused:
             handle.send(Command("pause"))
-            await self._until(session_id, lambda h: h.status != Status.running)
+            await self._until(session_id, lambda h: h.live.status != Status.running)
 
     async def resume(self, session_id: int, override_numerics: bool = False) -> None:
         handle = self.handles.get(session_id)
-        if handle is not None and handle.status in LIVE_STATUSES:
-            if handle.status == Status.paused:
+        if handle is not None and handle.live.status in LIVE_STATUSES:
+            if handle.live.status == Status.paused:
                 handle.send(Command("resume"))
-                await self._until(session_id, lambda h: h.status != Status.paused)
+                await self._until(session_id, lambda h: h.live.status != Status.paused)
             return
         with self.factory() as db:
             status = get_session(db, session_id).status
@@ -779,12 +481,12 @@ class SessionManager:
 
     async def stop(self, session_id: int) -> None:
         handle = self.handles.get(session_id)
-        if handle is None or handle.status not in LIVE_STATUSES:
+        if handle is None or handle.live.status not in LIVE_STATUSES:
             with self.factory() as db:
                 session = get_session(db, session_id)
                 if session.status in (Status.created, *RESUMABLE_STATUSES):
                     set_status(db, session_id, Status.stopped, "stopped by the researcher")
-                    self.notify(session_id)
+                    self.changes.notify(session_id)
                     return
             raise Conflict(f"session {session_id} is {session.status}; there is nothing to stop")
         if handle.handing_over:  # stop it where it goes on
@@ -793,7 +495,7 @@ class SessionManager:
         handle.stopping = True
         if handle.in_population:  # the others go on
             handle.send(Command("stop", session_id=session_id))
-            await self._until(session_id, lambda h: h.status not in LIVE_STATUSES)
+            await self._until(session_id, lambda h: h.live.status not in LIVE_STATUSES)
             return
         handle.send(Command("stop"))
         await run_in_threadpool(join, handle.process, self.command_timeout_s)
@@ -809,7 +511,7 @@ class SessionManager:
         """End a session for good now (a visit that ended early): its worker, if one runs,
         is killed at once (nothing of it is needed again) and the status recorded."""
         handle = self.handles.get(session_id)
-        if handle is not None and handle.status in LIVE_STATUSES:
+        if handle is not None and handle.live.status in LIVE_STATUSES:
             await run_in_threadpool(self._kill, handle, status, detail, logging.INFO)
         else:
             with self.factory() as db:
@@ -818,7 +520,7 @@ class SessionManager:
 
     def _live(self, session_id: int, verb: str) -> WorkerHandle:
         handle = self.handles.get(session_id)
-        if handle is None or handle.status not in LIVE_STATUSES:
+        if handle is None or handle.live.status not in LIVE_STATUSES:
             with self.factory() as db:
                 status = get_session(db, session_id).status
             raise Conflict(f"session {session_id} is {status}; only a running session can {verb}")
@@ -830,83 +532,27 @@ class SessionManager:
             handle = self.handles.get(session_id)
             if handle is None or done(handle):
                 return
-            await self.wait_change(session_id, self.version(session_id), 1.0)
+            await self.changes.wait(session_id, self.changes.version(session_id), 1.0)
         raise Conflict(f"session {session_id} did not answer within {self.command_timeout_s:.0f} s")
+
+    def live(self, session_id: int) -> LiveSession | None:
+        """The session's advice turn as its page sees it, while a worker of this process
+        runs it."""
+        handle = self.handles.get(session_id)
+        return handle.live if handle is not None else None
 
     def status(self, session_id: int) -> str:
         """The live status if a worker runs, else the stored one."""
         handle = self.handles.get(session_id)
         if handle is not None:
-            return handle.status
+            return handle.live.status
         with self.factory() as db:
             return get_session(db, session_id).status
 
-    # --- change notification (long-poll) ------------------------------------------------
-    def version(self, session_id: int) -> int:
-        if session_id not in self._version:
-            self._version[session_id] = next(self._versions)
-        return self._version[session_id]
-
-    async def wait_change(self, session_id: int, after: int, timeout: float) -> None:
-        """Return when the session's participant-visible state is newer than `after`."""
-        if self.version(session_id) > after:
-            return
-        event = self._changed.setdefault(session_id, asyncio.Event())
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(event.wait(), timeout)
-
-    def _notify_soon(self, session_id: int) -> None:
-        """Notify unless something else does first: the next advice request usually follows
-        an advice's result within milliseconds, and one wake-up then serves both."""
-        assert self._loop is not None
-        version = self.version(session_id)
-
-        def later() -> None:
-            if self.version(session_id) == version:
-                self.notify(session_id)
-
-        self._loop.call_later(COALESCE_S, later)
-
-    def notify(self, session_id: int) -> None:
-        self._version[session_id] = next(self._versions)
-        event = self._changed.pop(session_id, None)
-        if event is not None:
-            event.set()
-
     # --- messages from workers ---------------------------------------------------------
-    def _read(self, handle: WorkerHandle) -> None:
-        """Reader thread: one per worker, until its pipe closes."""
-        assert self._loop is not None
-        while True:
-            try:
-                message = handle.conn.recv()
-            except (EOFError, OSError):
-                break
-            kind = HUB_KINDS.get(type(message))
-            if kind is not None:
-                self.hub.publish(handle.session_id, kind, message)
-            self._call_soon(self._apply, handle, message)
-        self._exited(handle, join(handle.process, 10))
-
-    def _read_population(
-        self, conn: Connection, process: Any, members: dict[int, WorkerHandle]
-    ) -> None:
-        """Reader thread of a population's worker: each message to its session's handle."""
-        while True:
-            try:
-                message = conn.recv()
-            except (EOFError, OSError):
-                break
-            handle = members.get(message.session_id) if isinstance(message, Tagged) else None
-            if handle is None:
-                continue
-            kind = HUB_KINDS.get(type(message.message))
-            if kind is not None:
-                self.hub.publish(handle.session_id, kind, message.message)
-            self._call_soon(self._apply, handle, message.message)
-        code = join(process, 10)
-        for handle in members.values():
-            self._exited(handle, code)
+    def _deliver(self, handle: WorkerHandle, message: Any) -> None:
+        """A worker's message, from its reader thread: applied on the event loop's."""
+        self._call_soon(self._apply, handle, message)
 
     def _exited(self, handle: WorkerHandle, code: int | None) -> None:
         """The session's worker is gone: if it left the session live, it died."""
@@ -936,52 +582,26 @@ class SessionManager:
 
     def _apply(self, handle: WorkerHandle, message: Any) -> None:
         handle.reported = True
-        if isinstance(message, Progress):
-            handle.progress = message
-            return
+        handle.live.receive(message)
         if isinstance(message, AdviceRequest):
-            handle.request = message
-            handle.request_arrived = time.monotonic()
-            handle.shown_at = None
-            handle.moving = False
             self.on_request(handle, message)
-        elif isinstance(message, AdviceResult):
-            handle.moving = False
-            handle.last_reward = message.reward
-            for entry in handle.history:
-                if entry.advice_index == message.advice_index:
-                    entry.reward = message.reward
-            self._notify_soon(handle.session_id)
-            return
-        elif isinstance(message, StatusChanged):
-            handle.status = message.status
+        if isinstance(message, StatusChanged):
             if message.status == Status.abandoned:
                 assert self._loop is not None
                 task = self._loop.create_task(visits.abandoned(self, handle.session_id))
                 self._ending.add(task)
                 task.add_done_callback(self._ending.discard)
         elif isinstance(message, TrainingWanted):
-            if handle.run is not None:
-                handle.population_key = population_key(handle.run, advice_over=True)
-                handle.population_size = self.training_population or default_population(
-                    handle.run, workers=self.max_trainers
-                )
-            handle.queued = True
-            self._train_queue.append(handle.session_id)
-            self._grant_training()
-        else:
-            return
-        self.notify(handle.session_id)
+            self.trainers.request(handle.seat)
+            self.changes.notify(handle.session_id)
 
     def _drop(self, handle: WorkerHandle) -> None:
         if handle.handing_over:  # `_start_population` replaces it
             return
         if self.handles.get(handle.session_id) is handle:
             del self.handles[handle.session_id]
-        if handle.training or handle.queued:
-            handle.training = handle.queued = False
-            self._grant_training()
-        self.notify(handle.session_id)
+        self.trainers.release(handle.seat)
+        self.changes.notify(handle.session_id)
 
     def _watch(self, session_id: int, watched: bool) -> None:
         handle = self.handles.get(session_id)

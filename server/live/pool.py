@@ -88,8 +88,8 @@ class Pools:
     def practising(self) -> int:
         """Pooled sessions this server started that are not at their first turn yet."""
         for session_id in list(self._started):
-            handle = self.manager.handles.get(session_id)
-            if handle is None or handle.status != Status.running.value or handle.at_first_turn:
+            live = self.manager.live(session_id)
+            if live is None or live.status != Status.running.value or live.at_first_turn:
                 self._started.discard(session_id)
         return len(self._started)
 

@@ -21,7 +21,9 @@ from starlette.concurrency import run_in_threadpool
 from learner.evaluators import BAD, GOOD
 from learner.records import observation_hash
 from runs.worker.messages import AdviceRequest, RatingAnswer
-from server.live.manager import HistoryEntry, SessionManager, WorkerHandle
+from server.live.manager import SessionManager
+from server.live.session import HistoryEntry
+from server.live.workers import WorkerHandle
 from study.db.models import Feedback, Status, StudySession
 from study.schemas.participant import ParticipantState, RatingCreate, RatingReceipt
 from study.services.consent import NOT_CONSENTED
@@ -68,9 +70,7 @@ def resumed(manager: SessionManager, handle: WorkerHandle) -> None:
             .where(Feedback.session_id == handle.session_id, Feedback.evaluator == EVALUATOR)
             .order_by(Feedback.feedback_index)
         ).all()
-    for f in rows:
-        handle.given[f.feedback_index] = f.action
-        handle.history.append(HistoryEntry(f.feedback_index, f.action, f.global_step))
+    handle.live.restore([HistoryEntry(f.feedback_index, f.action, f.global_step) for f in rows])
 
 
 def shown(state: ParticipantState, request: AdviceRequest | None, arrived: float) -> None:
@@ -99,21 +99,22 @@ def refuses_advice(request: AdviceRequest) -> None:
 
 async def _time_out(manager: SessionManager, handle: WorkerHandle, request: AdviceRequest) -> None:
     index = request.advice_index
-    if handle.status == Status.paused:  # a whole time-out again once it goes on
-        while handle.status == Status.paused:
+    live = handle.live
+    if live.status == Status.paused:  # a whole time-out again once it goes on
+        while live.status == Status.paused:
             await asyncio.sleep(0.2)
-        if handle.request is request and index not in handle.given:
+        if live.request is request and index not in live.given:
             asked(manager, handle, request)
             return
-    async with handle.advice_lock:
-        if index in handle.given or handle.request is not request:
+    async with live.advice_lock:
+        if index in live.given or live.request is not request:
             _DEADLINES.pop((handle.session_id, index), None)
             return  # rated in time
-        if handle.status != Status.running:  # stopped or gone: a resumed worker asks again
+        if live.status != Status.running:  # stopped or gone: a resumed worker asks again
             _DEADLINES.pop((handle.session_id, index), None)
             return
         _DEADLINES.pop((handle.session_id, index), None)
-        response = time.monotonic() - (handle.shown_at or handle.request_arrived)
+        response = live.response_time_s(time.monotonic())
         weight = await run_in_threadpool(_weight, manager, handle)
         given = _given(handle.session_id, request, None, weight, response, None)
         if not await run_in_threadpool(_insert, manager, given):
@@ -153,20 +154,17 @@ def _close(
 ) -> None:
     assert request.rated_action is not None
     index = request.advice_index
-    handle.given[index] = request.rated_action
-    handle.request = None
-    handle.history.append(
-        HistoryEntry(index, request.rated_action, request.global_step, request.rated_reward)
+    handle.live.take_rating(
+        HistoryEntry(index, request.rated_action, request.global_step, request.rated_reward),
+        request.rated_reward,
     )
-    handle.last_reward = request.rated_reward
     handle.send(RatingAnswer(index, judgement))
     manager.hub.publish(handle.session_id, "rating_given", {"advice_index": index})
-    manager.notify(handle.session_id)
 
 
 def _weight(manager: SessionManager, handle: WorkerHandle) -> float:
-    if handle.run is not None:
-        return handle.run.feedback_weight
+    if handle.seat.run is not None:
+        return handle.seat.run.feedback_weight
     with manager.factory() as db:
         row = db.get(StudySession, handle.session_id)
         return row.spec.feedback_weight if row is not None else 1.0
@@ -211,24 +209,25 @@ async def submit_rating(
     manager: SessionManager, session_id: int, body: RatingCreate
 ) -> RatingReceipt:
     handle = manager.handles.get(session_id)
-    if handle is None or body.advice_index in handle.given:
+    if handle is None or body.advice_index in handle.live.given:
         stored = await run_in_threadpool(_stored, manager, session_id, body.advice_index)
         if stored is not None:
-            return _receipt(stored, body, manager.version(session_id))
+            return _receipt(stored, body, manager.changes.version(session_id))
         if handle is None:
             raise Conflict("no rating can be taken now: the session is not running")
         raise Conflict(f"turn {body.advice_index} is over and was not a rating; it cannot be rated")
-    async with handle.advice_lock:
-        if body.advice_index in handle.given:
+    live = handle.live
+    async with live.advice_lock:
+        if body.advice_index in live.given:
             stored = await run_in_threadpool(_stored, manager, session_id, body.advice_index)
             assert stored is not None, "a rating given but not stored"
-            return _receipt(stored, body, manager.version(session_id))
-        if not handle.ready:
+            return _receipt(stored, body, manager.changes.version(session_id))
+        if not live.ready:
             raise Conflict(NOT_CONSENTED)
-        if handle.status == Status.paused:
+        if live.status == Status.paused:
             raise Conflict("the session is paused by the researcher; rate when it resumes")
-        request = handle.request
-        if request is None or request.rated_action is None or handle.status != Status.running:
+        request = live.request
+        if request is None or request.rated_action is None or live.status != Status.running:
             raise Conflict(
                 "no rating is wanted right now (the learner is acting on its own); "
                 "wait for the next turn from GET /api/participant/state"
@@ -239,19 +238,19 @@ async def submit_rating(
                 "send advice_index from the latest state"
             )
         now = time.monotonic()
-        if now > _deadline(session_id, request, handle.request_arrived):
+        if now > _deadline(session_id, request, live.request_arrived):
             raise Conflict(
                 f"the time to rate turn {body.advice_index} ({request.rating_time_out_s:g} s) "
                 "is over: the learner went on with no answer"
             )
-        response = now - (handle.shown_at or handle.request_arrived)
+        response = live.response_time_s(now)
         judgement = JUDGEMENTS[body.rating]
         weight = await run_in_threadpool(_weight, manager, handle)
         given = _given(session_id, request, judgement, weight, response, body.decision_time_s)
         if not await run_in_threadpool(_insert, manager, given):
             stored = await run_in_threadpool(_stored, manager, session_id, body.advice_index)
             assert stored is not None
-            return _receipt(stored, body, manager.version(session_id))
+            return _receipt(stored, body, manager.changes.version(session_id))
         _close(manager, handle, request, judgement)
         _DEADLINES.pop((session_id, body.advice_index), None)
         return RatingReceipt(
@@ -261,5 +260,5 @@ async def submit_rating(
             shaping=given.shaping,
             duplicate=False,
             response_time_s=response,
-            version=manager.version(session_id),
+            version=manager.changes.version(session_id),
         )

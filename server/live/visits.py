@@ -14,6 +14,7 @@ from sqlalchemy import update
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
+from server.live.session import Changes
 from study.db.models import Outcome, Status, StudySession, utcnow
 from study.services.sessions import get_session
 
@@ -23,10 +24,9 @@ class SessionManager(Protocol):
     module when a worker gives up waiting, so it is named here, not imported)."""
 
     factory: sessionmaker[Session]
+    changes: Changes
 
     async def end(self, session_id: int, status: Status, detail: str) -> None: ...
-
-    def notify(self, session_id: int) -> None: ...
 
 
 DETAILS = {
@@ -44,7 +44,7 @@ async def end_visit(manager: SessionManager, session_id: int, outcome: Outcome) 
     first = await run_in_threadpool(_record, manager, session_id, outcome)
     if first and outcome != Outcome.completed:
         await manager.end(session_id, Status(outcome.value), DETAILS[outcome])
-    manager.notify(session_id)
+    manager.changes.notify(session_id)
 
 
 def _record(manager: SessionManager, session_id: int, outcome: Outcome) -> bool:

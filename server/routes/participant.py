@@ -48,7 +48,7 @@ async def get_state(
     timeout: float = Query(default=20.0, ge=0.0, le=MAX_WAIT_S, description="Longest wait (s)."),
 ) -> ParticipantState:
     if after is not None:
-        await manager.wait_change(session.id, after, timeout)
+        await manager.changes.wait(session.id, after, timeout)
     return await advising.current_state(manager, session)
 
 
@@ -127,16 +127,16 @@ async def readiness(session: ParticipantDep, manager: ManagerDep) -> Readiness:
     """How far the robot's random pretraining is before the first turn; the advice page
     shows it while the robot is not ready yet. Starts the session if nobody has."""
     await manager.welcome(session.id)
-    handle = manager.handles.get(session.id)
-    if handle is None:
+    live = manager.live(session.id)
+    if live is None:
         state = await advising.current_state(manager, session)
         return Readiness(status=state.status, steps_done=0, steps_before_first_turn=0, ready=False)
-    progress = handle.progress
+    progress = live.progress
     return Readiness(
-        status=handle.status,
+        status=live.status,
         steps_done=progress.global_step if progress is not None else 0,
-        steps_before_first_turn=handle.steps_before_first_turn,
-        ready=handle.at_first_turn,
+        steps_before_first_turn=live.steps_before_first_turn,
+        ready=live.at_first_turn,
     )
 
 
@@ -158,7 +158,7 @@ async def give_advice(
     if last and await run_in_threadpool(_visit_ends_with_advice, manager, session.id):
         await end_visit(manager, session.id, Outcome.completed)
     if wait > 0:
-        await manager.wait_change(session.id, receipt.version, wait)
+        await manager.changes.wait(session.id, receipt.version, wait)
         receipt.state = await advising.current_state(manager, session)
     return receipt
 
@@ -183,7 +183,7 @@ async def give_rating(
     if last and await run_in_threadpool(_visit_ends_with_advice, manager, session.id):
         await end_visit(manager, session.id, Outcome.completed)
     if wait > 0:
-        await manager.wait_change(session.id, receipt.version, wait)
+        await manager.changes.wait(session.id, receipt.version, wait)
         receipt.state = await advising.current_state(manager, session)
     return receipt
 

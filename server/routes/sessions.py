@@ -125,8 +125,8 @@ def delete_session(
 ) -> Response:
     """A session with its records, advice images and checkpoints, and the study's report
     (built from them); refused while it runs. How a participant's data is deleted."""
-    handle = manager.handles.get(session_id)
-    live = handle is not None and handle.status in LIVE_STATUSES
+    current = manager.live(session_id)
+    live = current is not None and current.status in LIVE_STATUSES
     storage.delete_session(db, settings.data_dir, session_id, live)
     request.app.state.participant_tokens.clear()
     request.app.state.playbacks.close_deleted(db)
@@ -182,10 +182,10 @@ async def stop_session(
 @router.get("/sessions/{session_id}/progress")
 def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progress:
     session = sessions.get_session(db, session_id)
-    handle = manager.handles.get(session_id)
-    live = handle.progress if handle is not None and handle.progress is not None else None
+    current = manager.live(session_id)
+    live = current.progress if current is not None and current.progress is not None else None
     data = vars(live) if live is not None else dict(session.progress)
-    status = handle.status if handle is not None else session.status
+    status = current.status if current is not None else session.status
     advice_given = int(data.get("advice_given", 0))
     spec = session.spec
     return Progress(
@@ -201,8 +201,8 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
         advice_given=advice_given,
         advice_budget=spec.advice_budget,
         advice_left=max(0, spec.advice_budget - advice_given),
-        advice_wanted=handle is not None and handle.request is not None,
-        queued=handle.queued if handle is not None else False,
+        advice_wanted=current is not None and current.request is not None,
+        queued=manager.trainers.queued(session_id),
         consented=session.consented_at is not None,
     )
 

@@ -106,7 +106,7 @@ async def delete_study(
         for session_id in pooled:
             await manager.end(session_id, Status.stopped, "its study was deleted")
         db.expire_all()
-        live = {i for i, h in manager.handles.items() if h.status in LIVE_STATUSES}
+        live = {i for i in manager.handles if manager.status(i) in LIVE_STATUSES}
         try:
             await run_in_threadpool(storage.delete_study, db, settings.data_dir, study_id, live)
             break
@@ -127,9 +127,7 @@ def _live_pooled(db: DbDep, manager: ManagerDep, study_id: int) -> list[int]:
         )
     )
     return [
-        i
-        for i in pooled
-        if (handle := manager.handles.get(i)) is not None and handle.status in LIVE_STATUSES
+        i for i in pooled if (live := manager.live(i)) is not None and live.status in LIVE_STATUSES
     ]
 
 
@@ -215,8 +213,8 @@ async def _delete_sessions(
     """Delete sessions, ending the live ones first (their visits are over)."""
     for session_id in ids:
         await manager.started_ahead(session_id)
-        handle = manager.handles.get(session_id)
-        if handle is not None and handle.status in LIVE_STATUSES:
+        live = manager.live(session_id)
+        if live is not None and live.status in LIVE_STATUSES:
             await manager.end(session_id, Status.stopped, "deleted by the researcher")
         db.expire_all()
         await run_in_threadpool(storage.delete_session, db, settings.data_dir, session_id, False)

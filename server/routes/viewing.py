@@ -33,12 +33,11 @@ def learning_curve(session: ParticipantDep, db: DbDep, manager: ManagerDep) -> L
         .where(Episode.session_id == session.id, Episode.stage == "train")
         .order_by(Episode.episode)
     ).all()
-    handle = manager.handles.get(session.id)
-    wait = manager.queue_wait_s(session.id)
+    wait = manager.trainers.wait_s(session.id)
     return LearningCurve(
         status=manager.status(session.id),
-        queued=handle is not None and handle.queued,
-        queue_place=manager.queue_place(session.id),
+        queued=manager.trainers.queued(session.id),
+        queue_place=manager.trainers.place(session.id),
         wait_s=round(wait, 1) if wait is not None else None,
         episodes=row.spec.config.episodes,
         curve=[CurvePoint(episode=e, collected_reward=r) for e, r in episodes],

@@ -223,7 +223,7 @@ def test_an_alternating_visit_says_the_robots_own_moves_and_shows_the_last_resul
 
 
 def request_info(live: Live, session_id: int) -> dict[str, Any]:
-    request = live.app.state.manager.handles[session_id].request
+    request = live.app.state.manager.handles[session_id].live.request
     assert request is not None, "the robot waits for advice"
     return request.info
 

@@ -25,7 +25,7 @@ KEYS = ["ArrowUp", "ArrowRight", "ArrowDown", "ArrowLeft"]
 
 
 def correct_action(live: Live, session_id: int) -> int:
-    request = live.app.state.manager.handles[session_id].request
+    request = live.app.state.manager.handles[session_id].live.request
     assert request is not None, "the agent waits for advice"
     return int(request.info["correct_action"])
 

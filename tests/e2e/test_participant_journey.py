@@ -49,7 +49,7 @@ def arm_sentence(info: dict[str, Any]) -> str:
 
 
 def request_info(live: Live, session_id: int) -> dict[str, Any]:
-    request = live.app.state.manager.handles[session_id].request
+    request = live.app.state.manager.handles[session_id].live.request
     assert request is not None, "the robot waits for advice"
     return request.info
 

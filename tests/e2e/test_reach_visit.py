@@ -33,7 +33,7 @@ HAND = "arm/lbr_iiwa_link_7"
 
 
 def request_info(live: Live, session_id: int) -> dict:
-    request = live.app.state.manager.handles[session_id].request
+    request = live.app.state.manager.handles[session_id].live.request
     assert request is not None, "the robot waits for advice"
     return dict(request.info)
 

@@ -1,5 +1,5 @@
 """The place in line and the time estimate a queued session's thank-you page shows, from
-the manager's own bookkeeping (no worker processes: the handles are made by hand)."""
+the trainer slots' own bookkeeping (no worker processes: the seats are made by hand)."""
 
 from __future__ import annotations
 
@@ -7,85 +7,114 @@ import time
 
 import pytest
 
-from runs.worker.messages import Progress
-from runs.worker.worker import WorkerOptions
-from server.live.hub import Hub
-from server.live.manager import SessionManager, WorkerHandle
+from runs.worker.messages import Progress, StatusChanged
+from server.live.session import Changes, LiveSession
+from server.live.trainers import Seat, TrainerSlots
 
 
-def _handle(session_id: int, episode: int, episodes: int = 20) -> WorkerHandle:
-    handle = WorkerHandle(session_id, f"token-{session_id}", None, None, 1, {})  # type: ignore[arg-type]
-    handle.progress = Progress("train", 0, episode, episodes, 0.1, 0.0, None, 1, 1)
-    return handle
+def _seat(session_id: int, episode: int, episodes: int = 20) -> Seat:
+    live = LiveSession(session_id, 1, [], Changes())
+    live.receive(Progress("train", 0, episode, episodes, 0.1, 0.0, None, 1, 1))
+    return Seat(live)
+
+
+class Slots:
+    """One trainer slot, and the seats of the sessions with a worker."""
+
+    def __init__(self) -> None:
+        self.seats: dict[int, Seat] = {}
+        self.granted: list[list[int]] = []
+        self.trainers = TrainerSlots(
+            1, 0, lambda: self.seats, lambda g, _: self.granted.append([s.session_id for s in g])
+        )
+
+    def hold(self, *seats: Seat, queued: tuple[int, ...] = ()) -> None:
+        self.seats = {s.session_id: s for s in seats}
+        self.trainers._queue.extend(queued)
 
 
 @pytest.fixture
-def manager() -> SessionManager:
-    return SessionManager(None, "", Hub(), WorkerOptions(), 60.0, max_trainers=1)  # type: ignore[arg-type]
+def slots() -> Slots:
+    return Slots()
 
 
-def test_places_count_the_queued_sessions_in_order(manager: SessionManager) -> None:
-    training, first, second = _handle(1, 0), _handle(2, 0), _handle(3, 0)
+def test_places_count_the_queued_sessions_in_order(slots: Slots) -> None:
+    training, first, second = _seat(1, 0), _seat(2, 0), _seat(3, 0)
     training.training, training.training_since = True, time.monotonic()
     first.queued = second.queued = True
-    manager.handles = {h.session_id: h for h in (training, first, second)}
-    manager._train_queue.extend([2, 3])
-    assert [manager.queue_place(i) for i in (1, 2, 3)] == [None, 1, 2]
-    assert manager.queue_wait_s(2) is None, "nothing to estimate from before an episode ends"
+    slots.hold(training, first, second, queued=(2, 3))
+    trainers = slots.trainers
+    assert [trainers.place(i) for i in (1, 2, 3)] == [None, 1, 2]
+    assert trainers.wait_s(2) is None, "nothing to estimate from before an episode ends"
 
 
-def test_the_estimate_runs_the_sessions_ahead_through_the_free_slot(
-    manager: SessionManager,
-) -> None:
-    training, first, second = _handle(1, 5), _handle(2, 0), _handle(3, 0)
+def test_the_estimate_runs_the_sessions_ahead_through_the_free_slot(slots: Slots) -> None:
+    training, first, second = _seat(1, 5), _seat(2, 0), _seat(3, 0)
     training.training = True
     training.training_since = time.monotonic() - 10.0  # 5 episodes in 10 s: 2 s each
     first.queued = second.queued = True
-    manager.handles = {h.session_id: h for h in (training, first, second)}
-    manager._train_queue.extend([2, 3])
-    assert manager.queue_wait_s(2) == pytest.approx(15 * 2.0, abs=0.5)  # 15 episodes left
-    assert manager.queue_wait_s(3) == pytest.approx(15 * 2.0 + 20 * 2.0, abs=0.5)
-    manager.max_trainers = 2  # a second slot, free now: the next in line starts at once
-    assert manager.queue_wait_s(2) == pytest.approx(0.0)
-    assert manager.queue_wait_s(3) == pytest.approx(15 * 2.0, abs=0.5)
+    slots.hold(training, first, second, queued=(2, 3))
+    trainers = slots.trainers
+    assert trainers.wait_s(2) == pytest.approx(15 * 2.0, abs=0.5)  # 15 episodes left
+    assert trainers.wait_s(3) == pytest.approx(15 * 2.0 + 20 * 2.0, abs=0.5)
+    trainers.slots = 2  # a second slot, free now: the next in line starts at once
+    assert trainers.wait_s(2) == pytest.approx(0.0)
+    assert trainers.wait_s(3) == pytest.approx(15 * 2.0, abs=0.5)
 
 
-def _queued(session_id: int, key: str, size: int = 2, episodes: int = 20) -> WorkerHandle:
-    handle = _handle(session_id, 0, episodes)
-    handle.queued, handle.population_key, handle.population_size = True, key, size
-    return handle
+def _queued(session_id: int, key: str, size: int = 2, episodes: int = 20) -> Seat:
+    seat = _seat(session_id, 0, episodes)
+    seat.queued, seat.population_key, seat.population_size = True, key, size
+    return seat
 
 
-def test_sessions_that_train_together_share_a_place(manager: SessionManager) -> None:
-    training = _handle(1, 0)
+def test_sessions_that_train_together_share_a_place(slots: Slots) -> None:
+    training = _seat(1, 0)
     training.training, training.training_since = True, time.monotonic()
     queued = [_queued(2, "a"), _queued(3, "b"), _queued(4, "a"), _queued(5, "a")]
-    manager.handles = {h.session_id: h for h in (training, *queued)}
-    manager._train_queue.extend([2, 3, 4, 5])
+    slots.hold(training, *queued, queued=(2, 3, 4, 5))
+    trainers = slots.trainers
     # 2 and 4 share a learner configuration: the next slot takes both (a population of
     # at most 2); then 3, alone of its kind; then 5.
-    assert [manager.queue_place(i) for i in (2, 3, 4, 5)] == [1, 2, 1, 3]
-    for handle in queued:
-        handle.population_size = 1
-    assert [manager.queue_place(i) for i in (2, 3, 4, 5)] == [1, 2, 3, 4]
+    assert [trainers.place(i) for i in (2, 3, 4, 5)] == [1, 2, 1, 3]
+    for seat in queued:
+        seat.population_size = 1
+    assert [trainers.place(i) for i in (2, 3, 4, 5)] == [1, 2, 3, 4]
 
 
-def test_the_estimate_counts_a_population_s_agent_episodes(manager: SessionManager) -> None:
+def test_the_estimate_counts_a_population_s_agent_episodes(slots: Slots) -> None:
     slot = object()
-    training = [_handle(1, 5), _handle(2, 5)]
-    for handle in training:  # a population of two: 5 episodes each in 10 s
-        handle.training, handle.slot = True, slot
-        handle.training_since = time.monotonic() - 10.0
+    training = [_seat(1, 5), _seat(2, 5)]
+    for seat in training:  # a population of two: 5 episodes each in 10 s
+        seat.training, seat.slot = True, slot
+        seat.training_since = time.monotonic() - 10.0
     queued = [_queued(3, "a"), _queued(4, "a"), _queued(5, "a")]
-    manager.handles = {h.session_id: h for h in (*training, *queued)}
-    manager._train_queue.extend([3, 4, 5])
+    slots.hold(*training, *queued, queued=(3, 4, 5))
+    trainers = slots.trainers
     # The slot frees once its 15 episodes left run (2 s each, side by side): 30 s. Its
     # speed is 1 s an agent-episode, so the next population (3 and 4, 20 episodes each)
     # holds the slot 20 x 2 x 1 s = 40 s before 5 starts.
-    assert manager.queue_place(3) == manager.queue_place(4) == 1
-    assert manager.queue_wait_s(3) == pytest.approx(30.0, abs=0.5)
-    assert manager.queue_wait_s(4) == pytest.approx(30.0, abs=0.5)
-    assert manager.queue_wait_s(5) == pytest.approx(70.0, abs=0.5)
-    training[1].status = "finished"  # one left its population: the slot frees with the other
-    training[1].progress = Progress("train", 0, 20, 20, 0.1, 0.0, None, 1, 1)
-    assert manager.queue_wait_s(3) == pytest.approx(30.0, abs=0.5)
+    assert trainers.place(3) == trainers.place(4) == 1
+    assert trainers.wait_s(3) == pytest.approx(30.0, abs=0.5)
+    assert trainers.wait_s(4) == pytest.approx(30.0, abs=0.5)
+    assert trainers.wait_s(5) == pytest.approx(70.0, abs=0.5)
+    # one left its population: the slot frees with the other
+    training[1].live.receive(StatusChanged("finished", ""))
+    training[1].live.receive(Progress("train", 0, 20, 20, 0.1, 0.0, None, 1, 1))
+    assert trainers.wait_s(3) == pytest.approx(30.0, abs=0.5)
+
+
+def test_a_freed_slot_goes_to_the_longest_queued_with_its_population(slots: Slots) -> None:
+    training = _seat(1, 5)
+    training.training, training.training_since = True, time.monotonic()
+    slots.hold(training)
+    trainers = slots.trainers
+    for seat in (_seat(2, 0), _seat(3, 0), _seat(4, 0)):
+        slots.seats[seat.session_id] = seat
+        seat.population_key, seat.population_size = "a" if seat.session_id != 3 else "b", 2
+        trainers.request(seat)
+    assert slots.granted == [] and [trainers.place(i) for i in (2, 3, 4)] == [1, 2, 1]
+    trainers.release(training)
+    assert slots.granted == [[2, 4]], "the longest queued, with the one it trains with"
+    assert slots.seats[2].slot is slots.seats[4].slot is not None
+    assert trainers.place(3) == 1 and not trainers.queued(2)
