@@ -189,9 +189,9 @@ class RecordedAdvisor:
 
 
 def make_advisor(kind: str, **options: Any) -> Advisor:
-    """`agent` (checkpoint=PATH, device=...), `fitted` (model=PATH, sort_rule=..., seed=...),
-    `oracle` (sort_rule=..., error_rate=..., seed=..., decision_time_median_s=...,
-    decision_time_sigma=...) or `random` (seed=...)."""
+    """`agent` (checkpoint=PATH, device=...), `fitted` (model=PATH, task=..., task_options=...
+    or sort_rule=..., seed=...), `oracle` (sort_rule=..., error_rate=..., seed=...,
+    decision_time_median_s=..., decision_time_sigma=...) or `random` (seed=...)."""
     factories: dict[str, Callable[..., Advisor]] = {
         "agent": AgentAdvisor,
         "fitted": _fitted,

@@ -628,7 +628,8 @@ class RunSpec:
                 return make_advisor(
                     "fitted",
                     model=self.fitted_model,
-                    sort_rule=self.sort_rule,
+                    task=self.the_task,
+                    task_options=self.env_options(),
                     seed=self.seed,
                     budget=self.advice_budget,
                 )

@@ -5,9 +5,12 @@ times, with the 3-D view's websocket open as the page keeps it (`/viewer/p/TOKEN
 scene message read), so the server meets the traffic, the waits and the early leavers of
 real people.
 
-The simulated person sees only what the page shows (the arm's station and what it
-holds, in the participant state) and advises with `learner.fitted.FittedAdvisor`; it
-leaves early as often as the fitted people did (`FittedAdvisor.stop_after`). A client of
+The simulated person sees only what the page shows and advises with
+`learner.fitted.FittedAdvisor` in the model's task: for the sorting robot, the arm's
+station and what it holds (in the participant state), so its advice is right or wrong as
+the fitted people's were there; for a task shown as frames, no ground truth, so it names
+actions as often as the fitted people did. It leaves early as often as they did
+(`FittedAdvisor.stop_after`). A client of
 the server's HTTP API only: it runs anywhere the participant links reach.
 """
 
@@ -19,12 +22,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import httpx
-import numpy as np
 
 from learner.fitted import FittedAdvisor, FittedModel
+from learner.records import TRAINING, stage_of
+from tasks import get_task
 
 ENDED = ("finished", "stopped", "interrupted", "abandoned", "failed")
-NO_IMAGE = np.zeros((64, 64, 3), np.uint8)
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,7 @@ class _Viewer(threading.Thread):
 
 
 def _info(state: dict[str, Any]) -> dict[str, Any]:
-    """The ground truth the page shows: station and held object."""
+    """The ground truth the sorting robot's page shows: station and held object."""
     held = state.get("held") or {}
     return {
         "station": state.get("station") or "center",
@@ -104,9 +107,13 @@ def rehearse(
     """One simulated participant through the session of `token`, until its advice is
     over, it leaves early, or the session ends. `speed` > 1 divides the waits (a quick
     rehearsal); the decision time sent is the drawn one. `viewer`: keep the 3-D view's
-    websocket open meanwhile, as the page does."""
-    advisor = FittedAdvisor(model, sort_rule, seed)
-    view = _Viewer(base_url, token) if viewer else None
+    websocket open meanwhile, as the page does (a task with a live 3-D view)."""
+    task = get_task(model.task)
+    if model.task == "sorting":
+        advisor = FittedAdvisor(model, sort_rule, seed)
+    else:
+        advisor = FittedAdvisor(model, seed=seed, task=task)
+    view = _Viewer(base_url, token) if viewer and task.live_view else None
     headers = {"Authorization": f"Bearer {token}"}
     times: list[float] = []
     with httpx.Client(base_url=base_url, headers=headers, timeout=60) as client:
@@ -122,7 +129,10 @@ def rehearse(
             if stop_after is not None and len(times) >= stop_after:
                 break  # this person leaves: the session's idle limit will abandon it
             if state["advice_wanted"] and state["advice_index"] is not None:
-                action = advisor.advise(NO_IMAGE, _info(state))
+                seen = _info(state) if task.live_view else None
+                stage = stage_of(state["stage"]) if state.get("stage") else TRAINING
+                action = advisor.advise_in(seen, stage)
+                assert isinstance(action, int), "made without a budget: it never leaves itself"
                 drawn = advisor.last_decision_time_s or 0.0
                 time.sleep(drawn / speed)
                 body = {"advice_index": state["advice_index"], "action": action,

@@ -74,6 +74,19 @@ class CheckQuestion:
             raise TaskError(f"{where}: its answer {self.answer!r} is not one of its choices")
 
 
+@dataclass(frozen=True)
+class Situations:
+    """What a person sees that changes how hard the choice is, for advisors fitted to people
+    (`learner.fitted`): each state's situation is a place within a group (the sorting robot:
+    the arm's station within what it holds), and a situation's error rate is pulled toward
+    its group's. A task without them is fitted by the run's stage within the correct action."""
+
+    of: Callable[[GymInfo], tuple[str, str]]
+    """(place, group) of the state `info` describes."""
+    places: tuple[str, ...]
+    groups: tuple[str, ...]
+
+
 class TaskError(ValueError):
     """A task that cannot be found or made; the message says why, for a person."""
 
@@ -120,6 +133,8 @@ class Task:
     texts: Mapping[str, str] = field(default_factory=dict)
     """The task's own participant page texts by key (title, consent, induction_1..3,
     thanks), over the pages' defaults for any task; a study's texts go over these."""
+    situations: Situations | None = None
+    """The situations a fitted advisor conditions on (None: the stage and correct action)."""
 
     @property
     def n_actions(self) -> int:
@@ -220,6 +235,7 @@ __all__ = [
     "BUILT_IN",
     "CheckQuestion",
     "OptionValue",
+    "Situations",
     "Task",
     "TaskAction",
     "TaskError",

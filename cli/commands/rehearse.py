@@ -3,7 +3,8 @@ fitted advisors (`ideeprl fit`) answering human sessions through the participant
 as people would: consent, the induction's Start, then each advice after its drawn
 decision time, leaving early as often as the fitted people did (`runs.rehearsal`).
 Create the human sessions first (dashboard, or POST /api/studies/ID/sessions) and pass
-their links; each simulated participant runs in its own thread."""
+their links; each simulated participant runs in its own thread. The model's task is the
+sessions' (the grid world's people are rehearsed with a model fitted to a grid world study)."""
 
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ def register(subparsers: Any) -> None:
         "--link", dest="links", type=_link, action="append", required=True,
         metavar="URL", help="a human session's participant link (repeatable)",
     )  # fmt: skip
-    parser.add_argument("--sort-rule", default="color", help="the study's sort rule")
+    parser.add_argument("--sort-rule", default="color", help="the study's sort rule (task sorting)")
     parser.add_argument("--seed", type=int, default=0, help="participant i draws with seed+i")
     parser.add_argument(
         "--speed", type=float, default=1.0,

@@ -10,7 +10,8 @@ import httpx
 import pytest
 
 from cli.main import main
-from learner.fitted import HELD, Count, FittedModel
+from learner.fitted import Count, FittedModel
+from tasks.sorting import HELD
 from tests.server.live import LiveServer
 from tests.server.scale import session_body, wait_for_status
 
@@ -23,7 +24,7 @@ def test_a_fitted_advisor_advises_a_human_session_through_its_link(
 ) -> None:
     model = FittedModel(
         advice=300, sessions=[1], methods=["human"], overall=Count(300, 0),
-        by_held={h: Count(100, 0) for h in HELD}, by_situation={},
+        by_group={h: Count(100, 0) for h in HELD}, by_situation={},
         wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=0.2,
         decision_time_sigma=0.3, decision_time_quantiles=[], budget_used=[1.0],
     )  # fmt: skip
