@@ -1,6 +1,7 @@
 """A rehearsal of a study's load: fitted advisors answer human sessions through the
-participant's own HTTP calls (what `web/static/advise.js` does: consent, the induction's
-Start, long-polled state, advice with its decision time), waiting their drawn decision
+participant's own HTTP calls (what `web/static/advise.js` does: consent, the study's
+comprehension check where it asks one, the induction's Start, long-polled state, advice
+with its decision time), waiting their drawn decision
 times, with the 3-D view's websocket open as the page keeps it (`/viewer/p/TOKEN`, every
 scene message read), so the server meets the traffic, the waits and the early leavers of
 real people.
@@ -25,7 +26,8 @@ import httpx
 
 from learner.fitted import FittedAdvisor, FittedModel
 from learner.records import TRAINING, stage_of
-from tasks import get_task
+from study.services.visit import task_questions
+from tasks import Task, get_task
 
 ENDED = ("finished", "stopped", "interrupted", "abandoned", "failed")
 
@@ -120,6 +122,7 @@ def rehearse(
         shown = _ok(client.get("/api/participant/consent"))
         _ok(client.post("/api/participant/consent", json={"agree": True,
                         "texts_version": shown["texts_version"]}))  # fmt: skip
+        _pass_check(client, task)
         state = _ok(client.post("/api/participant/start"))
         if view is not None:
             view.start()
@@ -158,6 +161,24 @@ def rehearse(
         viewer_messages=view.messages if view is not None else 0,
         viewer_bytes=view.bytes if view is not None else 0,
     )
+
+
+def _pass_check(client: httpx.Client, task: Task) -> None:
+    """The study's comprehension check, passed as its people did (they had to, to advise):
+    the task's own questions (a study's default check) answered right."""
+    check = _ok(client.get("/api/participant/check"))
+    if not check["required"] or check["passed"]:
+        return
+    right = {q.id: q.answer for q in task_questions(task)}
+    unknown = [q["id"] for q in check["questions"] if q["id"] not in right]
+    if unknown:
+        raise RuntimeError(
+            f"the study's own check question {unknown[0]!r}: a rehearsal answers only the "
+            f"questions of task {task.name} (a design's default check)"
+        )
+    answers = {q["id"]: right[q["id"]] for q in check["questions"]}
+    graded = _ok(client.post("/api/participant/check", json={"answers": answers}))
+    assert graded["passed"], "the task's own answers pass its check"
 
 
 def _ok(response: httpx.Response) -> dict[str, Any]:
