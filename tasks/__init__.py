@@ -133,6 +133,10 @@ class Task:
     texts: Mapping[str, str] = field(default_factory=dict)
     """The task's own participant page texts by key (title, consent, induction_1..3,
     thanks), over the pages' defaults for any task; a study's texts go over these."""
+    outcomes: tuple[str, ...] = ()
+    """What a step can do that the task counts beside its reward (the sorting robot's
+    placements: placed, misplaced, lost), in its steps' `outcome`; none: its reward and
+    success are its measures."""
     situations: Situations | None = None
     """The situations a fitted advisor conditions on (None: the stage and correct action)."""
 

@@ -66,6 +66,7 @@ def sorting_task() -> Task:
         good_reward=2.5,
         live_view=True,
         agent="robot",
+        outcomes=("placed", "misplaced", "lost"),
         situations=Situations(situation, STATIONS, HELD),
         texts={f.stem: f.read_text() for f in sorted(TEXTS.glob("*.txt"))},
     )
