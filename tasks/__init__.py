@@ -1,7 +1,8 @@
 """Tasks: the environments a study's learners act in, each with what people need to advise
 in it. A task is any Gymnasium environment with discrete actions whose observations are
-uint8 RGB images (H, W, 3), H and W multiples of 8; the learner sees it only through the
-Gymnasium API.
+uint8 RGB images (H, W, 3), H and W multiples of 8 (into the paper's network), or float
+vectors (n,) (into a small dense network); the learner sees it only through the Gymnasium
+API.
 
 A task is named in a run (`RunSpec.task`) by one of:
 - a built-in name: `sorting` (the paper's robot, the default) or `gridworld` (MiniGrid);
@@ -133,6 +134,10 @@ class Task:
     texts: Mapping[str, str] = field(default_factory=dict)
     """The task's own participant page texts by key (title, consent, induction_1..3,
     thanks), over the pages' defaults for any task; a study's texts go over these."""
+    preset: str = "paper"
+    """The learner preset a run of this task starts from when it names none (the paper's
+    DQN for the sorting robot; a vector task's learner is the dense network whatever its
+    preset)."""
     outcomes: tuple[str, ...] = ()
     """What a step can do that the task counts beside its reward (the sorting robot's
     placements: placed, misplaced, lost), in its steps' `outcome`; none: its reward and
