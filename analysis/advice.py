@@ -22,6 +22,8 @@ ADVICE_COLUMNS = ["session_id", "global_step", "action", "outcome", "stage", "ep
 REPLAYED_ADVICE_COLUMNS = ["session_id", "action", "same_observation"]
 """A replay's advice rows: `action` missing for a request past the recorded stream,
 `same_observation` whether the replayed advice met the image its advisor saw."""
+PLACED_COUNTS = ("placed", "misplaced", "lost")
+"""The sorting robot's placements by advised actions, which only its advice has."""
 QUALITY_COLUMNS = [
     "session_id", "method", "label", "advice", "placed", "misplaced", "lost",
     "unknown_outcome", "longest_repeat", "R_T",

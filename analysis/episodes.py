@@ -32,7 +32,9 @@ OPTIONAL_COLUMNS: tuple[str, ...] = (
 """Columns used when present: `label` names an agent in figures (derived when absent),
 `epsilon` draws the exploration schedule, the counts are summarised per method."""
 
-OUTCOME_COLUMNS: tuple[str, ...] = ("steps", "placed_correct", "misplaced", "lost")
+PLACEMENTS: tuple[str, ...] = ("placed_correct", "misplaced", "lost")
+"""The sorting robot's outcomes of an episode (a report of another task leaves them out)."""
+OUTCOME_COLUMNS: tuple[str, ...] = ("steps", *PLACEMENTS)
 
 EPISODE_TABLE_COLUMNS: tuple[str, ...] = (
     "session_id",

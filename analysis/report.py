@@ -19,13 +19,13 @@ import pandas as pd
 import scipy
 
 from analysis import markdown as md
-from analysis.advice import advice_quality, quality_correlations
+from analysis.advice import PLACED_COUNTS, advice_quality, quality_correlations
 from analysis.audit import Audit, audit, label
 from analysis.comparable import comparable
 from analysis.comparable_report import COMPARABLE_FILES, comparable_section
 from analysis.comparisons import compare
 from analysis.csvsafe import safe_frame
-from analysis.episodes import EpisodeTableError, agents_of, method_name
+from analysis.episodes import PLACEMENTS, EpisodeTableError, agents_of, method_name
 from analysis.figures import (
     bands_window,
     example_agents,
@@ -637,6 +637,9 @@ def write_report(
         raise EpisodeTableError(
             f"unknown reference {reference!r}; available: {', '.join(REFERENCES)}"
         )
+    sorting = _ran_sorting(settings)
+    if not sorting:  # the robot's placements: all 0 in another task, and meaningless
+        episodes_df = episodes_df.drop(columns=[c for c in PLACEMENTS if c in episodes_df])
     analysis = analyze(episodes_df, baseline=baseline, n_episodes=n_episodes, equal_var=equal_var)
     if settings is not None:
         settings = _without_sorting_settings(settings)
@@ -705,9 +708,12 @@ def write_report(
     quality = None
     if advice is not None:
         quality = advice_quality(advice, analysis.agents)
-        if len(quality):
+        if len(quality) and sorting:
             tables["advice_quality"] = quality
             tables["advice_correlations"] = quality_correlations(quality)
+        elif len(quality):
+            quality = _task_advice_quality(quality, analysis.episodes)
+            tables["advice_quality"] = quality
         else:
             quality = None
     if power is not None and power.comparisons:
@@ -893,6 +899,22 @@ def _withhold_tests(analysis: Analysis, checked: Audit, allow_mismatch: bool) ->
     return dataclasses.replace(analysis, t_tests=tests, paper=paper)
 
 
+def _ran_sorting(settings: pd.DataFrame | None) -> bool:
+    """Whether a session ran the sorting robot (or the settings cannot say: runs without a
+    task ran it), whose placements the report counts."""
+    return settings is None or "task" not in settings or (settings["task"] == "sorting").any()
+
+
+def _task_advice_quality(quality: pd.DataFrame, episodes: pd.DataFrame) -> pd.DataFrame:
+    """The advice quality of a task other than the sorting robot: without the robot's
+    placements, with each session's success rate where the task defines success."""
+    kept = quality.drop(columns=[*PLACED_COUNTS, "unknown_outcome"])
+    if "success" not in episodes:
+        return kept
+    rates = episodes.groupby("session_id")["success"].mean()
+    return kept.assign(success_rate=kept["session_id"].map(rates).astype(float))
+
+
 def _without_sorting_settings(settings: pd.DataFrame) -> pd.DataFrame:
     """The settings without the sorting robot's own (its motion, rule and scenario, which
     the rescoring reads) when no session ran the sorting task: they mean nothing there."""
@@ -1020,6 +1042,8 @@ def _advice_section(extra: _Extras) -> list[str]:
     """Each advised session's advice: what it did, and whether better advice went with a
     better outcome."""
     quality, per_method = extra.advice_quality, extra.advice_correlations
+    if quality is not None and "placed" not in quality:
+        return _task_advice_section(quality)
     if quality is None or per_method is None:
         return []
     rows = [
@@ -1051,6 +1075,34 @@ def _advice_section(extra: _Extras) -> list[str]:
         "",
         *rhos,
         *_unknown_outcomes(unknown),
+        "",
+    ]
+
+
+def _task_advice_section(quality: pd.DataFrame) -> list[str]:
+    """The advice quality of a task other than the sorting robot: its own measures."""
+    success = "success_rate" in quality
+    rows = [
+        f"| {r.label} | {method_name(r.method)} | {r.advice} | {r.longest_repeat} | "
+        + (f"{r.success_rate:.2f} | " if success else "")
+        + f"{r.R_T:.2f} |"
+        for r in quality.itertuples()
+    ]
+    return [
+        "## Advice quality",
+        "",
+        "What each advised session's advice did, counted from the steps whose action came "
+        "from the advisor: the most advised steps in a row with one action (an advisor "
+        "stuck in a state repeats one action until its budget ends), and the agent's own "
+        "measures: the share of its episodes that succeeded (where the task defines "
+        "success) and its R_T. An effect of advice is only credible where the advice was "
+        "good.",
+        "",
+        "| agent | method | advice | longest repeat | "
+        + ("success rate | " if success else "")
+        + "R_T |",
+        "|---|---|---:|---:|" + ("---:|" if success else "") + "---:|",
+        *rows,
         "",
     ]
 

@@ -94,6 +94,11 @@ class AdvisorCheck:
     max_repeat: int = MAX_REPEAT
     version: int = CHECK_VERSION
     problems: tuple[str, ...] = field(default=())
+    placements: bool = True
+    """Whether the task counts the robot's placements (`Task.outcomes`), which the summary
+    then gives for the advice; else the task's own measures only."""
+    success_rate: float | None = None
+    """The share of the fresh episodes that succeeded (None: the task states no success)."""
 
     @property
     def mean_reward(self) -> float:
@@ -105,14 +110,18 @@ class AdvisorCheck:
 
     def summary(self) -> str:
         advice = ", ".join(
-            f"seed {seed}: {q.placed} placed, {q.misplaced} misplaced, {q.lost} lost, "
-            f"longest repeat {q.longest_repeat} in {q.advice} advice"
+            f"seed {seed}: "
+            + (f"{q.placed} placed, {q.misplaced} misplaced, {q.lost} lost, "
+               if self.placements else "")
+            + f"longest repeat {q.longest_repeat} in {q.advice} advice"
             for seed, q in zip(self.advice_seeds, self.at_advice, strict=True)
-        )
+        )  # fmt: skip
         verdict = "passed" if self.passed else "FAILED: " + "; ".join(self.problems)
+        needs = f" (needs {self.min_reward})" if self.min_reward is not None else ""
+        success = "" if self.success_rate is None else f", success rate {self.success_rate:.2f}"
         return (
             f"advisor check {verdict}. Greedy on {len(self.rewards)} fresh episodes: mean "
-            f"reward {self.mean_reward:.2f} (needs {self.min_reward}), longest repeat "
+            f"reward {self.mean_reward:.2f}{needs}{success}, longest repeat "
             f"{self.episode_longest_repeat} (at most {self.max_repeat})"
             + (f". From the advice-time states: {advice}" if advice else "")
         )
@@ -242,6 +251,7 @@ def check_advisor(
     seeds = tuple(advice_seeds) or (spec.seed,)
     advisor = AgentAdvisor(checkpoint)
     rewards: list[float] = []
+    succeeded: list[bool] = []
     repeat = 0
     env = spec.make_env()
     try:
@@ -255,6 +265,8 @@ def check_advisor(
                 total += float(reward)
                 done = terminated or truncated
             rewards.append(total)
+            if "is_success" in info:
+                succeeded.append(bool(info["is_success"]))
             repeat = max(repeat, longest_repeat(actions))
     finally:
         env.close()
@@ -283,6 +295,8 @@ def check_advisor(
         advice_seeds=seeds if at_advice else (),
         problems=tuple(problems),
         min_reward=good,
+        placements=bool(spec.the_task.outcomes),
+        success_rate=sum(succeeded) / len(succeeded) if succeeded else None,
     )
 
 

@@ -135,10 +135,10 @@ class AgentAdvisor:
         config = DQNConfig.from_dict({**state["config"], "device": device})
         network = state["agent"]["network"]
         # the task's action count and image size, as the checkpoint's learner had them
-        # (checkpoints from before tasks other than the sorting robot's: 4, 64x64x3)
+        # (a vector task's: its length; checkpoints without them: 4, 64x64x3)
         n_actions = int(network["out.weight"].shape[0])
         image_shape = tuple(int(n) for n in state.get("image_shape", (64, 64, 3)))
-        self.agent = DQNAgent(config, resolve_device(device), n_actions, image_shape)  # type: ignore[arg-type]
+        self.agent = DQNAgent(config, resolve_device(device), n_actions, image_shape)
         self.agent.network.load_state_dict(network)
         self.checkpoint = str(checkpoint)
 
@@ -189,9 +189,9 @@ class RecordedAdvisor:
 
 
 def make_advisor(kind: str, **options: Any) -> Advisor:
-    """`agent` (checkpoint=PATH, device=...), `fitted` (model=PATH, sort_rule=..., seed=...),
-    `oracle` (sort_rule=..., error_rate=..., seed=..., decision_time_median_s=...,
-    decision_time_sigma=...) or `random` (seed=...)."""
+    """`agent` (checkpoint=PATH, device=...), `fitted` (model=PATH, task=..., task_options=...
+    or sort_rule=..., seed=...), `oracle` (sort_rule=..., error_rate=..., seed=...,
+    decision_time_median_s=..., decision_time_sigma=...) or `random` (seed=...)."""
     factories: dict[str, Callable[..., Advisor]] = {
         "agent": AgentAdvisor,
         "fitted": _fitted,

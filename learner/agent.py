@@ -16,7 +16,7 @@ import torch.nn.functional as F
 from learner import conv_kernel
 from learner.config import DQNConfig
 from learner.device import conv_dtype
-from learner.network import QNetwork
+from learner.network import DenseQNetwork, QNetwork
 from learner.optim import Adam, RMSprop
 from learner.phase_conv import PhaseConvForward, pack_frame
 from learner.replay import ReplaySample
@@ -30,15 +30,20 @@ class DQNAgent:
         config: DQNConfig,
         device: torch.device,
         n_actions: int = 4,
-        image_shape: tuple[int, int, int] = (64, 64, 3),
+        image_shape: tuple[int, ...] = (64, 64, 3),
         init_seed: int = 0,
     ) -> None:
         self.config = config
         self.device = device
         self.n_actions = n_actions
+        self.vector = len(image_shape) == 1
+        """Vector observations (n,): the dense network, computed plainly whatever `update`."""
+        self.mode = "plain" if self.vector else config.update
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(init_seed)
-            self.network = QNetwork(n_actions, image_shape, config.head, config.init)
+            self.network = QNetwork.for_observation(
+                n_actions, image_shape, config.head, config.init
+            )
         self.network.to(device)
         self.target = copy.deepcopy(self.network) if config.target_network else None
         self.updates = 0
@@ -51,26 +56,49 @@ class DQNAgent:
         else:
             self.optimizer = Adam(params, config.learning_rate, config.optimizer_eps)
         self.dtype = conv_dtype(config.precision, device)
-        kernel = conv_kernel.for_dtype(self.dtype)
-        self._fast = PhaseConvForward(self.network, self.dtype, kernel)
-        self._fast_target = (
-            PhaseConvForward(self.target, self.dtype, kernel) if self.target else None
-        )
+        self._fast, self._fast_target = None, None
+        if isinstance(self.network, QNetwork):
+            kernel = conv_kernel.for_dtype(self.dtype)
+            self._fast = PhaseConvForward(self.network, self.dtype, kernel)
+            if isinstance(self.target, QNetwork):
+                self._fast_target = PhaseConvForward(self.target, self.dtype, kernel)
+
+    @property
+    def fast(self) -> PhaseConvForward:
+        """The fast update's form of the paper's network (none for the dense one)."""
+        assert self._fast is not None, "a vector task's dense network has no fast form"
+        return self._fast
 
     @property
     def frame_shape(self) -> tuple[int, ...]:
         """Shape of a frame as the replay memory stores it (see `encode`)."""
-        h, w, c = self.network.image_shape
-        return (h // 2, w // 2, 4 * c) if self.config.update == "fast" else (h, w, c)
+        shape = self.network.observation_shape
+        if self.mode != "fast":
+            return shape
+        h, w, c = shape
+        return (h // 2, w // 2, 4 * c)
+
+    @property
+    def frame_dtype(self) -> torch.dtype:
+        """How the replay memory stores a frame: image bytes, or a vector's float32s."""
+        return torch.float32 if self.vector else torch.uint8
 
     def encode(self, image: np.ndarray) -> np.ndarray:
         """An observation as the replay memory stores it: packed for the fast update."""
-        if image.shape != self.network.image_shape or image.dtype != np.uint8:
+        shape = self.network.observation_shape
+        if self.vector:
+            if image.shape != shape or not np.issubdtype(image.dtype, np.floating):
+                raise ValueError(
+                    f"observations must be float vectors of shape {shape}, "
+                    f"got {image.dtype} {image.shape}"
+                )
+            return image.astype(np.float32, copy=False)
+        if image.shape != shape or image.dtype != np.uint8:
             raise ValueError(
-                f"observations must be uint8 images of shape {self.network.image_shape}, "
+                f"observations must be uint8 images of shape {shape}, "
                 f"got {image.dtype} {image.shape}"
             )
-        return pack_frame(image) if self.config.update == "fast" else image
+        return pack_frame(image) if self.mode == "fast" else image
 
     def q_values(self, image: np.ndarray) -> np.ndarray:
         """The network's values for one uint8 image (H, W, C), as the update computes them."""
@@ -87,7 +115,7 @@ class DQNAgent:
             return self._keras_fit(batch, rng or np.random.default_rng(self.updates))
         config = self.config
         n = len(batch.actions)
-        weights = self._fast.weights() if config.update == "fast" else None
+        weights = self._fast.weights() if self._fast and self.mode == "fast" else None
         targets = self._td_targets(batch, weights)
         q = self._forward(self.network, self._fast, batch.frames[:n], True, weights)
         taken = q.gather(1, batch.actions.unsqueeze(1)).squeeze(1)
@@ -107,7 +135,7 @@ class DQNAgent:
         n = len(batch.actions)
         frames = batch.frames[:n]
         with torch.no_grad():
-            weights = self._fast.weights() if config.update == "fast" else None
+            weights = self._fast.weights() if self._fast and self.mode == "fast" else None
             targets = self._forward(self.network, self._fast, frames, False, weights).float()
             targets = targets.clone()
             rows = torch.arange(n, device=targets.device)
@@ -169,13 +197,15 @@ class DQNAgent:
 
     def _forward(
         self,
-        network: QNetwork,
+        network: QNetwork | DenseQNetwork,
         fast: PhaseConvForward | None,
         frames: torch.Tensor,
         grad: bool,
         weights: list[tuple[torch.Tensor, torch.Tensor]] | None = None,
     ) -> torch.Tensor:
-        if self.config.update == "plain":
+        if self.vector:
+            return network(frames.float())
+        if self.mode == "plain":
             return network(frames.permute(0, 3, 1, 2).contiguous().float().div(255.0))
         assert fast is not None
         if weights is None:

@@ -156,6 +156,10 @@ class Population:
         self.trainers = trainers
         config = self.config = trainers[0].config
         self.layout = resolve_layout(layout, config, self.trainers[0].device)
+        if trainers[0].agent.vector:  # the dense network: each agent computes on its own
+            if layout not in ("auto", "loop"):
+                raise ValueError("a vector task's agents run with layout='loop' (or 'auto')")
+            self.layout = "loop"
         self.conv: ConvMode = conv
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")

@@ -50,17 +50,20 @@ class ReplayMemory:
         frame_shape: tuple[int, ...],
         device: torch.device | str = "cpu",
         spare_frames: int = 16,
+        dtype: torch.dtype = torch.uint8,
     ) -> None:
         if capacity < 1:
             raise ValueError(f"capacity must be at least 1, got {capacity}")
         self.capacity = capacity
         self.frame_shape = tuple(frame_shape)
+        self.dtype = dtype
+        """uint8 for images; float32 for a vector task's observations."""
         self.device = torch.device(device)
         self._ring = capacity + 1
         # empty, not zeros: pages become resident as frames arrive, and unused slots are
         # never read
         self.frames = torch.empty(
-            (self._ring + spare_frames, *frame_shape), dtype=torch.uint8, device=self.device
+            (self._ring + spare_frames, *frame_shape), dtype=dtype, device=self.device
         )
         self.state_slot = np.zeros(capacity, dtype=np.int64)
         self.next_slot = np.zeros(capacity, dtype=np.int64)
@@ -125,7 +128,7 @@ class ReplayMemory:
     def _grow_spares(self) -> None:
         """Double the spare ring; the old spares keep their slots."""
         spares = len(self.spare_owner)
-        extra = torch.zeros((spares, *self.frame_shape), dtype=torch.uint8, device=self.device)
+        extra = torch.zeros((spares, *self.frame_shape), dtype=self.dtype, device=self.device)
         self.frames = torch.cat((self.frames, extra))
         self.spare_owner = np.concatenate((self.spare_owner, np.full(spares, -1)))
 
@@ -182,7 +185,7 @@ class ReplayMemory:
                 f"this memory {self.capacity} of {list(self.frame_shape)}"
             )
         spares = state["spares"]
-        frames = torch.zeros((self._ring + len(spares), *self.frame_shape), dtype=torch.uint8)
+        frames = torch.zeros((self._ring + len(spares), *self.frame_shape), dtype=self.dtype)
         frames[: len(state["frames"])] = state["frames"]
         frames[self._ring :] = spares
         self.frames = frames.to(self.device)

@@ -188,7 +188,8 @@ class RunSpec:
     """Fixes scene, network, memory, exploration and the machine advisors' draws."""
     preset: Preset = bounded("paper")
     """The learner preset the config starts from: paper, modern or authors (what the
-    authors' Keras code did); fields given in `config` override it."""
+    authors' Keras code did); fields given in `config` override it. Left out of a run's
+    document: its task's (`Task.preset`)."""
     config: DQNConfig = group(DQNConfig, prefix="config_")
     """The learner's hyperparameters (the preset's, with the fields given here)."""
     strategy: Strategy = bounded("early", role="treatment")
@@ -297,7 +298,9 @@ class RunSpec:
             raise RunSpecError(
                 "version", f"run documents of version 1 to {SPEC_VERSION} can be read"
             )
-        preset = data.get("preset", "paper")
+        if "preset" not in data:
+            data["preset"] = _task_preset(data.get("task", "sorting"))
+        preset = data["preset"]
         config = data.get("config", {})
         if isinstance(preset, str) and preset in PRESET_FIELDS and isinstance(config, Mapping):
             data["config"] = {**PRESET_FIELDS[preset], **config}  # else `build` names the field
@@ -631,7 +634,8 @@ class RunSpec:
                 return make_advisor(
                     "fitted",
                     model=self.fitted_model,
-                    sort_rule=self.sort_rule,
+                    task=self.the_task,
+                    task_options=self.env_options(),
                     seed=self.seed,
                     budget=self.advice_budget,
                 )
@@ -772,3 +776,12 @@ def from_old_settings(settings: Mapping[str, Any], config: DQNConfig) -> RunSpec
         sort_rule=settings.get("sort_rule", "color"),
         scenario=ScenarioOptions.from_dict(settings.get("scenario")),
     )
+
+
+def _task_preset(task: Any) -> Any:
+    """The preset a run of this task starts from when it names none: the task's own (a
+    task that cannot be had: the paper's, and `validate` names the task)."""
+    try:
+        return get_task(task).preset if isinstance(task, str) else "paper"
+    except TaskError:
+        return "paper"

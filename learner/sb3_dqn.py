@@ -86,6 +86,11 @@ class SB3DQNTrainer(StagedRun):
         self.config = config = config or DQNConfig()
         self.env = env
         _check_spaces(env)
+        if len(env.observation_space.shape or ()) != 3:
+            raise ValueError(
+                "the SB3 baseline (sb3-dqn) runs on image tasks; this task's observations "
+                "are vectors: compare the paper's learner's methods instead"
+            )
         self.hyperparameters = h = dict(hyperparameters or sb3_hyperparameters(config))
         self.device = resolve_device(config.device)
         self.threads = configure_threads(config.torch_threads)

@@ -133,7 +133,7 @@ class StackedAgents:
         self.conv: ConvMode = conv
         self.dtype = agents[0].dtype
         self.device = agents[0].device
-        self.layouts = agents[0]._fast.layouts
+        self.layouts = agents[0].fast.layouts
 
     def _q(self, weights: StackedWeights, frames: torch.Tensor, conv: ConvMode | None = None):
         return stacked_q(weights, frames, self.layouts, self.dtype, conv or self.conv)
@@ -145,7 +145,7 @@ class StackedAgents:
         )
         batch = torch.from_numpy(frames).to(self.device).unsqueeze(1)
         with torch.inference_mode():
-            weights = stack_weights([agent._fast for agent in self.agents]).detach()
+            weights = stack_weights([agent.fast for agent in self.agents]).detach()
             q = self._q(weights, batch, conv)
         return q[:, 0].float().cpu().numpy()
 
@@ -158,7 +158,7 @@ class StackedAgents:
             raise ValueError(f"{len(batches)} batches for {len(self.agents)} agents")
         frames = torch.stack([batch.frames for batch in batches])
         actions = torch.stack([batch.actions for batch in batches])
-        weights = stack_weights([agent._fast for agent in self.agents])
+        weights = stack_weights([agent.fast for agent in self.agents])
         targets = self._td_targets(batches, frames, weights.detach())
         b = actions.shape[1]
         if self.config.fit == "keras":
@@ -225,7 +225,7 @@ class StackedAgents:
         losses = []
         for start in range(0, b, self.config.keras_minibatch):
             part = orders[:, start : start + self.config.keras_minibatch]
-            weights = stack_weights([agent._fast for agent in self.agents])
+            weights = stack_weights([agent.fast for agent in self.agents])
             q = self._q(weights, states[agent_rows, part])
             part_targets = targets[agent_rows, part]
             loss = torch.stack([self._loss(*pair) for pair in zip(q, part_targets, strict=True)])

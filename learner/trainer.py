@@ -100,17 +100,19 @@ class Trainer(StagedRun):
         self.seed = seed
         init, env_seeds, actions, memory = run_streams(seed)
         assert env.observation_space.shape is not None, "checked by _check_spaces"
-        height, width, channels = env.observation_space.shape
+        shape = tuple(int(n) for n in env.observation_space.shape)
         self.n_actions = int(cast(gym.spaces.Discrete, env.action_space).n)
         """How many actions the task has (the network's outputs)."""
         self.agent = DQNAgent(
             config,
             self.device,
             self.n_actions,
-            (height, width, channels),
+            shape,
             int(init.generate_state(1)[0]),
         )
-        self.memory = ReplayMemory(config.memory_size, self.agent.frame_shape, self.device)
+        self.memory = ReplayMemory(
+            config.memory_size, self.agent.frame_shape, self.device, dtype=self.agent.frame_dtype
+        )
         self.epsilon = EpsilonSchedule(
             config.epsilon_start, config.epsilon_decay, config.epsilon_min
         )
@@ -232,7 +234,7 @@ class Trainer(StagedRun):
                 "config": self.config.to_dict(),
                 "seed": self.seed,
                 "agent": self.agent.state_dict(),
-                "image_shape": list(self.agent.network.image_shape),
+                "image_shape": list(self.agent.network.observation_shape),
                 "memory": self.memory.state_dict() if memory else None,
                 "epsilon": self.epsilon.value,
                 "global_step": self.global_step,
@@ -345,21 +347,23 @@ def _advisor_state(advisor: AnyAdvisor | AnyEvaluator | None) -> dict[str, Any] 
 
 
 def _check_spaces(env: gym.Env) -> None:
+    """Images (H, W, 3) of uint8 for the paper's network, or float vectors (n,) for the
+    dense one; discrete actions."""
     obs_space, action_space = env.observation_space, env.action_space
-    if not (
-        isinstance(obs_space, gym.spaces.Box)
-        and obs_space.dtype == np.uint8
-        and len(obs_space.shape) == 3
-        and obs_space.shape[2] == 3
-    ):
+    box = isinstance(obs_space, gym.spaces.Box)
+    shape = obs_space.shape or ()
+    vector = box and len(shape) == 1 and np.issubdtype(obs_space.dtype, np.floating)
+    image = box and obs_space.dtype == np.uint8 and len(shape) == 3 and shape[2] == 3
+    if not (vector or image):
         raise ValueError(
-            f"the learner needs uint8 RGB image observations (H, W, 3), got {obs_space}"
+            "the learner needs uint8 RGB image observations (H, W, 3) or float vectors (n,), "
+            f"got {obs_space}"
         )
     if not (isinstance(action_space, gym.spaces.Discrete) and 2 <= action_space.n <= MAX_ACTIONS):
         raise ValueError(
             f"the learner needs Discrete(n) actions, n from 2 to {MAX_ACTIONS}, got {action_space}"
         )
-    height, width = obs_space.shape[:2]
+    height, width = shape[:2] if image else (16, 16)
     if height % 8 or width % 8 or height < 16 or width < 16:
         raise ValueError(
             "the learner needs images whose sides are multiples of 8, at least 16, "

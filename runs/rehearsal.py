@@ -1,24 +1,28 @@
 """A rehearsal of a study's load: fitted advisors answer human sessions through the
-participant's own HTTP calls (what `web/static/advise.js` does: consent, the induction's
-Start, long-polled state, advice with its decision time), waiting their drawn decision
+participant's own HTTP calls (what `web/static/advise.js` does: consent, the study's
+comprehension check where it asks one, the induction's Start, long-polled state, advice
+with its decision time), waiting their drawn decision
 times, with the 3-D view's websocket open as the page keeps it (`/viewer/p/TOKEN`, every
 scene message read), so the server meets the traffic, the waits and the early leavers of
 real people.
 
-The simulated person sees only what the page shows (the arm's station and what it
-holds, in the participant state) and advises with `learner.fitted.FittedAdvisor`; it
-leaves early as often as the fitted people did (`FittedAdvisor.stop_after`). Under
-evaluative feedback it rates the move the learner made instead: Good when it is the action
-the fitted person would have advised, else Bad, sent after the drawn decision time, or not
-at all when that time is longer than the turn's time-out (the turn lapses, as a person's).
-A client of the server's HTTP API only: it runs anywhere the participant links reach.
+The simulated person sees only what the page shows and advises with
+`learner.fitted.FittedAdvisor` in the model's task: for the sorting robot, the arm's
+station and what it holds (in the participant state), so its advice is right or wrong as
+the fitted people's were there; for a task shown as frames, no ground truth, so it names
+actions as often as the fitted people did. It leaves early as often as they did
+(`FittedAdvisor.stop_after`). Under evaluative feedback it rates the move the learner made
+instead: Good when it is the action it would have advised, else Bad, sent after the drawn
+decision time, or not at all when that time is longer than the turn's time-out (the turn
+lapses, as a person's). A client of the server's HTTP API only: it runs anywhere the
+participant links reach.
 
 Through an online study's link (`join`) a simulated participant arrives as a panel's
 would, with its own panel id, and goes through the whole visit: the comprehension check
-(answered from what the induction tells a person: the sort rule, what Drop does over the
-center table, what to do when asked; a question it cannot know it guesses, and guesses
-again where the check says it was wrong) and, after its turns, the questionnaire (each
-item answered in the middle of its scale).
+(answered from what the induction tells a person: the task's own answers, the sort rule,
+what to do when asked; a question it cannot know it guesses, and guesses again where the
+check says it was wrong) and, after its turns, the questionnaire (each item answered in
+the middle of its scale).
 """
 
 from __future__ import annotations
@@ -30,13 +34,14 @@ from typing import Any
 from urllib.parse import urlsplit
 
 import httpx
-import numpy as np
 
 from learner.fitted import FittedAdvisor, FittedModel
+from learner.records import TRAINING, stage_of
 from sim.rules import SortRule
+from study.services.visit import task_questions
+from tasks import Task, get_task
 
 ENDED = ("finished", "stopped", "interrupted", "abandoned", "failed")
-NO_IMAGE = np.zeros((64, 64, 3), np.uint8)
 
 
 @dataclass(frozen=True)
@@ -101,7 +106,7 @@ class _Viewer(threading.Thread):
 
 
 def _info(state: dict[str, Any]) -> dict[str, Any]:
-    """The ground truth the page shows: station and held object."""
+    """The ground truth the sorting robot's page shows: station and held object."""
     held = state.get("held") or {}
     return {
         "station": state.get("station") or "center",
@@ -124,9 +129,13 @@ def rehearse(
     """One simulated participant through the session of `token`, until its advice is
     over, it leaves early, or the session ends. `speed` > 1 divides the waits (a quick
     rehearsal); the decision time sent is the drawn one. `viewer`: keep the 3-D view's
-    websocket open meanwhile, as the page does."""
-    advisor = FittedAdvisor(model, sort_rule, seed)
-    view = _Viewer(base_url, token) if viewer else None
+    websocket open meanwhile, as the page does (a task with a live 3-D view)."""
+    task = get_task(model.task)
+    if model.task == "sorting":
+        advisor = FittedAdvisor(model, sort_rule, seed)
+    else:
+        advisor = FittedAdvisor(model, seed=seed, task=task)
+    view = _Viewer(base_url, token) if viewer and task.live_view else None
     headers = {"Authorization": f"Bearer {token}"}
     times: list[float] = []
     kind, lapsed = "advice", 0
@@ -136,7 +145,7 @@ def rehearse(
                         "texts_version": shown["texts_version"]}))  # fmt: skip
         check = _ok(client.get("/api/participant/check"))
         asked = check["required"] and not check["passed"]  # (passed: a participant back)
-        tries, passed = _pass_check(client, check, sort_rule) if asked else (0, True)
+        tries, passed = _pass_check(client, check, task, sort_rule) if asked else (0, True)
         if not passed:  # every try wrong: the visit ended `excluded`
             return Rehearsed(token[-4:], 0, [], False, "excluded", check_tries=tries)
         state = _ok(client.post("/api/participant/start"))
@@ -149,14 +158,14 @@ def rehearse(
                 break  # this person leaves: the session's idle limit will abandon it
             if state["advice_wanted"] and state.get("rated_action") is not None:
                 kind = "evaluative"
-                answered, state = _rate(client, advisor, state, speed)
+                answered, state = _rate(client, advisor, task, state, speed)
                 if answered is None:
                     lapsed += 1
                 else:
                     times.append(answered)
                 continue
             if state["advice_wanted"] and state["advice_index"] is not None:
-                action = advisor.advise(NO_IMAGE, _info(state))
+                action = _would_advise(advisor, task, state)
                 drawn = advisor.last_decision_time_s or 0.0
                 time.sleep(drawn / speed)
                 body = {"advice_index": state["advice_index"], "action": action,
@@ -208,12 +217,18 @@ def join(link: str, panel_id: str, panel_param: str = "PROLIFIC_PID") -> tuple[s
     return base, target.rpartition("/p/")[2]
 
 
-def _pass_check(client: httpx.Client, check: dict[str, Any], sort_rule: Any) -> tuple[int, bool]:
-    """The comprehension check, answered as the induction taught (other questions
-    guessed, each wrong one guessed again): the tries it took, and whether it passed."""
-    rule = SortRule.parse(sort_rule)
-    taught = {"blue_cube": rule.side("cube", "blue"), "red_disk": rule.side("disk", "red"),
-              "drop_at_centre": "keep", "rating": "a"}  # fmt: skip
+def _pass_check(
+    client: httpx.Client, check: dict[str, Any], task: Task, sort_rule: Any
+) -> tuple[int, bool]:
+    """The comprehension check, answered as the induction taught (the task's own answers;
+    other questions guessed, each wrong one guessed again): the tries it took, and whether
+    it passed."""
+    taught: dict[str, Any] = {q.id: q.answer for q in task_questions(task)}
+    taught["rating"] = "a"
+    if task.name == "sorting":
+        rule = SortRule.parse(sort_rule)
+        taught.update({"blue_cube": rule.side("cube", "blue"),
+                       "red_disk": rule.side("disk", "red"), "drop_at_centre": "keep"})  # fmt: skip
     guess = {q["id"]: 0 for q in check["questions"]}
     tries = 0
     while True:
@@ -259,12 +274,16 @@ def _middle(item: dict[str, Any]) -> Any:
 
 
 def _rate(
-    client: httpx.Client, advisor: FittedAdvisor, state: dict[str, Any], speed: float
+    client: httpx.Client,
+    advisor: FittedAdvisor,
+    task: Task,
+    state: dict[str, Any],
+    speed: float,
 ) -> tuple[float | None, dict[str, Any]]:
     """One rating turn: (the decision time sent, or None for a turn left to lapse; the
     state after it)."""
     index = state["advice_index"]
-    would = advisor.advise(NO_IMAGE, _info(state))
+    would = _would_advise(advisor, task, state)
     drawn = advisor.last_decision_time_s or 0.0
     left = float(state.get("rating_left_s") or 0.0)
     if drawn / speed >= left:  # too slow: the turn goes on without an answer
@@ -277,6 +296,15 @@ def _rate(
     body = {"advice_index": index, "rating": rating, "decision_time_s": drawn}
     receipt = _ok(client.post("/api/participant/rating", params={"wait": 20}, json=body))
     return drawn, receipt["state"] or _ok(client.get("/api/participant/state"))
+
+
+def _would_advise(advisor: FittedAdvisor, task: Task, state: dict[str, Any]) -> int:
+    """The action the simulated person names in this state (what the page shows)."""
+    seen = _info(state) if task.live_view else None
+    stage = stage_of(state["stage"]) if state.get("stage") else TRAINING
+    action = advisor.advise_in(seen, stage)
+    assert isinstance(action, int), "made without a budget: it never leaves itself"
+    return action
 
 
 def _ok(response: httpx.Response) -> dict[str, Any]:

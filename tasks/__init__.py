@@ -1,7 +1,8 @@
 """Tasks: the environments a study's learners act in, each with what people need to advise
 in it. A task is any Gymnasium environment with discrete actions whose observations are
-uint8 RGB images (H, W, 3), H and W multiples of 8; the learner sees it only through the
-Gymnasium API.
+uint8 RGB images (H, W, 3), H and W multiples of 8 (into the paper's network), or float
+vectors (n,) (into a small dense network); the learner sees it only through the Gymnasium
+API.
 
 A task is named in a run (`RunSpec.task`) by one of:
 - a built-in name: `sorting` (the paper's robot, the default), `gridworld` (MiniGrid) or
@@ -79,6 +80,19 @@ class CheckQuestion:
             raise TaskError(f"{where}: its answer {self.answer!r} is not one of its choices")
 
 
+@dataclass(frozen=True)
+class Situations:
+    """What a person sees that changes how hard the choice is, for advisors fitted to people
+    (`learner.fitted`): each state's situation is a place within a group (the sorting robot:
+    the arm's station within what it holds), and a situation's error rate is pulled toward
+    its group's. A task without them is fitted by the run's stage within the correct action."""
+
+    of: Callable[[GymInfo], tuple[str, str]]
+    """(place, group) of the state `info` describes."""
+    places: tuple[str, ...]
+    groups: tuple[str, ...]
+
+
 class TaskError(ValueError):
     """A task that cannot be found or made; the message says why, for a person."""
 
@@ -139,6 +153,16 @@ class Task:
     texts: Mapping[str, str] = field(default_factory=dict)
     """The task's own participant page texts by key (title, consent, induction_1..3,
     thanks), over the pages' defaults for any task; a study's texts go over these."""
+    preset: str = "paper"
+    """The learner preset a run of this task starts from when it names none (the paper's
+    DQN for the sorting robot; a vector task's learner is the dense network whatever its
+    preset)."""
+    outcomes: tuple[str, ...] = ()
+    """What a step can do that the task counts beside its reward (the sorting robot's
+    placements: placed, misplaced, lost), in its steps' `outcome`; none: its reward and
+    success are its measures."""
+    situations: Situations | None = None
+    """The situations a fitted advisor conditions on (None: the stage and correct action)."""
 
     @property
     def n_actions(self) -> int:
@@ -239,6 +263,7 @@ __all__ = [
     "BUILT_IN",
     "CheckQuestion",
     "OptionValue",
+    "Situations",
     "Task",
     "TaskAction",
     "TaskError",

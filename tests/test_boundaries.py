@@ -272,7 +272,6 @@ RECORDS_ALLOWED: dict[str, str] = {
     "sim.env.SortingEnv.step": GYM_INFO,
     "sim.rewards.step_outcome": GYM_INFO + " before and after a step",
     "sim.rules.oracle_action": GYM_INFO,
-    "learner.fitted.situation": GYM_INFO,
     "learner.advisors.Advisor.advise": GYM_INFO,
     "learner.advisors.RecordedAdvisor.advise": GYM_INFO,
     "learner.fitted.FittedAdvisor.advise": GYM_INFO,

@@ -90,8 +90,8 @@ def fit(args: argparse.Namespace) -> int:
     if fitted.without_situation:
         print(f"  {fitted.without_situation} advice left out: their episode has no record")
     print(
-        f"  wrong: {summary['error_rate']:.3f} overall; by what the arm held: "
-        + ", ".join(f"{h} {r:.3f}" for h, r in summary["error_rate_by_held"].items())
+        f"  wrong: {summary['error_rate']:.3f} overall; by group: "
+        + ", ".join(f"{h} {r:.3f}" for h, r in summary["error_rate_by_group"].items())
     )
     print(
         "  by situation: "

@@ -5,7 +5,8 @@ as people would: consent, the induction's Start, then each advice (or, under eva
 feedback, each rating) after its drawn decision time, leaving early as often as the fitted
 people did (`runs.rehearsal`); a summary per kind of feedback.
 Create the human sessions first (dashboard, or POST /api/studies/ID/sessions) and pass
-their links; each simulated participant runs in its own thread."""
+their links; each simulated participant runs in its own thread. The model's task is the
+sessions' (the grid world's people are rehearsed with a model fitted to a grid world study)."""
 
 from __future__ import annotations
 
@@ -51,7 +52,7 @@ def register(subparsers: Any) -> None:
         "--panel-param", default="PROLIFIC_PID",
         help="the study link's panel id parameter (the design's panel: Prolific's by default)",
     )  # fmt: skip
-    parser.add_argument("--sort-rule", default="color", help="the study's sort rule")
+    parser.add_argument("--sort-rule", default="color", help="the study's sort rule (task sorting)")
     parser.add_argument("--seed", type=int, default=0, help="participant i draws with seed+i")
     parser.add_argument(
         "--speed", type=float, default=1.0,

@@ -12,7 +12,7 @@ from typing import Any, Protocol
 from learner.advisors import NO_ADVICE, Advisor, NoAdvice
 from learner.evaluators import Evaluator
 from learner.records import observation_hash
-from learner.strategies import AdviceMoment
+from learner.strategies import AdviceMoment, ask
 from runs.worker.link import WorkerLink
 from runs.worker.messages import AdviceRequest, AdviceResult
 from runs.worker.recorder import Reporter
@@ -158,7 +158,7 @@ class RecordingAdvisor:
     def advise_at(self, moment: AdviceMoment) -> int | NoAdvice:
         started = time.perf_counter()
         requested_at = datetime.now(UTC)
-        answer = self._inner.advise(moment.obs, moment.info)
+        answer = ask(self._inner, moment)
         action = None if answer is NO_ADVICE else int(answer)
         elapsed = time.perf_counter() - started
         self._log.add_advice(

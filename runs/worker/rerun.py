@@ -4,7 +4,8 @@ The web process loads no simulation, so it hands a `RerunOrder` (the session's r
 episode's reset seed and its logged actions and rewards) to a spawned process, which
 resets the environment with the seed, takes the logged actions (the environment is
 deterministic), and sends back one `Rerun`: the scene's bodies, the poses before the
-first step, and per step the image the learner saw, the motion and the poses after.
+first step, and per step the image the learner saw, the motion and the poses after (a task
+without a live 3-D view has no bodies: its steps' images are the playback).
 Then it exits: the page steps through what it got, and the web process keeps nothing
 running for it.
 """
@@ -74,9 +75,11 @@ def rerun_episode(order: RerunOrder) -> Rerun:
     env = order.spec.make_env(record_motion=True)
     try:
         obs, _ = env.reset(seed=order.reset_seed)
-        scene = scene_of(env)
+        scene = scene_of(env) if order.spec.the_task.live_view else None
         start = SceneReset(
-            bodies=list(scene.scene_bodies()), poses=dict(scene.body_poses()), episode=-1
+            bodies=list(scene.scene_bodies()) if scene else [],
+            poses=dict(scene.body_poses()) if scene else {},
+            episode=-1,
         )
         steps: list[RerunStep] = []
         mismatch = ""
@@ -89,7 +92,7 @@ def rerun_episode(order: RerunOrder) -> Rerun:
                 action=int(action),
                 reward=float(reward),
                 frames=list(getattr(scene, "last_motion", None) or []),
-                poses=dict(scene.body_poses()),
+                poses=dict(scene.body_poses()) if scene else {},
                 global_step=index + 1,
             )
             steps.append(RerunStep(seen, motion, float(reward)))

@@ -3,10 +3,11 @@
 The advice rows say what was advised, not in which situation, nor what was right: each
 advised episode is replayed from its reset seed and its logged actions (as
 `study.services.outcomes` does), and the state before each advised step gives the
-situation (station, held colour) and the oracle's action. A model is stored in
+situation (the task's, or the step's stage within the correct action) and the task's
+correct action. A model is stored in
 `fitted_advisors` with the sessions it came from, and as a JSON file under the data
-folder (`fitted/`) that a `fitted` run names. Loads the simulator: run it from the
-command line (`ideeprl fit`), not in the web process.
+folder (`fitted/`) that a `fitted` run names. A study's sessions are fitted in one task.
+Loads the simulator: run it from the command line (`ideeprl fit`), not in the web process.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from learner.fitted import AdviceSeen, FittedModel, SessionAdvice, fit, situation
+from learner.records import stage_of
 from learner.seeding import reset_seeds
 from study.db.models import (
     LIVE_STATUSES,
@@ -34,6 +36,7 @@ from study.services.errors import Invalid, NotFound
 from study.services.fitted_files import write_model_file
 from study.services.outcomes import ReplayMismatch
 from study.services.studies import get_study
+from tasks import get_task
 
 if TYPE_CHECKING:
     import gymnasium as gym
@@ -63,7 +66,7 @@ class Fitted:
     model: FittedModel
     without_situation: int
     """Advice that could not be placed: its episode has no reset seed (recorded before
-    they were kept), or its step was not stored."""
+    they were kept), its step was not stored, or its task names no correct action there."""
 
 
 def session_advice(db: Session, session: StudySession) -> tuple[SessionAdvice, int]:
@@ -89,7 +92,7 @@ def session_advice(db: Session, session: StudySession) -> tuple[SessionAdvice, i
             if here and episode.reset_seed is not None:
                 assert env is not None
                 first = episode.first_global_step
-                seen += _replay(db, session, first, episode.reset_seed, here, env, spec.sort_rule)
+                seen += _replay(db, session, first, episode.reset_seed, here, env)
         # The episode a person left in (an abandoned session) has no record yet: its
         # steps are stored, and its reset seed is the run's next one.
         first = episodes[-1].last_global_step + 1 if episodes else 1
@@ -97,7 +100,7 @@ def session_advice(db: Session, session: StudySession) -> tuple[SessionAdvice, i
         if here and spec.learner == "dqn":
             assert env is not None
             reset_seed = reset_seeds(spec.seed, len(episodes) + 1)[-1]
-            seen += _replay(db, session, first, reset_seed, here, env, spec.sort_rule)
+            seen += _replay(db, session, first, reset_seed, here, env)
     finally:
         if env is not None:
             env.close()
@@ -112,11 +115,8 @@ def _replay(
     reset_seed: int,
     advice: dict[int, Advice],
     env: gym.Env[Any, Any],
-    sort_rule: str | dict[str, str],
 ) -> list[AdviceSeen]:
-    import sim
-
-    rule = sim.SortRule.parse(sort_rule)
+    task, options = session.spec.the_task, session.spec.env_options()
     steps = db.scalars(
         select(Step)
         .where(
@@ -129,17 +129,10 @@ def _replay(
     seen = []
     for step in steps:
         given = advice.get(step.global_step)
-        if given is not None and given.action is not None:  # a replay's unanswered request
-            station, held = situation(info)
-            seen.append(
-                AdviceSeen(
-                    station,
-                    held,
-                    int(sim.oracle_action(info, rule)),
-                    given.action,
-                    given.decision_time_s,
-                )
-            )
+        correct = None if given is None else task.correct(info, options)
+        if given is not None and given.action is not None and correct is not None:
+            place, group = situation(task, info, stage_of(step.stage), correct)
+            seen.append(AdviceSeen(place, group, correct, given.action, given.decision_time_s))
         _, reward, _, _, info = env.step(step.action)
         if abs(float(reward) - step.reward) > 1e-9:
             raise ReplayMismatch(
@@ -191,7 +184,13 @@ def fit_study(
             "session counts once its advice is over; --methods human,oracle fits an oracle "
             "pilot too)"
         )
-    model = fit(fitted, methods)
+    tasks = sorted({s.spec.task for s in sessions if any(f.session_id == s.id for f in fitted)})
+    if len(tasks) > 1:
+        raise Invalid(
+            "sessions",
+            f"the sessions are of tasks {', '.join(tasks)}; fit one task's (--sessions)",
+        )
+    model = fit(fitted, methods, task=get_task(tasks[0]))
     row = FittedAdvisorModel(
         study_id=study_id, model=model.to_json(), session_ids=[s.session_id for s in fitted]
     )

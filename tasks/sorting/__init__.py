@@ -13,7 +13,7 @@ import gymnasium as gym
 from sim.actions import ACTION_NAMES
 from sim.rules import oracle_action
 from sim.scenario import ScenarioOptions
-from tasks import GymInfo, OptionValue, Task, TaskAction, TaskOptions, task_factory
+from tasks import GymInfo, OptionValue, Situations, Task, TaskAction, TaskOptions, task_factory
 
 TEXTS = Path(__file__).with_name("texts")
 """The participant pages' texts for this task (the robot, its tables and its four actions)."""
@@ -26,6 +26,16 @@ OPTIONS: dict[str, OptionValue] = {
     "sort_rule": "color",
     **ScenarioOptions().to_dict(),
 }
+
+STATIONS = ("center", "left", "right")
+HELD = ("nothing", "red", "blue")
+"""What the arm holds, as a situation knows it: nothing, or the held object's colour."""
+
+
+def situation(info: GymInfo) -> tuple[str, str]:
+    """(station, held) of the environment's ground truth: `("center", "blue")`. Nine
+    situations stay estimable from about 100 advice a person."""
+    return str(info["station"]), str(info.get("held_color") or "") or "nothing"
 
 
 def _make_env(
@@ -56,5 +66,7 @@ def sorting_task() -> Task:
         good_reward=2.5,
         live_view=True,
         agent="robot",
+        outcomes=("placed", "misplaced", "lost"),
+        situations=Situations(situation, STATIONS, HELD),
         texts={f.stem: f.read_text() for f in sorted(TEXTS.glob("*.txt"))},
     )

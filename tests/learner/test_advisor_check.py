@@ -81,3 +81,26 @@ def test_the_paper_advisor_advises_like_a_working_policy(tmp_path: Path) -> None
     (quality,) = check.at_advice
     assert quality.placed >= 30 and quality.misplaced == 0 and quality.longest_repeat <= 10
     assert not any("advice-time" in p for p in check.problems)
+
+
+def test_a_grid_world_advisors_check_speaks_of_its_tasks_measures(tmp_path: Path) -> None:
+    """The grid world counts no placements: its check's message gives the fresh episodes'
+    success rate and the advice's repeats, never the robot's placed, misplaced and lost."""
+    config = {"episodes": 1, "pretraining_steps": 30, "advice_budget": 10, "batch_size": 8,
+              "memory_size": 100, "max_episode_steps": 20, "torch_threads": 1}  # fmt: skip
+    trained = RunSpec.from_json({"task": "gridworld", "method": "autonomous", "config": config})
+    trainer, _ = trained.build()
+    while not trainer.done:
+        trainer.step()
+    checkpoint = tmp_path / "advisor-grid.pt"
+    trainer.save_checkpoint(checkpoint, trained.to_json(), memory=False)
+    spec = trained.replace(method="agent", advisor_checkpoint=str(checkpoint))
+    check = checked_advisor(checkpoint, spec, advice_seeds=[0], episodes=3, allow_failed=True)
+    (quality,) = check.at_advice
+    assert quality.advice == 10 and not check.placements
+    assert check.success_rate is not None and 0.0 <= check.success_rate <= 1.0
+    summary = check.summary()
+    assert f"success rate {check.success_rate:.2f}" in summary
+    assert "in 10 advice" in summary
+    assert not any(word in summary for word in ("placed", "misplaced", "lost"))
+    assert stored_check(checkpoint, spec, [0], episodes=3) == check  # read back as stored

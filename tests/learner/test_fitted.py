@@ -12,7 +12,6 @@ import pytest
 import sim
 from learner.advisors import OracleAdvisor, make_advisor
 from learner.fitted import (
-    HELD,
     AdviceSeen,
     Count,
     FittedAdvisor,
@@ -20,8 +19,8 @@ from learner.fitted import (
     SessionAdvice,
     fit,
     read_model,
-    situation,
 )
+from tasks.sorting import HELD, situation
 
 RULE = sim.SortRule.parse("color")
 MEDIAN_S, SIGMA = 2.0, 0.5
@@ -73,8 +72,8 @@ def test_the_fit_recovers_a_situation_dependent_error_rate_and_decision_times() 
     sessions = advised_sessions(3000)
     model = FittedModel.from_json(json.loads(json.dumps(fit(sessions).to_json())))
     assert model.advice >= 2500
-    assert abs(model.held_rate("blue") - 0.3) < 0.03
-    assert model.held_rate("red") < 0.01 and model.held_rate("nothing") < 0.01
+    assert abs(model.group_rate("blue") - 0.3) < 0.03
+    assert model.group_rate("red") < 0.01 and model.group_rate("nothing") < 0.01
     for key, count in model.by_situation.items():
         station, held = key.split("/")
         truth = 0.3 if held == "blue" else 0.0
@@ -93,7 +92,7 @@ def _model(blue_rate: float) -> FittedModel:
     by_held = {h: Count(10_000, int(10_000 * blue_rate) if h == "blue" else 0) for h in HELD}
     return FittedModel(
         advice=30_000, sessions=[1], methods=["human"], overall=Count(30_000, 3_000),
-        by_held=by_held, by_situation={}, wrong_actions=[[0] * 4 for _ in range(4)],
+        by_group=by_held, by_situation={}, wrong_actions=[[0] * 4 for _ in range(4)],
         decision_time_median_s=1.5, decision_time_sigma=0.4,
         decision_time_quantiles=[], budget_used=[1.0, 0.5],
     )  # fmt: skip

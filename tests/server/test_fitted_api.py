@@ -7,9 +7,10 @@ from pathlib import Path
 
 import httpx
 
-from learner.fitted import HELD, Count, FittedModel
+from learner.fitted import Count, FittedModel
 from study.db.engine import make_engine, make_session_factory
 from study.db.models import FittedAdvisorModel
+from tasks.sorting import HELD
 from tests.server.live import LiveServer
 from tests.server.scale import session_body
 
@@ -21,7 +22,7 @@ def test_a_studys_fitted_models_are_listed_read_and_named_by_sessions(
     other = api.post("/api/studies", json={"name": "fitted models elsewhere"}).json()["id"]
     model = FittedModel(
         advice=200, sessions=[1], methods=["human"], overall=Count(200, 20),
-        by_held={h: Count(60, 4) for h in HELD}, by_situation={"center/blue": Count(30, 6)},
+        by_group={h: Count(60, 4) for h in HELD}, by_situation={"center/blue": Count(30, 6)},
         wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=2.0,
         decision_time_sigma=0.4, decision_time_quantiles=[], budget_used=[1.0, 0.5],
     )  # fmt: skip
@@ -59,7 +60,7 @@ def test_a_studys_fitted_models_are_listed_read_and_named_by_sessions(
 
 def _store(server: LiveServer, study: int, session_ids: list[int]) -> int:
     model = FittedModel(
-        advice=1, sessions=session_ids, methods=["human"], overall=Count(1, 0), by_held={},
+        advice=1, sessions=session_ids, methods=["human"], overall=Count(1, 0), by_group={},
         by_situation={}, wrong_actions=[[0] * 4 for _ in range(4)],
         decision_time_median_s=None, decision_time_sigma=None, decision_time_quantiles=[],
         budget_used=[1.0],

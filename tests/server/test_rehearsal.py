@@ -13,9 +13,14 @@ import httpx
 import pytest
 
 from cli.main import main
-from learner.fitted import HELD, Count, FittedModel
+from learner.fitted import Count, FittedModel, fit
+from study.schemas.design import Condition, StudyDesign
+from tasks import get_task
+from tasks.sorting import HELD
+from tests.learner.test_fitted_tasks import recorded
 from tests.server.live import LiveServer
 from tests.server.scale import export, session_body, wait_for_status
+from tests.study.test_visit import set_design
 
 pytestmark = pytest.mark.slow
 BUDGET = 5
@@ -26,7 +31,7 @@ def test_a_fitted_advisor_advises_a_human_session_through_its_link(
 ) -> None:
     model = FittedModel(
         advice=300, sessions=[1], methods=["human"], overall=Count(300, 0),
-        by_held={h: Count(100, 0) for h in HELD}, by_situation={},
+        by_group={h: Count(100, 0) for h in HELD}, by_situation={},
         wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=0.2,
         decision_time_sigma=0.3, decision_time_quantiles=[], budget_used=[1.0],
     )  # fmt: skip
@@ -63,7 +68,7 @@ def test_a_rehearsal_compares_advice_and_ratings_through_their_links(
     stored with its drawn decision time, the summary given per kind."""
     model = FittedModel(
         advice=300, sessions=[1], methods=["human"], overall=Count(300, 0),
-        by_held={h: Count(100, 0) for h in HELD}, by_situation={},
+        by_group={h: Count(100, 0) for h in HELD}, by_situation={},
         wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=0.2,
         decision_time_sigma=0.3, decision_time_quantiles=[], budget_used=[1.0],
     )  # fmt: skip
@@ -107,7 +112,7 @@ def test_an_online_study_of_advice_against_evaluation_is_rehearsed_through_its_l
     their visits; the summary and the export are per condition."""
     model = FittedModel(
         advice=300, sessions=[1], methods=["human"], overall=Count(300, 0),
-        by_held={h: Count(100, 0) for h in HELD}, by_situation={},
+        by_group={h: Count(100, 0) for h in HELD}, by_situation={},
         wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=0.2,
         decision_time_sigma=0.3, decision_time_quantiles=[], budget_used=[1.0],
     )  # fmt: skip
@@ -148,3 +153,40 @@ def test_an_online_study_of_advice_against_evaluation_is_rehearsed_through_its_l
     code = main([*argv, "--participants", "1", "--seed", "7"])  # a third panel id
     printed = capsys.readouterr()
     assert code == 1 and "did not admit" in printed.err + printed.out  # the study is full
+
+
+def test_fitted_people_of_a_grid_world_study_rehearse_its_sessions(
+    server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The grid world's page shows frames, no ground truth: the simulated people advise
+    its four moves as often as the fitted people did, with no 3-D view to keep open."""
+    task = get_task("gridworld")
+    model = fit(recorded("gridworld", 300), task=task)
+    path = tmp_path / "grid.json"
+    path.write_text(json.dumps(model.to_json()))
+    study = api.post("/api/studies", json={"name": "grid world rehearsal"}).json()
+    design = StudyDesign(conditions={"a": Condition(run={"method": "human", "task": "gridworld"})})
+    set_design(server, study["id"], design.model_dump(mode="json"))
+    body = session_body("human", task="gridworld", motion=None, advice_budget=BUDGET,
+                        pretraining_steps=16, episodes=1, max_episode_steps=20)  # fmt: skip
+    made = []
+    for _ in range(2):
+        response = api.post(f"/api/studies/{study['id']}/sessions", json=body)
+        assert response.status_code == 201, response.text
+        made.append(response.json())
+    links = [a for m in made for a in ("--link", f"{server.url}/p/{m['participant_token']}")]
+
+    code = main(["rehearse", "--model", str(path), *links, "--speed", "8", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    done = json.loads(out)["participants"]
+    assert [d["advice"] for d in done] == [BUDGET, BUDGET]
+    assert all(d["viewer_messages"] == 0 for d in done)
+    for created, rehearsed in zip(made, done, strict=True):
+        wait_for_status(api, created["id"], {"finished"})
+        advice = api.get(f"/api/sessions/{created['id']}/advice").json()
+        assert [a["advisor"] for a in advice] == ["human"] * BUDGET
+        assert {a["action"] for a in advice} <= set(range(task.n_actions))
+        assert [a["decision_time_s"] for a in advice] == pytest.approx(
+            rehearsed["decision_times_s"]
+        )

@@ -21,7 +21,7 @@ def test_a_restored_fitted_session_names_its_model_in_the_new_data_folder(
     tmp_path: Path,
 ) -> None:
     model = FittedModel(
-        advice=1, sessions=[], methods=["human"], overall=Count(1, 0), by_held={},
+        advice=1, sessions=[], methods=["human"], overall=Count(1, 0), by_group={},
         by_situation={}, wrong_actions=[[0] * 4 for _ in range(4)],
         decision_time_median_s=None, decision_time_sigma=None, decision_time_quantiles=[],
         budget_used=[1.0],
