@@ -63,6 +63,7 @@ from runs.worker.population import (
 )
 from runs.worker.worker import WorkerOptions, worker_main
 from server.live import visits
+from server.live.cluster import TrainingCluster
 from server.live.hub import Hub
 from server.live.reaping import join
 from study.db.models import (
@@ -246,6 +247,8 @@ class SessionManager:
         self._handovers: set[asyncio.Task[None]] = set()
         self._closing = False
         self._train_queue: deque[int] = deque()
+        self.cluster: TrainingCluster | None = None
+        """A Ray cluster that trains the granted groups in place of this machine's slots."""
         self.factory = factory
         self.database_url = database_url
         self.hub = hub
@@ -507,6 +510,9 @@ class SessionManager:
             group = self._next_group(waiting, free)
             taken = {h.session_id for h in group}
             self._train_queue = deque(sid for sid in self._train_queue if sid not in taken)
+            if self.cluster is not None:  # the cluster trains the group (server.live.cluster)
+                self.cluster.take(group, self.handles, self.notify, self.command_timeout_s)
+                continue
             slot = object() if len(group) > 1 else None
             for handle in group:
                 handle.queued = False
