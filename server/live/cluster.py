@@ -40,6 +40,7 @@ from runs.worker.worker import WorkerOptions
 from server.live.hub import Hub
 from server.live.reaping import join
 from study.db.models import Status, StudySession, utcnow
+from study.services.errors import Conflict
 from study.services.sessions import set_status
 
 log = logging.getLogger(__name__)
@@ -305,11 +306,24 @@ class TrainingCluster:
         session on the cluster, written to its row, where its task reads it within
         `runs.worker.cluster.CONTROL_EVERY_S`; False when no task of this process has it."""
         with self._lock:
-            tokens = {h.session_id: h.token for t in self._tasks.values() for h in t.handed}
-        if session_id not in tokens:
+            task = next(
+                (
+                    t
+                    for t in self._tasks.values()
+                    if any(h.session_id == session_id for h in t.handed)
+                ),
+                None,
+            )
+        if task is None:
             return False
+        if status != Status.stopped and len(task.handed) > 1:
+            raise Conflict(
+                f"session {session_id} trains together with other sessions on the cluster "
+                "and cannot pause alone; stop it instead (it resumes from its last checkpoint)"
+            )
+        (token,) = [h.token for h in task.handed if h.session_id == session_id]
         with self.factory() as db:
-            return set_status(db, session_id, status, detail, token=tokens[session_id])
+            return set_status(db, session_id, status, detail, token=token)
 
     def running(self) -> list[int]:
         """The sessions of the tasks not ended yet."""

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +60,22 @@ def handed(factory: sessionmaker[Session], session_id: int) -> Handed:
     """The session claimed here, as the web process holds one it hands over."""
     with factory() as db:
         return Handed(session_id, claim(db, session_id, resume=False))
+
+
+def until(
+    factory: sessionmaker[Session],
+    session_id: int,
+    done: Callable[[StudySession], bool],
+    timeout_s: float = 240,
+) -> StudySession:
+    """The session's row once `done` holds for it."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        found = row(factory, session_id)
+        if done(found):
+            return found
+        time.sleep(0.2)
+    raise AssertionError(f"session {session_id}: {found.status} {found.status_detail}")
 
 
 def hold(seconds: float) -> None:
@@ -124,18 +140,41 @@ def test_sessions_train_on_two_nodes_as_here_and_survive_a_node_killed(
             assert row(factory, there[seed]).status == Status.finished
             assert records(factory, there[seed]) == records(factory, here[seed])
 
+        controlled = session(factory, study_id, 14, 6)
+        trainer.submit([handed(factory, controlled)])
+        until(factory, controlled, lambda s: s.checkpoint_episodes >= 1)
+        assert trainer.control(controlled, Status.paused)
+        time.sleep(2)  # read within a second, checkpointed at the next step boundary
+        paused = row(factory, controlled)
+        time.sleep(3)  # paused: no step taken, its heartbeat goes on
+        still = row(factory, controlled)
+        assert still.status == Status.paused
+        assert still.progress["global_step"] == paused.progress["global_step"]
+        assert still.checkpoint_step == paused.checkpoint_step
+        assert still.heartbeat_at is not None and paused.heartbeat_at is not None
+        assert still.heartbeat_at > paused.heartbeat_at
+        assert trainer.control(controlled, Status.running)
+        until(factory, controlled, lambda s: s.checkpoint_step > paused.checkpoint_step)
+        assert trainer.control(controlled, Status.stopped, "stopped by the researcher")
+        assert trainer.wait(120)
+        stopped = row(factory, controlled)
+        assert (stopped.status, stopped.status_detail) == (
+            Status.stopped,
+            "stopped by the researcher",
+        )
+        assert stopped.checkpoint_episodes < 6, "stopped before its end, checkpointed"
+
         head = ray.get_runtime_context().get_node_id()
         sleep = ray.remote(num_cpus=1)(hold)
         holds_head = sleep.options(
             scheduling_strategy=NodeAffinitySchedulingStrategy(head, soft=False)
         ).remote(600)
         trainer.submit([handed(factory, there[13])])  # to the other node
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline:
-            killed = row(factory, there[13])
-            if killed.checkpoint_episodes >= 1 and TRAINS_ON in killed.status_detail:
-                break
-            time.sleep(0.2)
+        killed = until(
+            factory,
+            there[13],
+            lambda s: s.checkpoint_episodes >= 1 and TRAINS_ON in s.status_detail,
+        )
         assert killed.status == Status.running and killed.checkpoint_episodes < 6
         cluster.remove_node(worker)  # mid-run, after a checkpoint
         ray.cancel(holds_head, force=True)  # the head's CPU frees for it
