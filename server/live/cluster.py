@@ -35,6 +35,7 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
 from runs.worker.cluster import Handed, train_handed
+from runs.worker.link import SHUTTING_DOWN
 from runs.worker.messages import Command, StatusChanged
 from runs.worker.worker import WorkerOptions
 from server.live.hub import Hub
@@ -45,6 +46,9 @@ from study.services.sessions import set_status
 
 log = logging.getLogger(__name__)
 WAITING = "waiting for a node of the Ray cluster"
+SHUT_DOWN = (
+    f"{SHUTTING_DOWN} while it trained on the Ray cluster; it resumes from its last checkpoint"
+)
 ATTEMPTS = 3
 """Times a session is started on the cluster before it is left `interrupted` (its node
 died each time)."""
@@ -130,13 +134,24 @@ class TrainingCluster:
         self._watcher.start()
 
     def close(self) -> None:
-        """Stop watching; the tasks end with this process (Ray's owner rule), and their
-        sessions resume from their last checkpoints."""
+        """Server shutdown: the tasks end with this process (Ray's owner rule), so they are
+        cancelled, and their sessions left `interrupted` as a local worker's are by a
+        shutdown in order: from their last checkpoints, the server's next start resumes
+        the people's sessions (`server.live.manager.resumes_after_restart`)."""
         self._closing.set()
         if self._watcher is not None:
             self._watcher.join(10)
         import ray
 
+        with self._lock:
+            tasks, self._tasks = dict(self._tasks), {}
+        for ref in tasks:
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
+        with self.factory() as db:
+            for task in tasks.values():
+                for h in task.handed:
+                    set_status(db, h.session_id, Status.interrupted, SHUT_DOWN, token=h.token)
         with contextlib.suppress(Exception):
             ray.shutdown()
 

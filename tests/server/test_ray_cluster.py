@@ -17,8 +17,9 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from learner.run import RunSpec
 from runs.worker.cluster import TRAINS_ON, Handed
+from runs.worker.link import SHUTTING_DOWN
 from runs.worker.worker import WorkerOptions, run_session
-from server.live.cluster import TrainingCluster, cluster_refusal
+from server.live.cluster import SHUT_DOWN, TrainingCluster, cluster_refusal
 from server.live.hub import Hub
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
@@ -185,6 +186,15 @@ def test_sessions_train_on_two_nodes_as_here_and_survive_a_node_killed(
         resumed = [entry["from_step"] for entry in done.provenance]
         assert resumed[0] == 0 and resumed[-1] > 0, "resumed from its last checkpoint"
         assert records(factory, there[13]) == records(factory, here[13])
+
+        cut = session(factory, study_id, 15, 6)
+        trainer.submit([handed(factory, cut)])
+        until(factory, cut, lambda s: s.checkpoint_episodes >= 1)
+        trainer.close()  # the server shuts down in order
+        time.sleep(2)
+        left = row(factory, cut)
+        assert (left.status, left.status_detail) == (Status.interrupted, SHUT_DOWN)
+        assert left.status_detail.startswith(SHUTTING_DOWN), "resumed by the next start"
     finally:
         trainer.close()
         cluster.shutdown()
