@@ -13,6 +13,11 @@ agent-steps a second while both trained (`busy_rate`), extrapolated to the paper
 `PAPER_TRAINING_STEPS` a participant. The cluster's nodes share this machine's cores,
 so the number says what Ray and the database channel cost; on real machines each node
 adds its own cores' rate (a prediction from the per-node rate, not a measurement).
+
+Only a quiet machine gives that number. On a shared one, Linux's autogroups (on where
+`/proc/sys/kernel/sched_autogroup_enabled` is 1) share the CPU between sessions: each Ray
+node is a session of its own, while the two local workers share this one's, so under
+load the cluster's processes get a larger share of the cores, and its rate looks higher.
 """
 
 from __future__ import annotations
