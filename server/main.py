@@ -12,6 +12,7 @@ from fastapi import FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
+from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from learner.fields import FieldError, leaves
@@ -30,6 +31,7 @@ from server.guard import (
 )
 from server.limits import WindowLimit
 from server.live import rating
+from server.live.cluster import TrainingCluster, cluster_refusal, storage_root
 from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.live.playbacks import Playbacks
@@ -65,9 +67,17 @@ pose updates viser itself sends uncompressed ("compression can be too slow"); de
 again in the web process would cost that process the CPU its participants' requests need."""
 
 
+class ClusterRefused(Exception):
+    """The server cannot hand training to its Ray cluster (the message says why)."""
+
+
 def worker_options(settings: Settings) -> WorkerOptions:
+    """With a Ray cluster, checkpoints go to the storage root that every node sees."""
+    shared = settings.ray_address is not None
     return WorkerOptions(
-        data_dir=settings.data_dir,
+        data_dir=storage_root(settings.data_dir, settings.storage_root)
+        if shared
+        else settings.data_dir,
         checkpoint_every_episodes=settings.checkpoint_every_episodes,
         flush_every_steps=settings.flush_every_steps,
         heartbeat_s=settings.heartbeat_s,
@@ -136,6 +146,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         settings.training_population,
     )
     rating.install(manager)
+    if settings.ray_address:
+        refusal = cluster_refusal(
+            settings.db_url, storage_root(settings.data_dir, settings.storage_root)
+        )
+        if refusal is not None:
+            raise ClusterRefused(refusal)
+        manager.cluster = TrainingCluster(
+            settings.ray_address, factory, settings.db_url, manager.options, hub
+        )
     pools = Pools(
         manager,
         settings.pool_limit,
@@ -151,6 +170,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         upgrade(engine, settings.data_dir / BACKUPS)
         await manager.open()
+        if manager.cluster is not None:
+            await run_in_threadpool(manager.cluster.open)
         viewer.start()
         playbacks.open()
         pools.open()
@@ -161,6 +182,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         playback_viewer.stop()
         viewer.stop()
         await manager.close()
+        if manager.cluster is not None:
+            manager.cluster.close()
         engine.dispose()
 
     app = FastAPI(

@@ -141,6 +141,16 @@ class Settings(BaseSettings):
     dashboard_login_s: float = Field(default=8 * 3600.0, gt=0)
     """How long a dashboard login lasts; logging out ends it at once."""
 
+    ray_address: str | None = None
+    """A Ray cluster (`ray://head:10001`, or `auto` on a node of it) that trains the human
+    sessions whose advice is over, in place of this machine's trainer slots
+    (`server.live.cluster`); unset: they train here. Needs a database every node reaches
+    (PostgreSQL) and `storage_root`."""
+
+    storage_root: Path | None = None
+    """The folder every node of the Ray cluster sees at this same path, where checkpoints
+    go; default `data_dir` (then it must be the shared folder)."""
+
     keep_replay_memory: bool = False
     """Keep the replay memory in a finished session's final checkpoint (a session's own
     `keep_replay_memory` wins). Without it the checkpoint holds the network and what an

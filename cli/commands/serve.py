@@ -22,6 +22,11 @@ def register(subparsers: Any) -> None:
         help="address participants reach the server at, for their links (default http://HOST:PORT)",
     )
     parser.add_argument("--data-dir", type=Path, help="folder of database, checkpoints, exports")
+    parser.add_argument(
+        "--ray-address",
+        help="a Ray cluster that trains participants' learners after their advice "
+        "(needs PostgreSQL and a storage root every node sees; docs/deploy.md)",
+    )
     parser.add_argument("--log-level", default="info", help="uvicorn log level")
     parser.set_defaults(func=serve)
 
@@ -29,8 +34,8 @@ def register(subparsers: Any) -> None:
 def serve(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from cli.commands.common import check_database, shown_url
-    from server.main import UVICORN_OPTIONS, create_app
+    from cli.commands.common import CommandError, check_database, shown_url
+    from server.main import UVICORN_OPTIONS, ClusterRefused, create_app
     from study.settings import Settings
 
     overrides = {
@@ -40,12 +45,16 @@ def serve(args: argparse.Namespace) -> int:
             "port": args.port,
             "public_url": args.public_url,
             "data_dir": args.data_dir,
+            "ray_address": args.ray_address,
         }.items()
         if v is not None
     }
     settings = Settings(**overrides)
     key, new = settings.ensure_api_key()
-    app = create_app(settings)
+    try:
+        app = create_app(settings)
+    except ClusterRefused as error:
+        raise CommandError(f"the server does not start: {error}", code=2) from None
     base = settings.base_url
     where = settings.data_dir / "api_key"
     if sys.stdout.isatty():

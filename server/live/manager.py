@@ -37,6 +37,7 @@ from runs.worker.link import SHUTTING_DOWN, WAITED_FOR_PARTICIPANT
 from runs.worker.messages import AdviceRequest, Command, StatusChanged, TrainingWanted
 from runs.worker.worker import WorkerOptions
 from server.live import visits
+from server.live.cluster import TrainingCluster
 from server.live.hub import Hub
 from server.live.reaping import join
 from server.live.session import Changes, LiveSession
@@ -109,6 +110,8 @@ class SessionManager:
         )
         self._handovers: set[asyncio.Task[None]] = set()
         self._closing = False
+        self.cluster: TrainingCluster | None = None
+        """A Ray cluster that trains the granted groups in place of this machine's slots."""
         self.factory = factory
         self.database_url = database_url
         self.hub = hub
@@ -347,6 +350,11 @@ class SessionManager:
         """A trainer slot for `seats`: one session trains on in its own worker; several
         hand their sessions over to one population worker."""
         group = [self.handles[seat.session_id] for seat in seats]
+        if self.cluster is not None:  # the cluster trains the group (server.live.cluster)
+            for seat in seats:
+                self.trainers.vacate(seat)  # it holds no slot of this machine
+            self.cluster.take(group, self.handles, self.changes.notify, self.command_timeout_s)
+            return
         for handle in group:
             handle.handing_over = slot is not None
             handle.send(Command("handover" if slot is not None else "train"))

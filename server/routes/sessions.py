@@ -13,7 +13,7 @@ from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.live.manager import SessionManager
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
-from study.db.models import LIVE_STATUSES, Advice, StudySession
+from study.db.models import LIVE_STATUSES, Advice, Status, StudySession
 from study.schemas.runs import given
 from study.schemas.sessions import (
     AdvicePublic,
@@ -133,6 +133,12 @@ def delete_session(
     return Response(status_code=204)
 
 
+def on_cluster(manager: SessionManager, session_id: int, status: Status, detail: str = "") -> bool:
+    """The researcher's control of a session that trains on the Ray cluster, written to its
+    row for its task to read (`server.live.cluster`); False for any other session."""
+    return manager.cluster is not None and manager.cluster.control(session_id, status, detail)
+
+
 def _fresh(db: DbDep, settings: SettingsDep, session_id: int) -> SessionPublic:
     db.expire_all()
     return session_public(sessions.get_session(db, session_id), settings.base_url)
@@ -150,7 +156,8 @@ async def start_session(
 async def pause_session(
     db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
 ) -> SessionPublic:
-    await manager.pause(session_id)
+    if not on_cluster(manager, session_id, Status.paused, ""):
+        await manager.pause(session_id)
     return _fresh(db, settings, session_id)
 
 
@@ -167,7 +174,8 @@ async def resume_session(
         "saying why.",
     ),
 ) -> SessionPublic:
-    await manager.resume(session_id, override_numerics)
+    if not on_cluster(manager, session_id, Status.running):
+        await manager.resume(session_id, override_numerics)
     return _fresh(db, settings, session_id)
 
 
@@ -175,7 +183,8 @@ async def resume_session(
 async def stop_session(
     db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
 ) -> SessionPublic:
-    await manager.stop(session_id)
+    if not on_cluster(manager, session_id, Status.stopped, "stopped by the researcher"):
+        await manager.stop(session_id)
     return _fresh(db, settings, session_id)
 
 

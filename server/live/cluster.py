@@ -1,0 +1,356 @@
+"""Training on a Ray cluster: the web process's side.
+
+With a Ray address (`IDEEPRL_RAY_ADDRESS`, `ideeprl serve --ray-address`), the sessions a
+trainer slot would take (a human session whose advice is over, alone or with the queued
+sessions of its learner configuration) are handed to the cluster instead: each local
+worker checkpoints and exits (`Command("handover")`), and the group trains as one Ray task
+on any node (`runs.worker.cluster.train_handed`). The advice itself stays in the web
+process's own workers, next to the participant.
+
+The database is the channel both ways: the task writes records, progress, checkpoints and
+status, and reads the researcher's stop and pause from the session's row; the web process
+reads a session without a local worker from there, as it does for any other. A group
+waits for a node under a token of this process, which keeps it alive until the task
+takes it; a task whose node died is started again on another node, each session from its
+last checkpoint.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import tempfile
+import threading
+import time
+import uuid
+from collections.abc import Callable, MutableMapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+from sqlalchemy import update
+from sqlalchemy.engine import make_url
+from sqlalchemy.orm import Session, sessionmaker
+
+from runs.worker.cluster import Handed, train_handed
+from runs.worker.link import SHUTTING_DOWN
+from runs.worker.messages import Command, StatusChanged
+from runs.worker.worker import WorkerOptions
+from server.live.hub import Hub
+from server.live.reaping import join
+from study.db.models import Status, StudySession, utcnow
+from study.services.errors import Conflict
+from study.services.sessions import set_status
+
+log = logging.getLogger(__name__)
+WAITING = "waiting for a node of the Ray cluster"
+SHUT_DOWN = (
+    f"{SHUTTING_DOWN} while it trained on the Ray cluster; it resumes from its last checkpoint"
+)
+ATTEMPTS = 3
+"""Times a session is started on the cluster before it is left `interrupted` (its node
+died each time)."""
+WATCH_EVERY_S = 1.0
+
+
+def cluster_refusal(database_url: str, storage_root: Path) -> str | None:
+    """Why the server cannot hand training to a cluster with this database and storage
+    root (None: it can)."""
+    if make_url(database_url).get_backend_name() == "sqlite":
+        return (
+            "a Ray address is set, but the database is SQLite: a file that only this machine "
+            "can write, which the cluster's nodes cannot reach. Set IDEEPRL_DATABASE_URL to "
+            "a PostgreSQL server every node reaches, or leave IDEEPRL_RAY_ADDRESS unset to "
+            "train on this machine"
+        )
+    if not storage_root.is_dir():
+        return (
+            f"the storage root {storage_root} does not exist: mount the folder every node "
+            "shares there (IDEEPRL_STORAGE_ROOT), or leave IDEEPRL_RAY_ADDRESS unset"
+        )
+    try:
+        with tempfile.NamedTemporaryFile(dir=storage_root):
+            pass
+    except OSError as error:
+        return f"the storage root {storage_root} is not writable here ({error.strerror})"
+    return None
+
+
+class HandedHandle(Protocol):
+    """What the cluster needs of a session's handle in the web process."""
+
+    session_id: int
+    token: str
+    process: Any
+    handing_over: bool
+
+    def send(self, message: Any) -> bool: ...
+
+
+@dataclass
+class _Task:
+    handed: list[Handed]
+    attempt: int = 1
+
+
+class TrainingCluster:
+    """The server's connection to a Ray cluster, and the groups training there."""
+
+    def __init__(
+        self,
+        address: str,
+        factory: sessionmaker[Session],
+        database_url: str,
+        options: WorkerOptions,
+        hub: Hub,
+        cpus_per_group: float = 1.0,
+    ) -> None:
+        self.address = address
+        self.factory = factory
+        self.database_url = database_url
+        self.options = options
+        self.hub = hub
+        self.cpus_per_group = cpus_per_group
+        self._tasks: dict[Any, _Task] = {}
+        self._lock = threading.Lock()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._notify: Callable[[int], None] = lambda session_id: None
+        self._closing = threading.Event()
+        self._watcher: threading.Thread | None = None
+        self._handovers: set[asyncio.Task[None]] = set()
+        self._remote: Any = None
+
+    def open(self) -> None:
+        import ray
+
+        if not ray.is_initialized():
+            ray.init(address=self.address, log_to_driver=False)
+        self._remote = ray.remote(num_cpus=self.cpus_per_group, max_retries=0)(train_handed)
+        self._watcher = threading.Thread(target=self._watch, name="ray-cluster", daemon=True)
+        self._watcher.start()
+
+    def close(self) -> None:
+        """Server shutdown: the tasks end with this process (Ray's owner rule), so they are
+        cancelled, and their sessions left `interrupted` as a local worker's are by a
+        shutdown in order: from their last checkpoints, the server's next start resumes
+        the people's sessions (`server.live.manager.resumes_after_restart`)."""
+        self._closing.set()
+        if self._watcher is not None:
+            self._watcher.join(10)
+        import ray
+
+        with self._lock:
+            tasks, self._tasks = dict(self._tasks), {}
+        for ref in tasks:
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
+        with self.factory() as db:
+            for task in tasks.values():
+                for h in task.handed:
+                    set_status(db, h.session_id, Status.interrupted, SHUT_DOWN, token=h.token)
+        with contextlib.suppress(Exception):
+            ray.shutdown()
+
+    # --- the trainer-slot queue's hand-over ---------------------------------------------
+    def take(
+        self,
+        group: Sequence[HandedHandle],
+        handles: MutableMapping[int, Any],
+        notify: Callable[[int], None],
+        command_timeout_s: float,
+    ) -> None:
+        """Train `group` (sessions granted training together) on the cluster: each worker
+        checkpoints and exits, then the group goes to a node (the event loop's thread)."""
+        self._loop = asyncio.get_running_loop()
+        self._notify = notify
+        for handle in group:
+            handle.handing_over = True
+            handle.send(Command("handover"))
+            notify(handle.session_id)
+        task = self._loop.create_task(self._hand_over(list(group), handles, command_timeout_s))
+        self._handovers.add(task)
+        task.add_done_callback(self._handovers.discard)
+
+    async def _hand_over(
+        self, group: list[HandedHandle], handles: MutableMapping[int, Any], timeout_s: float
+    ) -> None:
+        from starlette.concurrency import run_in_threadpool
+
+        for handle in group:
+            await run_in_threadpool(join, handle.process, timeout_s)
+            if handle.process.is_alive():  # it resumes from its last checkpoint
+                log.warning("session %s: its worker did not hand over; killed", handle.session_id)
+                with contextlib.suppress(Exception):
+                    handle.process.kill()
+                await run_in_threadpool(join, handle.process, 5)
+        for handle in group:
+            if handles.get(handle.session_id) is handle:
+                del handles[handle.session_id]
+        await run_in_threadpool(self.submit, [Handed(h.session_id, h.token) for h in group])
+        for handle in group:
+            self._notify(handle.session_id)
+
+    # --- tasks ----------------------------------------------------------------------------
+    def submit(self, handed: Sequence[Handed], attempt: int = 1) -> list[int]:
+        """Send the sessions still `running` (or `paused`) under their tokens to the cluster
+        as one task, each under a new token of this process until the task takes it; the
+        sessions sent."""
+        ours = self._retoken(handed)
+        if ours:
+            ref = self._remote.remote(ours, self.database_url, self.options)
+            with self._lock:
+                self._tasks[ref] = _Task(ours, attempt)
+        return [h.session_id for h in ours]
+
+    def _retoken(self, handed: Sequence[Handed]) -> list[Handed]:
+        ours = []
+        with self.factory() as db:
+            for h in handed:
+                token = uuid.uuid4().hex
+                result = db.execute(
+                    update(StudySession)
+                    .where(
+                        StudySession.id == h.session_id,
+                        StudySession.worker_token == h.token,
+                        StudySession.status.in_(
+                            [Status.running.value, Status.paused.value, Status.interrupted.value]
+                        ),
+                    )
+                    .values(
+                        worker_token=token,
+                        worker_pid=None,
+                        heartbeat_at=utcnow(),
+                        status_detail=WAITING,
+                    )
+                )
+                if result.rowcount == 1:  # type: ignore[attr-defined]
+                    ours.append(Handed(h.session_id, token))
+            db.commit()
+        return ours
+
+    def _watch(self) -> None:
+        """The watcher thread: keeps the groups that wait for a node alive, and handles the
+        tasks that ended."""
+        while not self._closing.wait(WATCH_EVERY_S):
+            try:
+                self._beat()
+                self._collect()
+            except Exception:
+                log.exception("watching the Ray cluster's tasks failed")
+
+    def _beat(self) -> None:
+        with self._lock:
+            waiting = [h for t in self._tasks.values() for h in t.handed]
+        if not waiting:
+            return
+        with self.factory() as db:
+            for h in waiting:  # a task marks its session alive itself once it runs it
+                db.execute(
+                    update(StudySession)
+                    .where(
+                        StudySession.id == h.session_id,
+                        StudySession.worker_token == h.token,
+                        StudySession.worker_pid.is_(None),
+                        StudySession.status_detail == WAITING,
+                    )
+                    .values(heartbeat_at=utcnow())
+                )
+            db.commit()
+
+    def _collect(self) -> None:
+        import ray
+
+        with self._lock:
+            refs = list(self._tasks)
+        if not refs:
+            return
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=0)
+        for ref in ready:
+            with self._lock:
+                task = self._tasks.pop(ref)
+            try:
+                statuses = ray.get(ref)
+            except ray.exceptions.RayTaskError as error:  # the task's own code raised
+                self._fail(task, str(error))
+                continue
+            except ray.exceptions.RayError as error:  # its node or worker died
+                self._again(task, error)
+                continue
+            for session_id, status in statuses.items():
+                self._ended(session_id, status)
+
+    def _again(self, task: _Task, error: Exception) -> None:
+        """The task's node (or its worker) died: its sessions start again on another node
+        from their last checkpoints, up to `ATTEMPTS` times."""
+        log.warning(
+            "a Ray task of sessions %s died: %s", [h.session_id for h in task.handed], error
+        )
+        if task.attempt < ATTEMPTS:
+            again = self.submit(task.handed, task.attempt + 1)
+            log.info("sessions %s start again on the cluster", again)
+            return
+        detail = f"its node of the Ray cluster died {ATTEMPTS} times; resume it"
+        with self.factory() as db:
+            for h in task.handed:
+                set_status(db, h.session_id, Status.interrupted, detail, token=h.token)
+        for h in task.handed:
+            self._ended(h.session_id, Status.interrupted.value)
+
+    def _fail(self, task: _Task, detail: str) -> None:
+        with self.factory() as db:
+            for h in task.handed:
+                set_status(db, h.session_id, Status.failed, detail[-4000:], token=h.token)
+        for h in task.handed:
+            self._ended(h.session_id, Status.failed.value)
+
+    def _ended(self, session_id: int, status: str) -> None:
+        self.hub.publish(session_id, "status", StatusChanged(status))
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(self._notify, session_id)
+
+    def control(self, session_id: int, status: Status, detail: str = "") -> bool:
+        """The researcher's stop (`stopped`), pause (`paused`) or resume (`running`) of a
+        session on the cluster, written to its row, where its task reads it within
+        `runs.worker.cluster.CONTROL_EVERY_S`; False when no task of this process has it."""
+        with self._lock:
+            task = next(
+                (
+                    t
+                    for t in self._tasks.values()
+                    if any(h.session_id == session_id for h in t.handed)
+                ),
+                None,
+            )
+        if task is None:
+            return False
+        if status != Status.stopped and len(task.handed) > 1:
+            raise Conflict(
+                f"session {session_id} trains together with other sessions on the cluster "
+                "and cannot pause alone; stop it instead (it resumes from its last checkpoint)"
+            )
+        (token,) = [h.token for h in task.handed if h.session_id == session_id]
+        with self.factory() as db:
+            return set_status(db, session_id, status, detail, token=token)
+
+    def running(self) -> list[int]:
+        """The sessions of the tasks not ended yet."""
+        with self._lock:
+            return sorted(h.session_id for t in self._tasks.values() for h in t.handed)
+
+    def wait(self, timeout_s: float) -> bool:
+        """Wait until every task has ended (True), or `timeout_s` has passed."""
+        deadline = time.monotonic() + timeout_s
+        while self.running():
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.2)
+        return True
+
+
+def storage_root(data_dir: Path, configured: Path | None) -> Path:
+    """The folder every node sees: the configured one, else the data folder."""
+    return Path(os.path.abspath(configured or data_dir))

@@ -1,0 +1,200 @@
+"""Sessions trained on a Ray cluster of two 1-CPU nodes (`server.live.cluster`) with
+PostgreSQL and a shared folder: their records are those of training on this machine with
+the same seeds, and a session whose node is killed mid-run finishes on the other node
+from its last checkpoint, with the records of an uninterrupted run."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+from learner.run import RunSpec
+from runs.worker.cluster import TRAINS_ON, Handed
+from runs.worker.link import SHUTTING_DOWN
+from runs.worker.worker import WorkerOptions, run_session
+from server.live.cluster import SHUT_DOWN, TrainingCluster, cluster_refusal
+from server.live.hub import Hub
+from study.db.engine import make_engine, make_session_factory
+from study.db.migrate import upgrade
+from study.db.models import Episode, Status, Step, StudySession
+from study.services.sessions import claim, create_session
+from study.services.studies import create_study
+from tests.server.live import fresh_database
+from tests.server.scale import NONDETERMINISTIC, session_body
+
+ray = pytest.importorskip("ray")
+pytestmark = [
+    pytest.mark.postgres,
+    pytest.mark.skipif(
+        not os.environ.get("DATABASE_URL", "").startswith("postgres"),
+        reason="a cluster needs a database every node reaches: set DATABASE_URL to PostgreSQL",
+    ),
+]
+LEFT_OUT = {"id", "session_id", *NONDETERMINISTIC}
+
+
+def records(factory: sessionmaker[Session], session_id: int) -> list[tuple[Any, ...]]:
+    """The session's steps and episodes, less what differs between two runs of one seed."""
+    rows: list[tuple[Any, ...]] = []
+    with factory() as db:
+        for table, order in ((Step, Step.global_step), (Episode, Episode.last_global_step)):
+            columns = [c for c in table.__table__.columns if c.name not in LEFT_OUT]
+            query = select(*columns).where(table.session_id == session_id).order_by(order)
+            rows += [tuple(row) for row in db.execute(query)]
+    return rows
+
+
+def session(factory: sessionmaker[Session], study_id: int, seed: int, episodes: int) -> int:
+    body = session_body("oracle", advice_budget=10, seed=seed, episodes=episodes)
+    with factory() as db:
+        return create_session(db, study_id, RunSpec.from_json(body["run"])).id
+
+
+def handed(factory: sessionmaker[Session], session_id: int) -> Handed:
+    """The session claimed here, as the web process holds one it hands over."""
+    with factory() as db:
+        return Handed(session_id, claim(db, session_id, resume=False))
+
+
+def until(
+    factory: sessionmaker[Session],
+    session_id: int,
+    done: Callable[[StudySession], bool],
+    timeout_s: float = 240,
+) -> StudySession:
+    """The session's row once `done` holds for it."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        found = row(factory, session_id)
+        if done(found):
+            return found
+        time.sleep(0.2)
+    raise AssertionError(f"session {session_id}: {found.status} {found.status_detail}")
+
+
+def hold(seconds: float) -> None:
+    """A task that holds its node's CPU."""
+    time.sleep(seconds)
+
+
+def row(factory: sessionmaker[Session], session_id: int) -> StudySession:
+    with factory() as db:
+        found = db.get(StudySession, session_id)
+        assert found is not None
+        return found
+
+
+@pytest.fixture
+def database(tmp_path: Path) -> Iterator[tuple[str, sessionmaker[Session]]]:
+    with fresh_database(tmp_path) as url:
+        engine = make_engine(url)
+        upgrade(engine)
+        yield url, make_session_factory(engine)
+        engine.dispose()
+
+
+def test_a_cluster_refuses_sqlite_and_a_missing_storage_root(tmp_path: Path) -> None:
+    refusal = cluster_refusal(f"sqlite:///{tmp_path / 'x.sqlite3'}", tmp_path)
+    assert refusal is not None and "PostgreSQL" in refusal
+    refusal = cluster_refusal("postgresql+psycopg://h/db", tmp_path / "absent")
+    assert refusal is not None and "does not exist" in refusal
+    assert cluster_refusal("postgresql+psycopg://h/db", tmp_path) is None
+
+
+def test_sessions_train_on_two_nodes_as_here_and_survive_a_node_killed(
+    database: tuple[str, sessionmaker[Session]], tmp_path: Path
+) -> None:
+    from ray.cluster_utils import Cluster
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    url, factory = database
+    shared = tmp_path / "shared"  # the folder every node sees
+    options = WorkerOptions(data_dir=shared, checkpoint_every_episodes=1, heartbeat_s=1)
+    with factory() as db:
+        study_id = create_study(db, "on a cluster").id
+    here = {seed: session(factory, study_id, seed, 3) for seed in (11, 12)}
+    here[13] = session(factory, study_id, 13, 6)
+    there = {seed: session(factory, study_id, seed, 3) for seed in (11, 12)}
+    there[13] = session(factory, study_id, 13, 6)
+    for session_id in here.values():
+        assert run_session(session_id, url, options) == Status.finished
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
+    worker = cluster.add_node(num_cpus=1)
+    cluster.wait_for_nodes()
+    trainer = TrainingCluster(cluster.address, factory, url, options, Hub())
+    try:
+        trainer.open()
+        for seed in (11, 12):  # one CPU each: one on each node
+            trainer.submit([handed(factory, there[seed])])
+        assert trainer.wait(300), "trained within 5 minutes"
+        nodes = {row(factory, there[seed]).worker_host for seed in (11, 12)}
+        assert len(nodes) == 2, f"trained on both nodes: {nodes}"
+        for seed in (11, 12):
+            assert row(factory, there[seed]).status == Status.finished
+            assert records(factory, there[seed]) == records(factory, here[seed])
+
+        controlled = session(factory, study_id, 14, 6)
+        trainer.submit([handed(factory, controlled)])
+        until(factory, controlled, lambda s: s.checkpoint_episodes >= 1)
+        assert trainer.control(controlled, Status.paused)
+        time.sleep(2)  # read within a second, checkpointed at the next step boundary
+        paused = row(factory, controlled)
+        time.sleep(3)  # paused: no step taken, its heartbeat goes on
+        still = row(factory, controlled)
+        assert still.status == Status.paused
+        assert still.progress["global_step"] == paused.progress["global_step"]
+        assert still.checkpoint_step == paused.checkpoint_step
+        assert still.heartbeat_at is not None and paused.heartbeat_at is not None
+        assert still.heartbeat_at > paused.heartbeat_at
+        assert trainer.control(controlled, Status.running)
+        until(factory, controlled, lambda s: s.checkpoint_step > paused.checkpoint_step)
+        assert trainer.control(controlled, Status.stopped, "stopped by the researcher")
+        assert trainer.wait(120)
+        stopped = row(factory, controlled)
+        assert (stopped.status, stopped.status_detail) == (
+            Status.stopped,
+            "stopped by the researcher",
+        )
+        assert stopped.checkpoint_episodes < 6, "stopped before its end, checkpointed"
+
+        head = ray.get_runtime_context().get_node_id()
+        sleep = ray.remote(num_cpus=1)(hold)
+        holds_head = sleep.options(
+            scheduling_strategy=NodeAffinitySchedulingStrategy(head, soft=False)
+        ).remote(600)
+        trainer.submit([handed(factory, there[13])])  # to the other node
+        killed = until(
+            factory,
+            there[13],
+            lambda s: s.checkpoint_episodes >= 1 and TRAINS_ON in s.status_detail,
+        )
+        assert killed.status == Status.running and killed.checkpoint_episodes < 6
+        cluster.remove_node(worker)  # mid-run, after a checkpoint
+        ray.cancel(holds_head, force=True)  # the head's CPU frees for it
+        assert trainer.wait(300), "finished elsewhere within 5 minutes"
+        done = row(factory, there[13])
+        assert done.status == Status.finished, done.status_detail
+        assert done.worker_host != killed.worker_host, "finished on the other node"
+        resumed = [entry["from_step"] for entry in done.provenance]
+        assert resumed[0] == 0 and resumed[-1] > 0, "resumed from its last checkpoint"
+        assert records(factory, there[13]) == records(factory, here[13])
+
+        cut = session(factory, study_id, 15, 6)
+        trainer.submit([handed(factory, cut)])
+        until(factory, cut, lambda s: s.checkpoint_episodes >= 1)
+        trainer.close()  # the server shuts down in order
+        time.sleep(2)
+        left = row(factory, cut)
+        assert (left.status, left.status_detail) == (Status.interrupted, SHUT_DOWN)
+        assert left.status_detail.startswith(SHUTTING_DOWN), "resumed by the next start"
+    finally:
+        trainer.close()
+        cluster.shutdown()
