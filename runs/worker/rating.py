@@ -11,22 +11,20 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.strategies import AdviceMoment
 from runs.worker.link import WorkerLink
 from runs.worker.messages import AdviceRequest
 from runs.worker.recorder import Reporter
-from study.db.models import Feedback
+from study.services.feedback import rated_turns
 from study.services.observations import encode_png
 
 
 def given_ratings(factory: sessionmaker[Session], session_id: int) -> dict[int, float | None]:
     """The person's ratings stored so far (None: no answer), replayed on resume."""
     with factory() as db:
-        rows = db.scalars(select(Feedback).where(Feedback.session_id == session_id))
-        return {f.feedback_index: f.judgement for f in rows if f.evaluator == "human"}
+        return {f.feedback_index: f.judgement for f in rated_turns(db, session_id)}
 
 
 class HumanEvaluator:

@@ -151,6 +151,9 @@ class _Run:
             raise Conflict("a human session needs the server: start it through the API")
         self.advice_budget = self.spec.advice_budget
         """Read once, before the advisor that counts against it is made."""
+        self.person_rates = s.method == "human" and self.spec.feedback == "evaluative"
+        """The participant rates the learner's moves (evaluative feedback) instead of
+        advising."""
         self.live_view = self.spec.the_task.live_view
         """Whether the task has the live 3-D view (else the page shows its frames)."""
         spec = self.spec.validate()
@@ -187,7 +190,7 @@ class _Run:
         """The session's advisor: a person through the web process (human), or the machine
         advisor with its advice recorded."""
         s = self.session
-        if s.method == "human" and self.spec.feedback == "evaluative":
+        if self.person_rates:
             return None  # `_evaluator` makes the person's
         if s.method == "human":
             assert self.link is not None
@@ -227,11 +230,11 @@ class _Run:
     def _evaluator(self, machine: Any) -> RecordingEvaluator | HumanEvaluator | None:
         """Under evaluative feedback, the machine evaluator with its judgements recorded;
         it stands as the session's advisor (its count is the feedback given)."""
-        s = self.session
-        if s.method == "human" and self.spec.feedback == "evaluative":
+        if self.person_rates:
             return self._person_rates()
         if machine is None:
             return None
+        s = self.session
         self.advisor = RecordingEvaluator(
             machine, s.id, s.method, self.start_advice, self.spec.feedback_weight, self.recorder
         )

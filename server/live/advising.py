@@ -265,7 +265,11 @@ async def submit_advice(
                 "no advice is wanted right now (the learner is acting or is on its own); "
                 "wait for the next observation from GET /api/participant/state"
             )
-        rating.refuses_advice(request)
+        if request.rated_action is not None:
+            raise Conflict(
+                "this turn asks for a rating of the action taken, not for advice: "
+                "POST /api/participant/rating"
+            )
         if request.advice_index != body.advice_index:
             raise Conflict(
                 f"advice {request.advice_index} is wanted now, not {body.advice_index}; "

@@ -54,6 +54,7 @@ from study.db.models import (
 from study.services import numerics
 from study.services.assignment import expire_unopened_everywhere
 from study.services.errors import Conflict
+from study.services.feedback import rated_turns
 from study.services.sessions import (
     claim,
     get_session,
@@ -130,8 +131,6 @@ class SessionManager:
         """Visits ending after their worker gave up waiting (kept until done)."""
         self.on_request: Callable[[WorkerHandle, AdviceRequest], None] = lambda h, r: None
         """Called on the event loop as a turn's request arrives (`server.live.rating`)."""
-        self.on_start: Callable[[WorkerHandle], None] = lambda handle: None
-        """Called as a session's worker starts, its handle made (`server.live.rating`)."""
         hub.on_watchers_changed(self._watch)
 
     # --- lifecycle ---------------------------------------------------------------------
@@ -288,6 +287,7 @@ class SessionManager:
                 select(Advice).where(Advice.session_id == session_id).order_by(Advice.advice_index)
             ).all()
             human = session.method == "human"
+            rated = rated_turns(db, session_id) if human else []  # a rating session's turns
             ready = human and session.ready_for_advice
             strategy = spec.make_strategy() or make_strategy("early", 0)
             first_turn = strategy.first_advice_step(spec.config.pretraining_steps) - 1
@@ -315,12 +315,11 @@ class SessionManager:
         # nothing was given there)
         answered = [
             (a.advice_index, a.action, a.global_step) for a in advice if a.action is not None
-        ]
+        ] + [(f.feedback_index, f.action, f.global_step) for f in rated]
         live = LiveSession(
             session_id, spec.advice_budget, answered, self.changes, first_turn, human, pooled
         )
         handle = WorkerHandle(session_id, token, process, parent, live, Seat(live, run))
-        self.on_start(handle)
         self.handles[session_id] = handle
         self.workers.read(handle)
         if self.hub.watchers(session_id):

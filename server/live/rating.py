@@ -28,11 +28,11 @@ from study.db.models import Feedback, Status, StudySession
 from study.schemas.participant import ParticipantState, RatingCreate, RatingReceipt
 from study.services.consent import NOT_CONSENTED
 from study.services.errors import Conflict
-from study.services.feedback import FeedbackGiven, write_feedback
+from study.services.feedback import PERSON, FeedbackGiven, write_feedback
 from study.services.observations import decode_png
 
 JUDGEMENTS = {"good": GOOD, "bad": BAD}
-EVALUATOR = "human"
+EVALUATOR = PERSON
 _TIMING_OUT: set[asyncio.Task[None]] = set()
 _DEADLINES: dict[tuple[int, int], float] = {}
 """(session, turn) -> `time.monotonic()` when its rating may no longer come: the request's
@@ -40,9 +40,8 @@ arrival plus the time-out, or a resume plus the time-out after a pause."""
 
 
 def install(manager: SessionManager) -> None:
-    """Ratings in `manager`'s sessions: their time-outs, and their count on a restart."""
+    """Ratings in `manager`'s sessions: each turn's time-out."""
     manager.on_request = lambda handle, request: asked(manager, handle, request)
-    manager.on_start = lambda handle: resumed(manager, handle)
 
 
 def asked(manager: SessionManager, handle: WorkerHandle, request: AdviceRequest) -> None:
@@ -61,18 +60,6 @@ def asked(manager: SessionManager, handle: WorkerHandle, request: AdviceRequest)
     loop.call_later(request.rating_time_out_s, time_out)
 
 
-def resumed(manager: SessionManager, handle: WorkerHandle) -> None:
-    """A session started again: the turns its participant rated (or let pass) count as
-    given, as its advice would."""
-    with manager.factory() as db:
-        rows = db.scalars(
-            select(Feedback)
-            .where(Feedback.session_id == handle.session_id, Feedback.evaluator == EVALUATOR)
-            .order_by(Feedback.feedback_index)
-        ).all()
-    handle.live.restore([HistoryEntry(f.feedback_index, f.action, f.global_step) for f in rows])
-
-
 def shown(state: ParticipantState, request: AdviceRequest | None, arrived: float) -> None:
     """The state's rating fields, where the turn asks for a rating."""
     if request is None or request.rated_action is None:
@@ -86,15 +73,6 @@ def shown(state: ParticipantState, request: AdviceRequest | None, arrived: float
 def _deadline(session_id: int, request: AdviceRequest, arrived: float) -> float:
     default = arrived + request.rating_time_out_s
     return _DEADLINES.get((session_id, request.advice_index), default)
-
-
-def refuses_advice(request: AdviceRequest) -> None:
-    """Advice sent to a turn that asks for a rating."""
-    if request.rated_action is not None:
-        raise Conflict(
-            "this turn asks for a rating of the action taken, not for advice: "
-            "POST /api/participant/rating"
-        )
 
 
 async def _time_out(manager: SessionManager, handle: WorkerHandle, request: AdviceRequest) -> None:

@@ -179,13 +179,6 @@ class LiveSession:
         self.last_reward = reward
         self._changes.notify(self.session_id)
 
-    def restore(self, answered: list[HistoryEntry]) -> None:
-        """Turns answered before its worker started that are stored outside the advice
-        table (a rating session's feedback rows)."""
-        for entry in answered:
-            self.given[entry.advice_index] = entry.action
-            self.history.append(entry)
-
     def set_ready(self) -> None:
         """The participant consented and finished the induction: advice may be asked."""
         self.ready = True

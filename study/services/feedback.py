@@ -52,6 +52,20 @@ def write_feedback(db: Session, feedback: Sequence[FeedbackGiven]) -> None:
         db.execute(insert(Feedback), [dataclasses.asdict(f) for f in feedback])
 
 
+PERSON = "human"
+"""The evaluator of a participant's ratings (the advice page's Good and Bad)."""
+
+
+def rated_turns(db: Session, session_id: int) -> list[Feedback]:
+    """The participant's rated turns so far, answered or lapsed, in order."""
+    query = (
+        select(Feedback)
+        .where(Feedback.session_id == session_id, Feedback.evaluator == PERSON)
+        .order_by(Feedback.feedback_index)
+    )
+    return list(db.scalars(query))
+
+
 def judgements_given(db: Session, session_id: int) -> int:
     """How many of the session's turns were judged (answered or not): a rating session's
     count of turns, as its advice rows are an advice session's."""
