@@ -14,7 +14,7 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.strategies import AdviceMoment
-from runs.worker.link import WorkerLink
+from runs.worker.link import SessionAbandoned, WorkerLink
 from runs.worker.messages import AdviceRequest
 from runs.worker.recorder import Reporter
 from study.services.feedback import rated_turns
@@ -33,7 +33,10 @@ class HumanEvaluator:
     the web process answers (the rating, or None after the time-out).
 
     Ratings already given (`given`, from the database) are replayed without asking, so a
-    resumed session reaches the same point without troubling the participant again."""
+    resumed session reaches the same point without troubling the participant again. Turns
+    that lapse one after another for the idle limit (their time-outs summed) mean the person
+    has gone: the session is abandoned, as an advice session is after the idle limit without
+    advice, and an online visit ends timed out."""
 
     def __init__(
         self,
@@ -59,6 +62,8 @@ class HumanEvaluator:
         """The step being taken is to be rated: the 3-D view replays it as motion."""
         self._reward: float | None = None
         """The reward of the step just taken, shown with it."""
+        self._silent_s = 0.0
+        """The time-outs of the turns that lapsed since the person's last rating."""
 
     def state_dict(self) -> dict[str, Any]:
         """Saved in the learner's checkpoint: how many ratings were asked for."""
@@ -101,6 +106,12 @@ class HumanEvaluator:
                 index, max(self._idle_limit_s, self._time_out_s + 60.0)
             )
             self._given[index] = judgement
+            self._silent_s = self._silent_s + self._time_out_s if judgement is None else 0.0
+            if self._silent_s >= self._idle_limit_s:
+                raise SessionAbandoned(
+                    f"no rating for {self._silent_s:.0f} s of turns (the idle limit, "
+                    f"{self._idle_limit_s:.0f} s)"
+                )
         self.count += 1
         return judgement
 

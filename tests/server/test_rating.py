@@ -138,3 +138,34 @@ def test_a_pause_stops_a_ratings_clock_and_gives_it_a_whole_time_out_after(
     )
     assert rated.status_code == 200, rated.text
     participant.close()
+
+
+def test_turns_that_lapse_for_the_idle_limit_abandon_the_session(
+    server: LiveServer, api: httpx.Client
+) -> None:
+    """A person who stops rating is gone once the turns that lapsed one after another add up
+    to the idle limit: the session is abandoned (as an advice session without advice is),
+    while a rating in between starts the count again."""
+    study = api.post("/api/studies", json={"name": "a rater who leaves"}).json()
+    body = session_body("human", task="gridworld", advice_budget=8, feedback="evaluative",
+                        rating_time_out_s=1.0, idle_limit_s=2.5)  # fmt: skip
+    created = api.post(f"/api/studies/{study['id']}/sessions", json=body).json()
+    participant = SimulatedParticipant(server.url, created["participant_token"])
+    assert participant.begin().status_code == 200
+    for index, rating in enumerate(["good", None, "bad", None, None]):
+        state = participant.next_request()
+        assert state["advice_index"] == index, state
+        if rating is not None:
+            sent = participant.client.post(
+                "/api/participant/rating", json={"advice_index": index, "rating": rating}
+            )
+            assert sent.status_code == 200, sent.text
+    final = wait_for_status(api, created["id"], {"abandoned", "finished"})
+    assert final["status"] == "abandoned", final
+    assert "no rating" in (final.get("status_detail") or ""), final
+
+    files = export(api, study["id"])
+    rows = list(csv.DictReader(io.StringIO(files["feedback.csv"].decode())))
+    rows = [r for r in rows if r["session_id"] == str(created["id"])]
+    assert [r["judgement"] for r in rows] == ["1.0", "", "-1.0", "", "", ""]
+    participant.close()
