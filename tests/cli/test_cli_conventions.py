@@ -158,7 +158,7 @@ def test_a_design_file_with_several_bad_values_names_each_one_a_line(
         f"error: {source}: 4 bad values:",
         "  design.capacity: Input should be a valid integer",
         "  design.colour: unknown field 'colour'; valid fields: conditions, capacity, alpha, "
-        "idle_limit_s, pool, panel, check, questionnaire",
+        "idle_limit_s, pool, panel, check, questionnaire, primary",
         "  design.conditions.early.run.config.batch_size: config.batch_size must be an "
         "integer from 1 to 4096",
         '  design.conditions.late.run.strategy: strategy must be one of "early", '

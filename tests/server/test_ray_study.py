@@ -13,9 +13,10 @@ from typing import Any
 import pytest
 
 from cli.main import main
-from learner.fitted import HELD, Count, FittedModel
+from learner.fitted import Count, FittedModel
 from study.db.engine import make_engine, make_session_factory
 from study.db.models import Advice, StudySession
+from tasks.sorting import HELD
 from tests.server.live import serving
 from tests.server.scale import session_body, wait_for_status
 from tests.server.test_ray_cluster import records
@@ -36,7 +37,7 @@ SEEDS = (21, 22)
 def fitted_model(tmp_path: Path) -> Path:
     model = FittedModel(
         advice=300, sessions=[1], methods=["human"], overall=Count(300, 0),
-        by_held={h: Count(100, 0) for h in HELD}, by_situation={},
+        by_group={h: Count(100, 0) for h in HELD}, by_situation={},
         wrong_actions=[[0] * 4 for _ in range(4)], decision_time_median_s=0.2,
         decision_time_sigma=0.3, decision_time_quantiles=[], budget_used=[1.0],
     )  # fmt: skip
