@@ -10,6 +10,7 @@ final status.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import socket
@@ -163,7 +164,7 @@ class _Run:
             self.link, self.recorder, env, spec.config.episodes, self.advice_budget
         )
         task, task_options = spec.the_task, spec.env_options()
-        self.correct: Correct = lambda info: task.correct(info, task_options)
+        self.correct: Correct = functools.partial(task.correct, options=task_options)
         """The task's correct action at a step, stored beside each advice."""
         advisor = self._advisor(spec.make_advisor())  # None for sb3-dqn, which takes none
         evaluator = self._evaluator(spec.make_evaluator())  # evaluative feedback's, or None
