@@ -198,3 +198,25 @@ def test_a_session_pinned_to_the_kernel_resumes_with_it_where_it_runs(
         assert session is not None and session.numerics_overrides == []
         [computed] = session.provenance
         assert computed["numerics"]["conv_kernel"] == "avx2"
+
+
+def test_ideeprl_train_refuses_to_resume_where_the_pinned_kernel_does_not_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    if not machine.conv_kernel_runs("avx2"):
+        pytest.skip("the AVX2 kernel does not run here (no AVX2, or `make kernels` not run)")
+    from cli.main import main
+    from learner.checkpoint import read_checkpoint
+
+    small = [f"--{k.replace('_', '-')}={v}" for k, v in TINY.items()]
+    out = tmp_path / "run"
+    pinned = ["--precision", "fp32", "--conv-kernel", "avx2"]
+    assert main(["train", "--out", str(out), "--no-progress", *pinned, *small]) == 0
+    checkpoint = out / "checkpoint.pt"
+    assert read_checkpoint(checkpoint)["metadata"]["config"]["conv_kernel"] == "avx2"
+    monkeypatch.setattr(machine, "cpu_flags", lambda: frozenset({"sse2"}))  # no AVX2
+    assert main(["train", "--resume", str(checkpoint), "--episodes", "2", "--no-progress"]) == 2
+    assert "avx2 variant" in capsys.readouterr().err
+    code = main(["train", "--resume", str(checkpoint), "--episodes", "2", "--no-progress",
+                 "--override-numerics"])  # fmt: skip
+    assert code == 0 and "numerics overridden" in capsys.readouterr().err
