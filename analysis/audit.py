@@ -38,6 +38,7 @@ LABELS: dict[str, str] = {
     "motion": "motion mode",
     "sort_rule": "sorting rule",
     "cpu_kind": "CPU kind",
+    "conv_kernel": "first-layer kernel",
 }
 """A setting's name in words, where it is not its column's with spaces."""
 

@@ -22,9 +22,15 @@ from learner.config import PRESETS, DQNConfig
 from learner.fields import leaves
 from learner.run import RunSpec, declared
 
-PROVENANCE = {"code_version": "code", "cpu_kind": "cpu", "torch_version": "torch"}
+PROVENANCE = {
+    "code_version": "code",
+    "cpu_kind": "cpu",
+    "torch_version": "torch",
+    "conv_kernel": "conv_kernel",
+}
 """The provenance the audit compares (`learner.provenance.record`): its column, and the
-record's key. Arms computed by other code, on another CPU kind or torch are flagged."""
+record's key (the first layer's kernel under its `numerics`). Arms computed by other code,
+on another CPU kind or torch, or by another first-layer kernel are flagged."""
 
 
 def settings_table(
@@ -32,8 +38,8 @@ def settings_table(
     provenance: Mapping[int, Sequence[Mapping[str, Any]]] | None = None,
 ) -> pd.DataFrame:
     """The audit's table for `(session_id, run)` pairs; with `provenance` (each session's
-    records of where it was computed) also the code version, CPU kind and torch version
-    (several joined by ' + ' when a run was resumed elsewhere)."""
+    records of where it was computed) also the code version, CPU kind, torch version and
+    first-layer kernel (several joined by ' + ' when a run was resumed elsewhere)."""
     presets = {name: DQNConfig.preset(name).to_dict() for name in PRESETS}
     settings = [
         leaf
@@ -81,8 +87,16 @@ def settings_table(
 def where(records: Sequence[Mapping[str, Any]], key: str) -> str:
     """One provenance value of a run: its records' distinct values, in order, joined by
     ' + ' ('not recorded' for a run stored before provenance was)."""
-    seen = list(dict.fromkeys(str(r.get(key)) for r in records))
+    seen = list(dict.fromkeys(str(_recorded(r, key)) for r in records))
     return " + ".join(seen) if seen else "not recorded"
+
+
+def _recorded(record: Mapping[str, Any], key: str) -> Any:
+    """A record's value under `key`, or under its `numerics` (a numerics key a record made
+    before that key was: 'not recorded')."""
+    if key in record:
+        return record[key]
+    return record.get("numerics", {}).get(key, "not recorded")
 
 
 def _text(value: Any) -> Any:

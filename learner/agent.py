@@ -58,8 +58,13 @@ class DQNAgent:
         self.dtype = conv_dtype(config.precision, device)
         self._fast, self._fast_target = None, None
         if isinstance(self.network, QNetwork):
-            kernel = conv_kernel.for_dtype(self.dtype)
+            kernel = conv_kernel.for_run(config.conv_kernel, self.dtype)
             self._fast = PhaseConvForward(self.network, self.dtype, kernel)
+            if kernel is not None and self._fast.first_layer_kernel is None:
+                raise ValueError(
+                    f"conv_kernel {kernel.variant} computes the first layer of the paper's "
+                    "network on 64x64 RGB images on the CPU only: use conv_kernel none"
+                )
             if isinstance(self.target, QNetwork):
                 self._fast_target = PhaseConvForward(self.target, self.dtype, kernel)
 

@@ -20,6 +20,7 @@ Loss = Literal["mse", "huber"]
 Optimizer = Literal["rmsprop", "adam"]
 UpdateImpl = Literal["fast", "plain"]
 Precision = Literal["auto", "bf16", "fp32"]
+ConvKernel = Literal["auto", "none", "avx512bf16", "avx2"]
 Fit = Literal["td", "keras"]
 Init = Literal["torch", "glorot"]
 
@@ -128,6 +129,11 @@ class DQNConfig:
     precision: Precision = bounded("auto", role="numerics")
     """Convolution precision of the fast update: `bf16` where the device supports it
     natively (`auto`), else `fp32`. Dense layers and the loss stay float32."""
+    conv_kernel: ConvKernel = bounded("auto", role="numerics")
+    """The fast update's first layer on the CPU: `none` (PyTorch), or our compiled kernel
+    (`learner.conv_kernel`), `avx512bf16` (bfloat16 dot products, for `bf16`) or `avx2`
+    (float32 FMA, for `fp32`); the same function in another float order. `auto`: the
+    variant for the precision that runs here where `IDEEPRL_CONV_KERNEL=on`, else `none`."""
     device: str = bounded(
         "auto", role="numerics", max_length=16, pattern=r"auto|cpu|cuda(:[0-9]+)?"
     )

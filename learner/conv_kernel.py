@@ -6,7 +6,9 @@ library kernel's vector lanes mostly empty; ours vectorises over output pixels i
 (`learner/kernels/conv1_*.c`, built by `make kernels`). One shared library per
 instruction set, compiled with explicit flags, is chosen by the CPU's flags in
 /proc/cpuinfo: bfloat16 dot products with AVX-512 BF16, float32 FMA with AVX2. Where
-neither loads (another CPU, no compiler, CUDA), the PyTorch update is used.
+neither loads (another CPU, no compiler, CUDA), the PyTorch update is used. Which variant
+a run takes is part of its numerics (`config.conv_kernel`, pinned as precision and threads
+are).
 
 The kernel takes the replay memory's packed uint8 frames (`pack_frame`) and gives the
 layer's output as the second layer reads it: in the convolutions' dtype, in that layer's
@@ -20,22 +22,18 @@ frames.
 from __future__ import annotations
 
 import ctypes
-import os
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import torch
 
-SWITCH = "IDEEPRL_CONV_KERNEL"
-"""The environment variable that turns the kernel on (`on`); anything else: off."""
-BUILD = Path(__file__).parent / "kernels" / "build"
-VARIANTS = {
-    "avx512bf16": ({"avx512f", "avx512bw", "avx512vl", "avx512vbmi", "avx512_bf16", "fma"}, "bf16"),
-    "avx2": ({"avx2", "fma"}, "fp32"),
-}
-"""Instruction-set variant: (the CPU flags it needs, the precision of its functions)."""
+from learner import machine
+from learner.config import ConvKernel
+
+SWITCH = machine.CONV_KERNEL_SWITCH
+BUILD = machine.CONV_KERNEL_BUILD
+VARIANTS = machine.CONV_KERNEL_VARIANTS
 
 
 @dataclass(frozen=True)
@@ -49,47 +47,51 @@ class FirstLayerKernel:
     backward_fn: Callable[..., None]
 
 
-def cpu_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> set[str]:
-    try:
-        text = cpuinfo.read_text()
-    except OSError:
-        return set()
-    for line in text.splitlines():
-        if line.startswith("flags"):
-            return set(line.split(":", 1)[1].split())
-    return set()
+def _open(variant: ConvKernel) -> FirstLayerKernel:
+    precision = VARIANTS[variant][1]
+    library = ctypes.CDLL(str(BUILD / f"libconv1_{variant}.so"))
+    forward_fn = getattr(library, f"conv1_forward_{precision}")
+    backward_fn = getattr(library, f"conv1_backward_{precision}")
+    forward_fn.restype = backward_fn.restype = None
+    forward_fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, *[ctypes.c_void_p] * 4]
+    backward_fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, *[ctypes.c_void_p] * 4]
+    dtype = torch.bfloat16 if precision == "bf16" else torch.float32
+    return FirstLayerKernel(variant, precision, dtype, forward_fn, backward_fn)
 
 
-def load(precision: str, flags: set[str] | None = None) -> FirstLayerKernel | None:
-    """The kernel for `precision` ("bf16" or "fp32") on this CPU, or None where no built
-    variant runs here. The AVX2 library's float32 functions also serve AVX-512 CPUs."""
-    flags = cpu_flags() if flags is None else flags
+def load(precision: str, flags: frozenset[str] | set[str] | None = None) -> FirstLayerKernel | None:
+    """The kernel for `precision` ("bf16" or "fp32") on a CPU with `flags` (this one's by
+    default), or None where no built variant runs there. The AVX2 library's float32
+    functions also serve AVX-512 CPUs."""
+    flags = machine.cpu_flags() if flags is None else flags
     for variant, (needs, variant_precision) in VARIANTS.items():
-        if variant_precision != precision or not needs <= flags:
-            continue
-        path = BUILD / f"libconv1_{variant}.so"
-        if not path.exists():
-            continue
-        library = ctypes.CDLL(str(path))
-        forward_fn = getattr(library, f"conv1_forward_{precision}")
-        backward_fn = getattr(library, f"conv1_backward_{precision}")
-        forward_fn.restype = backward_fn.restype = None
-        forward_fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, *[ctypes.c_void_p] * 4]
-        backward_fn.argtypes = [ctypes.c_void_p, ctypes.c_int64, *[ctypes.c_void_p] * 4]
-        dtype = torch.bfloat16 if precision == "bf16" else torch.float32
-        return FirstLayerKernel(variant, precision, dtype, forward_fn, backward_fn)
+        built = (BUILD / f"libconv1_{variant}.so").exists()
+        if variant_precision == precision and needs <= flags and built:
+            return _open(variant)
     return None
 
 
-def for_dtype(dtype: torch.dtype) -> FirstLayerKernel | None:
-    """The kernel for the fast update's convolution dtype where `IDEEPRL_CONV_KERNEL=on`
-    asks for it and it loads here; else None (the PyTorch update).
-
-    An explicit switch, off by default: the kernel computes the same function in another
-    float order, and a run's numerics do not yet record which was used."""
-    if os.environ.get(SWITCH, "off") != "on":
+def for_run(conv_kernel: ConvKernel, dtype: torch.dtype) -> FirstLayerKernel | None:
+    """The kernel a run's `config.conv_kernel` names, for its convolution `dtype`: `none`,
+    None (the PyTorch update); a variant, that variant's, which must run here; `auto` (a
+    run not pinned), the variant the switch and this CPU decide
+    (`learner.machine.conv_kernel_for`). A pinned run's kernel is part of its numerics
+    (`RunSpec.pinned`), checked before it resumes (`RunSpec.numerics_problem`)."""
+    precision = "bf16" if dtype == torch.bfloat16 else "fp32"
+    variant = machine.conv_kernel_for(precision) if conv_kernel == "auto" else conv_kernel
+    if variant == "none":
         return None
-    return load("bf16" if dtype == torch.bfloat16 else "fp32")
+    if VARIANTS[variant][1] != precision:
+        raise ValueError(
+            f"conv_kernel {variant} computes {VARIANTS[variant][1]} convolutions, and the "
+            f"run's are {precision}: pin the precision it computes, or conv_kernel none"
+        )
+    if not machine.conv_kernel_runs(variant):
+        raise ValueError(
+            f"conv_kernel {variant} does not run here ({machine.cpu_kind()}): this CPU lacks "
+            "its instructions, or `make kernels` has not built it"
+        )
+    return _open(variant)
 
 
 def _pointer(t: torch.Tensor | None) -> int | None:

@@ -1,7 +1,7 @@
 """What this machine can compute, read without torch (the web process pins a run's numerics
-when it creates the session, and loads no torch): the CPU's kind and bfloat16 support, a
-CUDA device, the cores and the memory. `learner.device` asks torch the same questions
-where torch is loaded; a test checks the two agree here."""
+when it creates the session, and loads no torch): the CPU's kind and bfloat16 support, the
+learner's compiled first layer, a CUDA device, the cores and the memory. `learner.device`
+asks torch the same questions where torch is loaded; a test checks the two agree here."""
 
 from __future__ import annotations
 
@@ -9,9 +9,24 @@ import os
 import platform
 from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from learner.config import ConvKernel
 
 BF16_FLAGS = ("avx512_bf16", "amx_bf16")
 """CPU flags with which bfloat16 convolutions run natively (oneDNN's AVX-512 BF16 or AMX)."""
+CONV_KERNEL_SWITCH = "IDEEPRL_CONV_KERNEL"
+"""The environment variable with which a run left to choose (`config.conv_kernel` `auto`)
+takes the compiled first layer (`on`); anything else: off."""
+CONV_KERNEL_BUILD = Path(__file__).parent / "kernels" / "build"
+"""Where `make kernels` puts the compiled first layer's libraries (`libconv1_<variant>.so`)."""
+CONV_KERNEL_VARIANTS: dict[ConvKernel, tuple[set[str], str]] = {
+    "avx512bf16": ({"avx512f", "avx512bw", "avx512vl", "avx512vbmi", "avx512_bf16", "fma"}, "bf16"),
+    "avx2": ({"avx2", "fma"}, "fp32"),
+}
+"""The compiled first layer's variants (`learner.conv_kernel`): the CPU flags each needs, the
+convolution precision it computes in."""
 
 
 @cache
@@ -58,6 +73,24 @@ def cpu_kind() -> str:
 def bf16_native_cpu() -> bool:
     """bfloat16 convolutions run natively on this CPU."""
     return any(flag in cpu_flags() for flag in BF16_FLAGS)
+
+
+def conv_kernel_runs(variant: ConvKernel) -> bool:
+    """The compiled first layer's `variant` is built here and this CPU has its instructions."""
+    needs, _ = CONV_KERNEL_VARIANTS[variant]
+    return needs <= cpu_flags() and (CONV_KERNEL_BUILD / f"libconv1_{variant}.so").exists()
+
+
+def conv_kernel_for(precision: str) -> ConvKernel:
+    """The compiled first layer's variant a run in `precision` (`bf16`, `fp32`) takes here
+    when it leaves the choice open: the one that runs here where the switch
+    (`CONV_KERNEL_SWITCH`) is on, else `none` (the PyTorch update)."""
+    if os.environ.get(CONV_KERNEL_SWITCH, "off") != "on":
+        return "none"
+    for variant, (_, variant_precision) in CONV_KERNEL_VARIANTS.items():
+        if variant_precision == precision and conv_kernel_runs(variant):
+            return variant
+    return "none"
 
 
 def cuda_present() -> bool:

@@ -9,7 +9,7 @@ run starts or resumes (`sessions.provenance`), and the report's audit compares:
   different as soon as one of those files changes;
 - `commit`: the git commit when the code runs from a checkout (None otherwise);
 - `cpu`: the CPU kind (`learner.machine.cpu_kind`), `torch` and `python` versions;
-- `numerics`: the run's pinned device, precision and threads.
+- `numerics`: the run's pinned device, precision, first-layer kernel and threads.
 
 Torch-free (its version is read from the installed package's metadata).
 """
@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, TypedDict
 from learner import machine
 
 if TYPE_CHECKING:
-    from learner.config import DQNConfig, Precision
+    from learner.config import ConvKernel, DQNConfig, Precision
 
 PACKAGES = ("sim", "learner")
 """The packages whose files decide a run's course."""
@@ -82,6 +82,7 @@ def torch_version() -> str | None:
 class Numerics(TypedDict):
     device: str
     precision: Precision
+    conv_kernel: ConvKernel
     torch_threads: int
 
 
@@ -106,6 +107,9 @@ def record(config: DQNConfig) -> Provenance:
         torch=torch_version(),
         python=platform.python_version(),
         numerics=Numerics(
-            device=config.device, precision=config.precision, torch_threads=config.torch_threads
+            device=config.device,
+            precision=config.precision,
+            conv_kernel=config.conv_kernel,
+            torch_threads=config.torch_threads,
         ),
     )

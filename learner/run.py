@@ -12,8 +12,9 @@ audit. An option added here reaches all of them.
   export's `run_spec` column), every value checked; fields left out take their defaults, the
   learner config's the preset's.
 - `validate()`: the rules between fields, checked before anything is stored or started.
-- `pinned()`: the numerics (device, precision, threads) resolved on this machine; a session
-  stores its run pinned, and `numerics_problem()` says why another machine cannot honour it.
+- `pinned()`: the numerics (device, precision, first-layer kernel, threads) resolved on
+  this machine; a session stores its run pinned, and `numerics_problem()` says why another
+  machine cannot honour it.
 - `build()`: the environment and the trainer.
 
 Torch is not imported by this module: `build()` imports the trainer when it is called.
@@ -465,6 +466,26 @@ class RunSpec:
         if self.motion not in (None, "fast", "physics"):
             raise RunSpecError("motion", "motion is the sorting task's")
 
+    def _check_conv_kernel(self) -> None:
+        """A compiled first layer (`config.conv_kernel`) only where it computes the run's."""
+        config = self.config
+        kernel = config.conv_kernel
+        if kernel in ("auto", "none"):
+            return
+        precision = machine.CONV_KERNEL_VARIANTS[kernel][1]
+        if config.update != "fast" or config.device.startswith("cuda") or self.learner != "dqn":
+            raise RunSpecError(
+                "config.conv_kernel",
+                f"conv_kernel {kernel} is a first layer of the DQN's fast update on the CPU; "
+                "this run computes none (use conv_kernel none)",
+            )
+        if config.precision not in ("auto", precision):
+            raise RunSpecError(
+                "config.conv_kernel",
+                f"conv_kernel {kernel} computes {precision} convolutions and the run's "
+                f"precision is {config.precision}",
+            )
+
     def validate(self) -> RunSpec:
         """Every rule between fields, checked before anything is built or stored; returns the
         normalized spec. Raises `RunSpecError` (a `ValueError`) naming the field."""
@@ -486,6 +507,7 @@ class RunSpec:
                 if spec.method == "procedure"
                 else "only method procedure takes a schedule",
             )
+        spec._check_conv_kernel()
         if spec.method != "fitted" and spec.fitted_model:
             raise RunSpecError("fitted_model", "only method fitted takes a fitted_model")
         if spec.method == "fitted" and not spec.fitted_model:
@@ -543,8 +565,10 @@ class RunSpec:
     def pinned(self, threads: int | None = None) -> RunSpec:
         """The run with its numerics decided on this machine, as a session stores it: the
         device (`auto`: cuda when present, else cpu), the convolution precision (`auto`:
-        bf16 where the device runs it natively, else fp32) and the torch threads (0: half
-        the cores, 1 to 4, unless `threads` says how many a run gets here). Also checks
+        bf16 where the device runs it natively, else fp32), the first layer's compiled
+        kernel (`auto`: for the sorting task's fast update on the CPU, the variant
+        `machine.conv_kernel_for` gives, else none) and the torch threads (0: half the
+        cores, 1 to 4, unless `threads` says how many a run gets here). Also checks
         that the replay memory fits this machine."""
         config = self.config
         device = config.device
@@ -555,11 +579,23 @@ class RunSpec:
             native = device.startswith("cuda") or machine.bf16_native_cpu()
             precision = "bf16" if native and config.update == "fast" else "fp32"
         threads = config.torch_threads or threads or machine.default_threads()
+        conv_kernel = config.conv_kernel
+        if conv_kernel == "auto":
+            takes = device == "cpu" and config.update == "fast" and self.task == "sorting"
+            conv_kernel = machine.conv_kernel_for(precision) if takes else "none"
         spec = self.replace(
-            config=config.replace(device=device, precision=precision, torch_threads=threads)
+            config=config.replace(
+                device=device, precision=precision, torch_threads=threads, conv_kernel=conv_kernel
+            )
         )
         spec.check_memory()
         return spec
+
+    def repinned(self) -> RunSpec:
+        """The run pinned anew on this machine, as an override of its numerics resumes it:
+        its device, precision and first-layer kernel chosen here, its threads kept."""
+        config = self.config.replace(device="auto", precision="auto", conv_kernel="auto")
+        return self.replace(config=config).pinned(self.config.torch_threads)
 
     def numerics_problem(self) -> str | None:
         """Why this machine cannot take the steps this pinned run takes, or None."""
@@ -576,6 +612,15 @@ class RunSpec:
                 "the run was pinned to bfloat16 convolutions, which this CPU "
                 f"({machine.cpu_kind()}) does not run natively: its steps would differ. Resume "
                 "it on a CPU with AVX-512 BF16 or AMX, or override the numerics (recorded)"
+            )
+        kernel = config.conv_kernel
+        if kernel not in ("auto", "none") and not machine.conv_kernel_runs(kernel):
+            return (
+                f"the run was pinned to the {kernel} variant of the compiled first layer "
+                f"(conv_kernel), which does not run here ({machine.cpu_kind()}: the CPU lacks "
+                "its instructions, or `make kernels` has not built it): its steps would "
+                "differ. Resume it where that variant runs, or override the numerics "
+                "(recorded)"
             )
         return None
 

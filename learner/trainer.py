@@ -37,7 +37,7 @@ from learner.strategies import AdviceMoment, AdvisingStrategy, AnyAdvisor, make_
 
 MAX_ACTIONS = 32
 """The most actions a task may have (a person picks one from buttons)."""
-RUNTIME_FIELDS = ("device", "torch_threads", "precision", "episodes")
+RUNTIME_FIELDS = ("device", "torch_threads", "precision", "conv_kernel", "episodes")
 """Config fields a resumed run may change: where it computes, and how long it goes on."""
 
 

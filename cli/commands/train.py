@@ -136,8 +136,7 @@ def run_spec(args: argparse.Namespace) -> tuple[RunSpec, int | None]:
         if problem and not args.override_numerics:
             raise ValueError(f"cannot resume {args.resume}: {problem}")
         if problem:
-            config = spec.config.replace(device="auto", precision="auto")
-            spec = spec.replace(config=config).pinned(spec.config.torch_threads)
+            spec = spec.repinned()
             print(f"warning: numerics overridden ({problem})", file=sys.stderr)
         return spec.validate().pinned(), global_step
     return declaration.from_json(nest(values, declaration)).validate().pinned(), None

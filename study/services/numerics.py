@@ -2,8 +2,9 @@
 recorded.
 
 A run is pinned when its session is created (`RunSpec.pinned`: device, convolution
-precision, torch threads). A resume on a machine that cannot take the same steps (a run
-pinned to bfloat16 on a CPU without AVX-512 BF16 or AMX, or to CUDA without a GPU) is
+precision, the first layer's compiled kernel, torch threads). A resume on a machine that
+cannot take the same steps (a run pinned to bfloat16 on a CPU without AVX-512 BF16 or AMX,
+to CUDA without a GPU, or to a kernel variant this CPU or build lacks) is
 refused with the reason, unless the caller overrides: then the run is pinned anew on this
 machine and the change is appended to the session's `numerics_overrides` (when, at which
 step, from what, to what, why), which the export carries. A session stored before numerics
@@ -21,7 +22,7 @@ from learner.run import RunSpec
 from study.db.models import StudySession, utcnow
 from study.services.errors import Conflict
 
-FIELDS = ("device", "precision", "torch_threads")
+FIELDS = ("device", "precision", "conv_kernel", "torch_threads")
 
 
 class NumericsRefused(Conflict):
@@ -58,8 +59,7 @@ def settle(
     if problem is not None and not override:
         raise NumericsRefused(problem)
     if problem is not None:
-        config = spec.config.replace(device="auto", precision="auto")
-        repinned = spec.replace(config=config).pinned(spec.config.torch_threads)
+        repinned = spec.repinned()
         session.numerics_overrides = [
             *session.numerics_overrides,
             {

@@ -40,11 +40,12 @@ CONFIG = {
     "epsilon_decay": 0.99,
     "update": "fast",
     "precision": "fp32",
+    "conv_kernel": "none",
     "device": "cpu",
     "torch_threads": 1,
 }
-"""The paper's learner at a scale a test affords, its numerics pinned (float32, one
-thread)."""
+"""The paper's learner at a scale a test affords, its numerics pinned (float32, PyTorch's
+first layer, one thread)."""
 STREAM = [0, 1, 3, 0, 2, 3, 0, 0, 1, 3, 2, 2, 0, 1, 3, 0, 2, 3, 1, 0]
 """The person's recorded advice (20 choices, some of them wrong), fed by order."""
 EXACT = (

@@ -10,7 +10,9 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from learner import conv_kernel
+from learner import conv_kernel, machine
+from learner.agent import DQNAgent
+from learner.config import DQNConfig
 from learner.network import QNetwork, same_padding
 from learner.phase_conv import PhaseConvForward, pack_frame
 
@@ -19,7 +21,7 @@ PRECISIONS = {"fp32": torch.float32, "bf16": torch.bfloat16}
 
 def kernel_or_skip(precision: str) -> conv_kernel.FirstLayerKernel:
     needs = [n for v, (n, p) in conv_kernel.VARIANTS.items() if p == precision]
-    if not any(n <= conv_kernel.cpu_flags() for n in needs):
+    if not any(n <= machine.cpu_flags() for n in needs):
         pytest.skip(f"this CPU runs no {precision} variant")
     kernel = conv_kernel.load(precision)
     assert kernel is not None, "the CPU runs it but it is not built: run `make kernels`"
@@ -177,9 +179,42 @@ def test_the_network_with_the_kernel_is_the_plain_network_in_float32() -> None:
 
 def test_the_switch_is_off_unless_asked(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(conv_kernel.SWITCH, raising=False)
-    assert conv_kernel.for_dtype(torch.float32) is None
+    assert conv_kernel.for_run("auto", torch.float32) is None
     monkeypatch.setenv(conv_kernel.SWITCH, "off")
-    assert conv_kernel.for_dtype(torch.bfloat16) is None
+    assert conv_kernel.for_run("auto", torch.bfloat16) is None
+
+
+def test_a_pinned_variant_is_used_whatever_the_switch(monkeypatch: pytest.MonkeyPatch) -> None:
+    kernel_or_skip("fp32")
+    monkeypatch.delenv(conv_kernel.SWITCH, raising=False)
+    pinned = conv_kernel.for_run("avx2", torch.float32)
+    assert pinned is not None and pinned.variant == "avx2"
+    monkeypatch.setenv(conv_kernel.SWITCH, "on")
+    switched = conv_kernel.for_run("auto", torch.float32)
+    assert switched is not None and switched.variant == "avx2"
+    assert conv_kernel.for_run("none", torch.float32) is None
+    with pytest.raises(ValueError, match="computes fp32 convolutions"):
+        conv_kernel.for_run("avx2", torch.bfloat16)
+
+
+def test_the_agent_computes_with_the_pinned_kernel(monkeypatch: pytest.MonkeyPatch) -> None:
+    kernel_or_skip("fp32")
+    config = DQNConfig(precision="fp32", device="cpu")
+    monkeypatch.setenv(conv_kernel.SWITCH, "on")
+    agent = DQNAgent(config.replace(conv_kernel="none"), torch.device("cpu"))
+    assert agent.fast.first_layer_kernel is None
+    monkeypatch.delenv(conv_kernel.SWITCH)
+    agent = DQNAgent(config.replace(conv_kernel="avx2"), torch.device("cpu"))
+    assert agent.fast.first_layer_kernel is not None
+    assert agent.fast.first_layer_kernel.variant == "avx2"
+    with pytest.raises(ValueError, match="64x64 RGB"):
+        DQNAgent(config.replace(conv_kernel="avx2"), torch.device("cpu"), image_shape=(32, 32, 3))
+
+
+def test_a_pinned_variant_this_cpu_lacks_is_not_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(machine, "cpu_flags", lambda: frozenset({"sse2"}))
+    with pytest.raises(ValueError, match="does not run here"):
+        conv_kernel.for_run("avx2", torch.float32)
 
 
 def test_a_kernel_of_another_precision_is_not_used() -> None:

@@ -30,10 +30,27 @@ def test_the_code_version_changes_with_a_file_under_learner_and_needs_no_git(
 
 
 def test_a_record_names_the_machine_and_the_numerics() -> None:
-    config = DQNConfig(device="cpu", precision="fp32", torch_threads=1)
+    config = DQNConfig(device="cpu", precision="fp32", conv_kernel="avx2", torch_threads=1)
     record = provenance.record(config)
     assert record["code"] == provenance.code_version() and record["torch"]
-    assert record["numerics"] == {"device": "cpu", "precision": "fp32", "torch_threads": 1}
+    assert record["numerics"] == {
+        "device": "cpu", "precision": "fp32", "conv_kernel": "avx2", "torch_threads": 1
+    }  # fmt: skip
+
+
+def test_the_audit_flags_arms_computed_by_another_first_layer_kernel() -> None:
+    runs = [(1, RunSpec(method="autonomous")), (2, RunSpec(method="random"))]
+    here = provenance.record(DQNConfig(precision="fp32", conv_kernel="none"))
+    kernel = provenance.record(DQNConfig(precision="fp32", conv_kernel="avx2"))
+    same = settings_table(runs, provenance={1: [here], 2: [here]})
+    assert audit(same).differ("autonomous", "random") == []
+    mixed = settings_table(runs, provenance={1: [here], 2: [here, kernel]})
+    assert audit(mixed).differ("autonomous", "random") == ["first-layer kernel"]
+    assert mixed.loc[1, "conv_kernel"] == "none + avx2"
+    older = {**here, "numerics": {"device": "cpu", "precision": "fp32", "torch_threads": 1}}
+    assert settings_table(runs, provenance={1: [older], 2: []}).loc[0, "conv_kernel"] == (
+        "not recorded"
+    )
 
 
 def test_the_audit_flags_arms_computed_by_other_code() -> None:

@@ -103,6 +103,33 @@ def test_pinning_resolves_the_numerics_on_this_machine() -> None:
     assert plain.config.precision == "fp32"
 
 
+def test_pinning_chooses_the_first_layer_kernel_by_the_switch_the_cpu_and_the_run(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    if not machine.conv_kernel_runs("avx2"):
+        pytest.skip("the AVX2 kernel does not run here (no AVX2, or `make kernels` not run)")
+    fp32 = SMALL.replace(precision="fp32", device="cpu")
+    monkeypatch.delenv(machine.CONV_KERNEL_SWITCH, raising=False)
+    assert RunSpec(config=fp32).pinned().config.conv_kernel == "none"
+    monkeypatch.setenv(machine.CONV_KERNEL_SWITCH, "on")
+    pinned = RunSpec(config=fp32).pinned()
+    assert pinned.config.conv_kernel == "avx2" and pinned.numerics_problem() is None
+    assert RunSpec(config=fp32.replace(update="plain")).pinned().config.conv_kernel == "none"
+    assert RunSpec(config=fp32.replace(conv_kernel="none")).pinned().config.conv_kernel == "none"
+    monkeypatch.setattr(machine, "cpu_flags", lambda: frozenset({"sse2"}))
+    assert "avx2 variant" in (pinned.numerics_problem() or "")
+    assert pinned.repinned().config.conv_kernel == "none"
+
+
+def test_a_kernel_is_pinned_only_where_it_computes_the_run() -> None:
+    with pytest.raises(RunSpecError, match="fast update") as raised:
+        RunSpec(config=SMALL.replace(update="plain", conv_kernel="avx2")).validate()
+    assert raised.value.field == "config.conv_kernel"
+    with pytest.raises(RunSpecError, match="computes bf16"):
+        RunSpec(config=SMALL.replace(precision="fp32", conv_kernel="avx512bf16")).validate()
+    RunSpec(config=SMALL.replace(precision="fp32", conv_kernel="avx2")).validate()
+
+
 def test_a_replay_memory_larger_than_the_machine_is_refused_before_anything_runs() -> None:
     spec = RunSpec(config=SMALL.replace(memory_size=10_000_000))
     with pytest.raises(RunSpecError, match="GiB") as raised:

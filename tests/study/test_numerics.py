@@ -115,3 +115,106 @@ def test_sessions_are_pinned_where_they_are_created(database: str) -> None:
     native = machine.bf16_native_cpu() or config.device == "cuda"
     assert config.precision == ("bf16" if native else "fp32")
     assert config.torch_threads == 1 and config.device in ("cpu", "cuda")
+
+
+def test_a_session_pins_the_first_layer_kernel_the_switch_and_the_cpu_decide(
+    database: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    fp32 = {**TINY, "precision": "fp32", "device": "cpu"}
+    with Session(make_engine(database)) as db:
+        study = create_study(db, "kernel")
+        monkeypatch.delenv(machine.CONV_KERNEL_SWITCH, raising=False)
+        off = create_session(db, study.id, RunSpec.from_json({"config": fp32}), threads=1)
+        assert off.spec.config.conv_kernel == "none"  # the default: PyTorch's first layer
+        monkeypatch.setenv(machine.CONV_KERNEL_SWITCH, "on")
+        on = create_session(db, study.id, RunSpec.from_json({"config": fp32}), threads=1)
+        assert on.spec.config.conv_kernel == machine.conv_kernel_for("fp32")
+        monkeypatch.setattr(machine, "cpu_flags", lambda: frozenset({"sse2"}))  # no AVX2
+        bare = create_session(db, study.id, RunSpec.from_json({"config": fp32}), threads=1)
+        assert bare.spec.config.conv_kernel == "none"
+
+
+def _stopped_kernel_session(url: str) -> int:
+    """A session pinned to the AVX2 first-layer kernel (float32) that stopped early."""
+    with make_session_factory(make_engine(url))() as db:
+        study = create_study(db, "kernel")
+        config = {**TINY, "precision": "fp32", "device": "cpu", "conv_kernel": "avx2"}
+        spec = RunSpec.from_json({"method": "oracle", "config": config})
+        session = create_session(db, study.id, spec, threads=1)
+        assert session.spec.config.conv_kernel == "avx2"  # a pinned choice stays
+        set_status(db, session.id, Status.stopped, "stopped for the test")
+        return session.id
+
+
+def test_a_resume_where_the_kernel_does_not_run_is_refused_or_overridden_and_recorded(
+    database: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    session_id = _stopped_kernel_session(database)  # runs anywhere: it never computes avx2
+    monkeypatch.setenv(machine.CONV_KERNEL_SWITCH, "on")
+    monkeypatch.setattr(machine, "cpu_flags", lambda: frozenset({"sse2"}))  # a CPU without AVX2
+    with pytest.raises(NumericsRefused, match="avx2 variant of the compiled first layer") as no:
+        run_session(session_id, database, WorkerOptions(data_dir=tmp_path / "data"))
+    assert "override_numerics" in str(no.value)
+    factory = make_session_factory(make_engine(database))
+    with factory() as db:
+        session = db.get(StudySession, session_id)
+        assert session is not None and session.status == Status.stopped
+        assert session.numerics_overrides == []
+
+    status = run_session(session_id, database, WorkerOptions(
+        data_dir=tmp_path / "data", override_numerics=True))  # fmt: skip
+    assert status == "finished"
+    with factory() as db:
+        session = db.get(StudySession, session_id)
+        assert session is not None
+        [override] = session.numerics_overrides
+        assert override["from"]["conv_kernel"] == "avx2" and override["to"]["conv_kernel"] == "none"
+        assert override["from"]["precision"] == override["to"]["precision"] == "fp32"
+        assert "avx2" in override["why"]
+        assert session.spec.config.conv_kernel == "none"
+        export_study(db, session.study_id, tmp_path / "export")
+    with (tmp_path / "export" / "sessions.csv").open() as f:
+        import csv
+
+        (row,) = list(csv.DictReader(f))
+    assert json.loads(row["numerics_overrides"])[0]["to"]["conv_kernel"] == "none"
+    [computed] = json.loads(row["provenance"])
+    assert computed["numerics"]["conv_kernel"] == "none"
+
+
+def test_a_session_pinned_to_the_kernel_resumes_with_it_where_it_runs(
+    database: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    if not machine.conv_kernel_runs("avx2"):
+        pytest.skip("the AVX2 kernel does not run here (no AVX2, or `make kernels` not run)")
+    session_id = _stopped_kernel_session(database)
+    monkeypatch.delenv(machine.CONV_KERNEL_SWITCH, raising=False)  # the pin decides, not it
+    status = run_session(session_id, database, WorkerOptions(data_dir=tmp_path / "data"))
+    assert status == "finished"
+    with make_session_factory(make_engine(database))() as db:
+        session = db.get(StudySession, session_id)
+        assert session is not None and session.numerics_overrides == []
+        [computed] = session.provenance
+        assert computed["numerics"]["conv_kernel"] == "avx2"
+
+
+def test_ideeprl_train_refuses_to_resume_where_the_pinned_kernel_does_not_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    if not machine.conv_kernel_runs("avx2"):
+        pytest.skip("the AVX2 kernel does not run here (no AVX2, or `make kernels` not run)")
+    from cli.main import main
+    from learner.checkpoint import read_checkpoint
+
+    small = [f"--{k.replace('_', '-')}={v}" for k, v in TINY.items()]
+    out = tmp_path / "run"
+    pinned = ["--precision", "fp32", "--conv-kernel", "avx2"]
+    assert main(["train", "--out", str(out), "--no-progress", *pinned, *small]) == 0
+    checkpoint = out / "checkpoint.pt"
+    assert read_checkpoint(checkpoint)["metadata"]["config"]["conv_kernel"] == "avx2"
+    monkeypatch.setattr(machine, "cpu_flags", lambda: frozenset({"sse2"}))  # no AVX2
+    assert main(["train", "--resume", str(checkpoint), "--episodes", "2", "--no-progress"]) == 2
+    assert "avx2 variant" in capsys.readouterr().err
+    code = main(["train", "--resume", str(checkpoint), "--episodes", "2", "--no-progress",
+                 "--override-numerics"])  # fmt: skip
+    assert code == 0 and "numerics overridden" in capsys.readouterr().err
