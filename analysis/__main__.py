@@ -172,7 +172,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         notes += left_out
         if export.design is not None:  # an online study: its conditions are compared
             # (a session with no condition, a batch run beside the study, keeps its method)
-            group = {i: arm(run.method, run.feedback) for i, run in export.runs.items()}
+            group = {
+                i: arm(run.method, run.feedback, run.feedback_method)
+                for i, run in export.runs.items()
+            }
             group |= export.conditions
             episodes, settings, note = compare_conditions(episodes, settings, group, export.alpha)
             notes.append(note)

@@ -67,6 +67,8 @@ METHOD_NAMES: dict[str, str] = {
     "sb3-dqn": "SB3 DQN",
     "oracle-evaluative": "oracle evaluative feedback",
     "agent-evaluative": "agent evaluative feedback",
+    "oracle-evaluative-rating_model": "oracle evaluative feedback, rating model",
+    "agent-evaluative-rating_model": "agent evaluative feedback, rating model",
 }
 """Display names in the paper's words (and Stable-Baselines3's DQN, the independent
 baseline)."""
@@ -106,11 +108,16 @@ class EpisodeTableError(ValueError):
         return self.text.replace("{n_episodes}", length.format(n=self.n_episodes))
 
 
-def arm(method: str, feedback: str = "advice") -> str:
+def arm(method: str, feedback: str = "advice", feedback_method: str = "shaping") -> str:
     """What a report compares a run as: its method, and for evaluative feedback (the
-    paper's other strategy) its method with `-evaluative`, so that advice and evaluation
-    by the same advisor are two arms, never one mean."""
-    return f"{method}-evaluative" if feedback == "evaluative" else method
+    paper's other strategy) its method with `-evaluative` (and `-rating_model` where a
+    model of the ratings shapes the steps not judged), so that advice and evaluation by
+    the same advisor, and the two ways of learning from a judgement, are apart, never one
+    mean."""
+    if feedback != "evaluative":
+        return method
+    suffix = "" if feedback_method == "shaping" else f"-{feedback_method}"
+    return f"{method}-evaluative{suffix}"
 
 
 def method_name(method: str) -> str:

@@ -125,7 +125,7 @@ def read_export(path: Path, sessions: Collection[int] | None = None) -> Exported
     episodes = episodes[episodes["session_id"].isin(list(runs))]
     training = episodes[episodes["stage"] == "train"].copy()
     training["method"] = training["session_id"].map(
-        {i: arm(r.method, r.feedback) for i, r in runs.items()}
+        {i: arm(r.method, r.feedback, r.feedback_method) for i, r in runs.items()}
     )
     training["seed"] = training["session_id"].map({i: r.seed for i, r in runs.items()})
     training = training.sort_values(["session_id", "episode"])

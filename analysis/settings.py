@@ -53,7 +53,7 @@ def settings_table(
         rows.append(
             {
                 "session_id": session_id,
-                "method": arm(spec.method, spec.feedback),
+                "method": arm(spec.method, spec.feedback, spec.feedback_method),
                 "learner": learner,
                 **{leaf.name: _text(values[leaf.name]) for leaf in settings},
                 **(
@@ -67,7 +67,8 @@ def settings_table(
                 "advice": "none"
                 if not spec.advised
                 else (
-                    f"evaluative feedback (weight {spec.feedback_weight:g}), "
+                    f"evaluative feedback ({spec.feedback_method}, "
+                    f"weight {spec.feedback_weight:g}), "
                     if spec.feedback == "evaluative"
                     else ""
                 )
