@@ -119,9 +119,11 @@ shaping the judged step's remembered reward only (Ng et al. 1999; TAMER+RL's rew
 shaping), or also training a model of the rating that shapes the steps not judged (TAMER+RL,
 Knox and Stone 2010; Deep TAMER, Warnell et al. 2018)."""
 FeedbackMethod = Literal["shaping", "rating_model"]
-EVALUATORS = ("agent", "oracle", "human")
+EVALUATORS = ("agent", "oracle", "human", "replayed")
 """Methods whose advisor can judge an action (evaluative feedback): the machines that name
-the right one, and a person rating on the advice page (`runs.worker.rating`)."""
+the right one, a person rating on the advice page (`runs.worker.rating`), and a recorded
+session's ratings fed by order (`replayed`: the caller supplies a
+`learner.evaluators.RecordedEvaluator`)."""
 MAX_SEED = 2**31 - 1
 FRAME_BYTES = 64 * 64 * 3
 """One stored observation (uint8)."""
@@ -189,7 +191,8 @@ class RunSpec:
     checkpoint), human (a person in the browser), oracle (the correct action, with an error
     rate), random, fitted (advises like a study's people: `fitted_model`); sb3-dqn,
     Stable-Baselines3's DQN unadvised (needs the sb3 extra); or replayed, a recorded
-    session's advice fed by order (made by ideeprl replay)."""
+    session's advice (or, under evaluative feedback, its ratings) fed by order (made by
+    ideeprl replay)."""
     seed: int = bounded(0, 0, MAX_SEED, role="seed")
     """Fixes scene, network, memory, exploration and the machine advisors' draws."""
     preset: Preset = bounded("paper")
@@ -634,8 +637,8 @@ class RunSpec:
         """Under evaluative feedback, the machine evaluator: the oracle's correct action or
         the agent's greedy one is good, any other bad, each judgement wrong with the
         oracle's error rate (`learner.evaluators.AdvisorEvaluator`); else None."""
-        if self.feedback != "evaluative" or not self.advised or self.method == "human":
-            return None  # a person's ratings come through the worker (`runs.worker.rating`)
+        if self.feedback != "evaluative" or self.method not in ("agent", "oracle"):
+            return None  # a person's ratings, or a recorded stream, are the caller's
         advisor = self.replace(error_rate=0.0)._machine_advisor()
         assert advisor is not None, "validate() admits evaluative feedback from evaluators only"
         return AdvisorEvaluator(advisor, self.error_rate, self.seed)
