@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable
+from typing import Protocol
 
 import numpy as np
 import pandas as pd
@@ -118,6 +119,22 @@ def arm(method: str, feedback: str = "advice", feedback_method: str = "shaping")
         return method
     suffix = "" if feedback_method == "shaping" else f"-{feedback_method}"
     return f"{method}-evaluative{suffix}"
+
+
+class Armed(Protocol):
+    """A run as `arm` reads it (a `RunSpec`)."""
+
+    @property
+    def method(self) -> str: ...
+    @property
+    def feedback(self) -> str: ...
+    @property
+    def feedback_method(self) -> str: ...
+
+
+def arm_of(run: Armed) -> str:
+    """The arm a run is compared in (`arm`)."""
+    return arm(run.method, run.feedback, run.feedback_method)
 
 
 def method_name(method: str) -> str:
