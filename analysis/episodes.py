@@ -69,6 +69,8 @@ METHOD_NAMES: dict[str, str] = {
     "oracle-evaluative": "oracle evaluative feedback",
     "agent-evaluative": "agent evaluative feedback",
     "oracle-evaluative-rating_model": "oracle evaluative feedback, rating model",
+    "procedure-evaluative": "procedure control of evaluative feedback",
+    "procedure-evaluative-rating_model": "procedure control of evaluative feedback, rating model",
     "agent-evaluative-rating_model": "agent evaluative feedback, rating model",
 }
 """Display names in the paper's words (and Stable-Baselines3's DQN, the independent

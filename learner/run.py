@@ -119,11 +119,12 @@ shaping the judged step's remembered reward only (Ng et al. 1999; TAMER+RL's rew
 shaping), or also training a model of the rating that shapes the steps not judged (TAMER+RL,
 Knox and Stone 2010; Deep TAMER, Warnell et al. 2018)."""
 FeedbackMethod = Literal["shaping", "rating_model"]
-EVALUATORS = ("agent", "oracle", "human", "replayed")
+EVALUATORS = ("agent", "oracle", "human", "replayed", "procedure")
 """Methods whose advisor can judge an action (evaluative feedback): the machines that name
-the right one, a person rating on the advice page (`runs.worker.rating`), and a recorded
+the right one, a person rating on the advice page (`runs.worker.rating`), a recorded
 session's ratings fed by order (`replayed`: the caller supplies a
-`learner.evaluators.RecordedEvaluator`)."""
+`learner.evaluators.RecordedEvaluator`), and the procedure control of a judged run
+(uninformed judgements at its judged steps)."""
 MAX_SEED = 2**31 - 1
 FRAME_BYTES = 64 * 64 * 3
 """One stored observation (uint8)."""
@@ -636,8 +637,10 @@ class RunSpec:
     def make_evaluator(self) -> Evaluator | None:
         """Under evaluative feedback, the machine evaluator: the oracle's correct action or
         the agent's greedy one is good, any other bad, each judgement wrong with the
-        oracle's error rate (`learner.evaluators.AdvisorEvaluator`); else None."""
-        if self.feedback != "evaluative" or self.method not in ("agent", "oracle"):
+        oracle's error rate (`learner.evaluators.AdvisorEvaluator`); the procedure
+        control's, a random action's (good as often as an evaluator with one right action
+        whose learner acts at random, whatever the state: uninformed); else None."""
+        if self.feedback != "evaluative" or self.method not in ("agent", "oracle", "procedure"):
             return None  # a person's ratings, or a recorded stream, are the caller's
         advisor = self.replace(error_rate=0.0)._machine_advisor()
         assert advisor is not None, "validate() admits evaluative feedback from evaluators only"
