@@ -139,3 +139,21 @@ def test_the_two_learner_methods_are_two_arms(
     methods = {r["method"] for r in read_csv(report / "r_t_per_method.csv")}
     assert methods == {"oracle-evaluative", "oracle-evaluative-rating_model"}
     assert "oracle evaluative feedback, rating model" in (report / "report.md").read_text()
+
+
+def test_power_plans_from_evaluative_arms(place: Place, capsys: pytest.CaptureFixture[str]) -> None:
+    """A pilot of judged and unadvised agents: the power analysis takes the judged arm as
+    any other, by its arm's name."""
+    study = ["--study", "judged pilot", "--agents", "2", *SCALE, "--workers", "1"]
+    args = ["batch", "--methods", "autonomous", "oracle", "--feedback", "evaluative"]
+    code, out = run(place, capsys, *args, *study)
+    assert code == 0, out
+    power = ["power", "--study", "judged pilot", "--draws", "100", "--max-n", "20"]
+    code, out = run(place, capsys, *power, "--methods", "autonomous", "oracle-evaluative")
+    assert code == 0, out
+    assert "oracle evaluative feedback vs autonomous DeepRL" in out
+    assert "pilot 2 + 2 agents" in out
+    code, out = run(place, capsys, *power, "--baseline", "oracle-evaluative", "--json")
+    assert code == 0, out
+    (comparison,) = json.loads(out)["comparisons"]
+    assert (comparison["method"], comparison["baseline"]) == ("autonomous", "oracle-evaluative")
