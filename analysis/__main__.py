@@ -35,7 +35,7 @@ from analysis.baseline import (
     compare_conditions,
 )
 from analysis.demo_curves import demo_episodes
-from analysis.episodes import CONTRACT, REQUIRED_COLUMNS, EpisodeTableError, arm
+from analysis.episodes import CONTRACT, REQUIRED_COLUMNS, EpisodeTableError, arm_of
 from analysis.exported import Exported, ExportError, export_of_table, read_export
 from analysis.finished import Choice, left_out_notes, nothing_finished
 from analysis.human import Visits, learners_finished
@@ -172,7 +172,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         notes += left_out
         if export.design is not None:  # an online study: its conditions are compared
             # (a session with no condition, a batch run beside the study, keeps its method)
-            group = {i: arm(run.method, run.feedback) for i, run in export.runs.items()}
+            group = {i: arm_of(run) for i, run in export.runs.items()}
             group |= export.conditions
             episodes, settings, note = compare_conditions(episodes, settings, group, export.alpha)
             notes.append(note)

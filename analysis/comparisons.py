@@ -74,10 +74,14 @@ ADVISED = ("agent", "human", "oracle", "random")
 
 def comparison_pairs(methods: list[str], baseline: str | None) -> list[tuple[str, str]]:
     """(method, against) pairs: every method against the baseline, and every advised method
-    against the procedure control when there is one."""
+    against the procedure control when there is one (a judged arm, `oracle-evaluative`,
+    against the control of its kind, `procedure-evaluative`)."""
     pairs = [(m, baseline) for m in methods if baseline is not None and m != baseline]
-    if CONTROL in methods:
-        pairs += [(m, CONTROL) for m in methods if m in ADVISED and (m, CONTROL) not in pairs]
+    for method in methods:
+        advisor, dash, kind = method.partition("-")
+        control = CONTROL + dash + kind
+        if advisor in ADVISED and control in methods and (method, control) not in pairs:
+            pairs.append((method, control))
     return pairs
 
 

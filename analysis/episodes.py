@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable
+from typing import Protocol
 
 import numpy as np
 import pandas as pd
@@ -67,6 +68,10 @@ METHOD_NAMES: dict[str, str] = {
     "sb3-dqn": "SB3 DQN",
     "oracle-evaluative": "oracle evaluative feedback",
     "agent-evaluative": "agent evaluative feedback",
+    "oracle-evaluative-rating_model": "oracle evaluative feedback, rating model",
+    "procedure-evaluative": "procedure control of evaluative feedback",
+    "procedure-evaluative-rating_model": "procedure control of evaluative feedback, rating model",
+    "agent-evaluative-rating_model": "agent evaluative feedback, rating model",
 }
 """Display names in the paper's words (and Stable-Baselines3's DQN, the independent
 baseline)."""
@@ -106,11 +111,32 @@ class EpisodeTableError(ValueError):
         return self.text.replace("{n_episodes}", length.format(n=self.n_episodes))
 
 
-def arm(method: str, feedback: str = "advice") -> str:
+def arm(method: str, feedback: str = "advice", feedback_method: str = "shaping") -> str:
     """What a report compares a run as: its method, and for evaluative feedback (the
-    paper's other strategy) its method with `-evaluative`, so that advice and evaluation
-    by the same advisor are two arms, never one mean."""
-    return f"{method}-evaluative" if feedback == "evaluative" else method
+    paper's other strategy) its method with `-evaluative` (and `-rating_model` where a
+    model of the ratings shapes the steps not judged), so that advice and evaluation by
+    the same advisor, and the two ways of learning from a judgement, are apart, never one
+    mean."""
+    if feedback != "evaluative":
+        return method
+    suffix = "" if feedback_method == "shaping" else f"-{feedback_method}"
+    return f"{method}-evaluative{suffix}"
+
+
+class Armed(Protocol):
+    """A run as `arm` reads it (a `RunSpec`)."""
+
+    @property
+    def method(self) -> str: ...
+    @property
+    def feedback(self) -> str: ...
+    @property
+    def feedback_method(self) -> str: ...
+
+
+def arm_of(run: Armed) -> str:
+    """The arm a run is compared in (`arm`)."""
+    return arm(run.method, run.feedback, run.feedback_method)
 
 
 def method_name(method: str) -> str:

@@ -26,7 +26,7 @@ from typing import Any
 import pandas as pd
 
 from analysis.advice import ADVICE_COLUMNS, REPLAYED_ADVICE_COLUMNS
-from analysis.episodes import EPISODE_TABLE_COLUMNS, arm
+from analysis.episodes import EPISODE_TABLE_COLUMNS, arm_of
 from analysis.finished import not_finished, status_of
 from analysis.human import Visits
 from analysis.replays import REPLAYED, unchanged_replays
@@ -124,9 +124,7 @@ def read_export(path: Path, sessions: Collection[int] | None = None) -> Exported
     episodes = _with_stage(_table(path, "episodes"))
     episodes = episodes[episodes["session_id"].isin(list(runs))]
     training = episodes[episodes["stage"] == "train"].copy()
-    training["method"] = training["session_id"].map(
-        {i: arm(r.method, r.feedback) for i, r in runs.items()}
-    )
+    training["method"] = training["session_id"].map({i: arm_of(r) for i, r in runs.items()})
     training["seed"] = training["session_id"].map({i: r.seed for i, r in runs.items()})
     training = training.sort_values(["session_id", "episode"])
     every_step = _with_stage(_table(path, "steps"))

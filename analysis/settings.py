@@ -16,7 +16,7 @@ from typing import Any
 import pandas as pd
 
 from analysis.audit import describe_learner
-from analysis.episodes import arm
+from analysis.episodes import arm_of
 from learner import sb3_spec
 from learner.config import PRESETS, DQNConfig
 from learner.fields import leaves
@@ -59,7 +59,7 @@ def settings_table(
         rows.append(
             {
                 "session_id": session_id,
-                "method": arm(spec.method, spec.feedback),
+                "method": arm_of(spec),
                 "learner": learner,
                 **{leaf.name: _text(values[leaf.name]) for leaf in settings},
                 **(
@@ -73,7 +73,8 @@ def settings_table(
                 "advice": "none"
                 if not spec.advised
                 else (
-                    f"evaluative feedback (weight {spec.feedback_weight:g}), "
+                    f"evaluative feedback ({spec.feedback_method}, "
+                    f"weight {spec.feedback_weight:g}), "
                     if spec.feedback == "evaluative"
                     else ""
                 )

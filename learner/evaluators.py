@@ -14,6 +14,7 @@ environment's reward).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -94,3 +95,40 @@ class AdvisorEvaluator:
         load = getattr(self.advisor, "load_state_dict", None)
         if state["advisor"] is not None and callable(load):
             load(state["advisor"])
+
+
+class RecordedEvaluator:
+    """A recorded stream of ratings fed by order (`ideeprl replay`): the i-th judgement is
+    the i-th recorded one (None where the recording has no answer), whatever the action
+    and the state; past the stream's end, None. `observation_hashes[i]` is the hash of the
+    image the i-th rating was given on: `same_observation` says whether the learner now
+    shows the same one."""
+
+    def __init__(
+        self, judgements: Sequence[float | None], observation_hashes: Sequence[str | None]
+    ) -> None:
+        if len(judgements) != len(observation_hashes):
+            raise ValueError("a recorded stream needs one observation hash per rating")
+        self.judgements = [None if j is None else float(j) for j in judgements]
+        self.observation_hashes = list(observation_hashes)
+        self.count = 0
+        """Requests so far, answered or not."""
+        self.same_observation: bool | None = None
+        """Whether the last rating met the image it was given on (None: past the stream)."""
+
+    def judge(self, obs: np.ndarray, info: dict[str, Any], action: int) -> float | None:
+        from learner.records import observation_hash
+
+        index = self.count
+        self.count += 1
+        if index >= len(self.judgements):
+            self.same_observation = None
+            return None
+        self.same_observation = observation_hash(obs) == self.observation_hashes[index]
+        return self.judgements[index]
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"count": self.count}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.count = int(state["count"])

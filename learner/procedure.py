@@ -7,10 +7,13 @@ training at a lower epsilon (0.952 instead of 1.0 in the replication). Only an a
 goes through the same procedure with uninformed actions tells the advice's effect apart.
 A `Schedule` is that procedure, read from the advised run's step records: the steps whose
 action came from the advisor, the pretraining steps followed by an update, and epsilon as
-each step's action was chosen. A control run (method `procedure`) takes a random action
-at exactly those steps, fits exactly after those pretraining steps, and follows that
-epsilon step by step (`Trainer` with `schedule=`); beyond the recorded steps (its episodes
-end at other steps, so it may run longer) it follows its own rules.
+each step's action was chosen. A judged run's procedure (evaluative feedback) is its judged
+steps instead of advised ones: the judgements shape those steps' rewards and their fits.
+A control run (method `procedure`) takes a random action (or, following a judged run, gets
+an uninformed judgement, `RunSpec.make_evaluator`) at exactly those steps, fits exactly
+after those pretraining steps, and follows that epsilon step by step (`Trainer` with
+`schedule=`); beyond the recorded steps (its episodes end at other steps, so it may run
+longer) it follows its own rules.
 """
 
 from __future__ import annotations
@@ -40,6 +43,13 @@ class Schedule:
     pretraining_steps: int
     source: str = ""
     """Which run it was read from (e.g. `session 12`)."""
+    judged: frozenset[int] = frozenset()
+    """Steps whose action was judged (evaluative feedback; an answer given)."""
+
+    @property
+    def asked(self) -> frozenset[int]:
+        """The steps the control's advisor or evaluator is asked at."""
+        return self.advised | self.judged
 
     @classmethod
     def from_steps(
@@ -47,9 +57,10 @@ class Schedule:
         steps: Iterable[tuple[int, str, str, float | None, float]],
         pretraining_steps: int,
         source: str = "",
+        judged: Iterable[int] = (),
     ) -> Schedule:
         """From step records as `(global_step, stage, action_source, loss, epsilon)`, in
-        step order from step 1."""
+        step order from step 1, and the steps judged (a judged run's)."""
         advised, fitted, epsilon = set(), set(), []
         for expected, (global_step, stage, source_, loss, eps) in enumerate(steps, start=1):
             if global_step != expected:
@@ -62,7 +73,10 @@ class Schedule:
             if stage == "pretrain" and loss is not None:
                 fitted.add(global_step)
             epsilon.append(float(eps))
-        return cls(frozenset(advised), frozenset(fitted), tuple(epsilon), pretraining_steps, source)
+        return cls(
+            frozenset(advised), frozenset(fitted), tuple(epsilon), pretraining_steps, source,
+            frozenset(int(s) for s in judged),
+        )  # fmt: skip
 
     def epsilon_at(self, global_step: int) -> float | None:
         """Epsilon of the recorded step, None beyond the record."""
@@ -74,6 +88,7 @@ class Schedule:
             "source": self.source,
             "pretraining_steps": self.pretraining_steps,
             "advised": sorted(self.advised),
+            "judged": sorted(self.judged),
             "fitted": sorted(self.fitted),
             "epsilon": list(self.epsilon),
         }
@@ -88,6 +103,7 @@ class Schedule:
             tuple(float(e) for e in data["epsilon"]),
             int(data["pretraining_steps"]),
             str(data.get("source", "")),
+            frozenset(int(s) for s in data.get("judged", ())),
         )
 
     def save(self, path: str | Path) -> Path:
@@ -109,16 +125,16 @@ class Schedule:
 
 
 class ScheduledAdvising(AdvisingStrategy):
-    """Asks exactly at the schedule's advised steps (its budget: their number)."""
+    """Asks exactly at the schedule's advised (or judged) steps (its budget: their number)."""
 
     name = "scheduled"
 
     def __init__(self, schedule: Schedule) -> None:
-        super().__init__(len(schedule.advised))
+        super().__init__(len(schedule.asked))
         self.schedule = schedule
 
     def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
-        if moment.global_step not in self.schedule.advised:
+        if moment.global_step not in self.schedule.asked:
             return None
         return ask(advisor, moment)
 

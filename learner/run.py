@@ -114,9 +114,18 @@ FEEDBACK_KINDS = ("advice", "evaluative")
 (policy shaping: the advisor names the action taken) or evaluative feedback (reward
 shaping: the advisor judges the learner's own action, `learner.evaluators`)."""
 Feedback = Literal["advice", "evaluative"]
-EVALUATORS = ("agent", "oracle", "human")
+FEEDBACK_METHODS = ("shaping", "rating_model")
+"""How the learner uses evaluative feedback (`learner.trainer`, `learner.rating_model`):
+shaping the judged step's remembered reward only (Ng et al. 1999; TAMER+RL's reward
+shaping), or also training a model of the rating that shapes the steps not judged (TAMER+RL,
+Knox and Stone 2010; Deep TAMER, Warnell et al. 2018)."""
+FeedbackMethod = Literal["shaping", "rating_model"]
+EVALUATORS = ("agent", "oracle", "human", "replayed", "procedure")
 """Methods whose advisor can judge an action (evaluative feedback): the machines that name
-the right one, and a person rating on the advice page (`runs.worker.rating`)."""
+the right one, a person rating on the advice page (`runs.worker.rating`), a recorded
+session's ratings fed by order (`replayed`: the caller supplies a
+`learner.evaluators.RecordedEvaluator`), and the procedure control of a judged run
+(uninformed judgements at its judged steps)."""
 MAX_SEED = 2**31 - 1
 FRAME_BYTES = 64 * 64 * 3
 """One stored observation (uint8)."""
@@ -184,7 +193,8 @@ class RunSpec:
     checkpoint), human (a person in the browser), oracle (the correct action, with an error
     rate), random, fitted (advises like a study's people: `fitted_model`); sb3-dqn,
     Stable-Baselines3's DQN unadvised (needs the sb3 extra); or replayed, a recorded
-    session's advice fed by order (made by ideeprl replay)."""
+    session's advice (or, under evaluative feedback, its ratings) fed by order (made by
+    ideeprl replay)."""
     seed: int = bounded(0, 0, MAX_SEED, role="seed")
     """Fixes scene, network, memory, exploration and the machine advisors' draws."""
     preset: Preset = bounded("paper")
@@ -210,6 +220,16 @@ class RunSpec:
     environment's plus w times the judgement (TAMER+RL's reward shaping). 1: a judgement
     weighs as much as the task's largest rewards (a placement's +1, a misplacement's -1),
     so that it counts where the environment rewards nothing (a grab, a move)."""
+    feedback_method: FeedbackMethod = bounded("shaping", role="treatment")
+    """Evaluative feedback: how the learner uses a judgement. shaping: the judged step's
+    remembered reward only (environment's + w * judgement); rating_model: that, and the
+    judgements so far train a model H(s, a) of the rating (linear in pooled features of the
+    observation), and every step not judged after one remembers the environment's reward +
+    w * H (TAMER+RL, Deep TAMER), so a judgement counts beyond its step. shaping by default:
+    the paper's section 2 names reward shaping, and it adds no model of its own."""
+    rating_model_steps: int | None = bounded(None, 1, 100_000_000, role="treatment")
+    """feedback_method rating_model: how many steps after the latest judgement the model
+    shapes; none: to the end of the run [steps]."""
     rating_time_out_s: float = bounded(10.0, 1.0, 600.0, role="treatment")
     """Evaluative feedback from a person: how long the learner waits for a rating of its
     action (good or bad) before it goes on with none (recorded as no answer)."""
@@ -406,6 +426,7 @@ class RunSpec:
         motion = self.motion or ("physics" if self.method == "human" else "fast")
         oracle = self.method == "oracle"
         evaluative = self.advised and self.feedback == "evaluative"
+        modelled = evaluative and self.feedback_method == "rating_model"
         task_options = self.task_options
         if self.task != "sorting":
             try:
@@ -424,6 +445,8 @@ class RunSpec:
             decision_time_sigma=self.decision_time_sigma if oracle else 0.5,
             feedback="evaluative" if evaluative else "advice",
             feedback_weight=self.feedback_weight if evaluative else 1.0,
+            feedback_method=self.feedback_method if evaluative else "shaping",
+            rating_model_steps=self.rating_model_steps if modelled else None,
             rating_time_out_s=self.rating_time_out_s if evaluative else 10.0,
         )
 
@@ -525,6 +548,11 @@ class RunSpec:
             )
         if spec.feedback == "evaluative":
             spec._check_evaluative()
+            if self.rating_model_steps is not None and spec.feedback_method != "rating_model":
+                raise RunSpecError(
+                    "rating_model_steps",
+                    "only feedback_method rating_model takes rating_model_steps",
+                )
         if spec.method == "replayed" and spec.strategy not in REPLAY_STRATEGIES:
             raise RunSpecError(
                 "strategy",
@@ -654,9 +682,11 @@ class RunSpec:
     def make_evaluator(self) -> Evaluator | None:
         """Under evaluative feedback, the machine evaluator: the oracle's correct action or
         the agent's greedy one is good, any other bad, each judgement wrong with the
-        oracle's error rate (`learner.evaluators.AdvisorEvaluator`); else None."""
-        if self.feedback != "evaluative" or not self.advised or self.method == "human":
-            return None  # a person's ratings come through the worker (`runs.worker.rating`)
+        oracle's error rate (`learner.evaluators.AdvisorEvaluator`); the procedure
+        control's, a random action's (good as often as an evaluator with one right action
+        whose learner acts at random, whatever the state: uninformed); else None."""
+        if self.feedback != "evaluative" or self.method not in ("agent", "oracle", "procedure"):
+            return None  # a person's ratings, or a recorded stream, are the caller's
         advisor = self.replace(error_rate=0.0)._machine_advisor()
         assert advisor is not None, "validate() admits evaluative feedback from evaluators only"
         return AdvisorEvaluator(advisor, self.error_rate, self.seed)
@@ -727,7 +757,8 @@ class RunSpec:
         return Trainer(
             env, self.config, advisor, self.make_strategy(), self.seed, list(callbacks),
             schedule=self.make_schedule(), evaluator=evaluator,
-            feedback_weight=self.feedback_weight,
+            feedback_weight=self.feedback_weight, feedback_method=self.feedback_method,
+            rating_model_steps=self.rating_model_steps,
         )  # fmt: skip
 
     def make_schedule(self) -> Schedule | None:

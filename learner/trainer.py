@@ -6,7 +6,8 @@ except that an advising strategy may take some (early advising takes the last
 epsilon-greedy action with one update on a sampled batch after every action; strategies
 other than early advising may replace an action by the advisor's. Under evaluative
 feedback (an `evaluator` in the advisor's place) the learner's own action is always taken,
-and on the strategy's steps the evaluator's judgement shapes the reward it remembers.
+and on the strategy's steps the evaluator's judgement shapes the reward it remembers (with
+`feedback_method="rating_model"`, a model of the judgements shapes the steps not judged too).
 
 `step()` does one environment step and returns its record, so a server can interleave
 its own work (pause, stop, progress) between steps; `run()` steps until done.
@@ -29,6 +30,7 @@ from learner.device import configure_threads, resolve_device
 from learner.evaluators import AnyEvaluator, judge
 from learner.exploration import EpsilonSchedule
 from learner.procedure import Schedule, ScheduledAdvising
+from learner.rating_model import RatingModel
 from learner.records import EpisodeRecord, StepRecord, stage_of
 from learner.replay import ReplayMemory
 from learner.seeding import run_streams
@@ -59,13 +61,18 @@ class Trainer(StagedRun):
         schedule: Schedule | None = None,
         evaluator: AnyEvaluator | None = None,
         feedback_weight: float = 1.0,
+        feedback_method: str = "shaping",
+        rating_model_steps: int | None = None,
     ) -> None:
         """`schedule`: the procedure control's (`learner.procedure`): advice (from `advisor`,
         a random one) exactly at the recorded advised steps, fits exactly after the recorded
         pretraining steps, and the recorded epsilon at every recorded step. `evaluator`:
         evaluative feedback instead of advice (`learner.evaluators`): on the strategy's
         steps the action taken is judged, and the memory keeps the environment's reward
-        plus `feedback_weight` times the judgement."""
+        plus `feedback_weight` times the judgement. `feedback_method` `rating_model`: the
+        judgements also train a `RatingModel` H, and every step not judged after one (for
+        `rating_model_steps` after the latest, or to the end) remembers the environment's
+        reward plus `feedback_weight` times H of its observation and action."""
         self.config = config = config or DQNConfig()
         self.env = env
         _check_spaces(env)
@@ -93,6 +100,8 @@ class Trainer(StagedRun):
         self.advisor = advisor
         self.evaluator = evaluator
         self.feedback_weight = float(feedback_weight)
+        if feedback_method not in ("shaping", "rating_model"):
+            raise ValueError(f"feedback_method is shaping or rating_model, got {feedback_method!r}")
         self.last_judgement: tuple[int, float | None] | None = None
         """The last step judged (its global step) and its judgement (None: no answer)."""
         self.strategy = strategy
@@ -103,6 +112,12 @@ class Trainer(StagedRun):
         shape = tuple(int(n) for n in env.observation_space.shape)
         self.n_actions = int(cast(gym.spaces.Discrete, env.action_space).n)
         """How many actions the task has (the network's outputs)."""
+        self.rating_model = (
+            RatingModel(self.n_actions, shape, rating_model_steps)
+            if evaluator is not None and feedback_method == "rating_model"
+            else None
+        )
+        """The model of the judgements that shapes the steps not judged, if the method's."""
         self.agent = DQNAgent(
             config,
             self.device,
@@ -186,6 +201,11 @@ class Trainer(StagedRun):
             self.last_judgement = (global_step, judgement)
             if judgement is not None:
                 remembered = reward + self.feedback_weight * judgement
+                if self.rating_model is not None:
+                    self.rating_model.learn(episode.obs, action, judgement, global_step)
+        elif self.rating_model is not None and self.rating_model.shapes(global_step):
+            rating = self.rating_model.predict(episode.obs, action)
+            remembered = reward + self.feedback_weight * rating
         self.global_step = global_step
         episode.actions.append(action)
         truncated = bool(truncated) or len(episode.actions) >= config.max_episode_steps
@@ -248,6 +268,7 @@ class Trainer(StagedRun):
                 "strategy": self.strategy.state_dict() if self.strategy else None,
                 "advisor": _advisor_state(self.advisor),
                 "evaluator": _advisor_state(self.evaluator),
+                "rating_model": _advisor_state(self.rating_model),
             },
         )
 
@@ -279,6 +300,15 @@ class Trainer(StagedRun):
             self.advisor.load_state_dict(state["advisor"])  # type: ignore[union-attr]
         if state.get("evaluator") is not None and hasattr(self.evaluator, "load_state_dict"):
             self.evaluator.load_state_dict(state["evaluator"])  # type: ignore[union-attr]
+        saved_model = state.get("rating_model")
+        if (saved_model is None) != (self.rating_model is None):
+            raise ValueError(
+                "the checkpoint was made "
+                + ("without" if saved_model is None else "with")
+                + " a rating model (feedback_method rating_model); create the Trainer the same way"
+            )
+        if self.rating_model is not None and saved_model is not None:
+            self.rating_model.load_state_dict(saved_model)
         self.seed = int(state["seed"])
         self.agent.load_state_dict(state["agent"])
         self.memory.load_state_dict(state["memory"])
@@ -341,7 +371,9 @@ def _episode_state(episode: EpisodeInProgress) -> dict[str, Any]:
     }
 
 
-def _advisor_state(advisor: AnyAdvisor | AnyEvaluator | None) -> dict[str, Any] | None:
+def _advisor_state(
+    advisor: AnyAdvisor | AnyEvaluator | RatingModel | None,
+) -> dict[str, Any] | None:
     state_dict = getattr(advisor, "state_dict", None)
     return state_dict() if callable(state_dict) else None
 

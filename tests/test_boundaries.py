@@ -276,6 +276,7 @@ RECORDS_ALLOWED: dict[str, str] = {
     "learner.advisors.RecordedAdvisor.advise": GYM_INFO,
     "learner.fitted.FittedAdvisor.advise": GYM_INFO,
     "learner.evaluators.Evaluator.judge": GYM_INFO + " before the judged step",
+    "learner.evaluators.RecordedEvaluator.judge": GYM_INFO + " before the judged step",
     "learner.strategies.AdviceMoment.__init__": GYM_INFO + " where the advice is asked",
     "runs.worker.messages.AdviceRequest.__init__": GYM_INFO + " shown to the advisor",
     "learner.fields.given_arguments": LEAF_VALUES,

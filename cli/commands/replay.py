@@ -35,7 +35,10 @@ DESCRIPTION = """\
 Re-run a recorded session as a new session of a study (method `replayed`): the i-th advice
 the session recorded goes to the i-th request of the new run, whatever state it meets; each
 replayed advice records whether it met the image its advisor saw, and requests beyond the
-recorded stream get no advice (the advice table logs them without an action).
+recorded stream get no advice (the advice table logs them without an action). A session of
+evaluative feedback replays its ratings the same way: the i-th rating it recorded (good,
+bad or no answer) judges the i-th action the new run is asked about, and requests beyond
+the stream get no answer (the feedback table logs each, with the image's hash).
 
 Without run flags the replay is unchanged: on the CPU kind and numerics the original
 recorded, its steps equal the original's in every deciding column (actions, action sources,
@@ -125,7 +128,7 @@ def replay(args: argparse.Namespace) -> int:
         "source": stream.source,
         "unchanged": replays.unchanged(stream, run),
         "changed": _changed(stream.run, run),
-        "recorded_advice": len(stream.actions),
+        "recorded_ratings" if stream.rates else "recorded_advice": len(stream.actions),
         "why_records_may_differ": note,
     }
     if args.no_run:
@@ -133,7 +136,12 @@ def replay(args: argparse.Namespace) -> int:
     status = _run(replay_id, settings, args.override_numerics)
     result["status"] = status
     with factory() as db:
-        result["advice"] = vars(replays.advice_summary(db, replay_id))
+        summary = (
+            replays.ratings_summary(db, replay_id, stream)
+            if stream.rates
+            else replays.advice_summary(db, replay_id)
+        )
+        result["ratings" if stream.rates else "advice"] = vars(summary)
         if result["unchanged"] and stream.steps:
             comparison = replays.compare(
                 stream.steps, replays.replay_steps(db, replay_id), stream.finished
@@ -210,9 +218,11 @@ def _report(args: argparse.Namespace, result: dict[str, Any]) -> int:
         return 1 if fault or unfinished else 0
     source = result["source"]
     where = f" of export {source['export']}" if source.get("export") else ""
+    rates = "recorded_ratings" in result
+    recorded = result["recorded_ratings" if rates else "recorded_advice"]
     print(
         f"replay: session {result['session_id']} (study {result['study_id']}) of session "
-        f"{source['session']}{where}, {result['recorded_advice']} recorded advice"
+        f"{source['session']}{where}, {recorded} recorded {'ratings' if rates else 'advice'}"
     )
     if result["changed"]:
         print(f"changed: {', '.join(result['changed'])}")
@@ -220,16 +230,15 @@ def _report(args: argparse.Namespace, result: dict[str, Any]) -> int:
         print(f"not run (--no-run): session {result['session_id']} is created")
         return 0
     print(f"status: {result['status']}")
-    advice = result["advice"]
-    same = f"{advice['same_observation']} met the image their advisor saw"
+    advice = result["ratings" if rates else "advice"]
+    seen = "the image they were given on" if rates else "the image their advisor saw"
+    same = f"{advice['same_observation']} met {seen}"
     if advice["first_different"] is not None:
         same += f" (the first that did not: step {advice['first_different']})"
-    print(f"advice: {advice['replayed']} replayed, {same}")
+    print(f"{'ratings' if rates else 'advice'}: {advice['replayed']} replayed, {same}")
     if advice["beyond_stream"]:
-        print(
-            f"beyond the stream: {advice['beyond_stream']} request(s) got no advice (logged "
-            "without an action)"
-        )
+        none = "no answer" if rates else "no advice (logged without an action)"
+        print(f"beyond the stream: {advice['beyond_stream']} request(s) got {none}")
     note = result["why_records_may_differ"]
     if comparison is not None:
         difference = comparison["difference"]

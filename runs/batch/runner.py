@@ -180,11 +180,12 @@ class BatchRunner:
         if spec.replay_study is not None:
             with self.factory() as db:
                 get_study(db, spec.replay_study)
-                sources = completed_sources(db, spec.replay_study, spec.replay_methods)
+                feedback = spec.spec_of("replayed", spec.template.seed).feedback
+                sources = completed_sources(db, spec.replay_study, spec.replay_methods, feedback)
             if not sources:
                 raise BatchError(
                     f"study {spec.replay_study} has no finished session of method "
-                    f"{' or '.join(spec.replay_methods)} to replay"
+                    f"{' or '.join(spec.replay_methods)} with {feedback} feedback to replay"
                 )
             self.spec = spec = dataclasses.replace(spec, replay_sources=tuple(sources))
         self.states = [

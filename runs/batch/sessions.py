@@ -31,12 +31,19 @@ _RANK = {
 from its last checkpoint, like an interrupted one)."""
 
 
-def completed_sources(db: Session, study_id: int, methods: tuple[str, ...]) -> list[int]:
-    """The study's finished sessions of these methods, by id: what `replayed` re-runs."""
+def completed_sources(
+    db: Session, study_id: int, methods: tuple[str, ...], feedback: str = "advice"
+) -> list[int]:
+    """The study's finished sessions of these methods whose feedback is `feedback` (advice
+    or ratings, what the replayed runs are fed), by id: what `replayed` re-runs."""
     query = select(StudySession).where(
         StudySession.study_id == study_id, StudySession.status == Status.finished.value
     )
-    return [s.id for s in db.scalars(query.order_by(StudySession.id)) if s.method in methods]
+    return [
+        s.id
+        for s in db.scalars(query.order_by(StudySession.id))
+        if s.method in methods and s.spec.normalized().feedback == feedback
+    ]
 
 
 def find_session(

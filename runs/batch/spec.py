@@ -24,7 +24,8 @@ DQN (an independent baseline learner, the optional `sb3` extra), and `replayed`:
 completed session of another study re-run under the batch's run, fed its advice by order
 (`study.services.replays`)."""
 CONTROLLED = ("agent", "oracle", "random")
-"""The advised methods a `procedure` control can follow."""
+"""The advised (or, under evaluative feedback, judged) methods a `procedure` control can
+follow."""
 
 MAX_SEED = 2**31 - 1
 ADVISOR_SEED_OFFSET = 100_000

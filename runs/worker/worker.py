@@ -25,6 +25,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from learner import provenance
 from learner.advisors import RecordedAdvisor
+from learner.evaluators import RecordedEvaluator
 from learner.run import RunSpec, declare, declared
 from runs.worker.advisors import Correct, HumanAdvisor, RecordingAdvisor, RecordingEvaluator
 from runs.worker.link import HandOver, ParentGone, TaggedChannel, WorkerExit, WorkerLink
@@ -191,8 +192,8 @@ class _Run:
         """The session's advisor: a person through the web process (human), or the machine
         advisor with its advice recorded."""
         s = self.session
-        if self.person_rates:
-            return None  # `_evaluator` makes the person's
+        if self.person_rates or self.spec.feedback == "evaluative":
+            return None  # `_evaluator` makes the person's, or the recorded ratings' evaluator
         if s.method == "human":
             assert self.link is not None
             self.advisor = HumanAdvisor(
@@ -233,13 +234,26 @@ class _Run:
         it stands as the session's advisor (its count is the feedback given)."""
         if self.person_rates:
             return self._person_rates()
+        s = self.session
+        if s.method == "replayed" and self.spec.feedback == "evaluative":
+            machine = self._recorded_ratings()
         if machine is None:
             return None
-        s = self.session
         self.advisor = RecordingEvaluator(
             machine, s.id, s.method, self.start_advice, self.spec.feedback_weight, self.recorder
         )
         return self.advisor
+
+    def _recorded_ratings(self) -> RecordedEvaluator:
+        """A replay's stream of ratings, fed by order."""
+        s = self.session
+        stream = s.replay_stream
+        if not stream or "judgements" not in stream:
+            raise Conflict(
+                f"session {s.id} is a replay of ratings without its recorded stream: make "
+                "replays with `ideeprl replay`"
+            )
+        return RecordedEvaluator(stream["judgements"], stream["observation_hashes"])
 
     def _person_rates(self) -> HumanEvaluator:
         """Evaluative feedback from the participant, on the advice page."""

@@ -35,7 +35,7 @@ JUDGEMENTS = {"good": GOOD, "bad": BAD}
 EVALUATOR = PERSON
 _TIMING_OUT: set[asyncio.Task[None]] = set()
 _DEADLINES: dict[tuple[int, int], float] = {}
-"""(session, turn) -> `time.monotonic()` when its rating may no longer come: the request's
+"""(session, turn) -> `time.monotonic()` after which its rating is refused: the request's
 arrival plus the time-out, or a resume plus the time-out after a pause."""
 
 

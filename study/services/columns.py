@@ -168,7 +168,11 @@ FEEDBACK_COLUMNS: dict[str, tuple[str, str]] = {
         "Global step whose action was judged (from 1, pretraining included); steps.csv has "
         "the step, its reward the environment's.",
     ),
-    "evaluator": ("string", "Who judged: oracle or agent (machine evaluators)."),
+    "evaluator": (
+        "string",
+        "Who judged: oracle or agent (machine evaluators), human (a participant), or replayed "
+        "(a recorded session's ratings fed by order: ideeprl replay).",
+    ),
     "action": (
         "integer",
         "The action judged: the learner's own, the one taken (0 grab, 1 move right, 2 move "

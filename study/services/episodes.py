@@ -14,7 +14,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from analysis.advice import ADVICE_COLUMNS, REPLAYED_ADVICE_COLUMNS
-from analysis.episodes import EPISODE_TABLE_COLUMNS, arm
+from analysis.episodes import EPISODE_TABLE_COLUMNS, arm_of
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.records import TRAINING, stage_of
@@ -28,7 +28,7 @@ def load_episodes(db: Session, session_ids: Sequence[int]) -> pd.DataFrame:
     """The training episodes of these sessions, ordered by session and episode."""
     ids = list(session_ids)
     runs = {  # the method as the report compares it: evaluative feedback an arm of its own
-        s.id: (arm(s.method, s.spec.feedback), s.seed)
+        s.id: (arm_of(s.spec), s.seed)
         for s in db.scalars(select(StudySession).where(StudySession.id.in_(ids)))
     }
     query = (

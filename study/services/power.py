@@ -19,7 +19,7 @@ from analysis.baseline import AUTO, NO_BASELINE
 from analysis.csvsafe import safe_frame
 from analysis.episodes import (
     EpisodeTableError,
-    arm,
+    arm_of,
     method_name,
     order_methods,
     validate_episodes,
@@ -146,7 +146,9 @@ def study_power(
     chosen = ReportRequest(sessions=request.sessions, methods=request.methods, label=request.label)
     sessions, notes = select_sessions(db, study_id, chosen)
     baseline = _baseline(
-        {arm(s.method, s.spec.feedback) for s in sessions}, request.baseline, request.methods
+        {arm_of(s.spec) for s in sessions},
+        request.baseline,
+        request.methods,
     )
     episodes = load_episodes(db, [s.id for s in sessions])
     empty = sorted({s.id for s in sessions} - set(episodes["session_id"]))

@@ -1,4 +1,5 @@
-"""Replays: a recorded session's advice fed by order to a new run (SPEC section 5, "Replay").
+"""Replays: a recorded session's advice fed by order to a new run (SPEC section 5, "Replay");
+a session of evaluative feedback, its ratings (the i-th judgement to the i-th request).
 
 A replay is a session of method `replayed` whose stream is the source session's advice in
 advice order: the i-th advice goes to the i-th request of the replayed run, whatever state
@@ -35,7 +36,7 @@ from learner.config import DQNConfig
 from learner.fields import FieldError
 from learner.records import observation_hash
 from learner.run import RunSpec
-from study.db.models import LIVE_STATUSES, Advice, Status, Step, StudySession
+from study.db.models import LIVE_STATUSES, Advice, Feedback, Status, Step, StudySession
 from study.schemas.sessions import SessionOptions
 from study.services.errors import Conflict, Invalid, NotFound
 from study.services.sessions import Replay, ReplayStream, StreamSource, create_session
@@ -88,14 +89,24 @@ class Stream:
     """The source's id in this database (None: from an export)."""
     finished: bool = True
     """The source ran to its end (else its steps are a prefix of its run's)."""
+    judgements: tuple[float | None, ...] | None = None
+    """A stream of ratings (the source's feedback was evaluative): its judgements in
+    order (None: no answer), `actions` the actions judged; None: a stream of advice."""
+
+    @property
+    def rates(self) -> bool:
+        return self.judgements is not None
 
     def stored(self) -> ReplayStream:
         """What the replay's session keeps (`sessions.replay_stream`)."""
-        return ReplayStream(
+        stored = ReplayStream(
             source=self.source,
             actions=list(self.actions),
             observation_hashes=list(self.observation_hashes),
         )
+        if self.judgements is not None:
+            stored["judgements"] = list(self.judgements)
+        return stored
 
 
 def _png_hash(png: bytes) -> str:
@@ -114,22 +125,38 @@ def stream_of_session(db: Session, session_id: int) -> Stream:
             f"session {session_id} is {session.status}: its advice is still being recorded; "
             "replay it once it has finished or stopped"
         )
-    advice = list(
-        db.scalars(
-            select(Advice)
-            .where(Advice.session_id == session_id, Advice.action.is_not(None))
-            .order_by(Advice.advice_index)
-        )
-    )
     steps = db.execute(
         select(*(getattr(Step, c) for c in DECIDING))
         .where(Step.session_id == session_id)
         .order_by(Step.global_step)
     )
+    if session.spec.feedback == "evaluative":
+        ratings = list(
+            db.scalars(
+                select(Feedback)
+                .where(Feedback.session_id == session_id)
+                .order_by(Feedback.feedback_index)
+            )
+        )
+        actions = tuple(int(f.action) for f in ratings)
+        hashes = tuple(f.observation_hash for f in ratings)
+        judgements: tuple[float | None, ...] | None = tuple(f.judgement for f in ratings)
+    else:
+        advice = list(
+            db.scalars(
+                select(Advice)
+                .where(Advice.session_id == session_id, Advice.action.is_not(None))
+                .order_by(Advice.advice_index)
+            )
+        )
+        actions = tuple(int(a.action) for a in advice)  # type: ignore[arg-type]
+        hashes = tuple(_png_hash(a.observation_png) for a in advice)
+        judgements = None
     return Stream(
         run=session.spec,
-        actions=tuple(int(a.action) for a in advice),  # type: ignore[arg-type]
-        observation_hashes=tuple(_png_hash(a.observation_png) for a in advice),
+        actions=actions,
+        observation_hashes=hashes,
+        judgements=judgements,
         source=StreamSource(study=session.study.name, session=session_id, export=None),
         provenance=list(session.provenance),
         steps=[cast(StepRow, dict(row._mapping)) for row in steps],
@@ -156,11 +183,24 @@ def stream_of_export(path: Path, session_id: int) -> Stream:
             raise NotFound(f"the export at {path} has no session {session_id}")
         info = path / "study.json"
         study = json.loads(info.read_text()) if info.is_file() else {}
-        advice = [r for r in _of(_table(path, "advice"), session_id) if not _missing(r["action"])]
-        advice.sort(key=lambda r: int(r["advice_index"]))
-        steps = _of(_with_stage(_table(path, "steps")), session_id)  # old exports' `phase`
-        hashes = tuple(_png_hash((path / r["observation_file"]).read_bytes()) for r in advice)
         run = run_of(sessions[0])
+        judgements: tuple[float | None, ...] | None = None
+        if run.feedback == "evaluative":
+            ratings = _of(_table(path, "feedback"), session_id)
+            ratings.sort(key=lambda r: int(r["feedback_index"]))
+            actions = tuple(int(r["action"]) for r in ratings)
+            hashes = tuple(str(r["observation_hash"]) for r in ratings)
+            judgements = tuple(
+                None if _missing(r["judgement"]) else float(r["judgement"]) for r in ratings
+            )
+        else:
+            advice = [
+                r for r in _of(_table(path, "advice"), session_id) if not _missing(r["action"])
+            ]
+            advice.sort(key=lambda r: int(r["advice_index"]))
+            actions = tuple(int(r["action"]) for r in advice)
+            hashes = tuple(_png_hash((path / r["observation_file"]).read_bytes()) for r in advice)
+        steps = _of(_with_stage(_table(path, "steps")), session_id)  # old exports' `phase`
         recorded = (_provenance(_table(path, "sessions")) or {}).get(session_id, [])
     except (ExportError, OSError, KeyError, ValueError) as error:
         if isinstance(error, NotFound):
@@ -171,8 +211,9 @@ def stream_of_export(path: Path, session_id: int) -> Stream:
     return Stream(
         finished=sessions[0].get("status") == Status.finished.value,
         run=run,
-        actions=tuple(int(r["action"]) for r in advice),
+        actions=actions,
         observation_hashes=hashes,
+        judgements=judgements,
         source=StreamSource(study=study.get("name"), session=session_id, export=str(path)),
         provenance=recorded,
         steps=[_typed_step(r) for r in sorted(steps, key=lambda r: int(r["global_step"]))],
@@ -259,7 +300,15 @@ def unchanged_replays(db: Session, sessions: Iterable[StudySession]) -> dict[int
 def create_replay(
     db: Session, study_id: int, stream: Stream, run: RunSpec, label: str = ""
 ) -> StudySession:
-    """The replay's session, `created`, its run pinned here and its stream copied."""
+    """The replay's session, `created`, its run pinned here and its stream copied: ratings
+    only into a run of evaluative feedback, advice only into a run of advice."""
+    if stream.rates != (run.feedback == "evaluative"):
+        recorded, other = ("ratings", "advice") if stream.rates else ("advice", "ratings")
+        raise Invalid(
+            "run.feedback",
+            f"session {stream.source['session']} recorded {recorded}; a replay feeds them to "
+            f"a run of the same feedback, not one that asks for {other}",
+        )
     return create_session(
         db,
         study_id,
@@ -364,6 +413,37 @@ class AdviceSummary:
     """Requests after the stream ran out (none given)."""
     first_different: int | None
     """Global step of the first advice that met another image (None: all the same)."""
+
+
+def ratings_summary(db: Session, session_id: int, stream: Stream) -> AdviceSummary:
+    """What became of a replay's stream of ratings: the i-th feedback row of the replay
+    took the i-th recorded rating, on the image that rating was given on or not."""
+    hashes = list(
+        db.scalars(
+            select(Feedback.observation_hash)
+            .where(Feedback.session_id == session_id)
+            .order_by(Feedback.feedback_index)
+        )
+    )
+    given = hashes[: len(stream.judgements or ())]
+    different = [
+        i
+        for i, (mine, theirs) in enumerate(zip(given, stream.observation_hashes, strict=False))
+        if mine != theirs
+    ]
+    first = None
+    if different:
+        first = db.scalar(
+            select(Feedback.global_step).where(
+                Feedback.session_id == session_id, Feedback.feedback_index == different[0]
+            )
+        )
+    return AdviceSummary(
+        replayed=len(given),
+        same_observation=len(given) - len(different),
+        beyond_stream=len(hashes) - len(given),
+        first_different=first,
+    )
 
 
 def advice_summary(db: Session, session_id: int) -> AdviceSummary:

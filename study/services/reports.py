@@ -25,7 +25,7 @@ from sqlalchemy.orm import Session
 
 from analysis.baseline import AUTO, BaselineError, advisors_left_out, compare_conditions
 from analysis.baseline import choose_baseline as baseline_rule
-from analysis.episodes import EpisodeTableError, arm, method_name
+from analysis.episodes import EpisodeTableError, arm_of, method_name
 from analysis.finished import (
     Choice,
     is_finished,
@@ -158,10 +158,8 @@ def select_sessions(
         chosen = [s for s in chosen if s.label == request.label]
         notes.append(f"Sessions labelled {request.label!r} only.")
     if request.methods:
-        chosen = [s for s in chosen if arm(s.method, s.spec.feedback) in request.methods]
-        absent = [
-            m for m in request.methods if m not in {arm(s.method, s.spec.feedback) for s in chosen}
-        ]
+        chosen = [s for s in chosen if arm_of(s.spec) in request.methods]
+        absent = [m for m in request.methods if m not in {arm_of(s.spec) for s in chosen}]
         if absent:
             notes.append(f"No sessions of method(s) {', '.join(absent)} to include.")
     if not chosen:
@@ -180,7 +178,7 @@ def _nothing_chosen(study_id: int, everything: list[StudySession], request: Repo
     if not finished:
         return nothing_finished(f"study {study_id}", _statuses(everything), request.choose.sessions)
     labels = sorted({s.label for s in finished if s.label}, key=str)
-    methods = sorted({arm(s.method, s.spec.feedback) for s in finished})
+    methods = sorted({arm_of(s.spec) for s in finished})
     problems = []
     if request.label is not None and request.label not in labels:
         problems.append(
@@ -295,10 +293,7 @@ def build_report(
             visits, out_dir, title=title, notes=lines, alpha=alpha, preregistered=plan
         )
         return StudyReport(result, (learners,))
-    group = {
-        s.id: (s.condition if design and s.condition else arm(s.method, s.spec.feedback))
-        for s in sessions
-    }
+    group = {s.id: (s.condition if design and s.condition else arm_of(s.spec)) for s in sessions}
     baseline, baseline_notes = choose_baseline(set(group.values()), request.baseline)
     if baseline is None and request.baseline == AUTO and design is None:
         baseline_notes.append(baseline_next_step(db, study_id, sessions))
@@ -310,7 +305,8 @@ def build_report(
     elif any(group[s.id] != s.method for s in sessions):  # evaluative feedback: arms of its own
         notes.append(
             "Runs given evaluative feedback are compared as arms of their own "
-            "(METHOD-evaluative), apart from the same advisor's advice."
+            "(METHOD-evaluative, and METHOD-evaluative-rating_model where a model of the "
+            "ratings shapes the steps not rated), apart from the same advisor's advice."
         )
     steps = load_training_steps(db, [s.id for s in sessions])
     advice = load_advised_steps(db, [s.id for s in sessions])

@@ -9,18 +9,24 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from learner.procedure import Schedule
-from study.db.models import Step, StudySession
+from study.db.models import Feedback, Step, StudySession
 
 
 def schedule_of(db: Session, session: StudySession) -> Schedule:
-    """The session's schedule: its advised steps, its pretraining fits, its epsilon path."""
+    """The session's schedule: its advised steps (a judged session's: the steps judged, an
+    answer given), its pretraining fits, its epsilon path."""
     rows = db.execute(
         select(Step.global_step, Step.stage, Step.action_source, Step.loss, Step.epsilon)
         .where(Step.session_id == session.id)
         .order_by(Step.global_step)
     ).tuples()
+    judged = db.scalars(
+        select(Feedback.global_step).where(
+            Feedback.session_id == session.id, Feedback.judgement.is_not(None)
+        )
+    )
     spec = session.spec
-    return Schedule.from_steps(rows, spec.config.pretraining_steps, f"session {session.id}")
+    return Schedule.from_steps(rows, spec.config.pretraining_steps, f"session {session.id}", judged)
 
 
 def write_schedule(db: Session, session: StudySession, directory: Path) -> Path:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import secrets
 from pathlib import Path
-from typing import Any, NamedTuple, TypedDict, cast
+from typing import Any, NamedTuple, NotRequired, TypedDict, cast
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -40,11 +40,14 @@ class StreamSource(TypedDict):
 
 class ReplayStream(TypedDict):
     """What a replay's session keeps of its source (`sessions.replay_stream`, JSON as-is):
-    the advice it is fed in order, and the image hash each advice's advisor saw."""
+    the advice it is fed in order, and the image hash each advice's advisor saw; a stream
+    of ratings (evaluative feedback) also keeps the judgements, in order, and `actions`
+    are the actions judged."""
 
     source: StreamSource
     actions: list[int]
     observation_hashes: list[str]
+    judgements: NotRequired[list[float | None]]
 
 
 class Replay(NamedTuple):

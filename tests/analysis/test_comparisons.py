@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from analysis.comparisons import compare, probability_of_improvement
+from analysis.comparisons import compare, comparison_pairs, probability_of_improvement
 from analysis.report import write_report
 
 
@@ -75,3 +75,20 @@ def test_the_report_leads_with_the_primary_test(tmp_path: Path) -> None:
     summary = text[text.index("## In short") : text.index("## The primary test")]
     assert summary.index("Primary test (Welch's t-test") < summary.index("the paper's own test")
     assert (tmp_path / "primary_and_secondary_tests.csv").is_file()
+
+
+def test_each_judged_arm_is_compared_with_the_control_of_its_kind() -> None:
+    from analysis.episodes import arm
+
+    methods = [
+        "autonomous", "oracle", "procedure", arm("oracle", "evaluative"),
+        arm("procedure", "evaluative"), arm("agent", "evaluative", "rating_model"),
+        arm("procedure", "evaluative", "rating_model"), "sb3-dqn",
+    ]  # fmt: skip
+    pairs = comparison_pairs(methods, "autonomous")
+    assert [p for p in pairs if p[1] != "autonomous"] == [
+        ("oracle", "procedure"),
+        ("oracle-evaluative", "procedure-evaluative"),
+        ("agent-evaluative-rating_model", "procedure-evaluative-rating_model"),
+    ]
+    assert len(pairs) == len(methods) - 1 + 3

@@ -133,11 +133,12 @@ def test_a_run_declares_its_feedback_kind() -> None:
     person = RunSpec(method="human", feedback="evaluative", rating_time_out_s=4.0).validate()
     assert person.make_evaluator() is None and person.rating_time_out_s == 4.0  # the worker's
     assert RunSpec(method="human", rating_time_out_s=4.0).validate().rating_time_out_s == 10
+    replayed = RunSpec(method="replayed", feedback="evaluative").validate()
+    assert replayed.feedback == "evaluative" and replayed.make_evaluator() is None  # the stream's
     unadvised = RunSpec(method="autonomous", feedback="evaluative", feedback_weight=3.0)
     assert unadvised.validate().feedback == "advice" and unadvised.validate().feedback_weight == 1
     for changes, field in [
         ({"method": "random"}, "feedback"),
-        ({"method": "replayed"}, "feedback"),
         ({"method": "agent", "advisor_checkpoint": "x.pt", "strategy": "mistake_correcting"},
          "strategy"),
     ]:  # fmt: skip

@@ -82,3 +82,55 @@ def test_a_control_needs_its_schedule_and_only_a_control_takes_one(tmp_path: Pat
     missing = RunSpec.from_json({"method": "procedure", "schedule": str(tmp_path / "no.json")})
     with pytest.raises(RunSpecError, match="no schedule at"):
         missing.make_schedule()
+
+
+def _judged(spec: RunSpec) -> tuple[list, dict[int, float]]:
+    """A judged run's records and its judgements by step (an answer given)."""
+    trainer, env = spec.build()
+    try:
+        records, judged = [], {}
+        while not trainer.done:
+            records.append(trainer.step())
+            last = trainer.last_judgement  # type: ignore[union-attr]
+            if last is not None and last[0] == records[-1].global_step and last[1] is not None:
+                judged[last[0]] = last[1]
+        return records, judged
+    finally:
+        env.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("strategy", ["early", "alternating"])
+def test_the_control_of_a_judged_run_is_judged_uninformed_at_its_judged_steps(
+    tmp_path: Path, strategy: str
+) -> None:
+    judged_run = RunSpec.from_json(
+        {"method": "oracle", "feedback": "evaluative", "seed": 3, "strategy": strategy,
+         "config": TINY}
+    )  # fmt: skip
+    original, judgements = _judged(judged_run)
+    schedule = Schedule.from_steps(
+        ((r.global_step, r.stage, r.action_source, r.loss, r.epsilon) for r in original),
+        TINY["pretraining_steps"],
+        "test",
+        judgements,
+    )
+    assert schedule.judged == frozenset(judgements) and not schedule.advised
+    path = schedule.save(tmp_path / "schedule.json")
+    assert Schedule.load(path) == schedule
+    control_spec = judged_run.replace(method="procedure", schedule=str(path)).validate()
+    assert control_spec.feedback == "evaluative"
+    control, uninformed = _judged(control_spec)
+
+    def fits(records: list) -> list[int]:
+        return [r.global_step for r in records if r.stage == "pretrain" and r.loss is not None]
+
+    assert sorted(uninformed) == sorted(judgements) and len(judgements) == TINY["advice_budget"]
+    assert fits(control) == fits(original) and bool(fits(original)) == (strategy == "early")
+    common = min(len(original), len(control))
+    assert [r.epsilon for r in control[:common]] == [r.epsilon for r in original[:common]]
+    assert all(r.action_source != "advisor" for r in control)  # its own actions, judged
+    # uninformed: the same actions judged otherwise than the oracle judged them
+    assert set(uninformed.values()) <= {1.0, -1.0}
+    same_action = [s for s in judgements if original[s - 1].action == control[s - 1].action]
+    assert any(uninformed[s] != judgements[s] for s in same_action)

@@ -19,7 +19,7 @@ from learner.run import RunSpec
 from runs.worker.worker import WorkerOptions, run_session
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
-from study.db.models import Advice, Step, StudySession
+from study.db.models import Advice, Feedback, Step, StudySession
 from study.schemas.sessions import SessionOptions
 from study.services.sessions import create_session
 from study.services.studies import create_study
@@ -52,6 +52,11 @@ class Database:
         """`ideeprl replay --json`: its exit code and its report."""
         where = ["--database-url", self.url, "--data-dir", str(self.data_dir)]
         return _run_json(["replay", "--session", str(session_id), *flags, *where, "--json"])
+
+    def ratings(self, session_id: int) -> list[Feedback]:
+        with self.factory()() as db:
+            query = select(Feedback).where(Feedback.session_id == session_id)
+            return list(db.scalars(query.order_by(Feedback.feedback_index)))
 
     def advice(self, session_id: int) -> list[Advice]:
         with self.factory()() as db:
@@ -236,6 +241,79 @@ def test_steps_recorded_without_observation_hashes_compare_on_the_other_columns(
     assert changed.difference == {
         "global_step": 1, "column": "action", "original": 1, "replay": 2
     }  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def oracle_rated(database: Database) -> int:
+    """A session of evaluative feedback: an oracle that errs a third of the time rates the
+    learner's own actions at steps 31..40 (so its ratings cannot be had again from the
+    task's correct action)."""
+    return database.session(
+        "oracle", motion="fast", feedback="evaluative", error_rate=0.3, config=EARLY
+    )
+
+
+def test_an_unchanged_replay_of_ratings_takes_the_originals_steps(
+    database: Database, oracle_rated: int
+) -> None:
+    code, report = database.replay(oracle_rated)
+    assert code == 0, report
+    assert report["unchanged"] and report["status"] == "finished"
+    assert report["recorded_ratings"] == 10 and "advice" not in report
+    assert report["comparison"]["difference"] is None and report["comparison"]["steps"] > 40
+    assert report["ratings"] == {
+        "replayed": 10, "same_observation": 10, "beyond_stream": 0, "first_different": None
+    }  # fmt: skip
+    original, replayed = database.ratings(oracle_rated), database.ratings(report["session_id"])
+    assert {f.evaluator for f in replayed} == {"replayed"}
+    mine = [(f.global_step, f.action, f.judgement, f.shaping) for f in original]
+    assert [(f.global_step, f.action, f.judgement, f.shaping) for f in replayed] == mine
+    assert {f.judgement for f in original} == {1.0, -1.0}
+    assert database.advice(report["session_id"]) == []
+
+
+def test_ratings_replay_by_order_into_another_learner_and_none_beyond_the_stream(
+    database: Database, oracle_rated: int
+) -> None:
+    """Another seed (another scene, other random actions) and a larger budget: the i-th
+    recorded rating judges the i-th action the new learner is asked about, whatever it is;
+    the five requests past the stream get no answer."""
+    code, report = database.replay(oracle_rated, "--seed", "11", "--advice-budget", "15")
+    assert code == 0, report
+    assert not report["unchanged"] and report["status"] == "finished"
+    assert report["ratings"]["replayed"] == 10 and report["ratings"]["beyond_stream"] == 5
+    original, replayed = database.ratings(oracle_rated), database.ratings(report["session_id"])
+    assert [f.global_step for f in replayed] == list(range(26, 41))  # early: the last 15
+    assert [f.judgement for f in replayed[:10]] == [f.judgement for f in original]
+    assert [f.judgement for f in replayed[10:]] == [None] * 5
+    assert [f.shaping for f in replayed[10:]] == [0.0] * 5
+    different = [
+        i
+        for i, (mine, theirs) in enumerate(zip(original, replayed, strict=False))
+        if mine.observation_hash != theirs.observation_hash
+    ]
+    assert different and report["ratings"]["same_observation"] == 10 - len(different)
+    assert report["ratings"]["first_different"] == replayed[different[0]].global_step
+
+
+def test_ratings_replay_from_an_export_and_only_into_a_run_that_asks_for_ratings(
+    database: Database, oracle_rated: int, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from study.services.export import export_study
+
+    with database.factory()() as db:
+        export_study(db, 1, tmp_path / "export")
+    code, report = database.replay(
+        oracle_rated, "--export", str(tmp_path / "export"), "--study", "rated export"
+    )
+    assert code == 0, report
+    assert report["comparison"]["difference"] is None
+    assert report["ratings"]["same_observation"] == 10
+    judged = [f.judgement for f in database.ratings(report["session_id"])]
+    assert judged == [f.judgement for f in database.ratings(oracle_rated)]
+    where = ["--database-url", database.url, "--data-dir", str(database.data_dir), "--no-run"]
+    assert main(["replay", "--session", str(oracle_rated), "--feedback", "advice", *where]) == 2
+    assert "recorded ratings" in capsys.readouterr().err
 
 
 def test_a_missing_source_is_named_and_nothing_is_created(

@@ -105,3 +105,55 @@ def test_a_method_that_cannot_judge_is_refused(
     args = ["batch", "--study", "refused feedback", "--methods", "random", "--agents", "1"]
     code, out = run(place, capsys, *args, "--feedback", "evaluative", *SCALE)
     assert code == 2 and "method random cannot judge" in out, out
+
+
+def test_the_two_learner_methods_are_two_arms(
+    place: Place, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same oracle ratings, used by shaping alone and by a rating model: two runs, two
+    arms of the report, each run's method stored with it."""
+    study = ["--study", "feedback methods", "--agents", "1", *SCALE, "--workers", "1"]
+    evaluative = ["batch", "--methods", "oracle", "--feedback", "evaluative"]
+    code, out = run(place, capsys, *evaluative, *study)
+    assert code == 0, out
+    code, out = run(place, capsys, *evaluative, "--feedback-method", "rating_model", *study)
+    assert code == 0, out
+    engine = place.engine()
+    shaped, modelled = sessions(engine, study_id(engine, "feedback methods"))
+    assert {shaped.status, modelled.status} == {"finished"}
+    assert (shaped.spec.feedback_method, modelled.spec.feedback_method) == (
+        "shaping",
+        "rating_model",
+    )
+    with Session(engine) as db:
+        judged = {
+            s: [(f.global_step, f.judgement) for f in db.scalars(
+                select(Feedback).where(Feedback.session_id == s).order_by(Feedback.id)
+            )]
+            for s in (shaped.id, modelled.id)
+        }  # fmt: skip
+    assert judged[shaped.id] == judged[modelled.id] and len(judged[shaped.id]) == ADVICE
+    report = place.data_dir / "feedback-methods-report"
+    code, out = run(place, capsys, "report", "--study", "feedback methods", "--out", str(report))
+    assert code == 0, out
+    methods = {r["method"] for r in read_csv(report / "r_t_per_method.csv")}
+    assert methods == {"oracle-evaluative", "oracle-evaluative-rating_model"}
+    assert "oracle evaluative feedback, rating model" in (report / "report.md").read_text()
+
+
+def test_power_plans_from_evaluative_arms(place: Place, capsys: pytest.CaptureFixture[str]) -> None:
+    """A pilot of judged and unadvised agents: the power analysis takes the judged arm as
+    any other, by its arm's name."""
+    study = ["--study", "judged pilot", "--agents", "2", *SCALE, "--workers", "1"]
+    args = ["batch", "--methods", "autonomous", "oracle", "--feedback", "evaluative"]
+    code, out = run(place, capsys, *args, *study)
+    assert code == 0, out
+    power = ["power", "--study", "judged pilot", "--draws", "100", "--max-n", "20"]
+    code, out = run(place, capsys, *power, "--methods", "autonomous", "oracle-evaluative")
+    assert code == 0, out
+    assert "oracle evaluative feedback vs autonomous DeepRL" in out
+    assert "pilot 2 + 2 agents" in out
+    code, out = run(place, capsys, *power, "--baseline", "oracle-evaluative", "--json")
+    assert code == 0, out
+    (comparison,) = json.loads(out)["comparisons"]
+    assert (comparison["method"], comparison["baseline"]) == ("autonomous", "oracle-evaluative")

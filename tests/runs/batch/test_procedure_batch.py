@@ -69,3 +69,37 @@ def test_a_control_needs_its_advised_method_in_the_batch(
         place, capsys, "batch", "--study", "lonely", "--methods", "procedure", *SCALE
     )
     assert code == 2 and "--control-of agent is not among --methods" in out
+
+
+def test_the_control_of_a_judged_run_is_judged_at_its_judged_steps(
+    place: Place, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Evaluative feedback: the control gets an uninformed judgement at each step its oracle
+    run judged, fits where it fitted and follows its epsilon."""
+    from study.db.models import Feedback
+
+    args = [
+        "batch", "--study", "judged controls", "--methods", "oracle", "procedure",
+        "--agents", "1", "--control-of", "oracle", "--feedback", "evaluative",
+        "--set", "update_during_advice=true",
+    ]  # fmt: skip
+    code, out = in_process(place, capsys, *args, *SCALE)
+    assert code == 0, out
+    runs = sessions(place.engine(), study_id(place.engine(), "judged controls"))
+    (judged,) = [s for s in runs if s.method == "oracle"]
+    (control,) = [s for s in runs if s.method == "procedure"]
+    assert control.status == "finished" and control.spec.feedback == "evaluative"
+
+    def ratings(session_id: int) -> dict[int, float | None]:
+        with Session(place.engine()) as db:
+            query = select(Feedback).where(Feedback.session_id == session_id)
+            return {f.global_step: f.judgement for f in db.scalars(query)}
+
+    mine, theirs = ratings(control.id), ratings(judged.id)
+    assert sorted(mine) == sorted(theirs) and theirs
+    assert set(mine.values()) <= {1.0, -1.0}
+    schedule_mine, schedule_theirs = _schedule(place, control.id), _schedule(place, judged.id)
+    assert schedule_mine[0] == schedule_theirs[0] == []  # no advice: its own actions
+    assert schedule_mine[1] == schedule_theirs[1] and schedule_theirs[1]  # judged steps fit
+    common = min(len(schedule_mine[2]), len(schedule_theirs[2]))
+    assert schedule_mine[2][:common] == schedule_theirs[2][:common]
