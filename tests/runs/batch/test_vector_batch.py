@@ -6,13 +6,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import torch
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from study.db.models import Step
+from learner.records import observation_hash
+from study.db.models import Advice, Step
+from study.services.observations import decode_png, observation_of
 from tests.runs.batch.helpers import SCALE, Place, in_process, sessions, study_id
 
 pytestmark = pytest.mark.slow
@@ -36,6 +39,22 @@ def test_a_vector_tasks_batch_runs_and_reports(
     methods = pd.read_csv(tmp_path / "report" / "r_t_per_method.csv")
     assert methods["method"].tolist() == ["autonomous", "random"]
     assert methods["agents"].tolist() == [2, 2]
+
+    # Each advice holds the vector the learner saw (its step's hash) and the cart's frame.
+    advised = [s.id for s in rows if s.method == "random"]
+    with Session(engine) as db:
+        advice = list(db.scalars(select(Advice).where(Advice.session_id.in_(advised))))
+        hashes = {
+            (t.session_id, t.global_step): t.observation_hash
+            for t in db.scalars(select(Step).where(Step.session_id.in_(advised)))
+        }
+    assert len(advice) == 2 * 8
+    for a in advice:
+        vector = observation_of(a.observation_png)
+        assert vector.shape == (4,) and vector.dtype == np.float32 and np.abs(vector).max() > 0
+        assert observation_hash(vector) == hashes[(a.session_id, a.global_step)]
+        frame = decode_png(a.observation_png)
+        assert frame.shape == (400, 600, 3) and len(np.unique(frame.reshape(-1, 3), axis=0)) > 2
 
 
 def test_the_sb3_baseline_runs_a_vector_task_through_the_batch_with_its_mlp_policy(
