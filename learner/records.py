@@ -94,9 +94,9 @@ class StepRecord:
     recorded before it was kept, until `ideeprl outcomes` replays them)."""
     observation_hash: str
     """What the learner saw when it chose this step's action: the first 16 hex digits of
-    the BLAKE2b hash of the 64x64x3 uint8 image (`observation_hash`). Equal hashes, equal
-    images: a replay compares its steps with the original's by them (empty in rows recorded
-    before it was kept)."""
+    the BLAKE2b hash of the uint8 image, or of a vector task's float32 vector
+    (`observation_hash`). Equal hashes, equal observations: a replay compares its steps
+    with the original's by them (empty in rows recorded before it was kept)."""
     epsilon: float
     """Exploration rate used to choose this step's action."""
     loss: float | None
@@ -149,9 +149,12 @@ class EpisodeRecord:
 
 
 def observation_hash(obs: Any) -> str:
-    """A short fingerprint of an observation (its uint8 bytes): what a replay compares, step
-    by step and advice by advice, without storing every image."""
+    """A short fingerprint of an observation (an image's uint8 bytes, a vector's float32
+    ones): what a replay compares, step by step and advice by advice, without storing every
+    image."""
     import numpy as np
 
-    data = np.ascontiguousarray(obs, dtype=np.uint8)
+    array = np.asarray(obs)
+    vector = array.ndim == 1 and np.issubdtype(array.dtype, np.floating)
+    data = np.ascontiguousarray(array, dtype=np.float32 if vector else np.uint8)
     return hashlib.blake2b(data.tobytes(), digest_size=8).hexdigest()

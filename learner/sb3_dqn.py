@@ -6,10 +6,12 @@ same scenes under the same stages and are recorded the same way. So this trainer
 `EpisodeRecord`s to its callbacks, checkpoints that resume exactly), its stages
 (`pretraining_steps` random actions, the last pretraining episode cut, then `episodes`
 training episodes), and its episode reset seeds; the learner itself is SB3's: its
-`CnnPolicy` (NatureCNN), replay buffer, linear exploration schedule, target network, Huber
-loss and Adam, and its own `train()` and `_on_step()`. Only SB3's rollout loop is spelled
-out here (one environment, no VecEnv), as `OffPolicyAlgorithm.collect_rollouts` and
-`learn` do it, so that every step can be recorded and the run paused between steps.
+`CnnPolicy` (NatureCNN) on a task's images, its `MlpPolicy` on a task's float vectors (as
+the paper's learner takes its dense network for them), its replay buffer, linear
+exploration schedule, target network, Huber loss and Adam, and its own `train()` and
+`_on_step()`. Only SB3's rollout loop is spelled out here (one environment, no VecEnv), as
+`OffPolicyAlgorithm.collect_rollouts` and `learn` do it, so that every step can be
+recorded and the run paused between steps.
 
 The paper's hyperparameters become SB3's where SB3 has the same knob
 (`learner.sb3_spec.sb3_hyperparameters`, torch-free); the session stores them, and the
@@ -27,10 +29,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 
 from learner.config import DQNConfig
 from learner.records import EpisodeRecord, StepRecord, stage_of
-from learner.sb3_spec import sb3_hyperparameters
+from learner.sb3_spec import VECTOR_POLICY, sb3_hyperparameters
 from learner.seeding import run_streams
 from learner.staged import EpisodeInProgress, StagedRun, StepTaken
 
@@ -75,7 +78,6 @@ class SB3DQNTrainer(StagedRun):
         hyperparameters: dict[str, Any] | None = None,
     ) -> None:
         try:
-            from gymnasium import spaces
             from stable_baselines3 import DQN
             from stable_baselines3.common.logger import Logger
         except ImportError:
@@ -86,12 +88,10 @@ class SB3DQNTrainer(StagedRun):
         self.config = config = config or DQNConfig()
         self.env = env
         _check_spaces(env)
-        if len(env.observation_space.shape or ()) != 3:
-            raise ValueError(
-                "the SB3 baseline (sb3-dqn) runs on image tasks; this task's observations "
-                "are vectors: compare the paper's learner's methods instead"
-            )
+        self.vector = len(env.observation_space.shape or ()) == 1
         self.hyperparameters = h = dict(hyperparameters or sb3_hyperparameters(config))
+        if self.vector:
+            h["sb3_policy"] = VECTOR_POLICY
         self.device = resolve_device(config.device)
         self.threads = configure_threads(config.torch_threads)
         self.callbacks = list(callbacks)
@@ -118,9 +118,8 @@ class SB3DQNTrainer(StagedRun):
             seed=seed,
             _init_setup_model=False,
         )
-        height, width, channels = env.observation_space.shape
         # SB3 builds its networks from the spaces; the env is stepped here, not by SB3.
-        model.observation_space = spaces.Box(0, 255, (channels, height, width), np.uint8)
+        model.observation_space = _sb3_space(env.observation_space)
         model.action_space = spaces.Discrete(int(env.action_space.n))  # the task's actions
         model.n_envs = 1
         model._setup_model()
@@ -152,7 +151,7 @@ class SB3DQNTrainer(StagedRun):
         model = self.model
         pretraining = episode.stage == "pretrain"
         model.policy.set_training_mode(False)
-        obs = _channels_first(episode.obs)
+        obs = self._sb3_obs(episode.obs)
         with torch.no_grad():
             tensor, _ = model.policy.obs_to_tensor(obs)
             q_values = model.q_net(tensor)[0].cpu().numpy()
@@ -179,7 +178,7 @@ class SB3DQNTrainer(StagedRun):
         assert model.replay_buffer is not None, "made by _setup_model"
         model.replay_buffer.add(
             obs,
-            _channels_first(next_obs),
+            self._sb3_obs(next_obs),
             np.array([[action]]),
             np.array([reward], dtype=np.float32),
             np.array([terminated or truncated]),
@@ -196,6 +195,12 @@ class SB3DQNTrainer(StagedRun):
             truncated, info, epsilon, loss is not None,
         )  # fmt: skip
         return self._end_step(taken, loss)
+
+    def _sb3_obs(self, obs: np.ndarray) -> np.ndarray:
+        """An observation as SB3's policy takes it: a batch of one, images channels first."""
+        if self.vector:
+            return np.asarray(obs, np.float32)[None]
+        return _channels_first(obs)
 
     # --- checkpoints -----------------------------------------------------------------------
     def save_checkpoint(
@@ -297,6 +302,15 @@ class SB3DQNTrainer(StagedRun):
         )
         self.episode_record = None
         self._stopped = False
+
+
+def _sb3_space(space: Any) -> Any:
+    """The task's observation space as SB3's policy sees it: a vector's as it is (float32),
+    an (H, W, 3) image's channels first."""
+    if len(space.shape) == 1:
+        return spaces.Box(space.low, space.high, space.shape, np.float32)
+    height, width, channels = space.shape
+    return spaces.Box(0, 255, (channels, height, width), np.uint8)
 
 
 def _channels_first(image: np.ndarray) -> np.ndarray:

@@ -15,6 +15,10 @@ from learner.config import DQNConfig
 
 METHOD = "sb3-dqn"
 PREFIX = "sb3_"
+VECTOR_POLICY = "MlpPolicy"
+"""SB3's policy on a task whose observations are float vectors; `sb3_policy` is the one on
+images (the trainer sees which from the environment, as the paper's learner chooses its
+network)."""
 
 
 def exploration_steps(config: DQNConfig) -> int:
@@ -58,6 +62,7 @@ def sb3_hyperparameters(config: DQNConfig) -> dict[str, Any]:
 def describe(hyper: dict[str, Any], config: dict[str, Any]) -> str:
     """The learner in one line, for the report's audit: SB3's hyperparameters and the
     episode limit its stages share with the paper's learner."""
-    items = ", ".join(f"{k.removeprefix(PREFIX)}={v}" for k, v in sorted(hyper.items()))
+    shown = {**hyper, "sb3_policy": f"{hyper['sb3_policy']} ({VECTOR_POLICY} on vectors)"}
+    items = ", ".join(f"{k.removeprefix(PREFIX)}={v}" for k, v in sorted(shown.items()))
     limit = config.get("max_episode_steps")
     return f"{METHOD} (Stable-Baselines3 DQN: {items}; max_episode_steps={limit})"

@@ -18,7 +18,7 @@ from runs.worker.messages import AdviceRequest, AdviceResult
 from runs.worker.recorder import Reporter
 from study.services.advice import AdviceGiven
 from study.services.feedback import FeedbackGiven
-from study.services.observations import encode_png
+from study.services.observations import encode_observation, encode_png
 
 log = logging.getLogger(__name__)
 Correct = Callable[[dict[str, Any]], int | None]
@@ -84,7 +84,7 @@ class HumanAdvisor:
                 advice_index=index,
                 global_step=moment.global_step,
                 greedy_action=moment.greedy_action,
-                observation_png=encode_png(moment.obs),
+                observation_png=encode_observation(moment.obs, self._frames),
                 info=dict(moment.info),
                 advice_budget=self._budget,
                 frame_png=encode_png(self._frames()) if self._frames is not None else None,
@@ -134,8 +134,11 @@ class RecordingAdvisor:
         start_index: int,
         log: AdviceLog,
         correct: Correct | None = None,
+        frames: Callable[[], Any] | None = None,
     ) -> None:
         self._inner = inner
+        self._frames = frames
+        """A vector task's rendered frame, stored with its advice's vector (or None)."""
         self._session_id = session_id
         self._kind = kind
         self.count = start_index
@@ -169,7 +172,7 @@ class RecordingAdvisor:
                 advisor=self._kind,
                 action=action,
                 greedy_action=moment.greedy_action,
-                observation_png=encode_png(moment.obs),
+                observation_png=encode_observation(moment.obs, self._frames),
                 response_time_s=elapsed,
                 decision_time_s=getattr(self._inner, "last_decision_time_s", None),
                 requested_at=requested_at,

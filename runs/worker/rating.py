@@ -18,7 +18,7 @@ from runs.worker.link import SessionAbandoned, WorkerLink
 from runs.worker.messages import AdviceRequest
 from runs.worker.recorder import Reporter
 from study.services.feedback import rated_turns
-from study.services.observations import encode_png
+from study.services.observations import encode_observation, encode_png
 
 
 def given_ratings(factory: sessionmaker[Session], session_id: int) -> dict[int, float | None]:
@@ -90,7 +90,7 @@ class HumanEvaluator:
                 advice_index=index,
                 global_step=moment.global_step,
                 greedy_action=moment.greedy_action,
-                observation_png=encode_png(moment.obs),
+                observation_png=encode_observation(moment.obs, self._frames),
                 info=dict(moment.info),
                 advice_budget=self._budget,
                 frame_png=encode_png(self._frames()) if self._frames is not None else None,

@@ -70,12 +70,13 @@ class RerunFailed:
 
 def rerun_episode(order: RerunOrder) -> Rerun:
     """Reset with the episode's seed and take its logged actions."""
-    from study.services.observations import encode_png  # the rerun's process only
+    from study.services.observations import encode_observation  # the rerun's process only
 
     env = order.spec.make_env(record_motion=True)
     try:
         obs, _ = env.reset(seed=order.reset_seed)
         scene = scene_of(env) if order.spec.the_task.live_view else None
+        frame = env.render if getattr(env, "render_mode", None) == "rgb_array" else None
         start = SceneReset(
             bodies=list(scene.scene_bodies()) if scene else [],
             poses=dict(scene.body_poses()) if scene else {},
@@ -84,7 +85,7 @@ def rerun_episode(order: RerunOrder) -> Rerun:
         steps: list[RerunStep] = []
         mismatch = ""
         for index, (action, logged) in enumerate(zip(order.actions, order.rewards, strict=True)):
-            seen = encode_png(obs)
+            seen = encode_observation(obs, frame)
             obs, reward, _, _, _ = env.step(int(action))
             if not mismatch and abs(float(reward) - float(logged)) > REWARD_TOLERANCE:
                 mismatch = f"step {index + 1}: the rerun's reward {reward:g}, logged {logged:g}"
@@ -96,7 +97,7 @@ def rerun_episode(order: RerunOrder) -> Rerun:
                 global_step=index + 1,
             )
             steps.append(RerunStep(seen, motion, float(reward)))
-        return Rerun(start, steps, encode_png(obs), mismatch)
+        return Rerun(start, steps, encode_observation(obs, frame), mismatch)
     finally:
         env.close()
 

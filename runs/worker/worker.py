@@ -15,6 +15,7 @@ import logging
 import os
 import socket
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -186,6 +187,12 @@ class _Run:
     def _broadcast(self, env: Any) -> SceneBroadcast:
         """The environment as the trainer sees it: each step also goes to the live view."""
         self.env = SceneBroadcast(env, self.link, self.live_view)
+        renders = getattr(env, "render_mode", None) == "rgb_array"
+        self.frames: Callable[[], Any] | None = (
+            self.env.render if renders and not self.live_view else None
+        )
+        """What people see of a task without a live 3-D view: its environment's rendered
+        frame (Gymnasium's `render_mode="rgb_array"`), or None where it renders none."""
         return self.env
 
     def _advisor(self, machine: Any) -> Any:
@@ -203,7 +210,7 @@ class _Run:
                 self.start_advice,
                 self.advice_budget,
                 s.idle_limit_s or self.options.idle_limit_s,
-                frames=None if self.live_view else self.env.render,
+                frames=self.frames,
                 correct=self.correct,
             )
             self.env.after_step.append(self.advisor.after_step)
@@ -222,11 +229,13 @@ class _Run:
                 self.start_advice,
                 self.recorder,
                 self.correct,
+                self.frames,
             )
         elif machine is not None:
             self.advisor = RecordingAdvisor(
-                machine, s.id, s.method, self.start_advice, self.recorder, self.correct
-            )
+                machine, s.id, s.method, self.start_advice, self.recorder, self.correct,
+                self.frames,
+            )  # fmt: skip
         return self.advisor
 
     def _evaluator(self, machine: Any) -> RecordingEvaluator | HumanEvaluator | None:
@@ -266,7 +275,7 @@ class _Run:
             self.advice_budget,
             self.session.idle_limit_s or self.options.idle_limit_s,
             self.spec.rating_time_out_s,
-            frames=None if self.live_view else self.env.render,
+            frames=self.frames,
         )
         self.env.after_step.append(evaluator.after_step)
         self.env.participant = evaluator

@@ -29,7 +29,7 @@ from study.schemas.participant import ParticipantState, RatingCreate, RatingRece
 from study.services.consent import NOT_CONSENTED
 from study.services.errors import Conflict
 from study.services.feedback import PERSON, FeedbackGiven, write_feedback
-from study.services.observations import decode_png
+from study.services.observations import observation_of
 
 JUDGEMENTS = {"good": GOOD, "bad": BAD}
 EVALUATOR = PERSON
@@ -119,7 +119,7 @@ def _given(
         judgement=judgement,
         shaping=0.0 if judgement is None else weight * judgement,
         greedy_action=request.greedy_action,
-        observation_hash=observation_hash(decode_png(request.observation_png)),
+        observation_hash=observation_hash(observation_of(request.observation_png)),
         response_time_s=response_time_s,
         decision_time_s=decision_time_s,
         requested_at=answered_at - timedelta(seconds=response_time_s),

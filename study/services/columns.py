@@ -146,7 +146,11 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
     ),
     "requested_at": ("datetime", "Server side: when the page first read the request (UTC)."),
     "answered_at": ("datetime", "When the advice arrived (UTC)."),
-    "observation_file": ("string", "PNG (64x64 RGB, lossless) of what the advisor saw."),
+    "observation_file": (
+        "string",
+        "PNG (lossless) of what the advisor saw: the learner's image; for a vector task the "
+        "rendered frame, with the vector as JSON in its ideeprl-observation text.",
+    ),
     "same_observation": (
         "boolean",
         "Replayed advice: whether the replay showed it the image its advisor saw (equal "

@@ -110,9 +110,9 @@ class Stream:
 
 
 def _png_hash(png: bytes) -> str:
-    from study.services.observations import decode_png
+    from study.services.observations import observation_of
 
-    return observation_hash(decode_png(png))
+    return observation_hash(observation_of(png))
 
 
 def stream_of_session(db: Session, session_id: int) -> Stream:

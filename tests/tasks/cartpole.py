@@ -1,6 +1,6 @@
 """A vector task defined only inside the tests: Gymnasium's CartPole-v1, whose observation
 is four numbers (a Box of shape (4,)) and whose two actions push the cart; its learner is
-the dense network, from the `modern` preset."""
+the dense network, from the `modern` preset; people see its rendered frames."""
 
 from __future__ import annotations
 
@@ -14,7 +14,8 @@ from tasks import Task, TaskAction, TaskOptions, task_factory
 def _make_env(
     options: TaskOptions, max_episode_steps: int, record_motion: bool
 ) -> gym.Env[Any, Any]:
-    return gym.make("CartPole-v1", max_episode_steps=max_episode_steps)
+    # Rendered frames are what people see (the cart and pole drawn, 600x400).
+    return gym.make("CartPole-v1", max_episode_steps=max_episode_steps, render_mode="rgb_array")
 
 
 @task_factory

@@ -89,7 +89,25 @@ def test_vector_agents_train_in_one_population_as_alone() -> None:
         assert [s.to_dict() for s in recorder.steps] == [s.to_dict() for s in expected.steps]
 
 
-def test_the_sb3_baseline_refuses_a_vector_task_with_what_to_do() -> None:
+def test_the_sb3_baseline_learns_a_vector_task_with_its_mlp_policy_and_resumes_exactly(
+    tmp_path: Path,
+) -> None:
     pytest.importorskip("stable_baselines3")
-    with pytest.raises(ValueError, match=r"sb3-dqn\) runs on image tasks"):
-        _run(method="sb3-dqn").build()
+    from stable_baselines3.common.torch_layers import FlattenExtractor
+
+    spec = _run(method="sb3-dqn")
+    whole, _ = spec.build()
+    assert whole.hyperparameters["sb3_policy"] == "MlpPolicy"  # type: ignore[union-attr]
+    assert isinstance(whole.model.q_net.features_extractor, FlattenExtractor)  # type: ignore[union-attr]
+    expected = [whole.step() for _ in range(90)]
+    training = [r for r in expected if r.stage == "train"]
+    assert training and all(r.loss is not None and np.isfinite(r.loss) for r in training)
+    assert {r.action for r in expected} == {0, 1}
+    first, _ = spec.build()
+    for _ in range(70):
+        first.step()
+    first.save_checkpoint(tmp_path / "sb3.pt", spec.to_json())
+    resumed, _ = spec.build()
+    resumed.load_checkpoint(tmp_path / "sb3.pt")
+    again = [resumed.step() for _ in range(20)]
+    assert [r.to_dict() for r in again] == [r.to_dict() for r in expected[70:]]
