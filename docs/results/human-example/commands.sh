@@ -33,9 +33,11 @@ ideeprl study create --from "$HERE/design.yaml" --data-dir "$DATA" --json > "$DA
 JOIN=$("$PY" -c 'import json, sys; print(json.load(open(sys.argv[1]))["join_url"])' "$DATA/study.json")
 STUDY=$("$PY" -c 'import json, sys; print(json.load(open(sys.argv[1]))["id"])' "$DATA/study.json")
 stamp "serve on $URL, study $STUDY, link $JOIN"
-ideeprl serve --port "$PORT" --data-dir "$DATA" --log-level warning > "$DATA/serve.log" 2>&1 &
+# (nice runs the server in its own process: $! is the server, and the trap stops it)
+nice -n 10 "$PY" -m cli.main serve --port "$PORT" --data-dir "$DATA" --log-level warning \
+  > "$DATA/serve.log" 2>&1 &
 SERVER=$!
-trap 'kill $SERVER 2>/dev/null || true' EXIT
+trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true' EXIT
 until curl -sf "$URL/api/health" > /dev/null; do sleep 1; done
 api() { curl -sf -H "X-API-Key: $KEY" "$@"; }
 
