@@ -1242,7 +1242,7 @@ def _markdown(
                 ("reference", extra.reference),
                 ("comparisons", extra.comparisons),
                 ("advice_quality", extra.advice_quality),
-                ("advice_correlations", extra.advice_quality),
+                ("advice_correlations", extra.advice_correlations),
                 ("power", extra.power if extra.power and extra.power.comparisons else None),
             )
             if part is not None

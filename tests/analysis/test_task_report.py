@@ -5,6 +5,7 @@ keeps its placements."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +65,9 @@ def test_a_grid_world_report_shows_success_rates_and_no_placements(tmp_path: Pat
     by_session = episodes.groupby("session_id")["success"].mean()
     assert table["success_rate"].tolist() == pytest.approx(by_session[table["session_id"]].tolist())
     assert "advice_correlations" not in result.tables
+    linked = re.findall(r"- \[([^\]]+)\]\(", _section(text, "## Files"))
+    assert "advice_quality.csv" in linked, "every file the report names is there"
+    assert all((tmp_path / "grid" / name).exists() for name in linked), linked
 
     robot = write_report(
         episodes, tmp_path / "robot", settings=settings.assign(task="sorting"),
