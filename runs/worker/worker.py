@@ -154,9 +154,10 @@ class _Run:
             raise Conflict("a human session needs the server: start it through the API")
         self.advice_budget = self.spec.advice_budget
         """Read once, before the advisor that counts against it is made."""
-        self.person_rates = s.method == "human" and self.spec.feedback == "evaluative"
-        """The participant rates the learner's moves (evaluative feedback) instead of
-        advising."""
+        self.evaluative = self.spec.feedback == "evaluative"
+        """Its feedback judges the learner's own moves (else it advises them)."""
+        self.person_rates = s.method == "human" and self.evaluative
+        """The participant rates the learner's moves instead of advising."""
         self.live_view = self.spec.the_task.live_view
         """Whether the task has the live 3-D view (else the page shows its frames)."""
         spec = self.spec.validate()
@@ -199,7 +200,7 @@ class _Run:
         """The session's advisor: a person through the web process (human), or the machine
         advisor with its advice recorded."""
         s = self.session
-        if self.person_rates or self.spec.feedback == "evaluative":
+        if self.evaluative:
             return None  # `_evaluator` makes the person's, or the recorded ratings' evaluator
         if s.method == "human":
             assert self.link is not None
@@ -243,11 +244,11 @@ class _Run:
         it stands as the session's advisor (its count is the feedback given)."""
         if self.person_rates:
             return self._person_rates()
-        s = self.session
-        if s.method == "replayed" and self.spec.feedback == "evaluative":
+        if self.evaluative and self.session.method == "replayed":
             machine = self._recorded_ratings()
         if machine is None:
             return None
+        s = self.session
         self.advisor = RecordingEvaluator(
             machine, s.id, s.method, self.start_advice, self.spec.feedback_weight, self.recorder
         )
