@@ -103,13 +103,18 @@ class HumanAdvisor:
         return action
 
     def _until_participant_ready(self) -> None:
-        """Blocks until the participant consented and finished the induction."""
-        if self._link.participant_ready:
-            return
-        self._reporter.waiting_for_participant = True
-        self._reporter.before_waiting()
-        self._link.wait_for_participant(self._idle_limit_s)
-        self._reporter.waiting_for_participant = False
+        until_participant_ready(self._link, self._reporter, self._idle_limit_s)
+
+
+def until_participant_ready(link: WorkerLink, reporter: Reporter, idle_limit_s: float) -> None:
+    """Blocks until the participant consented and finished the induction (advice and
+    ratings alike are asked only then)."""
+    if link.participant_ready:
+        return
+    reporter.waiting_for_participant = True
+    reporter.before_waiting()
+    link.wait_for_participant(idle_limit_s)
+    reporter.waiting_for_participant = False
 
 
 class AdviceLog(Protocol):

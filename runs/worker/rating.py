@@ -14,6 +14,7 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.strategies import AdviceMoment
+from runs.worker.advisors import until_participant_ready
 from runs.worker.link import SessionAbandoned, WorkerLink
 from runs.worker.messages import AdviceRequest
 from runs.worker.recorder import Reporter
@@ -98,7 +99,7 @@ class HumanEvaluator:
                 rated_reward=self._reward,
                 rating_time_out_s=self._time_out_s,
             )
-            self._until_participant_ready()
+            until_participant_ready(self._link, self._reporter, self._idle_limit_s)
             self._link.send(request)
             self._reporter.before_waiting()
             # the web process answers by the time-out; the idle limit only guards a lost one
@@ -114,11 +115,3 @@ class HumanEvaluator:
                 )
         self.count += 1
         return judgement
-
-    def _until_participant_ready(self) -> None:
-        if self._link.participant_ready:
-            return
-        self._reporter.waiting_for_participant = True
-        self._reporter.before_waiting()
-        self._link.wait_for_participant(self._idle_limit_s)
-        self._reporter.waiting_for_participant = False
