@@ -1,8 +1,8 @@
 """Any PyBullet scene as the viewer's bodies, read from PyBullet itself.
 
 A task names the bodies people should see (`{"arm": arm_id, "goal": goal_id}`); each visual
-shape of each of their links becomes one `BodySpec` (boxes, spheres, cylinders, and meshes
-named by their files), in the colours PyBullet draws them, and `poses()` says where each
+shape of each of their links becomes one `BodySpec` (boxes, spheres, cylinders, capsules as
+closed meshes with their round ends, and meshes named by their files), in the colours PyBullet draws them, and `poses()` says where each
 shape is now. A shape's pose is its link's frame (the URDF's, not the centre of mass that
 PyBullet reports for a base) composed with the shape's own local frame, so a viewer only
 places each shape, with no knowledge of links or joints.
@@ -18,10 +18,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.bodies import BodySpec, Box, Cylinder, Geometry, MeshFile, Pose, Sphere
+from sim.bodies import BodySpec, Box, Cylinder, Geometry, Mesh, MeshFile, Pose, Sphere
 from sim.bullet import pybullet
 from sim.world import Client, wxyz
 
+CAPSULE_SEGMENTS = 24
+"""Points around a capsule's axis; its round ends have a quarter as many rings each."""
 PLANE_HALF_SIZE = 5.0
 """Metres: an infinite plane is shown as a square this far from its origin each way."""
 Frame = tuple[tuple[float, float, float], tuple[float, float, float, float]]
@@ -48,14 +50,46 @@ def geometry(kind: int, dimensions: Iterable[float], mesh: bytes) -> Geometry | 
         return Box(np.asarray(d[:3]) / 2)  # PyBullet reports a box's full sizes
     if kind == pybullet.GEOM_SPHERE:
         return Sphere(d[0])
-    if kind in (pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE):
-        return Cylinder(radius=d[1], length=d[0])  # a capsule drawn without its round ends
+    if kind == pybullet.GEOM_CYLINDER:
+        return Cylinder(radius=d[1], length=d[0])
+    if kind == pybullet.GEOM_CAPSULE:
+        return capsule(radius=d[1], length=d[0])
     if kind == pybullet.GEOM_MESH:
         path = mesh.decode()
         return MeshFile(path, (d[0], d[1], d[2])) if path else None
     if kind == pybullet.GEOM_PLANE:
         return Box(np.array([PLANE_HALF_SIZE, PLANE_HALF_SIZE, 0.0005]))
     return None
+
+
+def capsule(radius: float, length: float, segments: int = CAPSULE_SEGMENTS) -> Mesh:
+    """A capsule as a closed triangle mesh: a cylinder of `length` along z between two
+    half-spheres of `radius` (PyBullet's capsule: its length excludes the round ends)."""
+    rings = max(2, segments // 4)
+    # Latitudes from the top pole to the bottom one; the equator is repeated, once for each
+    # end, the cylinder's wall being the band between the two.
+    latitudes = np.linspace(np.pi / 2, 0.0, rings + 1)[1:]
+    heights = [(np.sin(a) * radius + length / 2, np.cos(a) * radius) for a in latitudes]
+    heights += [(-z, r) for z, r in reversed(heights)]
+    around = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
+    ring_points = [
+        np.stack([r * np.cos(around), r * np.sin(around), np.full(segments, z)], axis=1)
+        for z, r in heights
+    ]
+    top, bottom = len(heights) * segments, len(heights) * segments + 1
+    vertices = np.concatenate(
+        [*ring_points, [[0.0, 0.0, length / 2 + radius], [0.0, 0.0, -length / 2 - radius]]]
+    )
+    faces: list[tuple[int, int, int]] = []
+    for j in range(segments):
+        k = (j + 1) % segments
+        faces.append((top, j, k))  # the top cap, seen from outside (counter-clockwise)
+        last = (len(heights) - 1) * segments
+        faces.append((bottom, last + k, last + j))
+        for ring in range(len(heights) - 1):
+            a, b = ring * segments, (ring + 1) * segments
+            faces += [(a + j, b + j, b + k), (a + j, b + k, a + k)]
+    return Mesh(vertices, np.asarray(faces, dtype=np.int32))
 
 
 class BulletScene:
