@@ -593,9 +593,8 @@ def _scale_note(analysis: Analysis, humans: Sequence[str] = ()) -> str:
         named = ", ".join(method_name(m) for m in humans)
         return (
             f"Participants advised the learners of {named}, as in the paper's human-IDeepRL, "
-            "but none of these is named as one of the paper's methods (autonomous, agent, "
-            "human), so nothing here is set beside the paper's numbers: compare them with "
-            "the paper's human-IDeepRL yourself only where their settings are the paper's."
+            "but under this study's own conditions, not the paper's methods (autonomous, "
+            "agent, human): nothing here is set beside the paper's numbers."
         )
     if not len(analysis.paper):
         return "None of the paper's methods (autonomous, agent, human) is in these sessions."
