@@ -189,14 +189,10 @@ def _individual_plan(
             )
             method = advised[0]
         else:
-            human = method == "human"
-            paper = "the paper's shows the human-advised ones; " if human else ""
-            missing = (
-                "sessions a participant advised" if human else f"{method_name(method)} sessions"
-            )
+            paper = "the paper's shows the human-advised ones; " if method == "human" else ""
             notes.append(
                 f"Figure 6 shows the individual {method_name(others[0])} agents ({paper}this "
-                f"report has no {missing})."
+                f"report has no {method_name(method)} sessions)."
             )
             method = others[0]
     if reference_label is None:
