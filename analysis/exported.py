@@ -164,6 +164,8 @@ VISIT_COLUMNS = {
                  "status": str},
     "advice": {"session_id": int, "advisor": str, "action": float, "decision_time_s": float,
                "correct_action": float},
+    "feedback": {"session_id": int, "evaluator": str, "action": float, "judgement": float,
+                 "decision_time_s": float, "correct_action": float},
     "check": {"session_id": int, "attempt": int, "question": str, "correct": bool},
     "questionnaire": {"session_id": int, "instrument": str, "item": str,
                       "value_number": float},
@@ -194,7 +196,7 @@ def read_visits(path: Path, sessions: pd.DataFrame | None = None) -> Visits:
                 table = table.assign(**{column: None})
             typed[column] = table[column].map(lambda v, k=kind: _cell(v, k))
         frames[name] = pd.DataFrame(typed, index=table.index).reset_index(drop=True)
-    for name in ("advice", "questionnaire", "scales"):
+    for name in ("advice", "feedback", "questionnaire", "scales"):
         frame = frames[name]
         numbers = [c for c, kind in VISIT_COLUMNS[name].items() if kind is float and c in frame]
         frames[name] = frame.astype({c: "float64" for c in numbers})

@@ -1,7 +1,7 @@
 """The participant is the unit: an online study's visits by condition, their flow, each
 participant's measures and the tests between conditions, from the tables an export holds
-(`sessions`, `advice`, `check`, `questionnaire`, `scales`), or the same read from the
-database.
+(`sessions`, `advice`, `feedback`, `check`, `questionnaire`, `scales`), or the same read
+from the database.
 
 Nothing here waits for a learner: a completed visit's advice, decision times, check and
 questionnaire are what the participant did, whether or not the learner they advised has
@@ -10,11 +10,15 @@ finished its episodes.
 - The flow counts every visit (a session with a condition) by its `outcome`: arrived,
   declined, consented (`consented_at`), excluded by the check, timed out, completed, and
   those still under way (no outcome yet).
-- A participant's measures are those of a completed visit: advice given (their answers
-  to advice requests), its accuracy against the task's correct action where the advice
-  table records one (`correct_action`; none is recorded, the report says so), the median
-  of their decision times, their questionnaire's scales (`scales`: NASA-TLX raw, trust),
-  and every numeric item (NASA-TLX subscales, trust items, the researcher's own).
+- A participant's turns are their evaluative ratings where their session has any
+  (`feedback`: Good and Bad on the learner's own actions), else their advice. Their
+  measures are those of a completed visit: the turns they answered (advice given, or
+  ratings given), the accuracy of those answers against the task's correct action where
+  the table records one (`correct_action`: advice is right when it names it; a rating is
+  right when it says good of the correct action or bad of another; where none is
+  recorded there is no accuracy, and the report says so), the median of their decision
+  times, their questionnaire's scales (`scales`: NASA-TLX raw, trust), and every numeric
+  item (NASA-TLX subscales, trust items, the researcher's own).
 - The check's rates are over every participant who took it: passed at the first try, and
   passed at all (the others were excluded).
 """
@@ -22,7 +26,7 @@ finished its episodes.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
@@ -35,6 +39,14 @@ FLOW = ("arrived", "declined", "consented", "excluded", "timed_out", "completed"
 """The flow's counts per condition, in the order a CONSORT diagram reads them."""
 OUTCOMES = {"declined", "excluded", "timed_out", "completed"}
 """The outcomes a visit ends with (`sessions.outcome`)."""
+PERSON = "human"
+"""The advisor or evaluator of a participant's own advice or ratings (as the server
+stores it: `study.services.feedback.PERSON`)."""
+FEEDBACK_COLUMNS = ["session_id", "evaluator", "action", "judgement", "decision_time_s"]
+"""The feedback table's columns the section reads (and `correct_action` where recorded)."""
+TURN_COLUMNS = ["session_id", "gave", "answered", "decision_time_s", "correct"]
+"""One row per turn (`turns`): `gave` advice or ratings, `answered` (an answer was
+given), its decision time, `correct` 1.0 or 0.0 (NaN: not known)."""
 
 
 @dataclass(frozen=True)
@@ -51,6 +63,9 @@ class Visits:
     """session_id, instrument, item, value_number."""
     scales: pd.DataFrame
     """session_id, scale, score."""
+    feedback: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=FEEDBACK_COLUMNS))
+    """session_id, evaluator, action, judgement (+1 good, -1 bad, NaN no answer),
+    decision_time_s, [correct_action]: the ratings of evaluative feedback."""
 
     @property
     def visits(self) -> pd.DataFrame:
@@ -68,9 +83,28 @@ class Visits:
         return visits[visits["outcome"] == "completed"]
 
     @property
+    def rated(self) -> set[int]:
+        """Sessions whose turns are ratings (they have feedback rows)."""
+        return {int(i) for i in self.feedback["session_id"]}
+
+    @property
+    def advised_by_people(self) -> set[int]:
+        """Sessions whose advice or ratings came from a participant."""
+        advice, feedback = self.advice, self.feedback
+        return {
+            *(int(i) for i in advice.loc[advice["advisor"] == PERSON, "session_id"]),
+            *(int(i) for i in feedback.loc[feedback["evaluator"] == PERSON, "session_id"]),
+        }
+
+    @property
     def correct_action_recorded(self) -> bool:
-        """Whether the advice table records the task's correct action for each advice."""
-        return "correct_action" in self.advice and self.advice["correct_action"].notna().any()
+        """Whether the turns' table records the task's correct action: the advice's, or
+        the feedback's for rated sessions."""
+        advice = self.advice[~self.advice["session_id"].isin(self.rated)]
+        return any(
+            "correct_action" in table and table["correct_action"].notna().any()
+            for table in (advice, self.feedback)
+        )
 
 
 def learners_finished(visits: Visits) -> str:
@@ -130,21 +164,70 @@ def items(visits: Visits) -> pd.DataFrame:
     return wide.astype(float)
 
 
+def _correct(table: pd.DataFrame, right: pd.Series) -> pd.Series:
+    """1.0 where `right`, 0.0 where not, NaN where the row records no correct action."""
+    if "correct_action" not in table:
+        return pd.Series(np.nan, index=table.index)
+    known = table["correct_action"].notna()
+    return right.astype(float).where(known)
+
+
+def turns(visits: Visits) -> pd.DataFrame:
+    """Every turn of every session (`TURN_COLUMNS`): its ratings where it has any, else
+    its advice. A rating is right when it says good (judgement > 0) of the correct action
+    or bad (< 0) of another; a judgement of 0 says neither, and is not scored."""
+    advice = visits.advice[~visits.advice["session_id"].isin(visits.rated)]
+    action = advice["action"].astype(float)
+    advised = pd.DataFrame(
+        {
+            "session_id": advice["session_id"],
+            "gave": "advice",
+            "answered": action.notna(),
+            "decision_time_s": advice["decision_time_s"].astype(float),
+            "correct": (
+                _correct(advice, action == advice["correct_action"].astype(float))
+                if "correct_action" in advice
+                else np.nan
+            ),
+        }
+    )
+    feedback = visits.feedback
+    judgement = feedback["judgement"].astype(float)
+    if "correct_action" in feedback:
+        same = feedback["action"].astype(float) == feedback["correct_action"].astype(float)
+        scored = judgement.notna() & (judgement != 0)
+        correct = _correct(feedback, (judgement > 0) == same).where(scored)
+    else:
+        correct = pd.Series(np.nan, index=feedback.index)
+    rated = pd.DataFrame(
+        {
+            "session_id": feedback["session_id"],
+            "gave": "ratings",
+            "answered": judgement.notna(),
+            "decision_time_s": feedback["decision_time_s"].astype(float),
+            "correct": correct,
+        }
+    )
+    frames = [f for f in (advised, rated) if len(f)]
+    if not frames:
+        return pd.DataFrame(columns=TURN_COLUMNS)
+    return pd.concat(frames, ignore_index=True)[TURN_COLUMNS]
+
+
 def participants(visits: Visits) -> pd.DataFrame:
-    """One row per completed visit: session_id, condition, advice, accuracy (NaN where no
-    correct action is recorded), median_decision_s, the check's first_try and passed, one
-    column per scale score (`scale_nasa_tlx`, `scale_trust`)."""
+    """One row per completed visit: session_id, condition, gave (`advice` or `ratings`:
+    their turns), advice (the turns they answered: advice given, or ratings given),
+    accuracy (NaN where no correct action is recorded), median_decision_s, the check's
+    first_try and passed, one column per scale score (`scale_nasa_tlx`, `scale_trust`)."""
     done = visits.completed[["session_id", "condition"]].copy()
-    advice = visits.advice[visits.advice["session_id"].isin(done["session_id"])]
-    given = advice[advice["action"].notna()]
+    done["gave"] = ["ratings" if i in visits.rated else "advice" for i in done["session_id"]]
+    mine = turns(visits)
+    given = mine[mine["session_id"].isin(done["session_id"]) & mine["answered"].astype(bool)]
     done["advice"] = done["session_id"].map(given.groupby("session_id").size()).fillna(0)
     done["advice"] = done["advice"].astype(int)
-    if visits.correct_action_recorded:
-        known = given[given["correct_action"].notna()]
-        right = known["action"].astype(float) == known["correct_action"].astype(float)
-        done["accuracy"] = done["session_id"].map(right.groupby(known["session_id"]).mean())
-    else:
-        done["accuracy"] = np.nan
+    known = given[given["correct"].notna()]
+    accuracy = known.groupby("session_id")["correct"].mean()
+    done["accuracy"] = done["session_id"].map(accuracy).astype(float)
     times = given[given["decision_time_s"].notna()]
     median = times.groupby("session_id")["decision_time_s"].median()
     done["median_decision_s"] = done["session_id"].map(median)
@@ -175,6 +258,14 @@ def check_rates(visits: Visits) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["condition", "took", "first_try", "passed"])
 
 
+def given_words(gave: set[str]) -> str:
+    """What the participants' answered turns are called: advice given, ratings given, or
+    both where some gave advice and others ratings."""
+    if gave == {"ratings"}:
+        return "ratings given"
+    return "advice or ratings given" if "ratings" in gave else "advice given"
+
+
 TEST_COLUMNS = [
     "family", "measure", "condition_a", "condition_b", "test", "n_a", "n_b", "statistic",
     "p", "p_holm", "significant", "effect", "estimate", "low", "high", "no_test",
@@ -203,11 +294,12 @@ def between_conditions(visits: Visits, alpha: float) -> pd.DataFrame:
         def values(frame: pd.DataFrame, column: str) -> list[float]:
             return [float(v) for v in frame[column].dropna()]
 
+        counted = given_words(set(of_a["gave"]) | set(of_b["gave"]))
         continuous: list[tuple[str, str, Callable[[list[float], list[float]], Tested]]] = [
-            ("advice", "advice given", lambda x, y: welch(x, y, alpha)),
+            ("advice", counted, lambda x, y: welch(x, y, alpha)),
             ("advice", "median decision time [s]", lambda x, y: welch(x, y, alpha, log=True)),
         ]
-        columns = {"advice given": "advice", "median decision time [s]": "median_decision_s"}
+        columns = {counted: "advice", "median decision time [s]": "median_decision_s"}
         if visits.correct_action_recorded:
             continuous.insert(1, ("advice", "accuracy", lambda x, y: welch(x, y, alpha)))
             columns["accuracy"] = "accuracy"

@@ -18,7 +18,9 @@ from analysis.human import (
     between_conditions,
     check_rates,
     flow,
+    given_words,
     participants,
+    turns,
 )
 
 FIGURE_FILES = {"flow": "participants_flow.png", "decision_times": "decision_times.png"}
@@ -68,12 +70,13 @@ def _box(ax: object, x: float, y: float, text: str, small: bool = False) -> None
 
 
 def plot_decision_times(visits: Visits) -> Figure:
-    """Every decision time of the completed visits per condition on a log scale, each
-    participant's median marked."""
+    """Every decision time of the completed visits (their advice or ratings) per condition
+    on a log scale, each participant's median marked."""
     figure, ax = _new_figure(7.0, 4.5)
     people = participants(visits)
-    advice = visits.advice[visits.advice["session_id"].isin(people["session_id"])]
-    advice = advice[advice["decision_time_s"].notna() & advice["action"].notna()]
+    advice = turns(visits)
+    advice = advice[advice["session_id"].isin(people["session_id"])]
+    advice = advice[advice["decision_time_s"].notna() & advice["answered"].astype(bool)]
     condition = people.set_index("session_id")["condition"]
     rng = np.random.default_rng(0)
     for i, name in enumerate(visits.conditions):
@@ -100,6 +103,7 @@ def _by_condition(visits: Visits) -> pd.DataFrame:
         row: dict[str, object] = {
             "condition": name,
             "participants": len(group),
+            "gave": " and ".join(sorted(set(group["gave"]))) or "–",
             "advice": group["advice"].mean(),
             "accuracy": group["accuracy"].mean(),
             "median_decision_s": group["median_decision_s"].median(),
@@ -110,6 +114,32 @@ def _by_condition(visits: Visits) -> pd.DataFrame:
             row[column] = group[column].mean()
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _accuracy_note(people: pd.DataFrame) -> str:
+    """What the accuracy column means for the advice and the ratings given, and where it
+    is not available."""
+    notes = []
+    for gave, right, missing in (
+        (
+            "advice",
+            "Accuracy of advice is the share of a participant's advice that named the "
+            "task's correct action.",
+            "No accuracy for advice: no correct action is recorded beside it (the task "
+            "cannot say, or the advice was stored before it was recorded).",
+        ),
+        (
+            "ratings",
+            "Accuracy of ratings is the share of a participant's ratings that were right: "
+            "good of the task's correct action, bad of another.",
+            "No accuracy for ratings: the feedback table records no correct action beside "
+            "a rating, so whether a good or a bad was right is not available.",
+        ),
+    ):
+        group = people[people["gave"] == gave]
+        if len(group):
+            notes.append(right if group["accuracy"].notna().any() else missing)
+    return " ".join(notes)
 
 
 def _interval(row: pd.Series) -> str:
@@ -136,23 +166,21 @@ def human_section(
     files.append(save_figure(plot_flow(counts), out / FIGURE_FILES["flow"]))
     files.append(save_figure(plot_decision_times(visits), out / FIGURE_FILES["decision_times"]))
     summary = _by_condition(visits)
-    columns = {"condition": "condition", "participants": "completed", "advice": "advice given",
-               "accuracy": "accuracy", "median_decision_s": "median decision time [s]",
+    gave = set(people["gave"])
+    columns = {"condition": "condition", "participants": "completed", "gave": "gave",
+               "advice": given_words(gave), "accuracy": "accuracy",
+               "median_decision_s": "median decision time [s]",
                "check": "check: first try / passed of took"}  # fmt: skip
     columns |= {c: c.removeprefix("scale_") for c in summary.columns if c.startswith("scale_")}
-    formats = {c: md.fixed(2) for c in columns if c not in ("condition", "participants", "check")}
+    plain = ("condition", "participants", "gave", "check")
+    formats = {c: md.fixed(2) for c in columns if c not in plain}
     shown = tests.assign(interval=[_interval(r) for _, r in tests.iterrows()])
     shown["verdict"] = [
         f"no test: {r['no_test']}" if r["no_test"] else
         ("significant" if r["significant"] else "not significant")
         for _, r in shown.iterrows()
     ]  # fmt: skip
-    accuracy = (
-        "Accuracy is the share of a participant's advice that named the task's correct action."
-        if visits.correct_action_recorded
-        else "No accuracy: no correct action is recorded beside the advice (the task cannot "
-        "say, or the advice was stored before it was recorded), so none is given."
-    )
+    accuracy = _accuracy_note(people)
     lines = [
         "## The participants (the unit of the human study)",
         "",

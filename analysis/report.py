@@ -142,13 +142,29 @@ Plan = tuple[str, str, list[str]]
 """Figure 6's method, reference agent label, and the labels of the agents drawn."""
 
 
+def human_methods(analysis: Analysis, visits: Visits | None) -> list[str]:
+    """The methods (an online study's conditions) whose sessions a participant advised or
+    rated: those of the method `human` (or its evaluative arms), and any holding a session
+    whose advice or feedback came from a participant (`visits`), whatever its name."""
+    by_person = set() if visits is None else visits.advised_by_people
+    humans = []
+    for method, group in analysis.agents.groupby("method", sort=False):
+        named = method == "human" or str(method).startswith("human-")
+        if named or by_person & set(group["session_id"]):
+            humans.append(str(method))
+    return [m for m in analysis.method_order if m in humans]
+
+
 def _individual_plan(
     analysis: Analysis,
     method: str,
     reference_label: str | None,
     labels: Sequence[str] | None,
+    humans: Sequence[str] = (),
 ) -> tuple[Plan | None, list[str]]:
-    """Which agents Figure 6 shows, against which reference agent, and notes on the choice."""
+    """Which agents Figure 6 shows, against which reference agent, and notes on the choice.
+    `method` "human" (the paper's choice) stands for any of `humans`, the methods whose
+    sessions people advised (`human_methods`)."""
     order, notes = analysis.method_order, []
     method_of = dict(zip(analysis.agents["label"], analysis.agents["method"], strict=True))
     unknown = [
@@ -163,14 +179,22 @@ def _individual_plan(
         method = method_of[labels[0]]
     elif method not in order:
         others = [m for m in order if m != analysis.baseline]
+        advised = [m for m in others if m in humans] if method == "human" else []
         if not others:
             return None, ["Figure 6 is left out: it needs a method besides the baseline."]
-        paper = "the paper's shows the human-advised ones; " if method == "human" else ""
-        notes.append(
-            f"Figure 6 shows the individual {method_name(others[0])} agents ({paper}this "
-            f"report has no {method_name(method)} sessions)."
-        )
-        method = others[0]
+        if advised:
+            notes.append(
+                f"Figure 6 shows the individual {method_name(advised[0])} agents, learners "
+                "a participant advised (the paper's shows its human-advised ones)."
+            )
+            method = advised[0]
+        else:
+            paper = "the paper's shows the human-advised ones; " if method == "human" else ""
+            notes.append(
+                f"Figure 6 shows the individual {method_name(others[0])} agents ({paper}this "
+                f"report has no {method_name(method)} sessions)."
+            )
+            method = others[0]
     if reference_label is None:
         candidates = [m for m in [analysis.baseline, *order] if m is not None and m != method]
         if not candidates:
@@ -559,7 +583,15 @@ def _agent_counts(analysis: Analysis) -> str:
     )
 
 
-def _scale_note(analysis: Analysis) -> str:
+def _scale_note(analysis: Analysis, humans: Sequence[str] = ()) -> str:
+    """How these runs stand to the paper's; `humans`: the methods people advised."""
+    if not len(analysis.paper) and humans:
+        named = ", ".join(method_name(m) for m in humans)
+        return (
+            f"Participants advised the learners of {named}, as in the paper's human-IDeepRL, "
+            "but under this study's own conditions, not the paper's methods (autonomous, "
+            "agent, human): nothing here is set beside the paper's numbers."
+        )
     if not len(analysis.paper):
         return "None of the paper's methods (autonomous, agent, human) is in these sessions."
     methods = analysis.methods
@@ -666,8 +698,9 @@ def write_report(
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise EpisodeTableError(f"{out} is a file; pass a folder for the report")
+    humans = human_methods(analysis, visits)
     plan, plan_notes = _individual_plan(
-        analysis, individual_method, reference_label, individual_labels
+        analysis, individual_method, reference_label, individual_labels, humans
     )
     heatmap_labels, heatmap_notes = _heatmap_labels(analysis, plan[0] if plan else "")
     report_notes = [*plan_notes, *heatmap_notes, *_bands_notes(analysis)]
@@ -759,7 +792,7 @@ def write_report(
     )
     extra = _Extras(
         checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes, quality,
-        tables.get("advice_correlations"), tables.get("comparisons"), power,
+        tables.get("advice_correlations"), tables.get("comparisons"), power, humans,
     )  # fmt: skip
     text = _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra)
     if visits is not None:
@@ -865,6 +898,8 @@ class _Extras:
     advice_correlations: pd.DataFrame | None = None
     comparisons: pd.DataFrame | None = None
     power: PowerAnalysis | None = None
+    humans: Sequence[str] = ()
+    """The methods whose sessions participants advised or rated (`human_methods`)."""
 
 
 def _outcomes_note(by_outcomes: tuple[int, int] | None) -> str:
@@ -1222,7 +1257,7 @@ def _markdown(
             "",
         ]
     out += _advice_section(extra)
-    out += ["## Compared with the paper", "", _scale_note(analysis), ""]
+    out += ["## Compared with the paper", "", _scale_note(analysis, extra.humans), ""]
     if len(analysis.paper):
         out += [_paper_table(analysis), ""]
     out += [

@@ -131,7 +131,7 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
     for study in studies.list_studies(db):
         found = []
         for session in sessions.list_sessions(db, study.id):
-            public = session_routes.session_public(session, settings.base_url)
+            public = session_routes.session_public(session, settings.base_url, manager)
             progress = session_routes.get_progress(db, manager, session.id)
             fields = public.model_dump(include=set(SessionRow.model_fields))
             fields.update(

@@ -31,8 +31,26 @@ from study.settings import Settings
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
 
 
-def session_public(session: StudySession, base_url: str) -> SessionPublic:
-    """A session as the API shows it; its participant's link under `base_url`."""
+QUEUED = "queued"
+"""The status the API shows for a running session that waits for a trainer slot."""
+
+
+def shown_status(
+    manager: SessionManager | None, session_id: int, status: str
+) -> tuple[str, int | None]:
+    """A session's status as the API shows it, and its place in the trainer queue: a
+    session whose advice is over and that waits for a trainer slot is `queued` (1: next
+    to take a slot), not `running`, until it takes one; any other keeps its status."""
+    if manager is None or status != Status.running or not manager.trainers.queued(session_id):
+        return status, None
+    return QUEUED, manager.trainers.place(session_id)
+
+
+def session_public(
+    session: StudySession, base_url: str, manager: SessionManager | None = None
+) -> SessionPublic:
+    """A session as the API shows it; its participant's link under `base_url`; `queued`
+    with its place while it waits for a trainer slot (`shown_status`, from `manager`)."""
     data = {
         name: getattr(session, name)
         for name in SessionPublic.model_fields
@@ -45,6 +63,7 @@ def session_public(session: StudySession, base_url: str) -> SessionPublic:
         data["participant"] = session.participant.pseudonym
     if session.participant_token:
         data["participant_url"] = sessions.participant_url(base_url, session.participant_token)
+    data["status"], data["queue_place"] = shown_status(manager, session.id, session.status)
     return SessionPublic(**data)
 
 
@@ -108,15 +127,17 @@ def practise_ahead(
 
 @router.get("/studies/{study_id}/sessions")
 def list_sessions(
-    db: DbDep, settings: SettingsDep, study_id: StudyId, page: PageDep
+    db: DbDep, settings: SettingsDep, manager: ManagerDep, study_id: StudyId, page: PageDep
 ) -> list[SessionPublic]:
     found = page.of(sessions.list_sessions(db, study_id))
-    return [session_public(s, settings.base_url) for s in found]
+    return [session_public(s, settings.base_url, manager) for s in found]
 
 
 @router.get("/sessions/{session_id}")
-def get_session(db: DbDep, settings: SettingsDep, session_id: SessionId) -> SessionPublic:
-    return session_public(sessions.get_session(db, session_id), settings.base_url)
+def get_session(
+    db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
+) -> SessionPublic:
+    return session_public(sessions.get_session(db, session_id), settings.base_url, manager)
 
 
 @router.delete("/sessions/{session_id}", status_code=204)
@@ -139,9 +160,11 @@ def on_cluster(manager: SessionManager, session_id: int, status: Status, detail:
     return manager.cluster is not None and manager.cluster.control(session_id, status, detail)
 
 
-def _fresh(db: DbDep, settings: SettingsDep, session_id: int) -> SessionPublic:
+def _fresh(
+    db: DbDep, settings: SettingsDep, session_id: int, manager: SessionManager
+) -> SessionPublic:
     db.expire_all()
-    return session_public(sessions.get_session(db, session_id), settings.base_url)
+    return session_public(sessions.get_session(db, session_id), settings.base_url, manager)
 
 
 @router.post("/sessions/{session_id}/start")
@@ -149,7 +172,7 @@ async def start_session(
     db: DbDep, settings: SettingsDep, manager: ManagerDep, session_id: SessionId
 ) -> SessionPublic:
     await manager.start(session_id)
-    return _fresh(db, settings, session_id)
+    return _fresh(db, settings, session_id, manager)
 
 
 @router.post("/sessions/{session_id}/pause")
@@ -158,7 +181,7 @@ async def pause_session(
 ) -> SessionPublic:
     if not on_cluster(manager, session_id, Status.paused, ""):
         await manager.pause(session_id)
-    return _fresh(db, settings, session_id)
+    return _fresh(db, settings, session_id, manager)
 
 
 @router.post("/sessions/{session_id}/resume")
@@ -176,7 +199,7 @@ async def resume_session(
 ) -> SessionPublic:
     if not on_cluster(manager, session_id, Status.running):
         await manager.resume(session_id, override_numerics)
-    return _fresh(db, settings, session_id)
+    return _fresh(db, settings, session_id, manager)
 
 
 @router.post("/sessions/{session_id}/stop")
@@ -185,7 +208,7 @@ async def stop_session(
 ) -> SessionPublic:
     if not on_cluster(manager, session_id, Status.stopped, "stopped by the researcher"):
         await manager.stop(session_id)
-    return _fresh(db, settings, session_id)
+    return _fresh(db, settings, session_id, manager)
 
 
 @router.get("/sessions/{session_id}/progress")
@@ -194,7 +217,9 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
     current = manager.live(session_id)
     live = current.progress if current is not None and current.progress is not None else None
     data = vars(live) if live is not None else dict(session.progress)
-    status = current.status if current is not None else session.status
+    status, place = shown_status(
+        manager, session_id, current.status if current is not None else session.status
+    )
     advice_given = int(data.get("advice_given", 0))
     spec = session.spec
     return Progress(
@@ -211,7 +236,8 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
         advice_budget=spec.advice_budget,
         advice_left=max(0, spec.advice_budget - advice_given),
         advice_wanted=current is not None and current.request is not None,
-        queued=manager.trainers.queued(session_id),
+        queued=status == QUEUED,
+        queue_place=place,
         consented=session.consented_at is not None,
     )
 

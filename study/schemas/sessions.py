@@ -146,7 +146,16 @@ class SessionPublic(BaseModel):
     keep_replay_memory: bool | None = None
     participant: str | None = None
     participant_url: str | None = None
-    status: str
+    status: str = Field(
+        description="created, running, queued (a running session whose advice is over, "
+        "waiting for a trainer slot), paused, finished, stopped, interrupted, abandoned, "
+        "failed, declined, excluded or timed_out."
+    )
+    queue_place: int | None = Field(
+        default=None,
+        description="While queued: 1 for the sessions next to take a trainer slot, 2 for "
+        "those after, ...; null otherwise.",
+    )
     status_detail: str
     progress: dict[str, Any]
     created_at: datetime
@@ -214,7 +223,13 @@ class Progress(BaseModel):
     advice_wanted: bool = False
     queued: bool = Field(
         default=False,
-        description="Advice over; waiting in the server's queue for a free trainer slot.",
+        description="Advice over; waiting in the server's queue for a free trainer slot "
+        "(status queued).",
+    )
+    queue_place: int | None = Field(
+        default=None,
+        description="While queued: 1 for the sessions next to take a trainer slot, 2 for "
+        "those after, ...; null otherwise.",
     )
     consented: bool = Field(default=False, description="The participant consented (human).")
 

@@ -18,7 +18,7 @@ from analysis.episodes import EPISODE_TABLE_COLUMNS, arm_of
 from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.records import TRAINING, stage_of
-from study.db.models import Advice, Episode, Step, StudySession
+from study.db.models import Advice, Episode, Feedback, Step, StudySession
 
 if TYPE_CHECKING:
     from analysis.human import Visits
@@ -125,6 +125,21 @@ def load_visits(db: Session, sessions: Sequence[StudySession]) -> Visits:
         [tuple(row) for row in db.execute(query)],
         columns=["session_id", "advisor", "action", "decision_time_s", "correct_action"],
     )
+    rated = (
+        select(
+            Feedback.session_id,
+            Feedback.evaluator,
+            Feedback.action,
+            Feedback.judgement,
+            Feedback.decision_time_s,
+        )
+        .where(Feedback.session_id.in_([s.id for s in sessions]))
+        .order_by(Feedback.session_id, Feedback.feedback_index)
+    )
+    feedback = pd.DataFrame(
+        [tuple(row) for row in db.execute(rated)],
+        columns=["session_id", "evaluator", "action", "judgement", "decision_time_s"],
+    )
     check = pd.DataFrame(
         list(check_rows(db, list(sessions))),
         columns=["session_id", "attempt", "question", "correct"],
@@ -136,7 +151,7 @@ def load_visits(db: Session, sessions: Sequence[StudySession]) -> Visits:
     scales = pd.DataFrame(
         list(scale_rows(db, list(sessions))), columns=["session_id", "scale", "score"]
     )
-    return Visits(visits, advice, check, answers, scales)
+    return Visits(visits, advice, check, answers, scales, feedback)
 
 
 def session_settings(

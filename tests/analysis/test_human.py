@@ -4,13 +4,15 @@ same worked out by hand."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from analysis.between import fisher, holm, mann_whitney, welch
 from analysis.human import between_conditions, check_rates, flow, participants
-from tests.analysis.visits import hand_visits
+from analysis.human_report import human_section
+from tests.analysis.visits import hand_visits, rated_visits
 
 
 def test_the_flow_counts_the_sessions_outcomes_by_condition() -> None:
@@ -45,6 +47,36 @@ def test_no_accuracy_without_a_recorded_correct_action() -> None:
     assert not visits.correct_action_recorded
     assert participants(visits)["accuracy"].isna().all()
     assert "accuracy" not in set(between_conditions(visits, 0.05)["measure"])
+
+
+def test_ratings_are_a_participants_turns_where_their_session_has_them() -> None:
+    people = participants(rated_visits()).set_index("session_id")
+    assert people["gave"].to_dict() == {
+        1: "advice", 2: "advice", 3: "advice", 6: "ratings", 7: "ratings"
+    }  # fmt: skip
+    assert people["advice"].to_dict() == {1: 3, 2: 2, 3: 1, 6: 3, 7: 2}  # no answer: not one
+    # a rating is right when it says good of the correct action or bad of another; 0: neither
+    assert people["accuracy"].to_dict() == pytest.approx(
+        {1: 2 / 3, 2: 1.0, 3: 0.0, 6: 2 / 3, 7: 0.0}
+    )
+    assert people["median_decision_s"].to_dict() == {1: 2.0, 2: 2.0, 3: 8.0, 6: 3.0, 7: 1.0}
+    tests = between_conditions(rated_visits(), 0.05).set_index("measure")
+    assert "advice or ratings given" in tests.index and "advice given" not in tests.index
+    # late's accuracy: 2/3 and 0, the participant as the unit
+    assert tests.loc["accuracy", "n_b"] == 2
+
+
+def test_ratings_without_a_correct_action_have_no_accuracy(tmp_path: Path) -> None:
+    visits = rated_visits(correct_action=False)
+    people = participants(visits).set_index("session_id")
+    assert people["accuracy"].loc[[6, 7]].isna().all()
+    assert people["accuracy"].loc[[1, 2, 3]].tolist() == pytest.approx([2 / 3, 1.0, 0.0])
+    lines, _ = human_section(visits, tmp_path, 0.05)
+    text = "\n".join(lines)
+    assert "No accuracy for ratings: the feedback table records no correct action" in text
+    assert "Accuracy of advice is the share" in text
+    # per condition: late gave ratings, 2.5 of them on average, median of medians 2.0 s
+    assert "| late | 2 | ratings | 2.50 | – | 2.00 |" in text
 
 
 def test_the_checks_pass_rates_count_everyone_who_took_it() -> None:

@@ -64,3 +64,28 @@ def hand_visits() -> Visits:
         columns=["session_id", "scale", "score"],
     )  # fmt: skip
     return Visits(sessions, advice, check, questionnaire, scales)
+
+
+def rated_visits(correct_action: bool = True) -> Visits:
+    """`hand_visits` with `late`'s participants rating instead of advising: their turns
+    are in the feedback table (`correct_action` recorded beside each rating, or not)."""
+    visits = hand_visits()
+    feedback = pd.DataFrame(
+        [
+            # 6: good of the correct action (right), good of another (wrong), bad of another
+            # (right), no answer: 3 given, accuracy 2/3, median 3.0 s
+            (6, "human", 0, 1.0, 1.0, 0), (6, "human", 1, 1.0, 3.0, 2),
+            (6, "human", 2, -1.0, 5.0, 0), (6, "human", 3, None, None, 3),
+            # 7: bad of the correct action (wrong), 0 (neither: given, not scored): 2 given,
+            # accuracy 0/1, median 1.0 s
+            (7, "human", 2, -1.0, 0.5, 2), (7, "human", 1, 0.0, 1.5, 1),
+        ],
+        columns=["session_id", "evaluator", "action", "judgement", "decision_time_s",
+                 "correct_action"],
+    )  # fmt: skip
+    if not correct_action:
+        feedback = feedback.drop(columns="correct_action")
+    advice = visits.advice[~visits.advice["session_id"].isin([6, 7])]
+    return Visits(
+        visits.sessions, advice, visits.check, visits.questionnaire, visits.scales, feedback
+    )

@@ -74,7 +74,23 @@ def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveSe
         _until(lambda: _progress(api, third["id"])["queued"])
         assert [_curve(p)["queue_place"] for p in (b, c)] == [1, 2], "each alone: one by one"
         waiting = _progress(api, second["id"])
-        assert waiting["status"] == "running" and waiting["advice_left"] == 0
+        assert waiting["status"] == "queued" and waiting["advice_left"] == 0
+        assert waiting["queue_place"] == 1
+        listed = {s["id"]: s for s in api.get(f"/api/studies/{study['id']}/sessions").json()}
+        shown = [(listed[s["id"]]["status"], listed[s["id"]]["queue_place"])
+                 for s in (first, second, third)]  # fmt: skip
+        assert shown == [("running", None), ("queued", 1), ("queued", 2)], "queued, not running"
+        one = api.get(f"/api/sessions/{third['id']}").json()
+        assert (one["status"], one["queue_place"]) == ("queued", 2)
+        with httpx.Client(base_url=one_trainer.url, timeout=60) as dashboard:
+            assert dashboard.post("/dashboard/login", data={"key": API_KEY}).status_code == 303
+            rows = {
+                s["id"]: s
+                for st in dashboard.get("/dashboard/api/overview").json()
+                for s in st["sessions"]
+            }
+        row = rows[third["id"]]  # the page's badge shows the status, its progress the place
+        assert (row["status"], row["progress"]["queue_place"]) == ("queued", 2)
         assert b.client.get("/api/participant/learning-curve").json()["queued"] is True
         assert b.state()["queued"] is True
         trained = _progress(api, first["id"])["global_step"]
@@ -87,6 +103,9 @@ def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveSe
 
         api.post(f"/api/sessions/{first['id']}/stop")
         _until(lambda: not _progress(api, second["id"])["queued"])
+        training = api.get(f"/api/sessions/{second['id']}").json()
+        assert (training["status"], training["queue_place"]) == ("running", None), "its slot"
+        assert _progress(api, third["id"])["queue_place"] == 1
         moved = _progress(api, second["id"])["global_step"]
         _until(lambda: _progress(api, second["id"])["global_step"] > moved + 5)
         assert _progress(api, third["id"])["queued"], "training_population=1: one after another"

@@ -136,5 +136,5 @@ def test_the_participants_are_reported_before_any_learner_finishes(tmp_path: Pat
     people = pd.read_csv(tmp_path / "report" / "participants.csv")
     assert list(people["advice"]) == [3, 3, 3] and list(people["median_decision_s"]) == [2.0] * 3
     assert list(people["accuracy"]) == [0.5] * 3, "of the advice whose correct action is known"
-    assert "Accuracy is the share" in text
+    assert "Accuracy of advice is the share" in text
     engine.dispose()

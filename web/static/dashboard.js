@@ -10,6 +10,7 @@
   const COMMANDS = {
     created: ["start", "stop"],
     running: ["pause", "stop"],
+    queued: ["pause", "stop"], // running, its advice over, waiting for a trainer slot
     paused: ["resume", "stop"],
     stopped: ["resume"],
     interrupted: ["resume", "stop"],
@@ -41,7 +42,7 @@
       parts.push(s.declined ? "declined" : "not consented yet");
     }
     if (p.advice_wanted) parts.push("waiting for the participant");
-    if (p.queued) parts.push("advice done, queued for a trainer");
+    if (p.queued) parts.push(`advice done, queued for a trainer${p.queue_place ? ` (place ${p.queue_place})` : ""}`);
     if (p.stage === "train" || p.episode) parts.push(`episode ${p.episode}/${p.episodes}`);
     else if (p.stage && !p.queued && s.status === "running") parts.push(p.stage === "pretrain" ? "pretraining" : p.stage);
     if (p.last_episode_reward !== null && p.last_episode_reward !== undefined) {
@@ -66,7 +67,7 @@
     playback.title = "Play back a recorded episode";
     cells[1].textContent = s.method;
     cells[2].innerHTML = `<span class="badge"></span>`;
-    const shown = s.status === "running" && s.progress.queued ? "queued" : s.status.replace("_", " ");
+    const shown = s.status.replace("_", " ");
     cells[2].firstChild.textContent = shown;
     cells[2].firstChild.dataset.status = shown;
     if (s.status_detail) cells[2].firstChild.title = s.status_detail;
