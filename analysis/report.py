@@ -48,10 +48,11 @@ from analysis.power import DEFAULT_DRAWS, MIN_AGENTS, PowerAnalysis, power_analy
 from analysis.preregistration import Preregistered
 from analysis.primary import primary_lines
 from analysis.reference import REFERENCES, authors_totals, overlay_authors
-from analysis.rescoring import rescored_totals, rescoring_table
+from analysis.rescoring import plan as rescoring_plan
+from analysis.rescoring import rescored_schemes, rescored_totals, rescoring_table
 from analysis.stats import AGENT_TOTALS, EPISODE_MEANS
 from analysis.summary import Analysis, analyze
-from sim.rewards import REWARD_SCHEMES
+from tasks import RescoreError
 from tasks.sorting import OPTIONS as SORTING_OPTIONS
 
 FIGURE_FILES: dict[str, str] = {
@@ -681,20 +682,32 @@ def write_report(
         checked = audit(kept, baseline)
         analysis = _withhold_tests(analysis, checked, allow_mismatch)
     rescored = rescored_agents = None
-    if (
-        steps is not None
-        and settings is not None
-        and "reward_scheme" in settings
-        and not steps.empty  # none: nothing to rescore
-    ):
-        schemes = dict(zip(settings["session_id"], settings["reward_scheme"], strict=True))
-        methods = dict(zip(settings["session_id"], settings["method"], strict=True))
-        kept_steps = steps[steps["session_id"].isin(analysis.episodes["session_id"])]
-        totals = rescored_totals(kept_steps, schemes, n_episodes=analysis.n_episodes)
-        rescored = rescoring_table(totals, methods, baseline)
-        if checked is not None and not allow_mismatch:
-            rescored = _withhold_rescored(rescored, checked, baseline)
-        rescored_agents = totals.assign(method=totals["session_id"].map(methods))
+    rescoring = _Rescoring()
+    if steps is not None and settings is not None and not steps.empty:  # none: nothing to do
+        kept = settings[settings["session_id"].isin(analysis.episodes["session_id"])]
+        try:
+            planned = rescoring_plan(kept)
+        except RescoreError as error:
+            rescoring = _Rescoring(not_rescored=str(error))
+        else:
+            methods = dict(zip(settings["session_id"], settings["method"], strict=True))
+            kept_steps = steps[steps["session_id"].isin(analysis.episodes["session_id"])]
+            totals = rescored_totals(
+                kept_steps, planned.schemes, analysis.n_episodes, planned.task, planned.options
+            )
+            rescored = rescoring_table(totals, methods, baseline)
+            if checked is not None and not allow_mismatch:
+                rescored = _withhold_rescored(rescored, checked, baseline)
+            rescored_agents = totals.assign(method=totals["session_id"].map(methods))
+            declared = planned.task.reward_schemes
+            reasons = [r for r in dict.fromkeys(totals["not_rescored"]) if r]
+            rescoring = _Rescoring(
+                about=declared.about if declared is not None else "",
+                not_rescored="; ".join(reasons),
+                by_outcomes=(int(totals["by_outcomes"].sum()), len(totals))
+                if planned.task.outcomes
+                else None,
+            )
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise EpisodeTableError(f"{out} is a file; pass a folder for the report")
@@ -785,13 +798,8 @@ def write_report(
     }
 
     report = out / REPORT_FILE
-    by_outcomes = (
-        None
-        if rescored_agents is None
-        else (int(rescored_agents["by_outcomes"].sum()), len(rescored_agents))
-    )
     extra = _Extras(
-        checked, rescored, tables.get("reference"), allow_mismatch, by_outcomes, quality,
+        checked, rescored, tables.get("reference"), allow_mismatch, rescoring, quality,
         tables.get("advice_correlations"), tables.get("comparisons"), power, humans,
     )  # fmt: skip
     text = _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra)
@@ -885,6 +893,18 @@ def _bands_section(analysis: Analysis) -> list[str]:
 
 
 @dataclass(frozen=True)
+class _Rescoring:
+    """What the report says of its rescoring beside the table."""
+
+    about: str = ""
+    """How the task rescores a step (`tasks.RewardSchemes.about`)."""
+    not_rescored: str = ""
+    """Why the sessions, or some schemes, were not rescored ("": all were)."""
+    by_outcomes: tuple[int, int] | None = None
+    """Sessions rescored by their steps' outcomes, of all rescored (a task with outcomes)."""
+
+
+@dataclass(frozen=True)
 class _Extras:
     """The audit, rescoring and reference parts of a report (each may be absent)."""
 
@@ -892,8 +912,7 @@ class _Extras:
     rescored: pd.DataFrame | None
     reference: pd.DataFrame | None
     allow_mismatch: bool
-    by_outcomes: tuple[int, int] | None = None
-    """Sessions rescored by their steps' outcomes, of all rescored."""
+    rescoring: _Rescoring = _Rescoring()
     advice_quality: pd.DataFrame | None = None
     advice_correlations: pd.DataFrame | None = None
     comparisons: pd.DataFrame | None = None
@@ -1010,7 +1029,8 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
         columns = {"name": "method", "agents": "agents", "logged_under": "logged under",
                    "R_T_logged": "R_T as logged"}  # fmt: skip
         formats: dict[str, object] = {"R_T_logged": md.fixed(2)}
-        for scheme in REWARD_SCHEMES:
+        schemes = rescored_schemes(extra.rescored)
+        for scheme in schemes:
             columns[f"R_T_{scheme}"] = f"R_T under {scheme}"
             formats[f"R_T_{scheme}"] = md.fixed(2)
             if f"improvement_{scheme}" in extra.rescored:
@@ -1018,14 +1038,14 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
                 columns[f"p_welch_{scheme}"] = f"Welch's p under {scheme}"
                 formats[f"p_welch_{scheme}"] = md.p_value
         rescored, withheld = extra.rescored, ""
-        if baseline is not None and f"improvement_{REWARD_SCHEMES[0]}" in rescored:
+        if baseline is not None and f"improvement_{schemes[0]}" in rescored:
             base = rescored.set_index("method").loc[baseline]
             rescored = rescored.assign(
                 **{
                     f"vs_{scheme}": [
                         md.versus(v, base[f"R_T_{scheme}"]) for v in rescored[f"R_T_{scheme}"]
                     ]
-                    for scheme in REWARD_SCHEMES
+                    for scheme in schemes
                 }
             )
         if "withheld" in rescored and (rescored["withheld"] != "").any():
@@ -1041,11 +1061,25 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
         out += [
             "## R_T rescored under each reward scheme",
             "",
-            "The same logged behaviour scored under each accounting: a placement keeps its "
-            "reward, every other step costs what the scheme says (`sim.rewards`). Compare "
-            "methods within one column." + _outcomes_note(extra.by_outcomes) + withheld,
+            "The same logged behaviour scored under each of the task's reward schemes. "
+            + (f"{extra.rescoring.about} " if extra.rescoring.about else "")
+            + "Compare methods within one column."
+            + _outcomes_note(extra.rescoring.by_outcomes)
+            + withheld
+            + (
+                f" Left empty where the task cannot say: {extra.rescoring.not_rescored}."
+                if extra.rescoring.not_rescored
+                else ""
+            ),
             "",
             md.table(rescored, columns, formats),  # type: ignore[arg-type]
+            "",
+        ]
+    elif extra.rescoring.not_rescored:
+        out += [
+            "## R_T rescored under each reward scheme",
+            "",
+            f"Not rescored: {extra.rescoring.not_rescored}.",
             "",
         ]
     if extra.reference is not None:

@@ -1,19 +1,25 @@
-"""R_T rescored from the step logs under each reward scheme.
+"""R_T rescored from the step logs under each of the task's reward schemes.
 
-The same behaviour scores differently under the authors' two accountings: what a method
+The same behaviour scores differently under different accountings: what a method
 "collects" depends on the rule as much as on the learner. Rescoring each logged training
-step (a placement keeps its reward, every other step costs what the scheme says, see
+step under every reward scheme its task declares (`tasks.RewardSchemes`: for the sorting
+robot a placement keeps its reward, every other step costs what the scheme says, see
 `sim.rewards.rescore`) shows each method's R_T under every scheme, so methods run under
-different schemes can still be compared under one.
+different schemes can still be compared under one. A task that declares no schemes, or a
+scheme whose count is not in the record, is not rescored: `tasks.RescoreError` says why.
 """
 
 from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
 
 import pandas as pd
 
 from analysis.episodes import method_name, order_methods
 from analysis.stats import improvement_pct, student_t_test
-from sim.rewards import REWARD_SCHEMES, rescore
+from tasks import RecordedEpisode, RescoreError, Task, TaskOptions, get_task
 
 STEP_COLUMNS: tuple[str, ...] = (
     "session_id",
@@ -24,16 +30,78 @@ STEP_COLUMNS: tuple[str, ...] = (
 )
 """One row per training step (episode 1..N within the session, `episode_step` from 1, every
 step of each episode present: a step's cost depends on its number in the episode), and an
-optional `outcome` (`sim.rewards.OUTCOMES`; missing in logs recorded before it was kept):
-an episode whose steps all have one is rescored by them, else by its rewards."""
+optional `outcome` (`tasks.Task.outcomes` or none; missing in logs recorded before it was
+kept): an episode whose steps all have one is rescored by them, else by its rewards."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What rescoring a report's sessions needs: their one task, and per session the
+    scheme it was scored under and its task options."""
+
+    task: Task
+    schemes: dict[int, str]
+    options: Mapping[int, TaskOptions]
+
+
+def plan(settings: pd.DataFrame) -> Plan:
+    """The rescoring of the sessions of a settings table (`analysis.settings`: `task`,
+    `task_options` and a task's own options as columns; a table without `task` ran the
+    sorting robot); `RescoreError` says why they cannot be rescored together."""
+    tasks = sorted(set(settings["task"])) if "task" in settings else ["sorting"]
+    if len(tasks) != 1:
+        raise RescoreError(
+            f"the sessions ran different tasks ({', '.join(tasks)}): a task's reward schemes "
+            "score only its own runs (report each task on its own)"
+        )
+    task = get_task(tasks[0])
+    declared = task.reward_schemes
+    if declared is None:
+        raise RescoreError(
+            f"task {task.name} declares no reward schemes: its runs' rewards are reported "
+            "as logged, not rescored"
+        )
+    schemes, options = {}, {}
+    for row in settings.to_dict("records"):
+        given = _task_options(row.get("task_options"))
+        own = {k: row[k] for k in task.options if k in row and k not in given}
+        session = int(row["session_id"])
+        options[session] = {**own, **given}
+        if declared.option and declared.option not in options[session]:
+            raise RescoreError(
+                f"the settings do not say which reward scheme (`{declared.option}`) session "
+                f"{session} was scored under"
+            )
+        schemes[session] = declared.logged(options[session])
+    return Plan(task, schemes, options)
+
+
+def _task_options(value: object) -> dict[str, object]:
+    """A settings row's task options (JSON text in a settings table, or a map)."""
+    if isinstance(value, str) and value:
+        value = json.loads(value)
+    return dict(value) if isinstance(value, Mapping) else {}
 
 
 def rescored_totals(
-    steps: pd.DataFrame, schemes: dict[int, str], n_episodes: int | None = None
+    steps: pd.DataFrame,
+    schemes: dict[int, str],
+    n_episodes: int | None = None,
+    task: Task | str = "sorting",
+    options: Mapping[int, TaskOptions] | None = None,
 ) -> pd.DataFrame:
-    """Per session: R_T as logged and under each scheme (`R_T_<scheme>` columns), over its
-    first `n_episodes` episodes (all when None). `schemes` maps a session to the scheme
-    its steps were scored under."""
+    """Per session: R_T as logged and under each of the task's schemes (`R_T_<scheme>`
+    columns), over its first `n_episodes` episodes (all when None). `schemes` maps a
+    session to the scheme its steps were scored under, `options` to its task options (the
+    task's defaults when absent). A scheme the task cannot rescore a session's steps
+    under leaves its R_T empty (NaN), the reason in `not_rescored`. `RescoreError` when the
+    task declares no schemes."""
+    task = get_task(task) if isinstance(task, str) else task
+    if task.reward_schemes is None:
+        raise RescoreError(
+            f"task {task.name} declares no reward schemes: its runs' rewards are reported "
+            "as logged, not rescored"
+        )
     table = steps
     if n_episodes is not None:
         table = table[table["episode"] <= n_episodes]
@@ -41,33 +109,50 @@ def rescored_totals(
     rows = []
     for session_id, group in table.groupby("session_id", sort=True):
         scheme = schemes[int(session_id)]
+        given = (options or {}).get(int(session_id), {})
         row: dict[str, object] = {
             "session_id": int(session_id),
             "scheme": scheme,
             "R_T_logged": float(group["reward"].sum()),
         }
         episodes = [
-            ([float(r) for r in e["reward"]], [bool(t) for t in e["terminated"]], _outcomes(e))
+            RecordedEpisode(
+                tuple(float(r) for r in e["reward"]),
+                tuple(bool(t) for t in e["terminated"]),
+                _outcomes(e),
+            )
             for _, e in group.groupby("episode", sort=True)
         ]
-        row["by_outcomes"] = all(outcomes is not None for _, _, outcomes in episodes)
-        for target in REWARD_SCHEMES:
-            row[f"R_T_{target}"] = sum(
-                sum(rescore(rewards, ended, scheme, target, outcomes))
-                for rewards, ended, outcomes in episodes
-            )
+        row["by_outcomes"] = all(e.outcomes is not None for e in episodes)
+        reasons = []
+        for target in task.reward_schemes.names:
+            try:
+                row[f"R_T_{target}"] = sum(
+                    sum(task.rescore(e, scheme, target, given)) for e in episodes
+                )
+            except RescoreError as error:
+                row[f"R_T_{target}"] = float("nan")
+                reasons.append(f"{target}: {error}")
+        row["not_rescored"] = "; ".join(dict.fromkeys(reasons))
         rows.append(row)
     return pd.DataFrame(rows)
 
 
-def _outcomes(episode: pd.DataFrame) -> list[str | None] | None:
+def rescored_schemes(table: pd.DataFrame) -> list[str]:
+    """The schemes a rescoring table (or its totals) has an `R_T_<scheme>` column for."""
+    return [
+        c.removeprefix("R_T_") for c in table.columns if c.startswith("R_T_") and c != "R_T_logged"
+    ]
+
+
+def _outcomes(episode: pd.DataFrame) -> tuple[str, ...] | None:
     """The episode's step outcomes, or None when any is unknown (an older log)."""
     if "outcome" not in episode:
         return None
     values = list(episode["outcome"])
     if any(v is None or (isinstance(v, float) and v != v) for v in values):
         return None
-    return [str(v) for v in values]
+    return tuple(str(v) for v in values)
 
 
 def rescoring_table(
@@ -78,6 +163,7 @@ def rescoring_table(
     under each scheme, Welch's p for the agents' R_T against the baseline's (NaN with
     fewer than two agents on a side)."""
     frame = totals.assign(method=totals["session_id"].map(methods))
+    schemes = rescored_schemes(totals)
     out = []
     for method in order_methods(frame["method"], baseline):
         group = frame[frame["method"] == method]
@@ -88,13 +174,13 @@ def rescoring_table(
             "logged_under": " | ".join(sorted(set(group["scheme"]))),
             "R_T_logged": group["R_T_logged"].mean(),
         }
-        for scheme in REWARD_SCHEMES:
+        for scheme in schemes:
             row[f"R_T_{scheme}"] = group[f"R_T_{scheme}"].mean()
         out.append(row)
     table = pd.DataFrame(out)
     if baseline is not None and baseline in set(table["method"]):
         base = table.set_index("method")
-        for logged_or_scheme in ("logged", *REWARD_SCHEMES):
+        for logged_or_scheme in ("logged", *schemes):
             column = f"R_T_{logged_or_scheme}"
             reference = float(base.loc[baseline, column])
             table[f"improvement_{logged_or_scheme}"] = [
@@ -102,7 +188,7 @@ def rescoring_table(
             ]
         # Under one scheme the agents' R_T are comparable, so they can be tested.
         ours = frame["method"] == baseline
-        for scheme in REWARD_SCHEMES:
+        for scheme in schemes:
             column = f"R_T_{scheme}"
             table[f"p_welch_{scheme}"] = [
                 float("nan")

@@ -20,9 +20,11 @@ participant links reach.
 Through an online study's link (`join`) a simulated participant arrives as a panel's
 would, with its own panel id, and goes through the whole visit: the comprehension check
 (answered from what the induction tells a person: the task's own answers, the sort rule,
-what to do when asked; a question it cannot know it guesses, and guesses again where the
-check says it was wrong) and, after its turns, the questionnaire (each item answered in
-the middle of its scale).
+what to do when asked, and the study's own questions' answers where the rehearsal is given
+its design (`design_check`); a question it cannot know it guesses, and guesses again where
+the check says it was wrong) and, after its turns, the questionnaire (each item answered
+in the middle of its scale). A participant drawn to fail the check (`fail_check`) answers
+every question it knows wrong on every try, and the check excludes it as it would a person.
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ import httpx
 from learner.fitted import FittedAdvisor, FittedModel
 from learner.records import TRAINING, stage_of
 from sim.rules import SortRule
-from study.services.visit import task_questions
+from study.schemas.visit import CheckSpec
+from study.services.visit import expected_answer, task_questions
 from tasks import Task, get_task
 
 ENDED = ("finished", "stopped", "interrupted", "abandoned", "failed")
@@ -64,6 +67,9 @@ class Rehearsed:
     """Rating turns left without an answer (their time-out passed first)."""
     check_tries: int = 0
     """Tries at an online study's comprehension check (0: none asked)."""
+    check_guessed: int = 0
+    """The check's questions it was never taught (neither the task's nor, with the study's
+    design, the study's own), and so guessed."""
     questionnaire: bool = False
     """It submitted an online study's questionnaire (which completes the visit)."""
 
@@ -125,11 +131,15 @@ def rehearse(
     speed: float = 1.0,
     timeout_s: float = 600.0,
     viewer: bool = True,
+    design_check: CheckSpec | None = None,
+    fail_check: bool = False,
 ) -> Rehearsed:
     """One simulated participant through the session of `token`, until its advice is
     over, it leaves early, or the session ends. `speed` > 1 divides the waits (a quick
     rehearsal); the decision time sent is the drawn one. `viewer`: keep the 3-D view's
-    websocket open meanwhile, as the page does (a task with a live 3-D view)."""
+    websocket open meanwhile, as the page does (a task with a live 3-D view).
+    `design_check`: the study design's check, whose own questions it then answers right;
+    `fail_check`: it answers the check wrong on every try (and is excluded)."""
     task = get_task(model.task)
     if model.task == "sorting":
         advisor = FittedAdvisor(model, sort_rule, seed)
@@ -145,9 +155,14 @@ def rehearse(
                         "texts_version": shown["texts_version"]}))  # fmt: skip
         check = _ok(client.get("/api/participant/check"))
         asked = check["required"] and not check["passed"]  # (passed: a participant back)
-        tries, passed = _pass_check(client, check, task, sort_rule) if asked else (0, True)
+        taught = _taught(task, sort_rule, design_check)
+        tries, passed, guessed = (
+            _take_check(client, check, taught, fail_check) if asked else (0, True, 0)
+        )
         if not passed:  # every try wrong: the visit ended `excluded`
-            return Rehearsed(token[-4:], 0, [], False, "excluded", check_tries=tries)
+            return Rehearsed(
+                token[-4:], 0, [], False, "excluded", check_tries=tries, check_guessed=guessed
+            )
         state = _ok(client.post("/api/participant/start"))
         if view is not None:
             view.start()
@@ -195,6 +210,7 @@ def rehearse(
         feedback=kind,
         lapsed=lapsed,
         check_tries=tries,
+        check_guessed=guessed,
         questionnaire=answered,
     )
 
@@ -217,32 +233,57 @@ def join(link: str, panel_id: str, panel_param: str = "PROLIFIC_PID") -> tuple[s
     return base, target.rpartition("/p/")[2]
 
 
-def _pass_check(
-    client: httpx.Client, check: dict[str, Any], task: Task, sort_rule: Any
-) -> tuple[int, bool]:
-    """The comprehension check, answered as the induction taught (the task's own answers;
-    other questions guessed, each wrong one guessed again): the tries it took, and whether
-    it passed."""
-    taught: dict[str, Any] = {q.id: q.answer for q in task_questions(task)}
+def _taught(task: Task, sort_rule: Any, design_check: CheckSpec | None) -> dict[str, str]:
+    """The check's right answers as the induction teaches them, by question id: the task's
+    own questions', the rating question's, the sorting robot's under the sort rule, and the
+    study design's own questions' (a side of the table under the sort rule where the
+    question asks one)."""
+    taught: dict[str, str] = {q.id: str(q.answer) for q in task_questions(task)}
     taught["rating"] = "a"
     if task.name == "sorting":
         rule = SortRule.parse(sort_rule)
         taught.update({"blue_cube": rule.side("cube", "blue"),
                        "red_disk": rule.side("disk", "red"), "drop_at_centre": "keep"})  # fmt: skip
+    if design_check is not None:
+        rule = SortRule.parse(sort_rule)
+        taught.update({q.id: expected_answer(q, rule) for q in design_check.questions})
+    return taught
+
+
+def _take_check(
+    client: httpx.Client, check: dict[str, Any], taught: dict[str, str], fail: bool
+) -> tuple[int, bool, int]:
+    """The comprehension check, answered as the induction taught (other questions guessed,
+    each wrong one guessed again), or, to `fail` it, every known answer wrong on every try:
+    the tries it took, whether it passed, and how many questions it had to guess."""
     guess = {q["id"]: 0 for q in check["questions"]}
+    unknown = {q["id"] for q in check["questions"]
+               if taught.get(q["id"]) not in [c["value"] for c in q["choices"]]}  # fmt: skip
     tries = 0
     while True:
         answers = {}
         for q in check["questions"]:
             values = [c["value"] for c in q["choices"]]
             known = taught.get(q["id"])
-            answers[q["id"]] = known if known in values else values[guess[q["id"]] % len(values)]
+            if q["id"] in unknown:
+                answers[q["id"]] = values[guess[q["id"]] % len(values)]
+            elif fail:
+                answers[q["id"]] = next(v for v in values if v != known)
+            else:
+                answers[q["id"]] = str(known)
         result = _ok(client.post("/api/participant/check", json={"answers": answers}))
         tries += 1
         if result["passed"] or result["excluded"]:
-            return tries, bool(result["passed"])
+            return tries, bool(result["passed"]), len(unknown)
         for wrong in result["wrong"]:
             guess[wrong] += 1
+
+
+def fails_check(index: int, share: float) -> bool:
+    """Whether participant `index` (from 0) of a rehearsal is one of the `share` that fail
+    the check: spread evenly, so that of the first n, floor(n x share) fail."""
+    eps = 1e-9  # 10 x 0.3 is 3.0000000000000004, 3 x 0.1 is 0.30000000000000004
+    return int((index + 1) * share + eps) > int(index * share + eps)
 
 
 def _questionnaire(client: httpx.Client, deadline: float) -> bool:

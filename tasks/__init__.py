@@ -97,6 +97,52 @@ class TaskError(ValueError):
     """A task that cannot be found or made; the message says why, for a person."""
 
 
+class RescoreError(ValueError):
+    """Recorded steps a task cannot score under the scheme asked (what that scheme counts
+    is not in the record, or the task declares no schemes); the message says why."""
+
+
+@dataclass(frozen=True)
+class RecordedEpisode:
+    """One episode's recorded steps, as rescoring reads them (every step, in order)."""
+
+    rewards: tuple[float, ...]
+    """Each step's reward, as the run's scheme scored it."""
+    terminated: tuple[bool, ...]
+    """Whether the step ended the episode by the task's own end (Gymnasium's `terminated`,
+    not the step limit's truncation)."""
+    outcomes: tuple[str, ...] | None = None
+    """Each step's outcome (`Task.outcomes`, or "none") where every step has one; None for
+    steps recorded before outcomes were kept."""
+
+
+Rescore = Callable[[RecordedEpisode, str, str, TaskOptions], list[float]]
+"""(the episode, the scheme it was scored under, the scheme wanted, the run's task options)
+-> each step's reward under the scheme wanted; `RescoreError` where the record cannot say."""
+
+
+@dataclass(frozen=True)
+class RewardSchemes:
+    """A task's accountings of the same behaviour (what each step earns), and how a recorded
+    episode scored under one is scored under another, so runs scored differently can be
+    compared under one (`analysis.rescoring`)."""
+
+    names: tuple[str, ...]
+    """The schemes, the one runs are scored under by default first."""
+    rescore: Rescore
+    option: str = ""
+    """The task option that names the scheme a run is scored under ("": every run is
+    scored under the first)."""
+    about: str = ""
+    """How a recorded step is scored under another scheme, one sentence for the report."""
+
+    def logged(self, options: TaskOptions) -> str:
+        """The scheme a run with these task options was scored under."""
+        if not self.option:
+            return self.names[0]
+        return str(options.get(self.option, self.names[0]))
+
+
 @dataclass(frozen=True)
 class TaskAction:
     """One action as a person meets it on the advice page."""
@@ -163,6 +209,9 @@ class Task:
     success are its measures."""
     situations: Situations | None = None
     """The situations a fitted advisor conditions on (None: the stage and correct action)."""
+    reward_schemes: RewardSchemes | None = None
+    """Its reward schemes, for rescoring recorded runs (None: it declares none, and its
+    runs are reported as logged, never rescored)."""
 
     @property
     def n_actions(self) -> int:
@@ -192,6 +241,30 @@ class Task:
         self, options: TaskOptions | None, max_episode_steps: int, record_motion: bool
     ) -> gym.Env[Any, Any]:
         return self.make_env(self.checked_options(options), max_episode_steps, record_motion)
+
+    def rescore(
+        self, episode: RecordedEpisode, scheme: str, to_scheme: str, options: TaskOptions
+    ) -> list[float]:
+        """Each step of a recorded episode (scored under `scheme`) as `to_scheme` scores it;
+        `RescoreError` says why where the task cannot (no schemes, an unknown scheme, or
+        what `to_scheme` counts is not in the record)."""
+        schemes = self.reward_schemes
+        if schemes is None:
+            raise RescoreError(
+                f"task {self.name} declares no reward schemes: its runs' rewards are reported "
+                "as logged, not rescored"
+            )
+        for name in (scheme, to_scheme):
+            if name not in schemes.names:
+                raise RescoreError(
+                    f"task {self.name} has no reward scheme {name!r} (its schemes: "
+                    f"{', '.join(schemes.names)})"
+                )
+        if len(episode.terminated) != len(episode.rewards) or (
+            episode.outcomes is not None and len(episode.outcomes) != len(episode.rewards)
+        ):
+            raise RescoreError("an episode's rewards, ends and outcomes differ in length")
+        return schemes.rescore(episode, scheme, to_scheme, {**self.options, **options})
 
     def correct(self, info: GymInfo, options: TaskOptions) -> int | None:
         """The right action in the state `info` describes, or None where nobody can say."""
@@ -263,6 +336,9 @@ __all__ = [
     "BUILT_IN",
     "CheckQuestion",
     "OptionValue",
+    "RecordedEpisode",
+    "RescoreError",
+    "RewardSchemes",
     "Situations",
     "Task",
     "TaskAction",

@@ -6,7 +6,11 @@ feedback, each rating) after its drawn decision time, leaving early as often as 
 people did (`runs.rehearsal`); a summary per kind of feedback.
 Create the human sessions first (dashboard, or POST /api/studies/ID/sessions) and pass
 their links; each simulated participant runs in its own thread. The model's task is the
-sessions' (the grid world's people are rehearsed with a model fitted to a grid world study)."""
+sessions' (the grid world's people are rehearsed with a model fitted to a grid world study).
+An online study's comprehension check is answered as its induction teaches: the task's
+questions, and the study's own (`--design`, the file `ideeprl study create --from` read)
+right; `--check-failures SHARE` of the participants answer it wrong on every try and are
+excluded as the check says."""
 
 from __future__ import annotations
 
@@ -53,6 +57,16 @@ def register(subparsers: Any) -> None:
         help="the study link's panel id parameter (the design's panel: Prolific's by default)",
     )  # fmt: skip
     parser.add_argument("--sort-rule", default="color", help="the study's sort rule (task sorting)")
+    parser.add_argument(
+        "--design", type=Path, metavar="FILE",
+        help="the study's YAML file (as `ideeprl study create --from`): its own check "
+        "questions are answered right (without it they are guessed)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--check-failures", type=float, default=0.0, metavar="SHARE",
+        help="the share of participants (0 to 1, spread evenly) who answer the check wrong "
+        "on every try, and are excluded (default 0)",
+    )  # fmt: skip
     parser.add_argument("--seed", type=int, default=0, help="participant i draws with seed+i")
     parser.add_argument(
         "--speed", type=float, default=1.0,
@@ -66,10 +80,18 @@ def rehearse_command(args: argparse.Namespace) -> int:
     import httpx
 
     from learner.fitted import read_model
-    from runs.rehearsal import join, rehearse
+    from runs.rehearsal import fails_check, join, rehearse
 
     if not args.speed > 0:
         raise CommandError("--speed must be above 0", code=2)
+    if not 0 <= args.check_failures <= 1:
+        raise CommandError("--check-failures takes a share from 0 to 1", code=2)
+    check = None
+    if args.design is not None:
+        from cli.commands.study import read_body
+
+        design = read_body(args.design, None).design
+        check = None if design is None else design.check
     if bool(args.study_link) != (args.participants > 0) or (args.links and args.study_link):
         raise CommandError(
             "pass participant links (--link URL ...), or an online study's link with how "
@@ -86,7 +108,9 @@ def rehearse_command(args: argparse.Namespace) -> int:
             base, token = join(args.study_link, f"rehearsal-{args.seed + i}", args.panel_param)
         else:
             base, token = args.links[i]
-        return rehearse(base, token, model, args.sort_rule, args.seed + i, args.speed)
+        fail = fails_check(i, args.check_failures)
+        return rehearse(base, token, model, args.sort_rule, args.seed + i, args.speed,
+                        design_check=check, fail_check=fail)  # fmt: skip
 
     count = args.participants or len(args.links)
     try:
@@ -104,8 +128,11 @@ def rehearse_command(args: argparse.Namespace) -> int:
         else:
             given = f"{r.advice} advice"
         visit = f", check in {r.check_tries}" if r.check_tries else ""
+        visit += f" ({r.check_guessed} questions guessed)" if r.check_guessed else ""
         visit += ", questionnaire" if r.questionnaire else ""
         print(f"participant ...{r.token_tail}: {given}{left}{visit}; session {r.status}")
+    if any(r.check_guessed for r in done) and args.design is None:
+        print("some check questions were the study's own: --design FILE answers them right")
     for kind in sorted({r.feedback for r in done}):
         these = [r for r in done if r.feedback == kind]
         times = sorted(t for r in these for t in r.decision_times_s)

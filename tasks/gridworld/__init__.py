@@ -4,7 +4,9 @@ they see it; the learner sees the whole room from above, 8 pixels a square.
 
 The correct action is a shortest path's next move (a breadth-first search over the room,
 done once an episode), stated in `info["correct_action"]`. The reward is MiniGrid's: on
-reaching the goal, 1 - 0.9 x (steps taken / the step limit); nothing otherwise.
+reaching the goal, 1 - 0.9 x (steps taken / the step limit); nothing otherwise. Recorded
+runs are rescored under the other schemes (`SCHEMES`) from where each episode reached the
+goal (the step that ended it: the room ends an episode nowhere else).
 """
 
 from __future__ import annotations
@@ -15,7 +17,15 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from tasks import CheckQuestion, Task, TaskAction, TaskOptions, task_factory
+from tasks import (
+    CheckQuestion,
+    RecordedEpisode,
+    RewardSchemes,
+    Task,
+    TaskAction,
+    TaskOptions,
+    task_factory,
+)
 
 TILE = 8
 """Pixels a square in what the learner sees."""
@@ -28,6 +38,17 @@ DIRECTION = (3, 0, 1, 2)
 OPTIONS: dict[str, Any] = {"size": 8, "max_steps": 64}
 """The room's side in squares (walls included; the image is 8 x size pixels a side) and
 MiniGrid's own step limit, which its reward counts against."""
+SCHEMES = ("minigrid", "sparse", "step-cost")
+"""What reaching the goal at the n-th step of an episode earns, and what other steps cost:
+- `minigrid` (how runs are scored): 1 - 0.9 x n / max_steps at the goal, 0 otherwise;
+- `sparse`: 1 at the goal, 0 otherwise (only whether it got there counts);
+- `step-cost`: 1 at the goal, -0.01 every other step (every step counts the same)."""
+STEP_COST = -0.01
+ABOUT = (
+    "The step that reached the goal earns what the scheme gives it there, every other step "
+    "what the scheme costs (`tasks.gridworld.SCHEMES`)."
+)
+"""How its runs are rescored, for the report."""
 
 
 class GridWorldEnv(gym.Env[np.ndarray, int]):
@@ -129,6 +150,26 @@ class GridWorldEnv(gym.Env[np.ndarray, int]):
         return None
 
 
+def goal_reward(scheme: str, n: int, max_steps: int) -> float:
+    """What reaching the goal at the `n`-th step (from 1) earns under `scheme`."""
+    return 1 - 0.9 * (n / max_steps) if scheme == "minigrid" else 1.0
+
+
+def _rescore(
+    episode: RecordedEpisode, scheme: str, to_scheme: str, options: TaskOptions
+) -> list[float]:
+    """The goal's step earns what `to_scheme` gives it there, every other step its cost."""
+    if scheme == to_scheme:
+        return list(episode.rewards)
+    max_steps = options["max_steps"]
+    assert isinstance(max_steps, int), "the task's option"
+    other = STEP_COST if to_scheme == "step-cost" else 0.0
+    return [
+        goal_reward(to_scheme, n, max_steps) if ended else other
+        for n, ended in enumerate(episode.terminated, start=1)
+    ]
+
+
 def _make_env(
     options: TaskOptions, max_episode_steps: int, record_motion: bool
 ) -> gym.Env[Any, Any]:
@@ -152,6 +193,7 @@ def gridworld_task() -> Task:
         goal="Bring the red triangle to the green square in as few moves as you can.",
         options=OPTIONS,
         good_reward=0.5,
+        reward_schemes=RewardSchemes(SCHEMES, _rescore, about=ABOUT),
         check_questions=(
             CheckQuestion(
                 "gridworld_goal",

@@ -8,6 +8,11 @@ also has 100,000 visual triangles (18 ms a 64x64 frame in TinyRenderer, 3.4 ms f
 iiwa), the arm's weight on every step and on every participant's page.
 
 The oracle's move is the one that brings the hand nearest the ball, in `info`.
+
+Runs are scored `shaped`: each step earns 0.1 a lattice step the hand came nearer the ball
+(less where it went away), and reaching it 1 more. Rescored `sparse`: 1 for the step that
+reached the ball (the step that ended the episode), nothing otherwise. The shaped reward
+cannot be had back from a sparse record: it counts distances the record does not keep.
 """
 
 from __future__ import annotations
@@ -16,11 +21,39 @@ from typing import Any
 
 import gymnasium as gym
 
-from tasks import CheckQuestion, Task, TaskAction, TaskOptions, task_factory
+from tasks import (
+    CheckQuestion,
+    RecordedEpisode,
+    RescoreError,
+    RewardSchemes,
+    Task,
+    TaskAction,
+    TaskOptions,
+    task_factory,
+)
 from tasks.reach.moves import CAMERA, KEYS, MOVE_WORDS
 
 OPTIONS: dict[str, Any] = {"max_steps": 50}
 """The task's own step limit for an episode (the run's may be lower)."""
+
+
+SCHEMES = ("shaped", "sparse")
+"""Its reward schemes, the one runs are scored under first."""
+ABOUT = "Under sparse, the step that reached the ball earns 1, every other step nothing."
+"""How its runs are rescored, for the report."""
+
+
+def _rescore(
+    episode: RecordedEpisode, scheme: str, to_scheme: str, options: TaskOptions
+) -> list[float]:
+    if scheme == to_scheme:
+        return list(episode.rewards)
+    if to_scheme == "shaped":
+        raise RescoreError(
+            "task reach: the shaped reward counts the hand's distance to the ball at every "
+            "step, which a record scored sparse does not keep"
+        )
+    return [1.0 if ended else 0.0 for ended in episode.terminated]
 
 
 def _make_env(
@@ -44,6 +77,7 @@ def reach_task() -> Task:
         goal="Bring the robot's hand to the red ball in as few moves as you can.",
         options=OPTIONS,
         good_reward=1.0,
+        reward_schemes=RewardSchemes(SCHEMES, _rescore, about=ABOUT),
         live_view=True,
         camera=CAMERA,
         agent="robot",

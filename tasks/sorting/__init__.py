@@ -11,9 +11,20 @@ from typing import Any
 import gymnasium as gym
 
 from sim.actions import ACTION_NAMES
+from sim.rewards import REWARD_SCHEMES, rescore
 from sim.rules import oracle_action
 from sim.scenario import ScenarioOptions
-from tasks import GymInfo, OptionValue, Situations, Task, TaskAction, TaskOptions, task_factory
+from tasks import (
+    GymInfo,
+    OptionValue,
+    RecordedEpisode,
+    RewardSchemes,
+    Situations,
+    Task,
+    TaskAction,
+    TaskOptions,
+    task_factory,
+)
 
 TEXTS = Path(__file__).with_name("texts")
 """The participant pages' texts for this task (the robot, its tables and its four actions)."""
@@ -26,6 +37,9 @@ OPTIONS: dict[str, OptionValue] = {
     "sort_rule": "color",
     **ScenarioOptions().to_dict(),
 }
+
+ABOUT = "A placement keeps its reward, every other step costs what the scheme says (`sim.rewards`)."
+"""How its runs are rescored, for the report."""
 
 STATIONS = ("center", "left", "right")
 HELD = ("nothing", "red", "blue")
@@ -53,6 +67,15 @@ def _correct(info: GymInfo, options: TaskOptions) -> int | None:
     return oracle_action(info, rule)
 
 
+def _rescore(
+    episode: RecordedEpisode, scheme: str, to_scheme: str, options: TaskOptions
+) -> list[float]:
+    """A placement keeps its reward, every other step costs what `to_scheme` says
+    (`sim.rewards.rescore`)."""
+    outcomes = None if episode.outcomes is None else list[str | None](episode.outcomes)
+    return rescore(list(episode.rewards), list(episode.terminated), scheme, to_scheme, outcomes)
+
+
 @task_factory
 def sorting_task() -> Task:
     return Task(
@@ -68,5 +91,6 @@ def sorting_task() -> Task:
         agent="robot",
         outcomes=("placed", "misplaced", "lost"),
         situations=Situations(situation, STATIONS, HELD),
+        reward_schemes=RewardSchemes(REWARD_SCHEMES, _rescore, "reward_scheme", ABOUT),
         texts={f.stem: f.read_text() for f in sorted(TEXTS.glob("*.txt"))},
     )

@@ -11,7 +11,7 @@ from scipy import stats
 
 from analysis import write_report
 from analysis.audit import audit, describe_learner
-from analysis.rescoring import STEP_COLUMNS, rescored_totals, rescoring_table
+from analysis.rescoring import STEP_COLUMNS, rescored_schemes, rescored_totals, rescoring_table
 from sim.rewards import REWARD_SCHEMES, step_penalty
 from tests.analysis.test_report import study_episodes
 
@@ -235,18 +235,26 @@ def test_a_study_of_another_task_is_audited_without_the_sorting_robots_settings(
     tmp_path: Path,
 ) -> None:
     """No session ran the sorting robot: its motion, rule and reward scheme are not audited
-    (they mean nothing to the task), and R_T is not rescored under its schemes; a study
-    with a sorting session keeps them."""
+    (they mean nothing to the task), and R_T is rescored under the grid world's own schemes,
+    never the robot's; a study that mixes tasks keeps the robot's settings and is not
+    rescored (no one task's schemes score both), with the reason in the report."""
     episodes = study_episodes()
     settings = settings_for(episodes).assign(task="gridworld")
     result = write_report(
         episodes, tmp_path / "grid", settings=settings, steps=_steps(episodes, settings),
         power_draws=200,
     )  # fmt: skip
-    assert result.rescored is None and result.audit is not None
+    assert result.rescored is not None and result.audit is not None
     assert {"sort_rule", "motion", "reward_scheme"}.isdisjoint(result.audit.methods.columns)
+    assert rescored_schemes(result.rescored) == ["minigrid", "sparse", "step-cost"]
+    # each episode ends at its third step, the goal: sparse counts 1 an episode
+    agents = episodes.groupby("method")["session_id"].nunique()
+    per_method = episodes.groupby("method")["episode"].count() / agents
+    table = result.rescored.set_index("method")
+    assert table["R_T_sparse"].to_dict() == pytest.approx(per_method.to_dict())
     text = result.report.read_text()
-    assert "sorting rule" not in text and "rescored under each reward scheme" not in text
+    assert "sorting rule" not in text and "R_T under sparse" in text
+    assert "authors-autonomous" not in text
     assert "| gridworld |" in text
 
     mixed = settings.assign(task=["sorting"] + ["gridworld"] * (len(settings) - 1))
@@ -254,4 +262,5 @@ def test_a_study_of_another_task_is_audited_without_the_sorting_robots_settings(
         episodes, tmp_path / "mixed", settings=mixed, steps=_steps(episodes, mixed),
         power_draws=200,
     )  # fmt: skip
-    assert kept.rescored is not None and "sort_rule" in kept.audit.methods.columns
+    assert kept.rescored is None and "sort_rule" in kept.audit.methods.columns
+    assert "Not rescored: the sessions ran different tasks" in kept.report.read_text()

@@ -14,6 +14,7 @@ import pytest
 
 from cli.main import main
 from learner.fitted import Count, FittedModel, fit
+from runs.rehearsal import fails_check
 from study.schemas.design import Condition, StudyDesign
 from tasks import get_task
 from tasks.sorting import HELD
@@ -190,3 +191,72 @@ def test_fitted_people_of_a_grid_world_study_rehearse_its_sessions(
         assert [a["decision_time_s"] for a in advice] == pytest.approx(
             rehearsed["decision_times_s"]
         )
+
+
+GRID_CHECK = {
+    "tries": 2,
+    "questions": [
+        {"id": "goal_colour", "text": "What colour is the square the triangle must reach?",
+         "choices": [{"value": "red", "label": "Red"}, {"value": "green", "label": "Green"},
+                     {"value": "blue", "label": "Blue"}],
+         "answer": "green"},
+        {"id": "into_a_wall", "text": "What happens when the triangle walks into a wall?",
+         "choices": [{"value": "ends", "label": "The round ends"},
+                     {"value": "stays", "label": "It stays where it is"}],
+         "answer": "stays"},
+    ],
+}  # fmt: skip
+"""A researcher's own check for the grid world: neither right answer is the first choice,
+so a participant who guessed would not pass at its first try."""
+
+
+def test_a_study_s_own_check_is_passed_by_rehearsed_people_and_failed_by_their_share(
+    server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A grid world study with its own comprehension check: given the study's file, a
+    rehearsed participant answers it right at its first try and goes on to its turns and
+    the questionnaire; with a failure share of one half, the other answers it wrong on both
+    tries and is excluded, as the check says, its session never started."""
+    model = fit(recorded("gridworld", 300), task=get_task("gridworld"))
+    path = tmp_path / "grid.json"
+    path.write_text(json.dumps(model.to_json()))
+    run = {"method": "human", "task": "gridworld", "seed": 3, "config": {
+        "pretraining_steps": 16, "batch_size": 8, "memory_size": 500, "episodes": 1,
+        "max_episode_steps": 20, "advice_budget": BUDGET}}  # fmt: skip
+    study = {
+        "name": "grid world, own check",
+        "design": {"conditions": {"a": {"run": run, "target": 2}}, "check": GRID_CHECK,
+                   "panel": {"kind": "prolific", "codes": {"completed": "C-DONE"}}},
+    }  # fmt: skip
+    made = api.post("/api/studies", json=study)
+    assert made.status_code == 201, made.text
+    design_file = tmp_path / "study.yaml"
+    design_file.write_text(json.dumps(study))  # JSON is YAML
+    link = server.url + urlsplit(made.json()["join_url"]).path
+
+    argv = ["rehearse", "--model", str(path), "--speed", "8", "--study-link", link]
+    code = main([*argv, "--participants", "2", "--design", str(design_file),
+                 "--check-failures", "0.5", "--json"])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    passed, failed = json.loads(out)["participants"]
+    assert passed["check_tries"] == 1 and passed["check_guessed"] == 0
+    assert passed["advice"] == BUDGET and passed["questionnaire"]
+    assert failed["status"] == "excluded" and failed["check_tries"] == GRID_CHECK["tries"]
+    assert failed["advice"] == 0 and not failed["questionnaire"]
+
+    files = export(api, made.json()["id"])
+    sessions = list(csv.DictReader(io.StringIO(files["sessions.csv"].decode())))
+    assert sorted(r["outcome"] for r in sessions) == ["completed", "excluded"]
+
+
+def test_the_failure_share_is_spread_evenly_and_bounded(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert [fails_check(i, 0.5) for i in range(4)] == [False, True, False, True]
+    assert sum(fails_check(i, 0.3) for i in range(10)) == 3
+    assert all(fails_check(i, 1.0) for i in range(5))
+    assert not any(fails_check(i, 0.0) for i in range(5))
+    argv = ["rehearse", "--model", "m.json", "--study-link", "http://127.0.0.1:9/join/x"]
+    assert main([*argv, "--participants", "1", "--check-failures", "1.5"]) == 2
+    assert "--check-failures takes a share from 0 to 1" in capsys.readouterr().err

@@ -1,0 +1,82 @@
+"""A grid world batch, recorded by the platform, is rescored by `ideeprl report` under the
+grid world's own schemes (never the sorting robot's), each agent's R_T as counted by hand
+from the exported steps: where each training episode reached the goal."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[2]
+OPTIONS = {"size": 5, "max_steps": 30}
+"""A room of 3 x 3 open squares, whose MiniGrid score counts 30 steps."""
+SCALE = ["--episodes", "4", "--pretraining-steps", "40", "--advice-budget", "10",
+         "--max-episode-steps", "30", "--set", "batch_size=8", "--set", "memory_size=200",
+         "--torch-threads", "1"]  # fmt: skip
+
+
+def ideeprl(*args: str, data: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        [sys.executable, "-m", "cli", *args, "--data-dir", str(data)],
+        capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
+    )  # fmt: skip
+
+
+def by_hand(steps: list[dict[str, str]]) -> dict[int, dict[str, float]]:
+    """Each session's R_T under the three schemes, from where its training episodes ended:
+    at the goal at step n, MiniGrid gives 1 - 0.9 x n / 30, sparse 1, step-cost 1 less
+    0.01 for each of the n - 1 steps before; an episode that never got there, 0, 0 and
+    0.01 for each of its steps."""
+    episodes: dict[tuple[int, int], tuple[int, bool]] = {}
+    for step in steps:
+        if step["stage"] != "train":
+            continue
+        key = (int(step["session_id"]), int(step["episode"]))
+        n, reached = int(step["episode_step"]), step["terminated"] == "true"
+        before = episodes.get(key, (0, False))
+        episodes[key] = (max(n, before[0]), reached or before[1])
+    totals: dict[int, dict[str, float]] = {}
+    for (session, _), (n, reached) in episodes.items():
+        total = totals.setdefault(session, {"minigrid": 0.0, "sparse": 0.0, "step-cost": 0.0})
+        if reached:
+            total["minigrid"] += 1 - 0.9 * n / OPTIONS["max_steps"]
+            total["sparse"] += 1
+            total["step-cost"] += 1 - 0.01 * (n - 1)
+        else:
+            total["step-cost"] -= 0.01 * n
+    return totals
+
+
+def test_a_grid_world_batch_is_rescored_under_its_own_schemes(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    batch = ideeprl("batch", "--study", "grid", "--task", "gridworld",
+                    "--task-options", json.dumps(OPTIONS), "--methods", "autonomous",
+                    "oracle", "--agents", "1", "--no-progress", *SCALE, data=data)  # fmt: skip
+    assert batch.returncode == 0, batch.stderr
+    report = ideeprl("report", "--study", "grid", "--out", str(tmp_path / "report"), data=data)
+    assert report.returncode == 0, report.stderr
+    exported = ideeprl("export", "--study", "grid", "--out", str(tmp_path / "out"), data=data)
+    assert exported.returncode == 0, exported.stderr
+
+    with open(tmp_path / "out" / "steps.csv") as f:
+        expected = by_hand(list(csv.DictReader(f)))
+    with open(tmp_path / "report" / "r_t_rescored_per_agent.csv") as f:
+        rescored = {int(r["session_id"]): r for r in csv.DictReader(f)}
+    assert set(rescored) == set(expected) and len(expected) == 2
+    for session, hand in expected.items():
+        row = rescored[session]
+        assert row["scheme"] == "minigrid" and row["not_rescored"] == ""
+        assert float(row["R_T_logged"]) == pytest.approx(hand["minigrid"])
+        for scheme, value in hand.items():
+            assert float(row[f"R_T_{scheme}"]) == pytest.approx(value), (session, scheme)
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "R_T under step-cost" in text and "authors-interactive" not in text
