@@ -1,16 +1,16 @@
-"""Evaluators fitted to people: how often a study's people rated the learner's move against
-the task's correct action (Good for another action, Bad for the correct one), by situation
-and by whether the move was right, how often they let a turn pass without an answer, and
-how long they took; and `FittedEvaluator`, which rates like them.
+"""Evaluators fitted to people: how often a study's people's ratings of the learner's moves
+went against the task's correct action (Good for another action, Bad for the correct one),
+by situation and by whether the move was right, how often they let a turn pass without an
+answer, and how long they took; and `FittedEvaluator`, which rates like them.
 
 The evaluative counterpart of `learner.fitted` (advice): a researcher tries an evaluative
 study's design on evaluators as reliable, as silent and as slow as the people they will
 recruit. A rating is right when it says what the task's correct action says of the move
 (Good for it, Bad for any other). People judge a right move and a wrong one differently
-(a trainer's positive bias, Knox and Stone 2009; Thomaz and Breazeal 2008), so the
-hierarchy's root splits by the move: within each, a situation's rate is pulled toward its
-group's rate, and that toward the move's rate, by `prior_strength` pseudo-ratings, as the
-advice model pulls its rates. A turn without an answer is drawn at the rate of one fitted
+(a trainer's positive bias, Thomaz and Breazeal 2008), so the hierarchy's root splits by
+the move: within each, a situation's rate is pulled toward its group's rate, and that
+toward the move's rate, by `prior_strength` pseudo-ratings, as the advice model pulls its
+rates. A turn without an answer is drawn at the rate of one fitted
 person (each simulated evaluator draws one session's share once, as a fitted advisor draws
 when it leaves): some people let many turns pass, others none.
 
