@@ -72,6 +72,8 @@ METHOD_NAMES: dict[str, str] = {
     "procedure-evaluative": "procedure control of evaluative feedback",
     "procedure-evaluative-rating_model": "procedure control of evaluative feedback, rating model",
     "agent-evaluative-rating_model": "agent evaluative feedback, rating model",
+    "fitted-evaluative": "fitted evaluative feedback",
+    "fitted-evaluative-rating_model": "fitted evaluative feedback, rating model",
 }
 """Display names in the paper's words (and Stable-Baselines3's DQN, the independent
 baseline)."""

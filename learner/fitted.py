@@ -210,6 +210,11 @@ class FittedModel:
         """The model from its stored JSON; `ValueError` says what is wrong with it."""
         if not isinstance(data, Mapping):
             raise ValueError("a fitted model must be a JSON object")
+        if data.get("kind") == "evaluative":
+            raise ValueError(
+                "the model was fitted to ratings (a fitted evaluator): it judges a run with "
+                "evaluative feedback, and advises none"
+            )
         if data.get("version") not in (1, FITTED_VERSION):
             raise ValueError(f"fitted models of versions 1 to {FITTED_VERSION} can be read")
         if data["version"] == 1:  # the sorting robot's, its groups what the arm held

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 from learner import machine
 from learner.advisors import ADVISOR_KINDS, Advisor, make_advisor
 from learner.config import PRESET_FIELDS, DQNConfig, Preset
-from learner.evaluators import AdvisorEvaluator, AnyEvaluator, Evaluator
+from learner.evaluators import AdvisorEvaluator, AnyEvaluator
 from learner.fields import (
     FieldError,
     bounded,
@@ -46,6 +46,7 @@ from learner.fields import (
     nest,
     to_json,
 )
+from learner.fitted_ratings import FittedEvaluator, read_evaluator_model
 from learner.sb3_spec import sb3_hyperparameters
 from learner.strategies import (
     _STRATEGIES,
@@ -120,9 +121,10 @@ shaping the judged step's remembered reward only (Ng et al. 1999; TAMER+RL's rew
 shaping), or also training a model of the rating that shapes the steps not judged (TAMER+RL,
 Knox and Stone 2010; Deep TAMER, Warnell et al. 2018)."""
 FeedbackMethod = Literal["shaping", "rating_model"]
-EVALUATORS = ("agent", "oracle", "human", "replayed", "procedure")
+EVALUATORS = ("agent", "oracle", "fitted", "human", "replayed", "procedure")
 """Methods whose advisor can judge an action (evaluative feedback): the machines that name
-the right one, a person rating on the advice page (`runs.worker.rating`), a recorded
+the right one, an evaluator fitted to people's ratings (`learner.fitted_ratings`), a person
+rating on the advice page (`runs.worker.rating`), a recorded
 session's ratings fed by order (`replayed`: the caller supplies a
 `learner.evaluators.RecordedEvaluator`), and the procedure control of a judged run
 (uninformed judgements at its judged steps)."""
@@ -214,7 +216,8 @@ class RunSpec:
     shaping, the paper's: the advised action is taken) or evaluative (reward shaping: the
     learner takes its own action and the advisor judges it, good +1 or bad -1, on the
     steps the strategy and the advice budget give it); evaluative takes method oracle,
-    agent or human, strategy early, alternating or importance."""
+    agent, fitted (a model fitted to ratings) or human, strategy early, alternating or
+    importance."""
     feedback_weight: float = bounded(1.0, 0.0, 100.0, role="treatment")
     """Evaluative feedback: w in the reward the learner remembers for a judged step, the
     environment's plus w times the judgement (TAMER+RL's reward shaping). 1: a judgement
@@ -258,7 +261,8 @@ class RunSpec:
     their logarithm (method oracle, with decision_time_median_s)."""
     fitted_model: str | None = bounded(None, role="treatment", max_length=1000)
     """The fitted advisor's model (method fitted): `fitted:ID` through the API (a model
-    `ideeprl fit` stored), or the path of its JSON file."""
+    `ideeprl fit` stored), or the path of its JSON file; under evaluative feedback, a model
+    fitted to ratings (a fitted evaluator)."""
     motion: Motion | None = bounded(None)
     """fast (poses set directly) or physics (simulated motion); none: physics for a human
     session (a person watches it move), fast otherwise."""
@@ -679,17 +683,32 @@ class RunSpec:
             return None
         return self._machine_advisor()
 
-    def make_evaluator(self) -> Evaluator | None:
+    def make_evaluator(self) -> AnyEvaluator | None:
         """Under evaluative feedback, the machine evaluator: the oracle's correct action or
         the agent's greedy one is good, any other bad, each judgement wrong with the
         oracle's error rate (`learner.evaluators.AdvisorEvaluator`); the procedure
         control's, a random action's (good as often as an evaluator with one right action
-        whose learner acts at random, whatever the state: uninformed); else None."""
+        whose learner acts at random, whatever the state: uninformed); method fitted's,
+        rating as the people of its model did (`learner.fitted_ratings.FittedEvaluator`);
+        else None."""
+        if self.feedback == "evaluative" and self.method == "fitted":
+            return self._fitted_evaluator()
         if self.feedback != "evaluative" or self.method not in ("agent", "oracle", "procedure"):
             return None  # a person's ratings, or a recorded stream, are the caller's
         advisor = self.replace(error_rate=0.0)._machine_advisor()
         assert advisor is not None, "validate() admits evaluative feedback from evaluators only"
         return AdvisorEvaluator(advisor, self.error_rate, self.seed)
+
+    def _fitted_evaluator(self) -> FittedEvaluator:
+        try:
+            return FittedEvaluator(
+                read_evaluator_model(self.fitted_model or ""),
+                seed=self.seed,
+                task=self.the_task,
+                task_options=self.env_options(),
+            )
+        except ValueError as error:
+            raise RunSpecError("fitted_model", str(error)) from None
 
     def _machine_advisor(self) -> Advisor | None:
         if self.method == "agent":

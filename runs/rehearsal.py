@@ -14,8 +14,10 @@ actions as often as the fitted people did. It leaves early as often as they did
 (`FittedAdvisor.stop_after`). Under evaluative feedback it rates the move the learner made
 instead: Good when it is the action it would have advised, else Bad, sent after the drawn
 decision time, or not at all when that time is longer than the turn's time-out (the turn
-lapses, as a person's). A client of the server's HTTP API only: it runs anywhere the
-participant links reach.
+lapses, as a person's). With a model fitted to ratings (`learner.fitted_ratings`) it rates
+as the fitted evaluators did instead (`FittedEvaluator`: their errors on right and wrong
+moves, their silent turns, their times); such a person advises nobody. A client of the
+server's HTTP API only: it runs anywhere the participant links reach.
 
 Through an online study's link (`join`) a simulated participant arrives as a panel's
 would, with its own panel id, and goes through the whole visit: the comprehension check
@@ -37,7 +39,8 @@ from urllib.parse import urlsplit
 
 import httpx
 
-from learner.fitted import FittedAdvisor, FittedModel
+from learner.fitted import FittedAdvisor
+from learner.fitted_ratings import AnyFitted, FittedEvaluator, FittedEvaluatorModel
 from learner.records import TRAINING, stage_of
 from sim.rules import SortRule
 from study.schemas.visit import CheckSpec
@@ -125,7 +128,7 @@ def _info(state: dict[str, Any]) -> dict[str, Any]:
 def rehearse(
     base_url: str,
     token: str,
-    model: FittedModel,
+    model: AnyFitted,
     sort_rule: Any = "color",
     seed: int | None = None,
     speed: float = 1.0,
@@ -137,11 +140,16 @@ def rehearse(
     """One simulated participant through the session of `token`, until its advice is
     over, it leaves early, or the session ends. `speed` > 1 divides the waits (a quick
     rehearsal); the decision time sent is the drawn one. `viewer`: keep the 3-D view's
-    websocket open meanwhile, as the page does (a task with a live 3-D view).
+    websocket open meanwhile, as the page does (a task with a live 3-D view). A model
+    fitted to ratings rates; one fitted to advice advises, and rates as it would advise.
     `design_check`: the study design's check, whose own questions it then answers right;
     `fail_check`: it answers the check wrong on every try (and is excluded)."""
     task = get_task(model.task)
-    if model.task == "sorting":
+    advisor: FittedAdvisor | FittedEvaluator
+    if isinstance(model, FittedEvaluatorModel):
+        options = _options(task, sort_rule)
+        advisor = FittedEvaluator(model, seed=seed, task=task, task_options=options)
+    elif model.task == "sorting":
         advisor = FittedAdvisor(model, sort_rule, seed)
     else:
         advisor = FittedAdvisor(model, seed=seed, task=task)
@@ -166,7 +174,8 @@ def rehearse(
         state = _ok(client.post("/api/participant/start"))
         if view is not None:
             view.start()
-        stop_after = advisor.stop_after(int(state["advice_budget"]))
+        budget = int(state["advice_budget"])
+        stop_after = advisor.stop_after(budget) if isinstance(advisor, FittedAdvisor) else None
         deadline = time.monotonic() + timeout_s
         while state["status"] not in ENDED and time.monotonic() < deadline:
             if stop_after is not None and len(times) >= stop_after:
@@ -180,6 +189,11 @@ def rehearse(
                     times.append(answered)
                 continue
             if state["advice_wanted"] and state["advice_index"] is not None:
+                if not isinstance(advisor, FittedAdvisor):
+                    raise RuntimeError(
+                        "the model was fitted to ratings and this session asks for advice: "
+                        "rehearse it with a model fitted to advice"
+                    )
                 action = _would_advise(advisor, task, state)
                 drawn = advisor.last_decision_time_s or 0.0
                 time.sleep(drawn / speed)
@@ -316,7 +330,7 @@ def _middle(item: dict[str, Any]) -> Any:
 
 def _rate(
     client: httpx.Client,
-    advisor: FittedAdvisor,
+    advisor: FittedAdvisor | FittedEvaluator,
     task: Task,
     state: dict[str, Any],
     speed: float,
@@ -324,19 +338,35 @@ def _rate(
     """One rating turn: (the decision time sent, or None for a turn left to lapse; the
     state after it)."""
     index = state["advice_index"]
-    would = _would_advise(advisor, task, state)
+    rating = _rating(advisor, task, state)
     drawn = advisor.last_decision_time_s or 0.0
     left = float(state.get("rating_left_s") or 0.0)
-    if drawn / speed >= left:  # too slow: the turn goes on without an answer
+    if rating is None or drawn / speed >= left:  # silent, or too slow: no answer
         while state["advice_index"] == index and state["status"] not in ENDED:
             state = _ok(client.get("/api/participant/state",
                                    params={"after": state["version"], "timeout": 20}))  # fmt: skip
         return None, state
     time.sleep(drawn / speed)
-    rating = "good" if would == state["rated_action"] else "bad"
     body = {"advice_index": index, "rating": rating, "decision_time_s": drawn}
     receipt = _ok(client.post("/api/participant/rating", params={"wait": 20}, json=body))
     return drawn, receipt["state"] or _ok(client.get("/api/participant/state"))
+
+
+def _rating(
+    advisor: FittedAdvisor | FittedEvaluator, task: Task, state: dict[str, Any]
+) -> str | None:
+    """The simulated person's rating of the move shown: good, bad, or None (no answer)."""
+    if isinstance(advisor, FittedAdvisor):  # rates as it would advise
+        return "good" if _would_advise(advisor, task, state) == state["rated_action"] else "bad"
+    seen = _info(state) if task.live_view else None
+    stage = stage_of(state["stage"]) if state.get("stage") else TRAINING
+    judgement = advisor.rate(seen, stage, int(state["rated_action"]))
+    return None if judgement is None else ("good" if judgement > 0 else "bad")
+
+
+def _options(task: Task, sort_rule: Any) -> dict[str, Any] | None:
+    """The options the simulated person judges by: the sorting robot's rule, else none."""
+    return {"sort_rule": SortRule.parse(sort_rule).to_spec()} if task.name == "sorting" else None
 
 
 def _would_advise(advisor: FittedAdvisor, task: Task, state: dict[str, Any]) -> int:

@@ -275,8 +275,8 @@ RECORDS_ALLOWED: dict[str, str] = {
     "learner.advisors.Advisor.advise": GYM_INFO,
     "learner.advisors.RecordedAdvisor.advise": GYM_INFO,
     "learner.fitted.FittedAdvisor.advise": GYM_INFO,
-    "learner.evaluators.Evaluator.judge": GYM_INFO + " before the judged step",
     "learner.evaluators.RecordedEvaluator.judge": GYM_INFO + " before the judged step",
+    "learner.fitted_ratings.FittedEvaluator.judge": GYM_INFO + " before the judged step",
     "learner.strategies.AdviceMoment.__init__": GYM_INFO + " where the advice is asked",
     "runs.worker.messages.AdviceRequest.__init__": GYM_INFO + " shown to the advisor",
     "learner.fields.given_arguments": LEAF_VALUES,
@@ -293,8 +293,8 @@ RECORDS_ALLOWED: dict[str, str] = {
     "learner.run.RunSpec.sb3": "keyword arguments of Stable-Baselines3's DQN, passed on as-is",
     "learner.sb3_spec.describe": "Stable-Baselines3's hyperparameters and config, as SB3 names "
     "them",
-    "learner.fitted.FittedModel.summary": "JSON stored as-is (`fitted_advisors.summary`) and "
-    "served as-is (`FittedAdvisorPublic.summary`)",
+    "learner.fitted_ratings.FittedEvaluatorModel.summary": "JSON served as-is "
+    "(`FittedAdvisorPublic.summary`, a fitted evaluator's)",
     "learner.population.Population.save_checkpoint": "`metadata`: JSON the checkpoint keeps as-is",
     "learner.trainer.Trainer.save_checkpoint": "`metadata`: JSON the checkpoint keeps as-is",
     "analysis.exported.run_of": "a row of an exported CSV table, by column",

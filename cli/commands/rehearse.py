@@ -1,6 +1,7 @@
 """`ideeprl rehearse --model FILE --link URL [--link URL ...]` (or `--study-link URL
 --participants N`, an online study's whole visits): rehearse a study's load with
-fitted advisors (`ideeprl fit`) answering human sessions through the participant links,
+fitted advisors or evaluators (`ideeprl fit`) answering human sessions through the
+participant links,
 as people would: consent, the induction's Start, then each advice (or, under evaluative
 feedback, each rating) after its drawn decision time, leaving early as often as the fitted
 people did (`runs.rehearsal`); a summary per kind of feedback.
@@ -79,7 +80,7 @@ def register(subparsers: Any) -> None:
 def rehearse_command(args: argparse.Namespace) -> int:
     import httpx
 
-    from learner.fitted import read_model
+    from learner.fitted_ratings import read_any_model
     from runs.rehearsal import fails_check, join, rehearse
 
     if not args.speed > 0:
@@ -99,7 +100,7 @@ def rehearse_command(args: argparse.Namespace) -> int:
             code=2,
         )
     try:
-        model = read_model(args.model)
+        model = read_any_model(args.model)
     except ValueError as error:
         raise CommandError(str(error), code=2) from None
 

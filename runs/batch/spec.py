@@ -127,9 +127,11 @@ class BatchSpec:
             raise BatchError("an error rate is only used by the 'oracle' method")
         if "fitted" in self.methods:
             from learner.fitted import read_model
+            from learner.fitted_ratings import read_evaluator_model
 
+            evaluative = self.template.feedback == "evaluative"
             try:
-                read_model(fitted or "")
+                (read_evaluator_model if evaluative else read_model)(fitted or "")
             except ValueError as error:
                 raise BatchError(f"fitted: {error}") from None
         checkpoint = self.template.advisor_checkpoint

@@ -10,7 +10,7 @@ from datetime import UTC, datetime, timedelta
 from typing import Any, Protocol
 
 from learner.advisors import NO_ADVICE, Advisor, NoAdvice
-from learner.evaluators import Evaluator
+from learner.evaluators import AnyEvaluator, judge
 from learner.records import observation_hash
 from learner.strategies import AdviceMoment, ask
 from runs.worker.link import WorkerLink
@@ -202,7 +202,7 @@ class RecordingEvaluator:
 
     def __init__(
         self,
-        inner: Evaluator,
+        inner: AnyEvaluator,
         session_id: int,
         kind: str,
         start_index: int,
@@ -234,7 +234,7 @@ class RecordingEvaluator:
     def judge_at(self, moment: AdviceMoment) -> float | None:
         started = time.perf_counter()
         requested_at = datetime.now(UTC)
-        judgement = self._inner.judge(moment.obs, moment.info, moment.intended_action)
+        judgement = judge(self._inner, moment)
         elapsed = time.perf_counter() - started
         self._log.add_feedback(
             FeedbackGiven(

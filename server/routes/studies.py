@@ -5,7 +5,7 @@ from fastapi import APIRouter, BackgroundTasks, Path, Request, Response
 from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
-from learner.fitted import FittedModel
+from learner.fitted_ratings import model_from_json
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.live.manager import SessionManager
 from server.routes.paging import PageDep
@@ -41,13 +41,13 @@ def _public(db: DbDep, study: Study, base_url: str) -> StudyPublic:
 
 
 def fitted_public(row: FittedAdvisorModel) -> FittedAdvisorPublic:
-    """A fitted advisor model, whole, with its summary."""
+    """A fitted advisor (or evaluator) model, whole, with its summary."""
     return FittedAdvisorPublic(
         id=row.id,
         study_id=row.study_id,
         created_at=row.created_at,
         session_ids=[int(i) for i in row.session_ids],
-        summary=FittedModel.from_json(row.model).summary(),
+        summary=model_from_json(row.model).summary(),
         model=row.model,
     )
 

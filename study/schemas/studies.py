@@ -70,7 +70,9 @@ class FittedAdvisorPublic(BaseModel):
     session_ids: list[int] = Field(description="The sessions whose advice it was fitted from.")
     summary: dict[str, Any] = Field(
         description="Error rates by what the arm held and by situation (station/held), the "
-        "decision times' median and sigma, the share of sessions that stopped early."
+        "decision times' median and sigma, the share of sessions that stopped early; a "
+        "fitted evaluator's (kind evaluative): error rates by move (right or wrong) and "
+        "situation, the share of Good answers and of turns without one."
     )
     model: dict[str, Any] = Field(
         description="The whole model (`learner.fitted.FittedModel`, versioned JSON)."

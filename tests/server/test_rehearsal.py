@@ -1,5 +1,6 @@
-"""A rehearsal: a fitted advisor answers a human session through the participant's HTTP
-calls, and the session stores its advice with the decision times it drew."""
+"""A rehearsal: a fitted advisor (or evaluator) answers a human session through the
+participant's HTTP calls, and the session stores its advice (or ratings) with the decision
+times it drew."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import pytest
 
 from cli.main import main
 from learner.fitted import Count, FittedModel, fit
+from learner.fitted_ratings import RatingSeen, SessionRatings, fit_ratings
 from runs.rehearsal import fails_check
 from study.schemas.design import Condition, StudyDesign
 from tasks import get_task
@@ -260,3 +262,38 @@ def test_the_failure_share_is_spread_evenly_and_bounded(
     argv = ["rehearse", "--model", "m.json", "--study-link", "http://127.0.0.1:9/join/x"]
     assert main([*argv, "--participants", "1", "--check-failures", "1.5"]) == 2
     assert "--check-failures takes a share from 0 to 1" in capsys.readouterr().err
+
+
+def test_a_fitted_evaluator_rates_an_evaluative_session_through_its_link(
+    server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A model fitted to ratings (`ideeprl fit` of evaluative sessions) rehearses an
+    evaluative session: it rates every move (its people never let a turn pass), each
+    rating stored with its drawn decision time; it cannot advise an advice session."""
+    model = fit_ratings([SessionRatings(1, [RatingSeen("center", "nothing", True, 1.0, 0.2)] * 20)])
+    path = tmp_path / "evaluator.json"
+    path.write_text(json.dumps(model.to_json()))
+    study = api.post("/api/studies", json={"name": "rehearsed evaluators"}).json()
+    made = {}
+    for kind in ("evaluative", "advice"):
+        body = session_body("human", advice_budget=BUDGET, pretraining_steps=16, episodes=1,
+                            max_episode_steps=20, feedback=kind)  # fmt: skip
+        response = api.post(f"/api/studies/{study['id']}/sessions", json=body)
+        assert response.status_code == 201, response.text
+        made[kind] = response.json()
+    link = f"{server.url}/p/{made['evaluative']['participant_token']}"
+    code = main(["rehearse", "--model", str(path), "--link", link, "--speed", "4", "--json"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    (rated,) = json.loads(out)["participants"]
+    assert rated["feedback"] == "evaluative"
+    assert (rated["advice"], rated["lapsed"]) == (BUDGET, 0)
+    wait_for_status(api, made["evaluative"]["id"], {"finished"})
+    rows = list(csv.DictReader(io.StringIO(export(api, study["id"])["feedback.csv"].decode())))
+    assert [float(r["decision_time_s"]) for r in rows] == pytest.approx(rated["decision_times_s"])
+    assert all(r["judgement"] in ("1.0", "-1.0") for r in rows)
+
+    advice_link = f"{server.url}/p/{made['advice']['participant_token']}"
+    code = main(["rehearse", "--model", str(path), "--link", advice_link, "--speed", "4"])
+    out = capsys.readouterr()
+    assert code != 0 and "fitted to ratings" in out.out + out.err
