@@ -149,7 +149,7 @@ def bench_update(precision: str, blocks: int) -> None:
         del os.environ[conv_kernel.SWITCH]
     else:
         os.environ[conv_kernel.SWITCH] = previous
-    assert kernel._fast.first_layer_kernel is not None
+    assert kernel._fast.conv_kernels is not None
     images = real_frames(1500)
     memory = ReplayMemory(len(images), plain.frame_shape)
     rng = np.random.default_rng(0)
