@@ -48,7 +48,15 @@ static inline value_t store(float f) { /* round to nearest even, as torch's .bfl
     return (value_t)(u >> 16);
 }
 static inline float weight_value(float w) { return load(store(w)); }
+#define VL 16  /* lanes of a vector: a zmm */
+#define OCB 8  /* output channels a forward pass holds (x NV accumulators) */
+#define OCBW 4 /* output channels a weight-gradient pass holds (x 4 taps) */
+#define ICB 4  /* input channels an input-gradient pass holds (x NV) */
 #else
+#define VL 8 /* a ymm: 16 registers, so fewer channels a pass */
+#define OCB 2
+#define OCBW 2
+#define ICB 2
 typedef float value_t;
 #define SUFFIX(name) name##_fp32
 static inline float load(value_t v) { return v; }
@@ -66,61 +74,89 @@ static inline float sum16(v16 v) {
     return sum8(lo + hi);
 }
 
-/* ---- the second layer ---- */
+/* ---- the second layer ----
+ * Vectorised over a row's 32 output pixels (VL lanes a vector, NV vectors a row): its 4
+ * input channels would fill few lanes, and its 8 output channels too few for the input
+ * gradient. Planes are channel-major, zero padded, rows of PW floats. */
 
-/* p[y + 1][x + 1][c]: one image's input, zero padded (1 before, 2 after) */
-static void plane2(const value_t *in, float p[35][35][4]) {
-    memset(p, 0, sizeof(float) * 35 * 35 * 4);
+#define PW 40 /* padded row: the pixels at 1 .. 32 (input) or 2 .. 33 (gradient) */
+
+typedef float vl __attribute__((vector_size(VL * 4)));
+typedef int32_t il __attribute__((vector_size(VL * 4)));
+#define NV (32 / VL)
+
+static inline vl loadu(const float *p) {
+    vl v;
+    memcpy(&v, p, sizeof(v));
+    return v;
+}
+
+/* p[c][y + 1][x + 1]: one image's input, zero padded (1 before, 2 after) */
+static void plane2(const value_t *in, float p[4][35][PW]) {
+    memset(p, 0, sizeof(float) * 4 * 35 * PW);
     for (int by = 0; by < 16; by++)
         for (int bx = 0; bx < 16; bx++)
             for (int r = 0; r < 4; r++)
                 for (int c = 0; c < 4; c++)
-                    p[2 * by + (r >> 1) + 1][2 * bx + (r & 1) + 1][c] =
+                    p[c][2 * by + (r >> 1) + 1][2 * bx + (r & 1) + 1] =
                         load(in[((by * 16 + bx) * 4 + r) * 4 + c]);
 }
 
-/* w[ky][kx][c] over output channels, from torch's (8, 4, 4, 4) */
-static void weights2(const float *weight, v8 w[4][4][4]) {
-    for (int o = 0; o < 8; o++)
-        for (int c = 0; c < 4; c++)
-            for (int ky = 0; ky < 4; ky++)
-                for (int kx = 0; kx < 4; kx++)
-                    w[ky][kx][c][o] = weight_value(weight[((o * 4 + c) * 4 + ky) * 4 + kx]);
+/* torch's (8, 4, 4, 4), rounded as the precision rounds it */
+static void weights2(const float *weight, float w[8][4][4][4]) {
+    for (int i = 0; i < 512; i++) (&w[0][0][0][0])[i] = weight_value(weight[i]);
+}
+
+/* the max-pool of two conv rows (32 pixels, one channel) into 16 outputs: value, code */
+static void pool_rows(const float r0[32], const float r1[32], float best[16], int where[16]) {
+    for (int px = 0; px < 16; px++) {
+        float cand[4] = {r0[2 * px], r0[2 * px + 1], r1[2 * px], r1[2 * px + 1]};
+        float m = cand[0];
+        int k = 0;
+        for (int i = 1; i < 4; i++)
+            if (cand[i] > m) m = cand[i], k = i;
+        best[px] = m;
+        where[px] = k;
+    }
 }
 
 void SUFFIX(conv2_forward)(const value_t *in, int64_t batch, const float *weight,
                            const float *bias, value_t *out, uint8_t *code) {
-    static __thread float p[35][35][4] __attribute__((aligned(64)));
-    v8 w[4][4][4], bv;
+    static __thread float p[4][35][PW] __attribute__((aligned(64)));
+    float w[8][4][4][4];
+    float rows[2][8][32] __attribute__((aligned(64)));
     weights2(weight, w);
-    for (int o = 0; o < 8; o++) bv[o] = bias[o];
     for (int64_t b = 0; b < batch; b++) {
         plane2(in + b * 4096, p);
-        for (int py = 0; py < 16; py++) {
-            v8 rows[2][32];
-            for (int dy = 0; dy < 2; dy++)
-                for (int x = 0; x < 32; x++) {
-                    v8 acc = {0};
+        for (int y = 0; y < 32; y++) {
+            for (int o0 = 0; o0 < 8; o0 += OCB) {
+                vl acc[OCB][NV];
+                for (int o = 0; o < OCB; o++)
+                    for (int v = 0; v < NV; v++) acc[o][v] = (vl){0} + bias[o0 + o];
+                for (int c = 0; c < 4; c++)
                     for (int ky = 0; ky < 4; ky++)
-                        for (int kx = 0; kx < 4; kx++)
-                            for (int c = 0; c < 4; c++)
-                                acc += p[2 * py + dy + ky][x + kx][c] * w[ky][kx][c];
-                    rows[dy][x] = acc + bv;
-                }
-            for (int px = 0; px < 16; px++) {
-                v8 best = rows[0][2 * px];
-                i8 where = {0};
-                for (int i = 1; i < 4; i++) {
-                    v8 cand = rows[i >> 1][2 * px + (i & 1)];
-                    i8 gt = cand > best;
-                    best = (v8)(((i8)cand & gt) | ((i8)best & ~gt));
-                    where = (where & ~gt) | (gt & i);
-                }
-                i8 on = best > 0;
-                int64_t at = ((b * 16 + py) * 16 + px) * 8;
-                for (int o = 0; o < 8; o++) {
-                    out[at + o] = store(on[o] ? best[o] : 0.0f);
-                    if (code) code[at + o] = (uint8_t)(on[o] ? where[o] : 255);
+                        for (int kx = 0; kx < 4; kx++) {
+                            vl x[NV];
+                            for (int v = 0; v < NV; v++) x[v] = loadu(&p[c][y + ky][VL * v + kx]);
+                            for (int o = 0; o < OCB; o++) {
+                                float wv = w[o0 + o][c][ky][kx];
+                                for (int v = 0; v < NV; v++) acc[o][v] += x[v] * wv;
+                            }
+                        }
+                for (int o = 0; o < OCB; o++)
+                    for (int v = 0; v < NV; v++) memcpy(&rows[y & 1][o0 + o][VL * v], &acc[o][v], sizeof(vl));
+            }
+            if (!(y & 1)) continue;
+            int py = y >> 1;
+            for (int o = 0; o < 8; o++) {
+                float best[16];
+                int where[16];
+                pool_rows(rows[0][o], rows[1][o], best, where);
+                for (int px = 0; px < 16; px++) {
+                    int64_t at = ((b * 16 + py) * 16 + px) * 8 + o;
+                    int on = best[px] > 0;
+                    out[at] = store(on ? best[px] : 0.0f);
+                    if (code) code[at] = (uint8_t)(on ? where[px] : 255);
                 }
             }
         }
@@ -130,65 +166,86 @@ void SUFFIX(conv2_forward)(const value_t *in, int64_t batch, const float *weight
 void SUFFIX(conv2_backward)(const value_t *in, int64_t batch, const value_t *grad_out,
                             const uint8_t *code, const float *weight, float *grad_weight,
                             float *grad_bias, value_t *grad_in) {
-    static __thread float p[35][35][4] __attribute__((aligned(64)));
-    /* g[y + 2][x + 2]: the convolution's output gradient, zero padded (2 before, 1 after) */
-    static __thread v8 g[35][35];
-    v8 w[4][4][4], total[4][4][4], bsum = {0};
+    static __thread float p[4][35][PW] __attribute__((aligned(64)));
+    /* g[o][y + 2][x + 2]: the convolution's output gradient, zero padded (2 before, 1 after) */
+    static __thread float g[8][35][PW] __attribute__((aligned(64)));
+    static __thread vl total[8][4][4][4];
+    float w[8][4][4][4];
+    vl bsum[8];
     weights2(weight, w);
     memset(total, 0, sizeof(total));
+    memset(g, 0, sizeof(g));
+    memset(bsum, 0, sizeof(bsum));
     for (int64_t b = 0; b < batch; b++) {
         plane2(in + b * 4096, p);
-        memset(g, 0, sizeof(g));
         for (int py = 0; py < 16; py++)
             for (int px = 0; px < 16; px++) {
                 int64_t at = ((b * 16 + py) * 16 + px) * 8;
                 for (int o = 0; o < 8; o++) {
                     uint8_t k = code[at + o];
-                    if (k == 255) continue;
-                    g[2 * py + (k >> 1) + 2][2 * px + (k & 1) + 2][o] = load(grad_out[at + o]);
+                    float gv = load(grad_out[at + o]);
+                    for (int i = 0; i < 4; i++)
+                        g[o][2 * py + (i >> 1) + 2][2 * px + (i & 1) + 2] = k == i ? gv : 0.0f;
                 }
             }
-        v8 image_bsum = {0};
-        for (int y = 0; y < 32; y++)
-            for (int x = 0; x < 32; x++) image_bsum += g[y + 2][x + 2];
-        bsum += image_bsum;
-        for (int ky = 0; ky < 4; ky++)
-            for (int kx = 0; kx < 4; kx++) {
-                v8 a0 = {0}, a1 = {0}, a2 = {0}, a3 = {0};
-                for (int y = 0; y < 32; y++)
-                    for (int x = 0; x < 32; x++) {
-                        v8 gv = g[y + 2][x + 2];
-                        const float *q = p[y + ky][x + kx];
-                        a0 += q[0] * gv;
-                        a1 += q[1] * gv;
-                        a2 += q[2] * gv;
-                        a3 += q[3] * gv;
-                    }
-                total[ky][kx][0] += a0;
-                total[ky][kx][1] += a1;
-                total[ky][kx][2] += a2;
-                total[ky][kx][3] += a3;
-            }
-        /* input pixel (y, x) reaches output (y + 1 - ky, x + 1 - kx) through tap (ky, kx) */
+        for (int o = 0; o < 8; o++) {
+            vl s = {0};
+            for (int y = 0; y < 32; y++)
+                for (int v = 0; v < NV; v++) s += loadu(&g[o][y + 2][VL * v + 2]);
+            bsum[o] += s;
+        }
+        /* the weight's: sum over pixels of input (shifted by the tap) times gradient */
+        for (int c = 0; c < 4; c++)
+            for (int ky = 0; ky < 4; ky++)
+                for (int o0 = 0; o0 < 8; o0 += OCBW) {
+                    vl acc[OCBW][4];
+                    memset(acc, 0, sizeof(acc));
+                    for (int y = 0; y < 32; y++)
+                        for (int v = 0; v < NV; v++) {
+                            vl x[4], gv[OCBW];
+                            for (int kx = 0; kx < 4; kx++) x[kx] = loadu(&p[c][y + ky][VL * v + kx]);
+                            for (int o = 0; o < OCBW; o++) gv[o] = loadu(&g[o0 + o][y + 2][VL * v + 2]);
+                            for (int o = 0; o < OCBW; o++)
+                                for (int kx = 0; kx < 4; kx++) acc[o][kx] += x[kx] * gv[o];
+                        }
+                    for (int o = 0; o < OCBW; o++)
+                        for (int kx = 0; kx < 4; kx++) total[o0 + o][c][ky][kx] += acc[o][kx];
+                }
+        /* the input's: input pixel (y, x) reaches output (y + 1 - ky, x + 1 - kx) */
         value_t *gi = grad_in + b * 4096;
         for (int y = 0; y < 32; y++)
-            for (int x = 0; x < 32; x++) {
-                v8 a[4] = {{0}, {0}, {0}, {0}};
-                for (int ky = 0; ky < 4; ky++)
-                    for (int kx = 0; kx < 4; kx++) {
-                        v8 gv = g[y + 3 - ky][x + 3 - kx];
-                        for (int c = 0; c < 4; c++) a[c] += gv * w[ky][kx][c];
-                    }
-                value_t *to = gi + (((y >> 1) * 16 + (x >> 1)) * 4 + (y & 1) * 2 + (x & 1)) * 4;
-                for (int c = 0; c < 4; c++) to[c] = store(sum8(a[c]));
+            for (int c0 = 0; c0 < 4; c0 += ICB) {
+                vl acc[ICB][NV];
+                memset(acc, 0, sizeof(acc));
+                for (int o = 0; o < 8; o++)
+                    for (int ky = 0; ky < 4; ky++)
+                        for (int kx = 0; kx < 4; kx++) {
+                            vl gv[NV];
+                            for (int v = 0; v < NV; v++) gv[v] = loadu(&g[o][y + 3 - ky][VL * v + 3 - kx]);
+                            for (int c = 0; c < ICB; c++) {
+                                float wv = w[o][c0 + c][ky][kx];
+                                for (int v = 0; v < NV; v++) acc[c][v] += gv[v] * wv;
+                            }
+                        }
+                float row[ICB][32];
+                memcpy(row, acc, sizeof(row));
+                for (int x = 0; x < 32; x++) {
+                    value_t *to = gi + (((y >> 1) * 16 + (x >> 1)) * 4 + (y & 1) * 2 + (x & 1)) * 4;
+                    for (int c = 0; c < ICB; c++) to[c0 + c] = store(row[c][x]);
+                }
             }
     }
     for (int o = 0; o < 8; o++) {
-        grad_bias[o] = bsum[o];
+        float s = 0;
+        for (int i = 0; i < VL; i++) s += bsum[o][i];
+        grad_bias[o] = s;
         for (int c = 0; c < 4; c++)
             for (int ky = 0; ky < 4; ky++)
-                for (int kx = 0; kx < 4; kx++)
-                    grad_weight[((o * 4 + c) * 4 + ky) * 4 + kx] = total[ky][kx][c][o];
+                for (int kx = 0; kx < 4; kx++) {
+                    float t = 0;
+                    for (int i = 0; i < VL; i++) t += total[o][c][ky][kx][i];
+                    grad_weight[((o * 4 + c) * 4 + ky) * 4 + kx] = t;
+                }
     }
 }
 
