@@ -91,9 +91,9 @@ static inline vl loadu(const float *p) {
     return v;
 }
 
-/* p[c][y + 1][x + 1]: one image's input, zero padded (1 before, 2 after) */
+/* p[c][y + 1][x + 1]: one image's input; the padding (1 before, 2 after) is zeroed
+ * once a call, by the caller, and never written */
 static void plane2(const value_t *in, float p[4][35][PW]) {
-    memset(p, 0, sizeof(float) * 4 * 35 * PW);
     for (int by = 0; by < 16; by++)
         for (int bx = 0; bx < 16; bx++)
             for (int r = 0; r < 4; r++)
@@ -126,6 +126,7 @@ void SUFFIX(conv2_forward)(const value_t *in, int64_t batch, const float *weight
     float w[8][4][4][4];
     float rows[2][8][32] __attribute__((aligned(64)));
     weights2(weight, w);
+    memset(p, 0, sizeof(float) * 4 * 35 * PW);
     for (int64_t b = 0; b < batch; b++) {
         plane2(in + b * 4096, p);
         for (int y = 0; y < 32; y++) {
@@ -175,6 +176,7 @@ void SUFFIX(conv2_backward)(const value_t *in, int64_t batch, const value_t *gra
     weights2(weight, w);
     memset(total, 0, sizeof(total));
     memset(g, 0, sizeof(g));
+    memset(p, 0, sizeof(float) * 4 * 35 * PW);
     memset(bsum, 0, sizeof(bsum));
     for (int64_t b = 0; b < batch; b++) {
         plane2(in + b * 4096, p);
