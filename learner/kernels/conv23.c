@@ -180,14 +180,18 @@ void SUFFIX(conv2_backward)(const value_t *in, int64_t batch, const value_t *gra
     memset(bsum, 0, sizeof(bsum));
     for (int64_t b = 0; b < batch; b++) {
         plane2(in + b * 4096, p);
-        for (int py = 0; py < 16; py++)
-            for (int px = 0; px < 16; px++) {
-                int64_t at = ((b * 16 + py) * 16 + px) * 8;
-                for (int o = 0; o < 8; o++) {
-                    uint8_t k = code[at + o];
-                    float gv = load(grad_out[at + o]);
-                    for (int i = 0; i < 4; i++)
-                        g[o][2 * py + (i >> 1) + 2][2 * px + (i & 1) + 2] = k == i ? gv : 0.0f;
+        for (int o = 0; o < 8; o++)
+            for (int py = 0; py < 16; py++) {
+                const uint8_t *k = code + (b * 16 + py) * 128 + o;
+                const value_t *from = grad_out + (b * 16 + py) * 128 + o;
+                float *r0 = &g[o][2 * py + 2][2], *r1 = &g[o][2 * py + 3][2];
+                for (int px = 0; px < 16; px++) {
+                    float gv = load(from[8 * px]);
+                    int kk = k[8 * px];
+                    r0[2 * px] = kk == 0 ? gv : 0.0f;
+                    r0[2 * px + 1] = kk == 1 ? gv : 0.0f;
+                    r1[2 * px] = kk == 2 ? gv : 0.0f;
+                    r1[2 * px + 1] = kk == 3 ? gv : 0.0f;
                 }
             }
         for (int o = 0; o < 8; o++) {
