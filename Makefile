@@ -20,15 +20,16 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP) kernels
 
-# The learner's compiled first layer (learner/conv_kernel.py), one shared library per
-# instruction set, each with explicit flags (never -march=native: the library must run on
+# The learner's compiled convolutions (learner/conv_kernel.py), one shared library per
+# instruction set and source, each with explicit flags (never -march=native: the library must run on
 # any CPU with those flags, and the learner picks by /proc/cpuinfo). Plain C loaded with
 # ctypes, so no torch headers; where the compiler or the flags are missing the learner
 # keeps its PyTorch update.
 CC        ?= cc
 KERNELS   := learner/kernels
 KFLAGS    := -O3 -fPIC -shared -std=c11 -Wall -Wextra
-kernels: $(KERNELS)/build/libconv1_avx512bf16.so $(KERNELS)/build/libconv1_avx2.so
+kernels: $(KERNELS)/build/libconv1_avx512bf16.so $(KERNELS)/build/libconv1_avx2.so \
+         $(KERNELS)/build/libconv23_avx512bf16.so $(KERNELS)/build/libconv23_avx2.so
 
 $(KERNELS)/build/libconv1_avx512bf16.so: $(KERNELS)/conv1_bf16.c $(KERNELS)/conv1.h
 	mkdir -p $(@D)
@@ -39,6 +40,19 @@ $(KERNELS)/build/libconv1_avx2.so: $(KERNELS)/conv1_fp32.c $(KERNELS)/conv1.h
 	mkdir -p $(@D)
 	$(CC) $(KFLAGS) -mavx2 -mfma -o $@ $< \
 	  || echo "the AVX2 kernel did not build: the learner uses PyTorch there"
+
+# the second and third layers: one source, bfloat16 activations with -DCONV_BF16 (GCC's
+# vector extensions, so the FMAs contract: -ffp-contract=fast)
+$(KERNELS)/build/libconv23_avx512bf16.so: $(KERNELS)/conv23.c $(KERNELS)/conv23.h
+	mkdir -p $(@D)
+	$(CC) $(KFLAGS) -Wno-psabi -ffp-contract=fast -DCONV_BF16 -mavx512f -mavx512bw -mavx512vl \
+	  -mavx512bf16 -mfma -o $@ $< \
+	  || echo "the AVX-512 BF16 kernels did not build: the learner uses PyTorch there"
+
+$(KERNELS)/build/libconv23_avx2.so: $(KERNELS)/conv23.c $(KERNELS)/conv23.h
+	mkdir -p $(@D)
+	$(CC) $(KFLAGS) -Wno-psabi -ffp-contract=fast -mavx2 -mfma -o $@ $< \
+	  || echo "the AVX2 kernels did not build: the learner uses PyTorch there"
 
 # Debian's Chromium drives the browser tests, through Debian's nginx in front of the
 # server as deployed; installed when missing and we may.

@@ -1,4 +1,4 @@
-"""The compiled first layer (`learner.conv_kernel`) against the PyTorch path, in one run.
+"""The compiled convolutions (`learner.conv_kernel`) against the PyTorch path, in one run.
 
     python -m benchmarks.bench_conv_kernel            # both precisions this CPU runs
     python -m benchmarks.bench_conv_kernel --blocks 9
@@ -7,8 +7,10 @@
    next states), backward (weight and bias) on 128; the fast update's space-to-depth
    layer against the kernel, blocks of each alternating, with the kernel's rate against
    the core's matrix-multiply rate measured in the same run.
-2. The whole update (batch 128, one thread) with and without the kernel, the same
-   network and batches, blocks alternating.
+2. The second and third layers alone, the same way (forward on 256, backward with the
+   input's gradient on 128), PyTorch's phase layer against the kernel.
+3. The whole update (batch 128, one thread): plain, and with the first layer compiled,
+   the first and third, all three, the same network and batches, blocks in turn.
 
 Times are medians of blocks: CPU time of this thread (what the work costs, less
 disturbed by other processes on a shared machine) and wall time; ratios per block pair.
@@ -18,6 +20,7 @@ The machine's load is printed beside them.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import statistics
 import time
@@ -132,7 +135,71 @@ def bench_layer(precision: str, frames: torch.Tensor, blocks: int) -> None:
     )
 
 
+def bench_later_layers(precision: str, blocks: int) -> None:
+    from learner import conv_kernel
+    from learner.network import QNetwork
+    from learner.phase_conv import (
+        PhaseConvForward,
+        channels_last,
+        phase_max_bias_relu,
+        space_to_depth,
+    )
+
+    kernels = conv_kernel.load(precision)
+    assert kernels is not None
+    dtype = kernels.dtype
+    network = QNetwork()
+    fast = PhaseConvForward(network, dtype)
+    inputs = {
+        2: torch.rand(2 * BATCH, 16, 16, 16).to(dtype).permute(0, 3, 1, 2),
+        3: torch.rand(2 * BATCH, 16, 16, 8).to(dtype).permute(0, 3, 1, 2),
+    }
+    for layer, x in inputs.items():
+        conv = network.convs[layer - 1]
+        assert conv.bias is not None
+
+        def torch_layer(given: torch.Tensor, layer: int = layer) -> torch.Tensor:
+            kernel_weight, bias = fast.weights()[layer - 1]
+            layout = fast.layouts[layer - 1]
+            if layer == 2:  # the first kernel's output is this layer's input as it is
+                s, pad = given, layout.pad_before // 2
+            else:
+                s, pad = space_to_depth(given, False, layout, dtype)
+            return phase_max_bias_relu(channels_last(F.conv2d(s, kernel_weight, padding=pad)), bias)
+
+        def kernel_layer(given: torch.Tensor, layer: int = layer) -> torch.Tensor:
+            conv = network.convs[layer - 1]
+            assert conv.bias is not None
+            return conv_kernel.later_layer(kernels, layer, given, conv.weight, conv.bias)
+
+        def as_in_an_update(
+            run_layer: Callable[[torch.Tensor], torch.Tensor], x: torch.Tensor = x
+        ) -> Callable[[], None]:
+            def run() -> None:
+                with torch.no_grad():
+                    run_layer(x[BATCH:])
+                given = x[:BATCH].detach().requires_grad_()
+                run_layer(given).float().sum().backward()
+
+            return run
+
+        _compare(
+            f"layer {layer}, one update's share",
+            as_in_an_update(torch_layer),
+            as_in_an_update(kernel_layer),
+            blocks,
+            3,
+        )
+
+
+LAYER_SETS = ((1,), (1, 3), (1, 2, 3))
+"""The compiled layers each timed update takes (the rest in PyTorch)."""
+
+
 def bench_update(precision: str, blocks: int) -> None:
+    """The whole fast update, in PyTorch (the switch off) and with each of `LAYER_SETS`
+    compiled, blocks of each in turn, the same network and batches; ratios to PyTorch's
+    per round."""
     from benchmarks.bench_learner import real_frames
     from learner import conv_kernel
     from learner.agent import DQNAgent
@@ -142,14 +209,19 @@ def bench_update(precision: str, blocks: int) -> None:
     config = DQNConfig(torch_threads=1, precision=precision)
     previous = os.environ.get(conv_kernel.SWITCH)
     os.environ[conv_kernel.SWITCH] = "off"
-    plain = DQNAgent(config, torch.device("cpu"))
+    agents = {"PyTorch": DQNAgent(config, torch.device("cpu"))}
     os.environ[conv_kernel.SWITCH] = "on"
-    kernel = DQNAgent(config, torch.device("cpu"))
+    for layers in LAYER_SETS:
+        agent = DQNAgent(config, torch.device("cpu"))
+        for fast in (agent._fast, agent._fast_target):
+            if fast is not None and fast.conv_kernels is not None:
+                fast.conv_kernels = dataclasses.replace(fast.conv_kernels, layers=frozenset(layers))
+        agents["kernels " + "+".join(map(str, layers))] = agent
     if previous is None:
         del os.environ[conv_kernel.SWITCH]
     else:
         os.environ[conv_kernel.SWITCH] = previous
-    assert kernel._fast.first_layer_kernel is not None
+    plain = agents["PyTorch"]
     images = real_frames(1500)
     memory = ReplayMemory(len(images), plain.frame_shape)
     rng = np.random.default_rng(0)
@@ -158,16 +230,24 @@ def bench_update(precision: str, blocks: int) -> None:
         encoded = plain.encode(images[t]), plain.encode(images[t + 1])
         memory.add(encoded[0], t % 4, reward, encoded[1], t % 40 == 39, False)
     batches = [memory.sample(BATCH, rng) for _ in range(16)]
-    turn = {"plain": 0, "kernel": 0}
-
-    def step(name: str, agent: DQNAgent) -> Callable[[], None]:
-        def run() -> None:
-            agent.update(batches[turn[name] % len(batches)])
-            turn[name] += 1
-
-        return run
-
-    _compare("the whole update", step("plain", plain), step("kernel", kernel), blocks, 4)
+    for agent in agents.values():
+        for batch in batches[:2]:
+            agent.update(batch)
+    times: dict[str, list[tuple[float, float]]] = {name: [] for name in agents}
+    for _ in range(blocks):
+        for name, agent in agents.items():
+            times[name].append(_time(lambda a=agent: [a.update(b) for b in batches[:4]], 1))
+    plain_cpu = [t[0] / 4 for t in times["PyTorch"]]
+    print("  the whole update (batch 128, one thread), median of blocks of 4:")
+    for name, measured in times.items():
+        cpu = [t[0] / 4 for t in measured]
+        wall = statistics.median(t[1] / 4 for t in measured)
+        ratios = [p / c for p, c in zip(plain_cpu, cpu, strict=True)]
+        print(
+            f"    {name}: {statistics.median(cpu):.2f} ms of CPU ({wall:.2f} wall), "
+            f"{statistics.median(ratios):.2f}x PyTorch's "
+            f"(rounds {min(ratios):.2f}-{max(ratios):.2f})"
+        )
 
 
 def main() -> None:
@@ -187,6 +267,7 @@ def main() -> None:
             continue
         print(f"{precision} ({kernel.variant}):")
         bench_layer(precision, frames, args.blocks)
+        bench_later_layers(precision, args.blocks)
         bench_update(precision, args.blocks)
     print(f"load (1, 5, 15 min): {os.getloadavg()}")
 

@@ -60,9 +60,9 @@ class DQNAgent:
         if isinstance(self.network, QNetwork):
             kernel = conv_kernel.for_run(config.conv_kernel, self.dtype)
             self._fast = PhaseConvForward(self.network, self.dtype, kernel)
-            if kernel is not None and self._fast.first_layer_kernel is None:
+            if kernel is not None and self._fast.conv_kernels is None:
                 raise ValueError(
-                    f"conv_kernel {kernel.variant} computes the first layer of the paper's "
+                    f"conv_kernel {kernel.variant} computes the convolutions of the paper's "
                     "network on 64x64 RGB images on the CPU only: use conv_kernel none"
                 )
             if isinstance(self.target, QNetwork):

@@ -130,10 +130,11 @@ class DQNConfig:
     """Convolution precision of the fast update: `bf16` where the device supports it
     natively (`auto`), else `fp32`. Dense layers and the loss stay float32."""
     conv_kernel: ConvKernel = bounded("auto", role="numerics")
-    """The fast update's first layer on the CPU: `none` (PyTorch), or our compiled kernel
-    (`learner.conv_kernel`), `avx512bf16` (bfloat16 dot products, for `bf16`) or `avx2`
-    (float32 FMA, for `fp32`); the same function in another float order. `auto`: the
-    variant for the precision that runs here where `IDEEPRL_CONV_KERNEL=on`, else `none`."""
+    """The fast update's convolutions on the CPU: `none` (PyTorch), or our compiled kernels
+    for all three layers (`learner.conv_kernel`), `avx512bf16` (bfloat16 values, for
+    `bf16`) or `avx2` (float32 FMA, for `fp32`); the same function in another float order.
+    `auto`: the variant for the precision that runs here where `IDEEPRL_CONV_KERNEL=on`,
+    else `none`."""
     device: str = bounded(
         "auto", role="numerics", max_length=16, pattern=r"auto|cpu|cuda(:[0-9]+)?"
     )

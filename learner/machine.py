@@ -1,6 +1,6 @@
 """What this machine can compute, read without torch (the web process pins a run's numerics
 when it creates the session, and loads no torch): the CPU's kind and bfloat16 support, the
-learner's compiled first layer, a CUDA device, the cores and the memory. `learner.device`
+learner's compiled convolutions, a CUDA device, the cores and the memory. `learner.device`
 asks torch the same questions where torch is loaded; a test checks the two agree here."""
 
 from __future__ import annotations
@@ -18,14 +18,20 @@ BF16_FLAGS = ("avx512_bf16", "amx_bf16")
 """CPU flags with which bfloat16 convolutions run natively (oneDNN's AVX-512 BF16 or AMX)."""
 CONV_KERNEL_SWITCH = "IDEEPRL_CONV_KERNEL"
 """The environment variable with which a run left to choose (`config.conv_kernel` `auto`)
-takes the compiled first layer (`on`); anything else: off."""
+takes the compiled convolutions (`on`); anything else: off."""
 CONV_KERNEL_BUILD = Path(__file__).parent / "kernels" / "build"
-"""Where `make kernels` puts the compiled first layer's libraries (`libconv1_<variant>.so`)."""
+"""Where `make kernels` puts the compiled convolutions' libraries (`LIBRARIES`)."""
+CONV_KERNEL_LIBRARIES = ("libconv1", "libconv23")
+"""The libraries a variant needs, `<name>_<variant>.so`: the first layer, the second and
+third."""
+CONV_KERNEL_LAYERS = (1, 2, 3)
+"""The network's layers a run with a compiled variant computes with it (the rest in
+PyTorch); the first is always among them."""
 CONV_KERNEL_VARIANTS: dict[ConvKernel, tuple[set[str], str]] = {
     "avx512bf16": ({"avx512f", "avx512bw", "avx512vl", "avx512vbmi", "avx512_bf16", "fma"}, "bf16"),
     "avx2": ({"avx2", "fma"}, "fp32"),
 }
-"""The compiled first layer's variants (`learner.conv_kernel`): the CPU flags each needs, the
+"""The compiled convolutions' variants (`learner.conv_kernel`): the CPU flags each needs, the
 convolution precision it computes in."""
 
 
@@ -76,13 +82,16 @@ def bf16_native_cpu() -> bool:
 
 
 def conv_kernel_runs(variant: ConvKernel) -> bool:
-    """The compiled first layer's `variant` is built here and this CPU has its instructions."""
+    """The compiled convolutions' `variant` is built here and this CPU has its instructions."""
     needs, _ = CONV_KERNEL_VARIANTS[variant]
-    return needs <= cpu_flags() and (CONV_KERNEL_BUILD / f"libconv1_{variant}.so").exists()
+    built = all(
+        (CONV_KERNEL_BUILD / f"{name}_{variant}.so").exists() for name in CONV_KERNEL_LIBRARIES
+    )
+    return needs <= cpu_flags() and built
 
 
 def conv_kernel_for(precision: str) -> ConvKernel:
-    """The compiled first layer's variant a run in `precision` (`bf16`, `fp32`) takes here
+    """The compiled convolutions' variant a run in `precision` (`bf16`, `fp32`) takes here
     when it leaves the choice open: the one that runs here where the switch
     (`CONV_KERNEL_SWITCH`) is on, else `none` (the PyTorch update)."""
     if os.environ.get(CONV_KERNEL_SWITCH, "off") != "on":

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from learner.conv_kernel import FirstLayerKernel, first_layer
+from learner.conv_kernel import ConvKernels, first_layer, later_layer
 from learner.network import QNetwork, same_padding
 
 
@@ -284,21 +284,22 @@ class PhaseConvForward:
         self,
         network: QNetwork,
         dtype: torch.dtype,
-        first_layer_kernel: FirstLayerKernel | None = None,
+        conv_kernels: ConvKernels | None = None,
     ) -> None:
         self.network = network
         self.dtype = dtype
         device = network.out.weight.device
         fits = (
-            first_layer_kernel is not None
+            conv_kernels is not None
             and device.type == "cpu"
             and network.image_shape == (64, 64, 3)
             and network.conv1.weight.shape == (4, 3, 8, 8)
-            and first_layer_kernel.dtype == dtype
+            and conv_kernels.dtype == dtype
         )
-        self.first_layer_kernel = first_layer_kernel if fits else None
-        """The compiled first layer (`learner.conv_kernel`) where given and it fits this
-        network, device and precision; else the first layer runs in PyTorch too."""
+        self.conv_kernels = conv_kernels if fits else None
+        """The compiled convolutions (`learner.conv_kernel`) where given and they fit this
+        network, device and precision: the first layer and those of `layers`; else all
+        layers run in PyTorch."""
         self.layouts = []
         for conv in network.convs:
             out_channels, in_channels, kernel, _ = conv.weight.shape
@@ -356,14 +357,18 @@ class PhaseConvForward:
     ) -> torch.Tensor:
         """Q-values of packed uint8 frames (B, H/2, W/2, 4C), see `pack_frame`."""
         x = frames
+        compiled = self.conv_kernels
         for i, (layout, (kernel, bias)) in enumerate(zip(self.layouts, weights, strict=True)):
-            if self.first_layer_kernel is not None and i < 2:
-                if i == 0:
-                    continue
-                conv = self.network.conv1
-                assert conv.bias is not None, "the network's convolutions have biases"
-                s = first_layer(self.first_layer_kernel, frames, conv.weight, conv.bias)
-                padding = layout.pad_before // 2
+            conv = self.network.convs[i]
+            assert conv.bias is not None, "the network's convolutions have biases"
+            if compiled is not None and i == 0:
+                x = first_layer(compiled, frames, conv.weight, conv.bias)
+                continue
+            if compiled is not None and i + 1 in compiled.layers:
+                x = later_layer(compiled, i + 1, x, conv.weight, conv.bias)
+                continue
+            if compiled is not None and i == 1:  # the first kernel gave this layer's input
+                s, padding = x, layout.pad_before // 2
             else:
                 s, padding = space_to_depth(x, i == 0, layout, self.dtype)
             x = phase_max_bias_relu(channels_last(F.conv2d(s, kernel, padding=padding)), bias)

@@ -19,7 +19,7 @@ from learner.phase_conv import PhaseConvForward, pack_frame
 PRECISIONS = {"fp32": torch.float32, "bf16": torch.bfloat16}
 
 
-def kernel_or_skip(precision: str) -> conv_kernel.FirstLayerKernel:
+def kernel_or_skip(precision: str) -> conv_kernel.ConvKernels:
     needs = [n for v, (n, p) in conv_kernel.VARIANTS.items() if p == precision]
     if not any(n <= machine.cpu_flags() for n in needs):
         pytest.skip(f"this CPU runs no {precision} variant")
@@ -167,7 +167,7 @@ def test_the_network_with_the_kernel_is_the_plain_network_in_float32() -> None:
     plain_grads = [p.grad.clone() for p in network.parameters()]
     network.zero_grad()
     fast = PhaseConvForward(network, torch.float32, kernel)
-    assert fast.first_layer_kernel is kernel
+    assert fast.conv_kernels is kernel
     quick = fast(packed(images), fast.weights())
     (quick - target).square().mean().backward()
     assert_agree(quick, plain, 1e-5)
@@ -202,11 +202,11 @@ def test_the_agent_computes_with_the_pinned_kernel(monkeypatch: pytest.MonkeyPat
     config = DQNConfig(precision="fp32", device="cpu")
     monkeypatch.setenv(conv_kernel.SWITCH, "on")
     agent = DQNAgent(config.replace(conv_kernel="none"), torch.device("cpu"))
-    assert agent.fast.first_layer_kernel is None
+    assert agent.fast.conv_kernels is None
     monkeypatch.delenv(conv_kernel.SWITCH)
     agent = DQNAgent(config.replace(conv_kernel="avx2"), torch.device("cpu"))
-    assert agent.fast.first_layer_kernel is not None
-    assert agent.fast.first_layer_kernel.variant == "avx2"
+    assert agent.fast.conv_kernels is not None
+    assert agent.fast.conv_kernels.variant == "avx2"
     with pytest.raises(ValueError, match="64x64 RGB"):
         DQNAgent(config.replace(conv_kernel="avx2"), torch.device("cpu"), image_shape=(32, 32, 3))
 
@@ -219,7 +219,7 @@ def test_a_pinned_variant_this_cpu_lacks_is_not_run(monkeypatch: pytest.MonkeyPa
 
 def test_a_kernel_of_another_precision_is_not_used() -> None:
     kernel = kernel_or_skip("fp32")
-    assert PhaseConvForward(QNetwork(), torch.bfloat16, kernel).first_layer_kernel is None
+    assert PhaseConvForward(QNetwork(), torch.bfloat16, kernel).conv_kernels is None
 
 
 def test_the_variant_follows_the_cpu_flags() -> None:
@@ -239,7 +239,7 @@ def test_the_network_with_the_kernel_in_bfloat16_stays_as_close_as_without() -> 
     images = np.concatenate([rendered_frames(6), tied_frames()])
     plain = network(torch.from_numpy(images).permute(0, 3, 1, 2).float() / 255.0)
     fast = PhaseConvForward(network, torch.bfloat16, kernel)
-    assert fast.first_layer_kernel is kernel
+    assert fast.conv_kernels is kernel
     with torch.no_grad():
         quick = fast(packed(images), fast.weights())
     assert (quick - plain).abs().max() < 0.02 * plain.abs().max() + 1e-3
