@@ -2,10 +2,11 @@
 
 A task names the bodies people should see (`{"arm": arm_id, "goal": goal_id}`); each visual
 shape of each of their links becomes one `BodySpec` (boxes, spheres, cylinders, capsules as
-closed meshes with their round ends, and meshes named by their files), in the colours PyBullet draws them, and `poses()` says where each
-shape is now. A shape's pose is its link's frame (the URDF's, not the centre of mass that
-PyBullet reports for a base) composed with the shape's own local frame, so a viewer only
-places each shape, with no knowledge of links or joints.
+closed meshes with their round ends, and meshes named by their files), in the colours
+PyBullet draws them, and `poses()` says where each shape is now. A shape's pose is its
+link's frame (the URDF's, not the centre of mass that PyBullet reports for a base) composed
+with the shape's own local frame, so a viewer only places each shape, with no knowledge of
+links or joints.
 
 A task whose camera renders simplified meshes (TinyRenderer's time grows with triangles)
 names the full ones people should see instead (`shown_meshes`).
