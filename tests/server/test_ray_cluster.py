@@ -9,10 +9,8 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
-from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.run import RunSpec
@@ -23,11 +21,11 @@ from server.live.cluster import SHUT_DOWN, TrainingCluster, cluster_refusal
 from server.live.hub import Hub
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
-from study.db.models import Episode, Status, Step, StudySession
+from study.db.models import Status, StudySession
 from study.services.sessions import claim, create_session
 from study.services.studies import create_study
 from tests.server.live import fresh_database
-from tests.server.scale import NONDETERMINISTIC, session_body
+from tests.server.scale import records, session_body
 
 ray = pytest.importorskip("ray")
 pytestmark = [
@@ -37,18 +35,6 @@ pytestmark = [
         reason="a cluster needs a database every node reaches: set DATABASE_URL to PostgreSQL",
     ),
 ]
-LEFT_OUT = {"id", "session_id", *NONDETERMINISTIC}
-
-
-def records(factory: sessionmaker[Session], session_id: int) -> list[tuple[Any, ...]]:
-    """The session's steps and episodes, less what differs between two runs of one seed."""
-    rows: list[tuple[Any, ...]] = []
-    with factory() as db:
-        for table, order in ((Step, Step.global_step), (Episode, Episode.last_global_step)):
-            columns = [c for c in table.__table__.columns if c.name not in LEFT_OUT]
-            query = select(*columns).where(table.session_id == session_id).order_by(order)
-            rows += [tuple(row) for row in db.execute(query)]
-    return rows
 
 
 def session(factory: sessionmaker[Session], study_id: int, seed: int, episodes: int) -> int:

@@ -18,8 +18,7 @@ from study.db.engine import make_engine, make_session_factory
 from study.db.models import Advice, StudySession
 from tasks.sorting import HELD
 from tests.server.live import serving
-from tests.server.scale import session_body, wait_for_status
-from tests.server.test_ray_cluster import records
+from tests.server.scale import records, session_body, wait_for_status
 
 ray = pytest.importorskip("ray")
 pytestmark = [
