@@ -13,7 +13,7 @@ import pytest
 from sqlalchemy import update
 
 from learner.run import RunSpec
-from runs.worker.cluster import DatabaseChannel, Handed
+from runs.worker.cluster import STORAGE_ROOT_VARIABLE, DatabaseChannel, Handed, node_storage_root
 from runs.worker.worker import WorkerOptions, run_session
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
@@ -109,3 +109,13 @@ def test_a_session_resumes_with_its_storage_root_mounted_elsewhere(tmp_path: Pat
             assert found is not None
             assert located(found.checkpoint_path, tmp_path / "elsewhere") == second / kept
         engine.dispose()
+
+
+def test_a_node_reads_the_storage_root_where_it_mounts_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    web = tmp_path / "srv" / "shared"  # where the web server mounts it
+    monkeypatch.delenv(STORAGE_ROOT_VARIABLE, raising=False)
+    assert node_storage_root(web) == web
+    monkeypatch.setenv(STORAGE_ROOT_VARIABLE, str(tmp_path / "mnt"))  # `ray start`'s here
+    assert node_storage_root(web) == tmp_path / "mnt"
