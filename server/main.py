@@ -78,6 +78,7 @@ def worker_options(settings: Settings) -> WorkerOptions:
         data_dir=storage_root(settings.data_dir, settings.storage_root)
         if shared
         else settings.data_dir,
+        shared_storage=shared,
         checkpoint_every_episodes=settings.checkpoint_every_episodes,
         flush_every_steps=settings.flush_every_steps,
         heartbeat_s=settings.heartbeat_s,

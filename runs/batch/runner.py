@@ -32,7 +32,14 @@ from runs.worker.population import default_population, next_group, population_ke
 from runs.worker.worker import WorkerOptions
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import BACKUPS, upgrade
-from study.db.models import ADVISOR_ROLE, LIVE_STATUSES, RESUMABLE_STATUSES, Status, StudySession
+from study.db.models import (
+    ADVISOR_ROLE,
+    LIVE_STATUSES,
+    RESUMABLE_STATUSES,
+    Status,
+    StudySession,
+    located,
+)
 from study.services import numerics
 from study.services.errors import Invalid
 from study.services.ownership import set_status, take_back
@@ -235,14 +242,14 @@ class BatchRunner:
         False returned) until `advisor_attempts` are spent."""
         session = db.get(StudySession, advisor.session_id)
         assert session is not None and session.status == Status.finished.value
-        path = session.checkpoint_path
-        if not path or not Path(path).is_file():
+        path = located(session.checkpoint_path, self.options.data_dir)
+        if not path or not path.is_file():
             raise BatchError(
                 f"the advisor (session {session.id}) has finished but its checkpoint "
                 f"{path or '(none)'} is gone; pass --advisor-checkpoint, or delete session "
                 f"{session.id} to train the advisor again"
             )
-        checkpoint = str(Path(path).resolve())
+        checkpoint = str(path.resolve())
         check = self._check_advisor(checkpoint)
         if check is None or check.passed or self.options.advisor_check == "record":
             self.advisor_checkpoint = checkpoint
@@ -349,13 +356,14 @@ class BatchRunner:
         after it (each attempt's stored check said in its row); None: none would yet."""
         while True:
             row = rows[-1]
-            check = last_check(found.checkpoint_path) if found.checkpoint_path else None
+            path = located(found.checkpoint_path, self.options.data_dir)
+            check = last_check(path) if path else None
             failed = check is not None and not check.passed
             if failed:
                 assert check is not None
                 row.status += f"; failed its check ({'; '.join(check.problems)})"
             if not failed or self.options.advisor_check != "require":
-                return found.checkpoint_path
+                return str(path) if path else None
             attempt = state.run.seed - self.spec.advisor_seed + 1
             if attempt >= self.options.advisor_attempts:
                 row.status += f"; {attempt} attempts failed: the batch stops here"

@@ -11,12 +11,14 @@ another from there, with the records an uninterrupted run would have.
 
 from __future__ import annotations
 
+import os
 import socket
 import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import cast
 
 from sqlalchemy import select, update
@@ -32,6 +34,7 @@ CONTROL_EVERY_S = 1.0
 """How often a task reads its sessions' control from the database while it trains."""
 TRAINS_ON = "training on "
 """How a session's status detail names the node it trains on."""
+STORAGE_ROOT_VARIABLE = "IDEEPRL_STORAGE_ROOT"
 
 
 @dataclass(frozen=True)
@@ -102,6 +105,14 @@ def node_name() -> str:
     return f"{socket.gethostname()}, Ray node {node[:12]}"
 
 
+def node_storage_root(web: Path) -> Path:
+    """The storage root as this node mounts it: `IDEEPRL_STORAGE_ROOT` in the environment
+    `ray start` ran in here, else the path the web server mounts it at (`web`). Checkpoint
+    paths are stored relative to it, so each node may mount the shared folder anywhere."""
+    here = os.environ.get(STORAGE_ROOT_VARIABLE)
+    return Path(here) if here else web
+
+
 def adopt(factory: sessionmaker[Session], handed: Sequence[Handed], node: str) -> list[Handed]:
     """The sessions still handed to this task (their token unchanged: not stopped, ended or
     taken back meanwhile), marked as training on `node`."""
@@ -133,7 +144,15 @@ def train_handed(
     if not adopted:
         return {}
     # the node's task is its trainer slot: no lower priority, no local queue
-    options = replace(options, nice=0, idle=False, train_nice=0, train_idle=False, pooled=False)
+    options = replace(
+        options,
+        data_dir=node_storage_root(options.data_dir),
+        nice=0,
+        idle=False,
+        train_nice=0,
+        train_idle=False,
+        pooled=False,
+    )
     channel = cast(Connection, DatabaseChannel(factory, adopted, population=len(adopted) > 1))
     tokens = {h.session_id: h.token for h in adopted}
     if len(adopted) > 1:

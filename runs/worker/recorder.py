@@ -20,7 +20,15 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from learner.records import TRAINING, EpisodeRecord, StepRecord
 from runs.worker.messages import EpisodeDone, Progress
-from study.db.models import Advice, Episode, Feedback, Step, StudySession, utcnow
+from study.db.models import (
+    Advice,
+    Episode,
+    Feedback,
+    Step,
+    StudySession,
+    stored_path,
+    utcnow,
+)
 from study.services.advice import AdviceGiven, write_advice
 from study.services.feedback import FeedbackGiven, write_feedback
 
@@ -59,8 +67,12 @@ class Recorder:
         flush_every_steps: int,
         heartbeat_s: float,
         progress: Callable[[], dict[str, Any]] = dict,
+        root: Path | None = None,
     ) -> None:
+        """`root`: the storage root the checkpoint paths are stored relative to (None:
+        absolute)."""
         self._factory = factory
+        self._root = root
         self.session_id = session_id
         self._token = worker_token
         self._dir = checkpoint_dir
@@ -132,7 +144,7 @@ class Recorder:
         with self._factory() as db:
             self._own(
                 db,
-                checkpoint_path=str(path),
+                checkpoint_path=stored_path(path, self._root),
                 checkpoint_step=self.steps,
                 checkpoint_episodes=self.episodes,
                 checkpoint_advice=advice_count,

@@ -36,7 +36,7 @@ from runs.worker.rating import HumanEvaluator, given_ratings
 from runs.worker.recorder import Checkpointable, LeaseLost, Recorder, Reporter
 from runs.worker.scene import SceneBroadcast
 from study.db.engine import make_engine, make_session_factory
-from study.db.models import Advice, Status, StudySession, utcnow
+from study.db.models import Advice, Status, StudySession, located, utcnow
 from study.services import numerics
 from study.services.errors import Conflict
 from study.services.sessions import claim, get_session, set_status
@@ -50,6 +50,10 @@ class WorkerOptions:
 
     data_dir: Path = Path("study_data")
     """Checkpoints go to `data_dir/checkpoints/session-ID/`."""
+    shared_storage: bool = False
+    """`data_dir` is the storage root of a Ray cluster, which each node may mount under a
+    path of its own: checkpoint paths are stored relative to it
+    (`study.db.models.stored_path`)."""
     checkpoint_every_episodes: int = 10
     """Training episodes between periodic checkpoints."""
     flush_every_steps: int = 500
@@ -133,6 +137,7 @@ class _Run:
             options.data_dir / "checkpoints" / f"session-{session_id}",
             options.flush_every_steps,
             options.heartbeat_s,
+            root=options.data_dir if options.shared_storage else None,
         )
         self.link = (
             WorkerLink(
@@ -145,8 +150,8 @@ class _Run:
             if conn
             else None
         )
-        checkpoint = s.checkpoint_path
-        if checkpoint and not Path(checkpoint).is_file():
+        checkpoint = located(s.checkpoint_path, options.data_dir)
+        if checkpoint and not checkpoint.is_file():
             checkpoint = None  # a fresh start, as for a session never checkpointed
         self.start_advice = s.checkpoint_advice if checkpoint else 0
         self.advisor: Any = None

@@ -7,6 +7,10 @@ worker checkpoints and exits (`Command("handover")`), and the group trains as on
 on any node (`runs.worker.cluster.train_handed`). The advice itself stays in the web
 process's own workers, next to the participant.
 
+A machine session started on the server (a replay, a fitted advisor's or an oracle's run:
+no person advises it) goes to the cluster from its start, one task of its own
+(`SessionManager.start`), with the records it would have in a local worker.
+
 The database is the channel both ways: the task writes records, progress, checkpoints and
 status, and reads the researcher's stop and pause from the session's row; the web process
 reads a session without a local worker from there, as it does for any other. A group
@@ -30,16 +34,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from sqlalchemy import update
+from sqlalchemy import select, update
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
 from runs.worker.cluster import Handed, train_handed
 from runs.worker.link import SHUTTING_DOWN
-from runs.worker.messages import Command, StatusChanged
+from runs.worker.messages import Command, Progress, StatusChanged
 from runs.worker.worker import WorkerOptions
 from server.live.hub import Hub
 from server.live.reaping import join
+from server.live.trainers import Seat
 from study.db.models import Status, StudySession, utcnow
 from study.services.errors import Conflict
 from study.services.sessions import set_status
@@ -53,6 +58,8 @@ ATTEMPTS = 3
 """Times a session is started on the cluster before it is left `interrupted` (its node
 died each time)."""
 WATCH_EVERY_S = 1.0
+CAPACITY_EVERY_S = 10.0
+"""How often the cluster's CPUs are read again (nodes join and leave)."""
 
 
 def cluster_refusal(database_url: str, storage_root: Path) -> str | None:
@@ -85,6 +92,7 @@ class HandedHandle(Protocol):
     token: str
     process: Any
     handing_over: bool
+    seat: Seat
 
     def send(self, message: Any) -> bool: ...
 
@@ -114,9 +122,16 @@ class TrainingCluster:
         self.hub = hub
         self.cpus_per_group = cpus_per_group
         self._tasks: dict[Any, _Task] = {}
+        self._seats: dict[int, Seat] = {}
+        """The trainer-slot seats of the sessions it trains (or hands over): they hold their
+        slots until their task ends, so the queue counts the cluster's capacity."""
         self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._notify: Callable[[int], None] = lambda session_id: None
+        self._release: Callable[[Seat], None] = lambda seat: None
+        self._set_slots: Callable[[int], None] = lambda slots: None
+        self._capacity = 0
+        self._capacity_read_at = 0.0
         self._closing = threading.Event()
         self._watcher: threading.Thread | None = None
         self._handovers: set[asyncio.Task[None]] = set()
@@ -128,6 +143,7 @@ class TrainingCluster:
         if not ray.is_initialized():
             ray.init(address=self.address, log_to_driver=False)
         self._remote = ray.remote(num_cpus=self.cpus_per_group, max_retries=0)(train_handed)
+        self._read_capacity()
         self._watcher = threading.Thread(target=self._watch, name="ray-cluster", daemon=True)
         self._watcher.start()
 
@@ -153,23 +169,65 @@ class TrainingCluster:
         with contextlib.suppress(Exception):
             ray.shutdown()
 
+    def bind(
+        self,
+        notify: Callable[[int], None],
+        release: Callable[[Seat], None],
+        set_slots: Callable[[int], None],
+    ) -> None:
+        """The trainer slots' side, called on this event loop (the caller's thread): whom
+        an ended task's sessions are told to (`notify`), who frees their seats (`release`),
+        and who takes the cluster's capacity as the number of trainer slots (`set_slots`)."""
+        self._loop = asyncio.get_running_loop()
+        self._notify, self._release, self._set_slots = notify, release, set_slots
+        if self._capacity:
+            set_slots(self._capacity)
+
+    def capacity(self) -> int:
+        """Groups the cluster trains at once: the CPUs of its live nodes, `cpus_per_group`
+        to a task (read every `CAPACITY_EVERY_S`)."""
+        return self._capacity
+
+    def _read_capacity(self) -> None:
+        import ray
+
+        self._capacity_read_at = time.monotonic()
+        cpus = float(ray.cluster_resources().get("CPU", 0.0))
+        capacity = int(cpus // self.cpus_per_group)
+        if capacity != self._capacity:
+            self._capacity = capacity
+            self._on_loop(self._set_slots, capacity)
+
+    def seats(self) -> dict[int, Seat]:
+        """The seats of the sessions the cluster trains, by session."""
+        with self._lock:
+            return dict(self._seats)
+
+    def _on_loop(self, callback: Callable[..., None], *args: Any) -> None:
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(callback, *args)
+
     # --- the trainer-slot queue's hand-over ---------------------------------------------
     def take(
         self,
         group: Sequence[HandedHandle],
         handles: MutableMapping[int, Any],
-        notify: Callable[[int], None],
         command_timeout_s: float,
     ) -> None:
         """Train `group` (sessions granted training together) on the cluster: each worker
-        checkpoints and exits, then the group goes to a node (the event loop's thread)."""
-        self._loop = asyncio.get_running_loop()
-        self._notify = notify
+        checkpoints and exits, then the group goes to a node (the event loop's thread);
+        their seats hold their slots until their task ends."""
+        with self._lock:
+            self._seats.update((h.session_id, h.seat) for h in group)
         for handle in group:
             handle.handing_over = True
             handle.send(Command("handover"))
-            notify(handle.session_id)
-        task = self._loop.create_task(self._hand_over(list(group), handles, command_timeout_s))
+            self._notify(handle.session_id)
+        task = asyncio.get_running_loop().create_task(
+            self._hand_over(list(group), handles, command_timeout_s)
+        )
         self._handovers.add(task)
         task.add_done_callback(self._handovers.discard)
 
@@ -188,8 +246,10 @@ class TrainingCluster:
         for handle in group:
             if handles.get(handle.session_id) is handle:
                 del handles[handle.session_id]
-        await run_in_threadpool(self.submit, [Handed(h.session_id, h.token) for h in group])
+        sent = await run_in_threadpool(self.submit, [Handed(h.session_id, h.token) for h in group])
         for handle in group:
+            if handle.session_id not in sent:  # stopped or ended meanwhile: its seat frees
+                self._free(handle.session_id)
             self._notify(handle.session_id)
 
     # --- tasks ----------------------------------------------------------------------------
@@ -237,6 +297,9 @@ class TrainingCluster:
             try:
                 self._beat()
                 self._collect()
+                self._progress()
+                if time.monotonic() - self._capacity_read_at >= CAPACITY_EVERY_S:
+                    self._read_capacity()
             except Exception:
                 log.exception("watching the Ray cluster's tasks failed")
 
@@ -307,10 +370,31 @@ class TrainingCluster:
 
     def _ended(self, session_id: int, status: str) -> None:
         self.hub.publish(session_id, "status", StatusChanged(status))
-        loop = self._loop
-        if loop is not None and not loop.is_closed():
-            with contextlib.suppress(RuntimeError):
-                loop.call_soon_threadsafe(self._notify, session_id)
+        self._free(session_id)
+        self._on_loop(self._notify, session_id)
+
+    def _free(self, session_id: int) -> None:
+        """The session left the cluster: its seat's slot frees for the queue."""
+        with self._lock:
+            seat = self._seats.pop(session_id, None)
+        if seat is not None:
+            self._on_loop(self._release, seat)
+
+    def _progress(self) -> None:
+        """The seats' progress, as their tasks store it: what the queue's wait estimate
+        reads of the sessions in the cluster's slots."""
+        seats = self.seats()
+        if not seats:
+            return
+        with self.factory() as db:
+            rows = db.execute(
+                select(StudySession.id, StudySession.progress).where(
+                    StudySession.id.in_(list(seats))
+                )
+            ).all()
+        for session_id, stored in rows:
+            with contextlib.suppress(TypeError):  # none stored yet, or another shape
+                self._on_loop(seats[session_id].live.receive, Progress(**(stored or {})))
 
     def control(self, session_id: int, status: Status, detail: str = "") -> bool:
         """The researcher's stop (`stopped`), pause (`paused`) or resume (`running`) of a

@@ -33,6 +33,7 @@ from starlette.concurrency import run_in_threadpool
 
 from learner.run import RunSpec
 from learner.strategies import make_strategy
+from runs.worker.cluster import Handed
 from runs.worker.link import SHUTTING_DOWN, WAITED_FOR_PARTICIPANT
 from runs.worker.messages import AdviceRequest, Command, StatusChanged, TrainingWanted
 from runs.worker.worker import WorkerOptions
@@ -112,7 +113,8 @@ class SessionManager:
         self._handovers: set[asyncio.Task[None]] = set()
         self._closing = False
         self.cluster: TrainingCluster | None = None
-        """A Ray cluster that trains the granted groups in place of this machine's slots."""
+        """A Ray cluster that trains the granted groups in place of this machine's slots
+        (the slots are then its CPUs, `TrainingCluster.bind`)."""
         self.factory = factory
         self.database_url = database_url
         self.hub = hub
@@ -136,6 +138,8 @@ class SessionManager:
     # --- lifecycle ---------------------------------------------------------------------
     async def open(self) -> None:
         self._loop = asyncio.get_running_loop()
+        if self.cluster is not None:  # its capacity is the number of trainer slots
+            self.cluster.bind(self.changes.notify, self.trainers.release, self.trainers.set_slots)
         self.workers.warm()
         await run_in_threadpool(self._reap)
         self._reaper = asyncio.create_task(self._reap_forever())
@@ -279,7 +283,8 @@ class SessionManager:
         pooled: bool = False,
     ) -> None:
         """Start (or resume) the session's worker; `pooled`: it waits in its condition's
-        pool for an arrival, its idle limit off until `assign`."""
+        pool for an arrival, its idle limit off until `assign`. With a Ray cluster a machine
+        session (no person advises it) trains there, as a human one does after its advice."""
         token, spec = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
         with self.factory() as db:
             session = get_session(db, session_id)
@@ -292,6 +297,12 @@ class SessionManager:
             strategy = spec.make_strategy() or make_strategy("early", 0)
             first_turn = strategy.first_advice_step(spec.config.pretraining_steps) - 1
             run = spec if human else None
+        if self.cluster is not None and not human:  # a replay, a fitted or an oracle's run:
+            # it trains on the cluster from its start
+            await run_in_threadpool(self.cluster.submit, [Handed(session_id, token)])
+            self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
+            self.changes.notify(session_id)
+            return
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
@@ -343,16 +354,17 @@ class SessionManager:
             handle.send(Command("ready"))
 
     def _seats(self) -> dict[int, Seat]:
-        return {session_id: h.seat for session_id, h in self.handles.items()}
+        """The seats of the sessions with a worker here, and of those the cluster trains
+        (each holds one of the cluster's slots until its task ends)."""
+        seats = self.cluster.seats() if self.cluster is not None else {}
+        return {**seats, **{session_id: h.seat for session_id, h in self.handles.items()}}
 
     def _granted(self, seats: list[Seat], slot: object | None) -> None:
         """A trainer slot for `seats`: one session trains on in its own worker; several
         hand their sessions over to one population worker."""
         group = [self.handles[seat.session_id] for seat in seats]
         if self.cluster is not None:  # the cluster trains the group (server.live.cluster)
-            for seat in seats:
-                self.trainers.vacate(seat)  # it holds no slot of this machine
-            self.cluster.take(group, self.handles, self.changes.notify, self.command_timeout_s)
+            self.cluster.take(group, self.handles, self.command_timeout_s)
             return
         for handle in group:
             handle.handing_over = slot is not None

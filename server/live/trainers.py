@@ -9,7 +9,8 @@ size), by the batch's rule (`runs.worker.population.next_group`).
 What a caller needs: `request` a slot for a session's `Seat`, `release` it when the session
 ends, `place` and `wait_s` for its page. What granting a slot does to the worker (train on,
 or hand over to a population's worker) is the caller's `granted` callback, so the slots can
-be placed elsewhere without the queue changing.
+be placed elsewhere without the queue changing: on a Ray cluster (`server.live.cluster`)
+they are the cluster's CPUs, and its sessions' seats hold them until their tasks end.
 """
 
 from __future__ import annotations

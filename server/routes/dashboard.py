@@ -138,6 +138,7 @@ def overview(db: DbDep, settings: SettingsDep, manager: ManagerDep) -> list[Stud
                 status=progress.status,
                 progress=progress.model_dump(),
                 declined=session.declined_at is not None and session.consented_at is None,
+                node=session.worker_host,
             )
             found.append(SessionRow(**fields))
         counts = study_routes.condition_counts(db, study.id) if study.design else []

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import enum
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any, ClassVar
 
 from sqlalchemy import (
@@ -32,6 +33,27 @@ from learner.run import METHODS, UNADVISED, RunSpec, declared
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
+
+
+def stored_path(path: Path, root: Path | None) -> str:
+    """A checkpoint's path as a session's row keeps it (`StudySession.checkpoint_path`):
+    relative to `root`, the storage root a Ray cluster's nodes share (each may mount it
+    under a path of its own), when it lies there; absolute with `root` None, as one
+    machine's training keeps it."""
+    if root is None:
+        return str(path)
+    absolute, base = Path(path).absolute(), Path(root).absolute()
+    return str(absolute.relative_to(base)) if absolute.is_relative_to(base) else str(absolute)
+
+
+def located(path: str | None, root: Path) -> Path | None:
+    """The file a row's checkpoint path names on this machine, whose storage root is mounted
+    at `root`: a relative path joined to it, an absolute one (one machine's training, or a
+    database written before checkpoint paths were kept relative) as it is; None: no path."""
+    if not path:
+        return None
+    found = Path(path)
+    return found if found.is_absolute() else Path(root) / found
 
 
 class UTCDateTime(TypeDecorator[datetime]):
@@ -209,6 +231,7 @@ class StudySession(Base):
     heartbeat_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
 
     checkpoint_path: Mapped[str | None] = mapped_column(Text)
+    """Its last checkpoint: absolute, or relative to the storage root (`located`)."""
     checkpoint_step: Mapped[int] = mapped_column(Integer, default=0)
     checkpoint_episodes: Mapped[int] = mapped_column(Integer, default=0)
     checkpoint_advice: Mapped[int] = mapped_column(Integer, default=0)

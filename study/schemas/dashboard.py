@@ -28,6 +28,9 @@ class SessionRow(BaseModel):
     outcome: str | None = None
     preview: bool = False
     pooled: bool = False
+    node: str | None = None
+    """Where it trains, or last trained: this machine, or a node of the Ray cluster
+    (`worker_host`); None before it starts."""
 
 
 class StudyRow(BaseModel):

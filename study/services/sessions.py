@@ -16,6 +16,7 @@ from study.db.models import (
     Episode,
     Participant,
     StudySession,
+    located,
 )
 from study.schemas.sessions import SessionOptions
 from study.services.errors import Invalid, NotFound
@@ -69,7 +70,8 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
     if spec.startswith("session:"):
         number = spec.removeprefix("session:")
         found = db.get(StudySession, int(number)) if number.isdigit() and len(number) < 10 else None
-        if found is None or not found.checkpoint_path or not Path(found.checkpoint_path).is_file():
+        file = located(found.checkpoint_path, data_dir or Path()) if found is not None else None
+        if found is None or file is None or not file.is_file():
             raise Invalid(
                 "run.advisor_checkpoint",
                 "run.advisor_checkpoint names no session of this installation with a "
@@ -81,7 +83,7 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
                 "run.advisor_checkpoint names an sb3-dqn session: its checkpoint is "
                 "Stable-Baselines3's, which cannot advise; name a session of the paper's learner",
             )
-        return str(Path(found.checkpoint_path).resolve())
+        return str(file.resolve())
     try:
         path = Path(spec).resolve()
         inside = data_dir is None or path.is_relative_to(data_dir.resolve())

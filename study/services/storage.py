@@ -29,6 +29,7 @@ from study.db.models import (
     Status,
     Study,
     StudySession,
+    located,
 )
 from study.services.errors import Conflict, NotFound
 from study.services.fitted_files import fitted_model_path
@@ -73,8 +74,9 @@ def _inside(path: Path, folder: Path) -> bool:
 
 def remove_session_files(data_dir: Path, session_id: int, checkpoint: str | None) -> None:
     _remove(session_dir(data_dir, session_id))
-    if checkpoint and _inside(Path(checkpoint), data_dir):
-        _remove(Path(checkpoint))
+    file = located(checkpoint, data_dir)
+    if file is not None and _inside(file, data_dir):
+        _remove(file)
 
 
 def remove_study_files(data_dir: Path, study_id: int) -> None:
@@ -261,7 +263,7 @@ def study_disk(db: Session, data_dir: Path, study_id: int) -> DiskUse:
     found = {}
     for session in sorted(study.sessions, key=lambda s: s.id):
         size = _size(session_dir(data_dir, session.id))
-        checkpoint = Path(session.checkpoint_path) if session.checkpoint_path else None
+        checkpoint = located(session.checkpoint_path, data_dir)
         if checkpoint is not None and not _inside(checkpoint, session_dir(data_dir, session.id)):
             size += _size(checkpoint)
         found[session.id] = size

@@ -10,9 +10,12 @@ from typing import Any
 import httpx
 import numpy as np
 from PIL import Image
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
 
 from learner.fields import leaves, nest
 from learner.run import RunSpec
+from study.db.models import Episode, Step
 from study.schemas.sessions import NOT_THE_RUN
 
 SMALL_CONFIG: dict[str, Any] = {"pretraining_steps": 60, "batch_size": 16, "memory_size": 2000}
@@ -22,6 +25,19 @@ NONDETERMINISTIC = {
     *("time", "wall_time", "logged_at", "elapsed_s"),
     *("requested_at", "answered_at", "response_time_s"),
 }
+
+LEFT_OUT = {"id", "session_id", *NONDETERMINISTIC}
+
+
+def records(factory: sessionmaker[Session], session_id: int) -> list[tuple[Any, ...]]:
+    """The session's steps and episodes, less what differs between two runs of one seed."""
+    rows: list[tuple[Any, ...]] = []
+    with factory() as db:
+        for table, order in ((Step, Step.global_step), (Episode, Episode.last_global_step)):
+            columns = [c for c in table.__table__.columns if c.name not in LEFT_OUT]
+            query = select(*columns).where(table.session_id == session_id).order_by(order)
+            rows += [tuple(row) for row in db.execute(query)]
+    return rows
 
 
 GROUPS = tuple({leaf.path[0] for leaf in leaves(RunSpec) if len(leaf.path) > 1})

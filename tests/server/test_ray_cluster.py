@@ -1,18 +1,19 @@
 """Sessions trained on a Ray cluster of two 1-CPU nodes (`server.live.cluster`) with
 PostgreSQL and a shared folder: their records are those of training on this machine with
 the same seeds, and a session whose node is killed mid-run finishes on the other node
-from its last checkpoint, with the records of an uninterrupted run."""
+from its last checkpoint, with the records of an uninterrupted run. The trainer slots
+(and so the queue's place and wait) are the cluster's CPUs, as its nodes come and go."""
 
 from __future__ import annotations
 
+import asyncio
 import os
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
-from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.run import RunSpec
@@ -21,13 +22,14 @@ from runs.worker.link import SHUTTING_DOWN
 from runs.worker.worker import WorkerOptions, run_session
 from server.live.cluster import SHUT_DOWN, TrainingCluster, cluster_refusal
 from server.live.hub import Hub
+from server.live.trainers import TrainerSlots
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
-from study.db.models import Episode, Status, Step, StudySession
+from study.db.models import Status, StudySession
 from study.services.sessions import claim, create_session
 from study.services.studies import create_study
 from tests.server.live import fresh_database
-from tests.server.scale import NONDETERMINISTIC, session_body
+from tests.server.scale import records, session_body
 
 ray = pytest.importorskip("ray")
 pytestmark = [
@@ -37,18 +39,6 @@ pytestmark = [
         reason="a cluster needs a database every node reaches: set DATABASE_URL to PostgreSQL",
     ),
 ]
-LEFT_OUT = {"id", "session_id", *NONDETERMINISTIC}
-
-
-def records(factory: sessionmaker[Session], session_id: int) -> list[tuple[Any, ...]]:
-    """The session's steps and episodes, less what differs between two runs of one seed."""
-    rows: list[tuple[Any, ...]] = []
-    with factory() as db:
-        for table, order in ((Step, Step.global_step), (Episode, Episode.last_global_step)):
-            columns = [c for c in table.__table__.columns if c.name not in LEFT_OUT]
-            query = select(*columns).where(table.session_id == session_id).order_by(order)
-            rows += [tuple(row) for row in db.execute(query)]
-    return rows
 
 
 def session(factory: sessionmaker[Session], study_id: int, seed: int, episodes: int) -> int:
@@ -77,6 +67,13 @@ def until(
             return found
         time.sleep(0.2)
     raise AssertionError(f"session {session_id}: {found.status} {found.status_detail}")
+
+
+def until_true(done: Callable[[], bool], what: str, timeout_s: float = 60) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not done():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.2)
 
 
 def hold(seconds: float) -> None:
@@ -130,8 +127,18 @@ def test_sessions_train_on_two_nodes_as_here_and_survive_a_node_killed(
     worker = cluster.add_node(num_cpus=1)
     cluster.wait_for_nodes()
     trainer = TrainingCluster(cluster.address, factory, url, options, Hub())
+    loop = asyncio.new_event_loop()  # the web process's, where the trainer slots live
+    threading.Thread(target=loop.run_forever, daemon=True).start()
+    slots = TrainerSlots(7, 1, trainer.seats, lambda seats, slot: None)
+
+    async def bind() -> None:
+        trainer.bind(lambda session_id: None, slots.release, slots.set_slots)
+
     try:
+        asyncio.run_coroutine_threadsafe(bind(), loop).result(10)
         trainer.open()
+        assert trainer.capacity() == 2
+        until_true(lambda: slots.slots == 2, "the queue counts the cluster's two CPUs")
         for seed in (11, 12):  # one CPU each: one on each node
             trainer.submit([handed(factory, there[seed])])
         assert trainer.wait(300), "trained within 5 minutes"
@@ -180,6 +187,7 @@ def test_sessions_train_on_two_nodes_as_here_and_survive_a_node_killed(
         cluster.remove_node(worker)  # mid-run, after a checkpoint
         ray.cancel(holds_head, force=True)  # the head's CPU frees for it
         assert trainer.wait(300), "finished elsewhere within 5 minutes"
+        until_true(lambda: slots.slots == 1, "the queue counts the one node left")
         done = row(factory, there[13])
         assert done.status == Status.finished, done.status_detail
         assert done.worker_host != killed.worker_host, "finished on the other node"
@@ -198,3 +206,4 @@ def test_sessions_train_on_two_nodes_as_here_and_survive_a_node_killed(
     finally:
         trainer.close()
         cluster.shutdown()
+        loop.call_soon_threadsafe(loop.stop)

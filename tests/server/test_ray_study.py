@@ -1,7 +1,9 @@
 """An online study's participants, rehearsed through their links (`ideeprl rehearse`),
 on a server that hands their learners to a Ray cluster of two 1-CPU nodes after their
 advice: each finishes there, on a node the database names, with the records the same
-participants leave on a server that trains them itself."""
+participants leave on a server that trains them itself. A replay of one of them, started
+through the server, trains on the cluster from its start, with the records of the same
+replay trained on the server itself. The dashboard names the node each trained on."""
 
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 
 from cli.main import main
@@ -17,9 +20,8 @@ from learner.fitted import Count, FittedModel
 from study.db.engine import make_engine, make_session_factory
 from study.db.models import Advice, StudySession
 from tasks.sorting import HELD
-from tests.server.live import serving
-from tests.server.scale import session_body, wait_for_status
-from tests.server.test_ray_cluster import records
+from tests.server.live import API_KEY, serving
+from tests.server.scale import records, session_body, wait_for_status
 
 ray = pytest.importorskip("ray")
 pytestmark = [
@@ -48,7 +50,7 @@ def fitted_model(tmp_path: Path) -> Path:
 
 def study(data_dir: Path, model: Path, capsys: pytest.CaptureFixture[str], **settings: Any) -> Any:
     """Each seed's session's rows (session, advice, records), rehearsed on a server with
-    `settings`."""
+    `settings`, then those of a replay of the first, started there."""
     data_dir.mkdir()
     with serving(data_dir, heartbeat_s=1, pool_limit=0, **settings) as live, live.client() as api:
         made = api.post("/api/studies", json={"name": "on a cluster"}).json()
@@ -64,6 +66,13 @@ def study(data_dir: Path, model: Path, capsys: pytest.CaptureFixture[str], **set
             wait_for_status(api, session_id, {"finished"}, timeout=300)
             progress = api.get(f"/api/sessions/{session_id}/progress").json()
             assert progress["status"] == "finished" and progress["episode"] == progress["episodes"]
+        where = ["--database-url", live.database_url, "--data-dir", str(data_dir)]
+        made_replay = ["replay", "--session", str(ids[0]), "--no-run", *where, "--json"]
+        assert main(made_replay) == 0  # a machine session, started through the server
+        replay = json.loads(capsys.readouterr().out)["session_id"]
+        assert api.post(f"/api/sessions/{replay}/start").status_code == 200
+        wait_for_status(api, replay, {"finished"}, timeout=300)
+        ids.append(replay)
         engine = make_engine(live.database_url)
         factory = make_session_factory(engine)
         with factory() as db:
@@ -79,6 +88,11 @@ def study(data_dir: Path, model: Path, capsys: pytest.CaptureFixture[str], **set
             (row, given, records(factory, row.id)) for row, given in zip(rows, advice, strict=True)
         ]
         engine.dispose()
+        with httpx.Client(base_url=live.url, timeout=30) as browser:  # the dashboard's rows
+            assert browser.post("/dashboard/login", data={"key": API_KEY}).status_code == 303
+            overview = browser.get("/dashboard/api/overview").json()
+        nodes = {s["id"]: s["node"] for study in overview for s in study["sessions"]}
+        assert [nodes[row.id] for row in rows] == [row.worker_host for row in rows]
         return done
 
 
@@ -98,8 +112,9 @@ def test_rehearsed_participants_train_on_the_cluster_as_on_this_machine(
         cluster.shutdown()
     for (local, local_advice, local_records), (remote, advice, rows) in zip(
         here, there, strict=True
-    ):
+    ):  # the participants' sessions, then the replay of the first
         assert "Ray node" not in (local.worker_host or "")
         assert "Ray node" in (remote.worker_host or ""), remote.worker_host
         assert len(advice) == BUDGET and advice == local_advice
         assert rows and rows == local_records
+    assert [row.method for row, _, _ in there] == ["human", "human", "replayed"]

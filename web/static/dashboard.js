@@ -71,6 +71,12 @@
     cells[2].firstChild.textContent = shown;
     cells[2].firstChild.dataset.status = shown;
     if (s.status_detail) cells[2].firstChild.title = s.status_detail;
+    if (s.node) {
+      // where it trains: this machine, or a node of the Ray cluster
+      const node = cells[2].appendChild(document.createElement("div"));
+      node.className = "muted small session-node";
+      node.textContent = `on ${s.node}`;
+    }
     cells[3].textContent = progressText(s);
     if (s.pooled) {
       // its link goes to the next arrival at the study link, as the study's blocks assign:
