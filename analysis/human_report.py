@@ -133,7 +133,8 @@ def _accuracy_note(people: pd.DataFrame) -> str:
             "Accuracy of ratings is the share of a participant's ratings that were right: "
             "good of the task's correct action, bad of another.",
             "No accuracy for ratings: the feedback table records no correct action beside "
-            "a rating, so whether a good or a bad was right is not available.",
+            "a rating (the task cannot say, or the ratings were stored before it was "
+            "recorded), so whether a good or a bad was right is not available.",
         ),
     ):
         group = people[people["gave"] == gave]

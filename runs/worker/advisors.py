@@ -197,8 +197,10 @@ class FeedbackLog(Protocol):
 class RecordingEvaluator:
     """Wraps a machine evaluator (`learner.evaluators`): the same judgements, each logged
     with the action judged, what it added to the remembered reward (`weight` times the
-    judgement: the run's feedback_weight) and the time it took, as `RecordingAdvisor` logs
-    advice. `count` is the judgements given (the worker's advice count)."""
+    judgement: the run's feedback_weight), the task's correct action at the judged step
+    (`correct`, from the moment's info: the step before it was taken) and the time it
+    took, as `RecordingAdvisor` logs advice. `count` is the judgements given (the worker's
+    advice count)."""
 
     def __init__(
         self,
@@ -208,6 +210,7 @@ class RecordingEvaluator:
         start_index: int,
         weight: float,
         log: FeedbackLog,
+        correct: Correct | None = None,
     ) -> None:
         self._inner = inner
         self._session_id = session_id
@@ -215,6 +218,7 @@ class RecordingEvaluator:
         self.count = start_index
         self._weight = weight
         self._log = log
+        self._correct = correct
 
     def __getattr__(self, name: str) -> Any:
         if name == "q_values":  # for importance's window
@@ -251,6 +255,7 @@ class RecordingEvaluator:
                 decision_time_s=getattr(self._inner, "last_decision_time_s", None),
                 requested_at=requested_at,
                 answered_at=requested_at + timedelta(seconds=elapsed),
+                correct_action=self._correct(moment.info) if self._correct else None,
             )
         )
         self.count += 1

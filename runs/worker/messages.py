@@ -63,8 +63,8 @@ class AdviceRequest:
     frame_png: bytes | None = None
     """A task without a live 3-D view: what people see at this step, PNG."""
     correct_action: int | None = None
-    """The task's correct action at this step (stored with the advice for its accuracy;
-    never shown to the participant); None where the task cannot say."""
+    """The task's correct action at this step (stored with the advice or the rating for its
+    accuracy; never shown to the participant); None where the task cannot say."""
     rated_action: int | None = None
     """Evaluative feedback: the action the learner took at this step, for the person to rate
     (good, bad, or no answer); None: advice is asked for (`runs.worker.rating`)."""

@@ -14,7 +14,7 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.strategies import AdviceMoment
-from runs.worker.advisors import until_participant_ready
+from runs.worker.advisors import Correct, until_participant_ready
 from runs.worker.link import SessionAbandoned, WorkerLink
 from runs.worker.messages import AdviceRequest
 from runs.worker.recorder import Reporter
@@ -49,6 +49,7 @@ class HumanEvaluator:
         idle_limit_s: float,
         time_out_s: float,
         frames: Callable[[], Any] | None = None,
+        correct: Correct | None = None,
     ) -> None:
         self._link = link
         self._reporter = reporter
@@ -59,6 +60,9 @@ class HumanEvaluator:
         self._time_out_s = time_out_s
         self._frames = frames
         """A task without a live 3-D view: what people see now (after the rated move)."""
+        self._correct = correct
+        """The task's correct action at a step, sent with the request for the web process
+        to store beside the rating (never shown to the participant)."""
         self.carrying_out = False
         """The step being taken is to be rated: the 3-D view replays it as motion."""
         self._reward: float | None = None
@@ -98,6 +102,7 @@ class HumanEvaluator:
                 rated_action=moment.intended_action,
                 rated_reward=self._reward,
                 rating_time_out_s=self._time_out_s,
+                correct_action=self._correct(moment.info) if self._correct else None,
             )
             until_participant_ready(self._link, self._reporter, self._idle_limit_s)
             self._link.send(request)

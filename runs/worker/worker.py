@@ -173,7 +173,7 @@ class _Run:
         )
         task, task_options = spec.the_task, spec.env_options()
         self.correct: Correct = functools.partial(task.correct, options=task_options)
-        """The task's correct action at a step, stored beside each advice."""
+        """The task's correct action at a step, stored beside each advice and judgement."""
         advisor = self._advisor(spec.make_advisor())  # None for sb3-dqn, which takes none
         evaluator = self._evaluator(spec.make_evaluator())  # evaluative feedback's, or None
         self.reporter.advisor = self.advisor
@@ -255,8 +255,9 @@ class _Run:
             return None
         s = self.session
         self.advisor = RecordingEvaluator(
-            machine, s.id, s.method, self.start_advice, self.spec.feedback_weight, self.recorder
-        )
+            machine, s.id, s.method, self.start_advice, self.spec.feedback_weight, self.recorder,
+            self.correct,
+        )  # fmt: skip
         return self.advisor
 
     def _recorded_ratings(self) -> RecordedEvaluator:
@@ -282,6 +283,7 @@ class _Run:
             self.session.idle_limit_s or self.options.idle_limit_s,
             self.spec.rating_time_out_s,
             frames=self.frames,
+            correct=self.correct,
         )
         self.env.after_step.append(evaluator.after_step)
         self.env.participant = evaluator

@@ -419,6 +419,9 @@ class Feedback(Base):
     decision_time_s: Mapped[float | None] = mapped_column(Float)
     requested_at: Mapped[datetime] = mapped_column(UTCDateTime())
     answered_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    correct_action: Mapped[int | None] = mapped_column(Integer)
+    """The task's correct action at the rated step (`tasks.Task.correct`), for the rating's
+    accuracy; NULL where the task cannot say, and in rows stored before 0019."""
 
 
 class CheckAttempt(Base):

@@ -205,6 +205,13 @@ FEEDBACK_COLUMNS: dict[str, tuple[str, str]] = {
     ),
     "requested_at": ("datetime", "When the judgement was asked (UTC)."),
     "answered_at": ("datetime", "When it arrived (UTC)."),
+    "correct_action": (
+        "integer",
+        "The task's correct action at the judged step, its index as in action (the sorting "
+        "rule's for the sorting robot, the shortest path's in the grid world): a judgement "
+        "is right when it is good and action equals it, or bad and action differs; empty "
+        "where the task cannot say, and for judgements stored before it was recorded.",
+    ),
 }
 ASSIGNMENT_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "The session the arrival got."),

@@ -132,14 +132,16 @@ def load_visits(db: Session, sessions: Sequence[StudySession]) -> Visits:
             Feedback.action,
             Feedback.judgement,
             Feedback.decision_time_s,
+            Feedback.correct_action,
         )
         .where(Feedback.session_id.in_([s.id for s in sessions]))
         .order_by(Feedback.session_id, Feedback.feedback_index)
     )
     feedback = pd.DataFrame(
         [tuple(row) for row in db.execute(rated)],
-        columns=["session_id", "evaluator", "action", "judgement", "decision_time_s"],
-    )
+        columns=["session_id", "evaluator", "action", "judgement", "decision_time_s",
+                 "correct_action"],
+    )  # fmt: skip
     check = pd.DataFrame(
         list(check_rows(db, list(sessions))),
         columns=["session_id", "attempt", "question", "correct"],

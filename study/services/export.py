@@ -222,6 +222,7 @@ def _feedback_rows(db: Session, sessions: list[StudySession]) -> Iterator[dict[s
                 "decision_time_s": f.decision_time_s,
                 "requested_at": f.requested_at,
                 "answered_at": f.answered_at,
+                "correct_action": f.correct_action,
             }
 
 

@@ -43,6 +43,9 @@ class FeedbackGiven:
     decision_time_s: float | None
     requested_at: datetime
     answered_at: datetime
+    correct_action: int | None = None
+    """The task's correct action at the rated step (`tasks.Task.correct`), for the rating's
+    accuracy; None where the task cannot say."""
 
 
 def write_feedback(db: Session, feedback: Sequence[FeedbackGiven]) -> None:

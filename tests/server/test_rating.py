@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 import time
+from typing import Any
 
 import httpx
 import pytest
@@ -19,6 +20,20 @@ from tests.server.scale import export, session_body, wait_for_status
 pytestmark = pytest.mark.slow
 BUDGET = 4
 TIME_OUT_S = 1.5
+SIDES = {"red": "left", "blue": "right"}
+"""The colour rule, the sessions' (blue right, red left)."""
+
+
+def sorted_by_colour(state: dict[str, Any]) -> int:
+    """The sorting robot's correct action by hand, from what the turn's state says the arm
+    holds and where: grab when it holds nothing, drop at the held object's side, else move
+    towards it (0 grab, 1 move right, 2 move left, 3 drop)."""
+    if state["held"] is None:
+        return 0
+    side = SIDES[state["held"]["color"]]
+    if state["station"] == side:
+        return 3
+    return 1 if side == "right" else 2
 
 
 @pytest.mark.parametrize("task", ["gridworld", "sorting"])
@@ -44,9 +59,12 @@ def test_ratings_are_taken_in_their_window_and_a_silent_turn_is_recorded_as_none
     assert participant.begin().status_code == 200
 
     shown: list[tuple[int, float, float]] = []  # index, our clock from showing to receipt
+    correct: list[int] = []  # the sorting task's correct action at each rated step, by hand
     for index, rating in enumerate(["good", None, "bad", "good"]):
         state = participant.next_request()
         seen = time.monotonic()
+        if task == "sorting":
+            correct.append(sorted_by_colour(state))
         assert state["advice_index"] == index and state["rated_action"] in range(4), state
         assert 0 < state["rating_left_s"] <= TIME_OUT_S
         advice = participant.advise(index, 0)
@@ -109,6 +127,10 @@ def test_ratings_are_taken_in_their_window_and_a_silent_turn_is_recorded_as_none
         assert server_s <= ours + 0.05, (index, server_s, ours)
         assert server_s >= ours - round_trip - 0.05, (index, server_s, ours, round_trip)
     assert all(len(r["observation_hash"]) == 16 for r in rows)
+    if task == "sorting":  # the arm's state at the rated step, before its action was taken
+        assert [int(r["correct_action"]) for r in rows] == correct
+    else:  # the grid world's shortest path: its next move, one of the four
+        assert all(r["correct_action"] in ("0", "1", "2", "3") for r in rows), rows
     participant.close()
 
 

@@ -1,5 +1,6 @@
 import gzip
 import json
+import math
 import shutil
 from datetime import UTC, datetime
 from pathlib import Path
@@ -9,10 +10,16 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import MetaData, Table, func, inspect, select, text
 
+from analysis.human import participants
 from learner.config import DQNConfig
+from learner.run import RunSpec
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import alembic_config, upgrade
-from study.db.models import Base, Step, StudySession
+from study.db.models import Base, Feedback, Step, StudySession
+from study.services.episodes import load_visits
+from study.services.feedback import FeedbackGiven, write_feedback
+from study.services.sessions import create_session
+from study.services.studies import create_study
 from tests.server.live import fresh_database
 
 
@@ -147,3 +154,54 @@ def test_the_committed_replication_database_migrates(tmp_path: Path) -> None:
             assert spec.scenario.to_dict() == json.loads(old.scenario)
     engine.dispose()
     assert len(after) == 35
+
+
+def test_migration_0019_adds_the_feedbacks_correct_action_and_keeps_older_rows(
+    tmp_path: Path,
+) -> None:
+    """A judgement stored under 0018 reads with no correct action (NULL, not a guess) and
+    the report gives it no accuracy; one stored after carries its own; the downgrade keeps
+    the judgements without the column."""
+    now = datetime(2026, 12, 7, tzinfo=UTC)
+    judged = {"feedback_index": 0, "global_step": 5, "evaluator": "human", "action": 1,
+              "judgement": 1.0, "shaping": 1.0, "greedy_action": 1,
+              "observation_hash": "0" * 16, "response_time_s": 1.0, "decision_time_s": 0.5,
+              "requested_at": now, "answered_at": now}  # fmt: skip
+    with fresh_database(tmp_path) as url:
+        engine = make_engine(url)
+        command.upgrade(alembic_config(engine), "0018")
+        factory = make_session_factory(engine)
+        with factory() as db:
+            study = create_study(db, "ratings before 0019")
+            sessions = [
+                create_session(db, study.id, RunSpec(method="autonomous", seed=seed))
+                for seed in (1, 2)
+            ]
+            for s in sessions:
+                s.condition, s.outcome, s.consented_at = "rating", "completed", now
+            db.commit()
+            ids = [s.id for s in sessions]
+        with engine.begin() as c:
+            feedback = Table("feedback", MetaData(), autoload_with=c)
+            assert "correct_action" not in feedback.c
+            c.execute(feedback.insert().values(session_id=ids[0], **judged))
+        upgrade(engine)
+        with factory() as db:
+            write_feedback(db, [FeedbackGiven(session_id=ids[1], **judged, correct_action=1)])
+            db.commit()
+            stored = list(db.scalars(select(Feedback).order_by(Feedback.session_id)))
+            assert [(f.session_id, f.correct_action) for f in stored] == [
+                (ids[0], None),
+                (ids[1], 1),
+            ]
+            made = list(db.scalars(select(StudySession).order_by(StudySession.id)))
+            people = participants(load_visits(db, made)).set_index("session_id")
+        assert people.loc[ids[0], "advice"] == 1 and math.isnan(people.loc[ids[0], "accuracy"])
+        assert people.loc[ids[1], "accuracy"] == 1.0, "good of the correct action: right"
+        command.downgrade(alembic_config(engine), "0018")
+        with engine.connect() as c:
+            feedback = Table("feedback", MetaData(), autoload_with=c)
+            assert "correct_action" not in feedback.c
+            kept = c.execute(select(feedback.c.session_id).order_by(feedback.c.session_id))
+            assert [row[0] for row in kept] == ids
+        engine.dispose()

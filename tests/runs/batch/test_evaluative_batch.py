@@ -59,6 +59,11 @@ def test_oracle_evaluation_beside_oracle_advice_and_no_feedback(
         assert step.advised_action is None and f.observation_hash == step.observation_hash
         assert f.judgement in (1.0, -1.0) and f.shaping == 0.5 * f.judgement
         assert f.evaluator == "oracle"
+        # the task's correct action at the judged step: the one this oracle (no errors)
+        # calls good, so good exactly where the action taken was it
+        assert f.correct_action in range(4) and (f.judgement == 1.0) == (
+            f.action == f.correct_action
+        ), (f.global_step, f.action, f.correct_action, f.judgement)
     assert all(s.advised_action is None for s in steps.values())
 
     out_dir = place.data_dir / "feedback-export"
@@ -69,6 +74,7 @@ def test_oracle_evaluation_beside_oracle_advice_and_no_feedback(
         (f.session_id, f.global_step) for f in feedback
     ]
     assert [float(r["judgement"]) for r in rows] == [f.judgement for f in feedback]
+    assert [int(r["correct_action"]) for r in rows] == [f.correct_action for f in feedback]
     assert {r["action_name"] for r in rows} <= {"grab", "move right", "move left", "drop"}
     kinds = {int(r["session_id"]): r["feedback"] for r in read_csv(out_dir / "sessions.csv")}
     assert kinds == {autonomous.id: "advice", judged.id: "evaluative", advised.id: "advice"}
@@ -76,6 +82,7 @@ def test_oracle_evaluation_beside_oracle_advice_and_no_feedback(
     (resource,) = [r for r in package["resources"] if r["name"] == "feedback"]
     described = {f["name"]: f["type"] for f in resource["schema"]["fields"]}
     assert described["judgement"] == "number" and described["shaping"] == "number"
+    assert described["correct_action"] == "integer"
 
     # The report compares oracle evaluation and oracle advice as two arms, from the
     # database and from the export alike, neither averaged into the other.
