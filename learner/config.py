@@ -20,7 +20,7 @@ Loss = Literal["mse", "huber"]
 Optimizer = Literal["rmsprop", "adam"]
 UpdateImpl = Literal["fast", "plain"]
 Precision = Literal["auto", "bf16", "fp32"]
-ConvKernel = Literal["auto", "none", "avx512bf16", "avx2"]
+ConvKernel = Literal["auto", "none", "avx512bf16:1-3", "avx2:1-3", "avx512bf16", "avx2"]
 Fit = Literal["td", "keras"]
 Init = Literal["torch", "glorot"]
 
@@ -131,10 +131,11 @@ class DQNConfig:
     natively (`auto`), else `fp32`. Dense layers and the loss stay float32."""
     conv_kernel: ConvKernel = bounded("auto", role="numerics")
     """The fast update's convolutions on the CPU: `none` (PyTorch), or our compiled kernels
-    for all three layers (`learner.conv_kernel`), `avx512bf16` (bfloat16 values, for
-    `bf16`) or `avx2` (float32 FMA, for `fp32`); the same function in another float order.
-    `auto`: the variant for the precision that runs here where `IDEEPRL_CONV_KERNEL=on`,
-    else `none`."""
+    (`learner.conv_kernel`), `avx512bf16` (bfloat16 values, for `bf16`) or `avx2` (float32
+    FMA, for `fp32`), named with the layers they compute: `avx2:1-3` all three, a bare
+    `avx2` the first alone (the rest in PyTorch); the same function in another float
+    order. `auto`: the variant for the precision that runs here, for all three layers,
+    where `IDEEPRL_CONV_KERNEL=on`, else `none`."""
     device: str = bounded(
         "auto", role="numerics", max_length=16, pattern=r"auto|cpu|cuda(:[0-9]+)?"
     )

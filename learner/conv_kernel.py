@@ -11,8 +11,9 @@ output channels. All are built by `make kernels`, one shared library per instruc
 and file, compiled with explicit flags, chosen by the CPU's flags in /proc/cpuinfo:
 bfloat16 with AVX-512 BF16, float32 FMA with AVX2. Where none loads (another CPU, no
 compiler, CUDA), the PyTorch update is used. Which variant a run takes is part of its
-numerics (`config.conv_kernel`, pinned as precision and threads are); which layers it
-computes is `LAYERS`, the same wherever the variant runs.
+numerics (`config.conv_kernel`, pinned as precision and threads are), named with the
+layers it computes (`avx2:1-3`; a bare `avx2`, the first alone): a run pinned to a layer
+set computes that set wherever it resumes. A run left to choose takes `LAYERS`.
 
 The first kernel takes the replay memory's packed uint8 frames (`pack_frame`) and gives
 the layer's output as the second layer reads it: in the convolutions' dtype, in that
@@ -59,7 +60,7 @@ class ConvKernels:
     layers: frozenset[int] = frozenset(LAYERS)
 
 
-def _open(variant: ConvKernel) -> ConvKernels:
+def _open(variant: str, layers: frozenset[int] = frozenset(LAYERS)) -> ConvKernels:
     precision = VARIANTS[variant][1]
     library = ctypes.CDLL(str(BUILD / f"libconv1_{variant}.so"))
     forward_fn = getattr(library, f"conv1_forward_{precision}")
@@ -77,7 +78,7 @@ def _open(variant: ConvKernel) -> ConvKernels:
         backward.argtypes = [ctypes.c_void_p, ctypes.c_int64, *[ctypes.c_void_p] * 6]
         later[layer] = (forward, backward)
     dtype = torch.bfloat16 if precision == "bf16" else torch.float32
-    return ConvKernels(variant, precision, dtype, forward_fn, backward_fn, later)
+    return ConvKernels(variant, precision, dtype, forward_fn, backward_fn, later, layers)
 
 
 def load(precision: str, flags: frozenset[str] | set[str] | None = None) -> ConvKernels | None:
@@ -95,15 +96,22 @@ def load(precision: str, flags: frozenset[str] | set[str] | None = None) -> Conv
 
 
 def for_run(conv_kernel: ConvKernel, dtype: torch.dtype) -> ConvKernels | None:
-    """The kernel a run's `config.conv_kernel` names, for its convolution `dtype`: `none`,
-    None (the PyTorch update); a variant, that variant's, which must run here; `auto` (a
-    run not pinned), the variant the switch and this CPU decide
-    (`learner.machine.conv_kernel_for`). A pinned run's kernel is part of its numerics
-    (`RunSpec.pinned`), checked before it resumes (`RunSpec.numerics_problem`)."""
+    """The kernels a run's `config.conv_kernel` names, for its convolution `dtype`: `none`,
+    None (the PyTorch update); a variant with its layers (`avx2:1-3`, `avx2` the first
+    alone), that variant's for those layers, which must run here; `auto` (a run not
+    pinned), the variant the switch and this CPU decide (`learner.machine.conv_kernel_for`).
+    A pinned run's kernels are part of its numerics (`RunSpec.pinned`), checked before it
+    resumes (`RunSpec.numerics_problem`)."""
     precision = "bf16" if dtype == torch.bfloat16 else "fp32"
-    variant = machine.conv_kernel_for(precision) if conv_kernel == "auto" else conv_kernel
-    if variant == "none":
+    name = machine.conv_kernel_for(precision) if conv_kernel == "auto" else conv_kernel
+    if name == "none":
         return None
+    variant, layers = machine.conv_kernel_parts(name)
+    if not machine.conv_kernel_layers_computed(name):
+        raise ValueError(
+            f"conv_kernel {name} computes layers {sorted(layers)} with the kernels; this code "
+            f"computes {' or '.join(str(sorted(s)) for s in machine.CONV_KERNEL_LAYER_SETS)}"
+        )
     if VARIANTS[variant][1] != precision:
         raise ValueError(
             f"conv_kernel {variant} computes {VARIANTS[variant][1]} convolutions, and the "
@@ -114,7 +122,7 @@ def for_run(conv_kernel: ConvKernel, dtype: torch.dtype) -> ConvKernels | None:
             f"conv_kernel {variant} does not run here ({machine.cpu_kind()}): this CPU lacks "
             "its instructions, or `make kernels` has not built it"
         )
-    return _open(variant)
+    return _open(variant, layers)
 
 
 def _pointer(t: torch.Tensor | None) -> int | None:

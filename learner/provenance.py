@@ -9,7 +9,8 @@ run starts or resumes (`sessions.provenance`), and the report's audit compares:
   different as soon as one of those files changes;
 - `commit`: the git commit when the code runs from a checkout (None otherwise);
 - `cpu`: the CPU kind (`learner.machine.cpu_kind`), `torch` and `python` versions;
-- `numerics`: the run's pinned device, precision, first-layer kernel and threads.
+- `numerics`: the run's pinned device, precision, compiled convolutions (variant and
+  layers) and threads.
 
 Torch-free (its version is read from the installed package's metadata).
 """

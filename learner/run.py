@@ -12,9 +12,9 @@ audit. An option added here reaches all of them.
   export's `run_spec` column), every value checked; fields left out take their defaults, the
   learner config's the preset's.
 - `validate()`: the rules between fields, checked before anything is stored or started.
-- `pinned()`: the numerics (device, precision, first-layer kernel, threads) resolved on
-  this machine; a session stores its run pinned, and `numerics_problem()` says why another
-  machine cannot honour it.
+- `pinned()`: the numerics (device, precision, compiled convolutions and their layers,
+  threads) resolved on this machine; a session stores its run pinned, and
+  `numerics_problem()` says why another machine cannot honour it.
 - `build()`: the environment and the trainer.
 
 Torch is not imported by this module: `build()` imports the trainer when it is called.
@@ -494,17 +494,17 @@ class RunSpec:
             raise RunSpecError("motion", "motion is the sorting task's")
 
     def _check_conv_kernel(self) -> None:
-        """A compiled first layer (`config.conv_kernel`) only where it computes the run's."""
+        """Compiled convolutions (`config.conv_kernel`) only where they compute the run's."""
         config = self.config
         kernel = config.conv_kernel
         if kernel in ("auto", "none"):
             return
-        precision = machine.CONV_KERNEL_VARIANTS[kernel][1]
+        precision = machine.CONV_KERNEL_VARIANTS[machine.conv_kernel_parts(kernel)[0]][1]
         if config.update != "fast" or config.device.startswith("cuda") or self.learner != "dqn":
             raise RunSpecError(
                 "config.conv_kernel",
-                f"conv_kernel {kernel} is a first layer of the DQN's fast update on the CPU; "
-                "this run computes none (use conv_kernel none)",
+                f"conv_kernel {kernel} computes convolutions of the DQN's fast update on the "
+                "CPU; this run computes none (use conv_kernel none)",
             )
         if config.precision not in ("auto", precision):
             raise RunSpecError(
@@ -597,8 +597,8 @@ class RunSpec:
     def pinned(self, threads: int | None = None) -> RunSpec:
         """The run with its numerics decided on this machine, as a session stores it: the
         device (`auto`: cuda when present, else cpu), the convolution precision (`auto`:
-        bf16 where the device runs it natively, else fp32), the first layer's compiled
-        kernel (`auto`: for the sorting task's fast update on the CPU, the variant
+        bf16 where the device runs it natively, else fp32), the compiled convolutions
+        (`auto`: for the sorting task's fast update on the CPU, the variant and layers
         `machine.conv_kernel_for` gives, else none) and the torch threads (0: half the
         cores, 1 to 4, unless `threads` says how many a run gets here). Also checks
         that the replay memory fits this machine."""
@@ -625,7 +625,7 @@ class RunSpec:
 
     def repinned(self) -> RunSpec:
         """The run pinned anew on this machine, as an override of its numerics resumes it:
-        its device, precision and first-layer kernel chosen here, its threads kept."""
+        its device, precision and compiled convolutions chosen here, its threads kept."""
         config = self.config.replace(device="auto", precision="auto", conv_kernel="auto")
         return self.replace(config=config).pinned(self.config.torch_threads)
 
@@ -646,13 +646,26 @@ class RunSpec:
                 "it on a CPU with AVX-512 BF16 or AMX, or override the numerics (recorded)"
             )
         kernel = config.conv_kernel
-        if kernel not in ("auto", "none") and not machine.conv_kernel_runs(kernel):
+        if kernel in ("auto", "none"):
+            return None
+        variant, layers = machine.conv_kernel_parts(kernel)
+        if not machine.conv_kernel_runs(kernel):
             return (
-                f"the run was pinned to the {kernel} variant of the compiled first layer "
-                f"(conv_kernel), which does not run here ({machine.cpu_kind()}: the CPU lacks "
-                "its instructions, or `make kernels` has not built it): its steps would "
-                "differ. Resume it where that variant runs, or override the numerics "
+                f"the run was pinned to the {variant} variant of the compiled convolutions "
+                f"(conv_kernel {kernel}), which does not run here ({machine.cpu_kind()}: the "
+                "CPU lacks its instructions, or `make kernels` has not built it): its steps "
+                "would differ. Resume it where that variant runs, or override the numerics "
                 "(recorded)"
+            )
+        if not machine.conv_kernel_layers_computed(kernel):
+            computed = " or ".join(
+                ", ".join(map(str, sorted(s))) for s in machine.CONV_KERNEL_LAYER_SETS
+            )
+            return (
+                f"the run was pinned to compiled convolutions for layers "
+                f"{', '.join(map(str, sorted(layers)))} (conv_kernel {kernel}), and this code "
+                f"computes layers {computed} with them: its steps would differ. Resume it "
+                "with the code it was pinned with, or override the numerics (recorded)"
             )
         return None
 

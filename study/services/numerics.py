@@ -2,12 +2,13 @@
 recorded.
 
 A run is pinned when its session is created (`RunSpec.pinned`: device, convolution
-precision, the first layer's compiled kernel, torch threads). A resume on a machine that
-cannot take the same steps (a run pinned to bfloat16 on a CPU without AVX-512 BF16 or AMX,
-to CUDA without a GPU, or to a kernel variant this CPU or build lacks) is
-refused with the reason, unless the caller overrides: then the run is pinned anew on this
-machine and the change is appended to the session's `numerics_overrides` (when, at which
-step, from what, to what, why), which the export carries. A session stored before numerics
+precision, the compiled convolutions' variant and the layers it computes, torch threads).
+A resume on a machine that cannot take the same steps (a run pinned to bfloat16 on a CPU
+without AVX-512 BF16 or AMX, to CUDA without a GPU, to a kernel variant this CPU or build
+lacks, or to a set of compiled layers this code does not compute) is refused with the
+reason, unless the caller overrides: then the run is pinned anew on this machine and the
+change is appended to the session's `numerics_overrides` (when, at which step, from what,
+to what, why), which the export carries. A session stored before numerics
 were pinned (`auto`) is pinned at its next start, without an override: it never had any.
 """
 

@@ -187,11 +187,17 @@ def test_the_switch_is_off_unless_asked(monkeypatch: pytest.MonkeyPatch) -> None
 def test_a_pinned_variant_is_used_whatever_the_switch(monkeypatch: pytest.MonkeyPatch) -> None:
     kernel_or_skip("fp32")
     monkeypatch.delenv(conv_kernel.SWITCH, raising=False)
-    pinned = conv_kernel.for_run("avx2", torch.float32)
+    pinned = conv_kernel.for_run("avx2:1-3", torch.float32)
     assert pinned is not None and pinned.variant == "avx2"
+    assert pinned.layers == frozenset({1, 2, 3})
+    first = conv_kernel.for_run("avx2", torch.float32)  # pinned when layer 1 alone had one
+    assert first is not None and first.layers == frozenset({1})
     monkeypatch.setenv(conv_kernel.SWITCH, "on")
     switched = conv_kernel.for_run("auto", torch.float32)
     assert switched is not None and switched.variant == "avx2"
+    assert switched.layers == frozenset(conv_kernel.LAYERS)
+    with pytest.raises(ValueError, match="computes layers"):
+        conv_kernel.for_run("avx2:1,3", torch.float32)  # type: ignore[arg-type]
     assert conv_kernel.for_run("none", torch.float32) is None
     with pytest.raises(ValueError, match="computes fp32 convolutions"):
         conv_kernel.for_run("avx2", torch.bfloat16)
@@ -204,9 +210,13 @@ def test_the_agent_computes_with_the_pinned_kernel(monkeypatch: pytest.MonkeyPat
     agent = DQNAgent(config.replace(conv_kernel="none"), torch.device("cpu"))
     assert agent.fast.conv_kernels is None
     monkeypatch.delenv(conv_kernel.SWITCH)
-    agent = DQNAgent(config.replace(conv_kernel="avx2"), torch.device("cpu"))
+    agent = DQNAgent(config.replace(conv_kernel="avx2:1-3"), torch.device("cpu"))
     assert agent.fast.conv_kernels is not None
     assert agent.fast.conv_kernels.variant == "avx2"
+    assert agent.fast.conv_kernels.layers == frozenset({1, 2, 3})
+    agent = DQNAgent(config.replace(conv_kernel="avx2"), torch.device("cpu"))
+    assert agent.fast.conv_kernels is not None
+    assert agent.fast.conv_kernels.layers == frozenset({1})
     with pytest.raises(ValueError, match="64x64 RGB"):
         DQNAgent(config.replace(conv_kernel="avx2"), torch.device("cpu"), image_shape=(32, 32, 3))
 

@@ -103,7 +103,7 @@ def test_pinning_resolves_the_numerics_on_this_machine() -> None:
     assert plain.config.precision == "fp32"
 
 
-def test_pinning_chooses_the_first_layer_kernel_by_the_switch_the_cpu_and_the_run(
+def test_pinning_chooses_the_kernels_by_the_switch_the_cpu_and_the_run(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     if not machine.conv_kernel_runs("avx2"):
@@ -113,12 +113,45 @@ def test_pinning_chooses_the_first_layer_kernel_by_the_switch_the_cpu_and_the_ru
     assert RunSpec(config=fp32).pinned().config.conv_kernel == "none"
     monkeypatch.setenv(machine.CONV_KERNEL_SWITCH, "on")
     pinned = RunSpec(config=fp32).pinned()
-    assert pinned.config.conv_kernel == "avx2" and pinned.numerics_problem() is None
+    assert pinned.config.conv_kernel == "avx2:1-3" and pinned.numerics_problem() is None
     assert RunSpec(config=fp32.replace(update="plain")).pinned().config.conv_kernel == "none"
     assert RunSpec(config=fp32.replace(conv_kernel="none")).pinned().config.conv_kernel == "none"
     monkeypatch.setattr(machine, "cpu_flags", lambda: frozenset({"sse2"}))
     assert "avx2 variant" in (pinned.numerics_problem() or "")
     assert pinned.repinned().config.conv_kernel == "none"
+
+
+def test_the_pinned_kernel_names_the_layers_it_computes() -> None:
+    """A bare variant is the first layer alone (what it computed when runs were pinned to
+    it), a suffix names the layers; the names and their parts go both ways."""
+    assert machine.conv_kernel_parts("avx2") == ("avx2", frozenset({1}))
+    assert machine.conv_kernel_parts("avx512bf16:1-3") == ("avx512bf16", frozenset({1, 2, 3}))
+    assert machine.conv_kernel_parts("avx2:1,3") == ("avx2", frozenset({1, 3}))
+    for name in ("avx2", "avx2:1-3", "avx512bf16:1-3", "avx2:1,3"):
+        assert machine.conv_kernel_name(*machine.conv_kernel_parts(name)) == name
+    assert machine.conv_kernel_layers_computed("avx2")
+    assert machine.conv_kernel_layers_computed("avx2:1-3")
+    assert not machine.conv_kernel_layers_computed("avx2:1,3")
+
+
+def test_a_run_pinned_to_other_compiled_layers_than_this_code_computes_is_not_resumed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A run pinned to the first layer's kernel alone (`avx2`) resumes as pinned where this
+    code computes that layer set; where it does not, the reason names the layers, and a
+    re-pin takes the layers a run pinned here takes."""
+    if not machine.conv_kernel_runs("avx2"):
+        pytest.skip("the AVX2 kernel does not run here (no AVX2, or `make kernels` not run)")
+    monkeypatch.setenv(machine.CONV_KERNEL_SWITCH, "on")
+    first = RunSpec(config=SMALL.replace(precision="fp32", device="cpu", conv_kernel="avx2"))
+    assert first.pinned().config.conv_kernel == "avx2" and first.numerics_problem() is None
+    monkeypatch.setattr(machine, "CONV_KERNEL_LAYER_SETS", (frozenset({1, 2, 3}),))
+    problem = first.numerics_problem() or ""
+    assert "layers 1 (conv_kernel avx2)" in problem and "layers 1, 2, 3" in problem
+    repinned = first.repinned().config  # the layers and precision a run pinned here takes
+    assert repinned.conv_kernel == machine.conv_kernel_for(repinned.precision)
+    assert machine.conv_kernel_parts(repinned.conv_kernel)[1] == frozenset({1, 2, 3})
+    assert first.repinned().numerics_problem() is None
 
 
 def test_a_kernel_is_pinned_only_where_it_computes_the_run() -> None:
@@ -128,6 +161,9 @@ def test_a_kernel_is_pinned_only_where_it_computes_the_run() -> None:
     with pytest.raises(RunSpecError, match="computes bf16"):
         RunSpec(config=SMALL.replace(precision="fp32", conv_kernel="avx512bf16")).validate()
     RunSpec(config=SMALL.replace(precision="fp32", conv_kernel="avx2")).validate()
+    with pytest.raises(RunSpecError, match="computes bf16"):
+        RunSpec(config=SMALL.replace(precision="fp32", conv_kernel="avx512bf16:1-3")).validate()
+    RunSpec(config=SMALL.replace(precision="fp32", conv_kernel="avx2:1-3")).validate()
 
 
 def test_a_replay_memory_larger_than_the_machine_is_refused_before_anything_runs() -> None:

@@ -134,14 +134,15 @@ def test_a_session_pins_the_first_layer_kernel_the_switch_and_the_cpu_decide(
         assert bare.spec.config.conv_kernel == "none"
 
 
-def _stopped_kernel_session(url: str) -> int:
-    """A session pinned to the AVX2 first-layer kernel (float32) that stopped early."""
+def _stopped_kernel_session(url: str, kernel: str = "avx2:1-3") -> int:
+    """A session pinned to the AVX2 kernels (float32) for `kernel`'s layers that stopped
+    early."""
     with make_session_factory(make_engine(url))() as db:
-        study = create_study(db, "kernel")
-        config = {**TINY, "precision": "fp32", "device": "cpu", "conv_kernel": "avx2"}
+        study = create_study(db, f"kernel {db.query(StudySession).count()}")
+        config = {**TINY, "precision": "fp32", "device": "cpu", "conv_kernel": kernel}
         spec = RunSpec.from_json({"method": "oracle", "config": config})
         session = create_session(db, study.id, spec, threads=1)
-        assert session.spec.config.conv_kernel == "avx2"  # a pinned choice stays
+        assert session.spec.config.conv_kernel == kernel  # a pinned choice stays
         set_status(db, session.id, Status.stopped, "stopped for the test")
         return session.id
 
@@ -152,7 +153,7 @@ def test_a_resume_where_the_kernel_does_not_run_is_refused_or_overridden_and_rec
     session_id = _stopped_kernel_session(database)  # runs anywhere: it never computes avx2
     monkeypatch.setenv(machine.CONV_KERNEL_SWITCH, "on")
     monkeypatch.setattr(machine, "cpu_flags", lambda: frozenset({"sse2"}))  # a CPU without AVX2
-    with pytest.raises(NumericsRefused, match="avx2 variant of the compiled first layer") as no:
+    with pytest.raises(NumericsRefused, match="avx2 variant of the compiled convolutions") as no:
         run_session(session_id, database, WorkerOptions(data_dir=tmp_path / "data"))
     assert "override_numerics" in str(no.value)
     factory = make_session_factory(make_engine(database))
@@ -168,7 +169,8 @@ def test_a_resume_where_the_kernel_does_not_run_is_refused_or_overridden_and_rec
         session = db.get(StudySession, session_id)
         assert session is not None
         [override] = session.numerics_overrides
-        assert override["from"]["conv_kernel"] == "avx2" and override["to"]["conv_kernel"] == "none"
+        assert override["from"]["conv_kernel"] == "avx2:1-3"
+        assert override["to"]["conv_kernel"] == "none"
         assert override["from"]["precision"] == override["to"]["precision"] == "fp32"
         assert "avx2" in override["why"]
         assert session.spec.config.conv_kernel == "none"
@@ -195,7 +197,46 @@ def test_a_session_pinned_to_the_kernel_resumes_with_it_where_it_runs(
         session = db.get(StudySession, session_id)
         assert session is not None and session.numerics_overrides == []
         [computed] = session.provenance
+        assert computed["numerics"]["conv_kernel"] == "avx2:1-3"
+
+
+def test_a_session_pinned_to_the_first_layer_kernel_alone_resumes_with_that_layer_alone(
+    database: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A run pinned to `avx2` (the first layer's kernel, the rest in PyTorch) resumes with
+    that layer set where this code computes it; where it does not, the resume is refused,
+    or overridden and recorded, from the layer set it was pinned to to the one it takes."""
+    if not machine.conv_kernel_runs("avx2"):
+        pytest.skip("the AVX2 kernel does not run here (no AVX2, or `make kernels` not run)")
+    monkeypatch.setenv(machine.CONV_KERNEL_SWITCH, "on")
+    first = _stopped_kernel_session(database, "avx2")
+    assert run_session(first, database, WorkerOptions(data_dir=tmp_path / "a")) == "finished"
+    factory = make_session_factory(make_engine(database))
+    with factory() as db:
+        session = db.get(StudySession, first)
+        assert session is not None and session.numerics_overrides == []
+        assert session.spec.config.conv_kernel == "avx2"
+        [computed] = session.provenance
         assert computed["numerics"]["conv_kernel"] == "avx2"
+
+    session_id = _stopped_kernel_session(database, "avx2")
+    monkeypatch.setattr(machine, "CONV_KERNEL_LAYER_SETS", (frozenset({1, 2, 3}),))
+    with pytest.raises(NumericsRefused, match=r"layers 1 \(conv_kernel avx2\)"):
+        run_session(session_id, database, WorkerOptions(data_dir=tmp_path / "b"))
+    status = run_session(session_id, database, WorkerOptions(
+        data_dir=tmp_path / "b", override_numerics=True))  # fmt: skip
+    assert status == "finished"
+    with factory() as db:
+        session = db.get(StudySession, session_id)
+        assert session is not None
+        [override] = session.numerics_overrides
+        assert override["from"]["conv_kernel"] == "avx2"
+        to = override["to"]  # all three layers, in the precision a run pinned here takes
+        assert to["conv_kernel"] == machine.conv_kernel_for(to["precision"])
+        assert machine.conv_kernel_parts(to["conv_kernel"])[1] == frozenset({1, 2, 3})
+        assert "layers 1, 2, 3" in override["why"]
+        [computed] = session.provenance
+        assert computed["numerics"]["conv_kernel"] == to["conv_kernel"]
 
 
 def test_ideeprl_train_refuses_to_resume_where_the_pinned_kernel_does_not_run(
