@@ -298,8 +298,9 @@ def _storable(leaf: Leaf, text: str) -> None:
 
 
 def check_object(obj: Any) -> None:
-    """Check every leaf of a dataclass instance in place: ints given for floats become
-    floats; raises `FieldError` (a `ValueError`)."""
+    """Check every leaf of a dataclass instance in place (ints given for floats become
+    floats), then its class's rules across fields (`checked`), in order; raises
+    `FieldError` (a `ValueError`). `@checked` makes it the class's `__post_init__`."""
     for leaf in leaves(type(obj)):
         if len(leaf.path) != 1:
             continue  # a nested dataclass checks its own
@@ -307,6 +308,8 @@ def check_object(obj: Any) -> None:
         checked = check(leaf, value)
         if checked is not value:
             object.__setattr__(obj, leaf.name, checked)
+    for rule in getattr(type(obj), "__rules__", ()):
+        rule.check(obj)
 
 
 @dataclass(frozen=True)
@@ -352,13 +355,7 @@ def checked(*rules: Rule) -> Callable[[_T], _T]:
     def decorate(cls: _T) -> _T:
         if "__post_init__" in vars(cls):
             raise TypeError(f"{cls.__name__}: @checked writes __post_init__; declare rules")
-
-        def __post_init__(self: Any) -> None:
-            check_object(self)
-            for rule in rules:
-                rule.check(self)
-
-        cls.__post_init__ = __post_init__  # type: ignore[attr-defined]
+        cls.__post_init__ = check_object  # type: ignore[attr-defined]
         cls.__rules__ = rules  # type: ignore[attr-defined]
         return cls
 

@@ -104,14 +104,16 @@ TRACER = ROOT / "tests" / "walks"
 DOC = ROOT / "docs" / "architecture.md"
 BEGIN, END = "<!-- walks: begin (python tests/test_walks.py --update) -->", "<!-- walks: end -->"
 
-LIMITS = {"a": (51, 0, 7), "b": (22, 0, 12), "c": (50, 0, 13)}
+LIMITS = {"a": (52, 0, 6), "b": (22, 0, 11), "c": (50, 0, 11)}
 """Walk: (most files, most climbs back, most hand-offs) the code meets today, bounds that may
 only go down; issue 18 asked 10, 12 and 15 files, issue 40 asks 8, 8 and 10 hand-offs and
 no climb back (docs/architecture.md says what blocks them). Files that do a walk's work
 raise its file bound, never its hand-offs: the session manager's parts (`server/live/
 session.py`, `workers.py`), the learner's own first layer (`learner/conv_kernel.py`, a and
 c), a rating session's turns read at start (`study/services/feedback.py`, a) and the
-network that says what it observes (`learner/network.py`, b)."""
+network that says what it observes (`learner/network.py`, b). Walk a enters the trainer
+slots (`server/live/trainers.py`) only where its worker is running by the time
+`start_session` shows the session, as on a loaded machine: 51 files or 52."""
 CYCLE_CLIMBS = 0
 """The most climbs back over the worker's whole advice cycle (walk b): a bound that may only
 go down; the issue asks none."""

@@ -114,6 +114,10 @@ class RunState:
 
     run: Run
     """Which run."""
+    spec: RunSpec
+    """The run, derived once from the `BatchSpec` (`run_spec`, checked when the batch was
+    made); an `agent` run's advisor checkpoint is added where its session is found or made
+    (`BatchRunner._run_spec`), a `procedure` run's schedule once its advised run finished."""
     session_id: int | None = None
     """Its session (None: not created yet, an `agent` run waiting for the advisor)."""
     status: str = WAITING
@@ -122,9 +126,9 @@ class RunState:
     """Why it failed or stopped."""
     done_before: bool = False
     """It had finished before this invocation."""
-    spec: RunSpec | None = None
-    """The run, described once (`BatchSpec.spec_of` checks it before anything runs); an
-    `agent` run's advisor checkpoint is filled in when the advisor has trained."""
+    stored: RunSpec | None = None
+    """The run as its session stores it (pinned on the machine that made it), read once
+    where the session is found or made: its numerics and its population key come from it."""
 
 
 @dataclass(frozen=True)
@@ -196,7 +200,11 @@ class BatchRunner:
                 )
             self.spec = spec = dataclasses.replace(spec, replay_sources=tuple(sources))
         self.states = [
-            RunState(run, status=WAITING_PAIR if run.method == "procedure" else WAITING)
+            RunState(
+                run,
+                run_spec(spec, run, None),
+                status=WAITING_PAIR if run.method == "procedure" else WAITING,
+            )
             for run in plan_runs(spec)
         ]
         given = spec.template.advisor_checkpoint
@@ -205,14 +213,16 @@ class BatchRunner:
         """Every advisor checkpoint checked by this batch, in order, with its check."""
         self.queue: list[RunState] = []
         self.elsewhere: list[RunState] = []
-        self._keys: dict[int | None, Any] = {}
         self.log: Callable[[str], None] = print
 
     # --- the runs' sessions ------------------------------------------------------------
-    def _run_spec(self, state: RunState, checkpoint: str | None) -> RunSpec:
+    def _retry(self, run: Run) -> RunState:
+        """The state of an advisor trained again (a seed after one that failed its check)."""
+        return RunState(run, run_spec(self.spec, run, None))
+
+    @staticmethod
+    def _run_spec(state: RunState, checkpoint: str | None) -> RunSpec:
         """The run's `RunSpec`, with `checkpoint` advising an `agent` run."""
-        if state.spec is None:
-            state.spec = run_spec(self.spec, state.run, checkpoint)
         if state.run.method != "agent" or checkpoint is None:
             return state.spec
         return state.spec.replace(advisor_checkpoint=checkpoint)
@@ -231,8 +241,9 @@ class BatchRunner:
             db.commit()
         state.session_id, state.status = session.id, session.status
         state.done_before = session.status == Status.finished.value
+        state.stored = session.spec
         if session.status in TO_RUN and session.status != Status.created.value:
-            problem = numerics.refusal(session, session.spec)
+            problem = numerics.refusal(session, state.stored)
             if problem and not self.options.override_numerics:
                 state.status, state.detail = REFUSED, problem
 
@@ -265,7 +276,7 @@ class BatchRunner:
             f"the advisor of seed {advisor.run.seed} (session {session.id}) failed its check "
             f"({'; '.join(check.problems)}): training the advisor of seed {advisor.run.seed + 1}"
         )
-        retry = RunState(Run("autonomous", -1, advisor.run.seed + 1))
+        retry = self._retry(Run("autonomous", -1, advisor.run.seed + 1))
         self.states.insert(self.states.index(advisor) + 1, retry)
         self._ensure(db, retry)
         if retry.status == Status.finished.value:
@@ -308,7 +319,7 @@ class BatchRunner:
             row = db.get(StudySession, pair.session_id)
             assert row is not None
             path = write_schedule(db, row, self.options.data_dir / "schedules")
-            state.spec = run_spec(self.spec, state.run, None).replace(schedule=str(path))
+            state.spec = state.spec.replace(schedule=str(path))
             self._ensure(db, state)
             created.append(state)
         return created
@@ -368,7 +379,7 @@ class BatchRunner:
             if attempt >= self.options.advisor_attempts:
                 row.status += f"; {attempt} attempts failed: the batch stops here"
                 return None
-            state = RunState(Run("autonomous", -1, state.run.seed + 1))
+            state = self._retry(Run("autonomous", -1, state.run.seed + 1))
             next_row = PreviewRow(f"advisor (attempt {attempt + 1})", "autonomous", state.run.seed)
             rows.append(next_row)
             retry = find_session(db, self.study_id, self._run_spec(state, None), None)
@@ -439,21 +450,14 @@ class BatchRunner:
             return self.options.population
         return default_population(self.spec.template.pinned(), workers=self.options.workers)
 
-    def _key(self, db: Session, state: RunState) -> Any:
-        """The run's population key (`population_key`), from its session as stored."""
-        if state.session_id not in self._keys:
-            row = db.get(StudySession, state.session_id)
-            assert row is not None
-            self._keys[state.session_id] = population_key(row.spec)
-        return self._keys[state.session_id]
-
-    def _next_group(self, db: Session, workers: int) -> list[RunState]:
+    def _next_group(self, workers: int) -> list[RunState]:
         """The next population to start, taken off the queue (`next_group`). An advisor
         that `agent` runs wait for trains alone: it is the batch's critical path."""
         first = self.queue[0]
         waited_for = first.run.is_advisor and any(s.status == WAITING for s in self.states)
         population = 1 if waited_for else self.population
-        keys = [self._key(db, s) for s in self.queue]
+        # a queued run's session was found or made (`_ensure`), so its stored run was read
+        keys = [population_key(s.stored) for s in self.queue]  # type: ignore[arg-type]
         group = next_group(self.queue, keys, population, workers)
         taken = {id(s) for s in group}
         self.queue = [s for s in self.queue if id(s) not in taken]
@@ -541,14 +545,13 @@ class BatchRunner:
         previous = _stop_on_sigterm()
         try:
             while backend is not None:
-                with self.factory() as db:
-                    busy = backend.busy()  # these workers will take a share when they free
-                    while self.queue and backend.busy() < backend.capacity:
-                        free = backend.capacity - backend.busy()
-                        group = self._next_group(db, free + busy)
-                        backend.start(tuple(s.session_id for s in group))  # type: ignore[misc]
-                        for state in group:
-                            state.status = Status.running.value
+                busy = backend.busy()  # these workers will take a share when they free
+                while self.queue and backend.busy() < backend.capacity:
+                    free = backend.capacity - backend.busy()
+                    group = self._next_group(free + busy)
+                    backend.start(tuple(s.session_id for s in group))  # type: ignore[misc]
+                    for state in group:
+                        state.status = Status.running.value
                 with self.factory() as db:
                     self._ended(db, backend)
                     self._watch_elsewhere(db)

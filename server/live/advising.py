@@ -16,7 +16,6 @@ from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from sqlalchemy import func, select
-from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
 
 from runs.worker.messages import AdviceAnswer, AdviceRequest
@@ -31,7 +30,7 @@ from study.schemas.participant import (
     HistoryItem,
     ParticipantState,
 )
-from study.services.advice import AdviceGiven, write_advice
+from study.services.advice import AdviceGiven, store_advice
 from study.services.consent import NOT_CONSENTED
 from study.services.errors import Conflict, Invalid, NotFound
 from study.services.feedback import judgements_given
@@ -202,17 +201,6 @@ def _stored(manager: SessionManager, session_id: int, index: int) -> Advice | No
         )
 
 
-def _insert(manager: SessionManager, advice: AdviceGiven) -> bool:
-    with manager.factory() as db:
-        try:
-            write_advice(db, [advice])
-            db.commit()
-        except IntegrityError:
-            db.rollback()
-            return False
-    return True
-
-
 def _receipt(
     stored: Advice, body: AdviceCreate, version: int, words: tuple[str, ...]
 ) -> AdviceReceipt:
@@ -292,7 +280,7 @@ async def submit_advice(
             answered_at=answered_at,
             correct_action=request.correct_action,
         )
-        if not await run_in_threadpool(_insert, manager, advice):
+        if not await run_in_threadpool(store_advice, manager.factory, advice):
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
             assert stored is not None
             return _receipt(stored, body, manager.changes.version(session.id), words)

@@ -15,7 +15,6 @@ import time
 from datetime import UTC, datetime, timedelta
 
 from sqlalchemy import select
-from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
 
 from learner.evaluators import BAD, GOOD
@@ -28,7 +27,7 @@ from study.db.models import Feedback, Status, StudySession
 from study.schemas.participant import ParticipantState, RatingCreate, RatingReceipt
 from study.services.consent import NOT_CONSENTED
 from study.services.errors import Conflict
-from study.services.feedback import PERSON, FeedbackGiven, write_feedback
+from study.services.feedback import PERSON, FeedbackGiven, store_feedback
 from study.services.observations import observation_of
 
 JUDGEMENTS = {"good": GOOD, "bad": BAD}
@@ -95,7 +94,7 @@ async def _time_out(manager: SessionManager, handle: WorkerHandle, request: Advi
         response = live.response_time_s(time.monotonic())
         weight = await run_in_threadpool(_weight, manager, handle)
         given = _given(handle.session_id, request, None, weight, response, None)
-        if not await run_in_threadpool(_insert, manager, given):
+        if not await run_in_threadpool(store_feedback, manager.factory, given):
             return
         _close(manager, handle, request, None)
 
@@ -147,17 +146,6 @@ def _weight(manager: SessionManager, handle: WorkerHandle) -> float:
     with manager.factory() as db:
         row = db.get(StudySession, handle.session_id)
         return row.spec.feedback_weight if row is not None else 1.0
-
-
-def _insert(manager: SessionManager, given: FeedbackGiven) -> bool:
-    with manager.factory() as db:
-        try:
-            write_feedback(db, [given])
-            db.commit()
-        except IntegrityError:
-            db.rollback()
-            return False
-    return True
 
 
 def _stored(manager: SessionManager, session_id: int, index: int) -> Feedback | None:
@@ -226,7 +214,7 @@ async def submit_rating(
         judgement = JUDGEMENTS[body.rating]
         weight = await run_in_threadpool(_weight, manager, handle)
         given = _given(session_id, request, judgement, weight, response, body.decision_time_s)
-        if not await run_in_threadpool(_insert, manager, given):
+        if not await run_in_threadpool(store_feedback, manager.factory, given):
             stored = await run_in_threadpool(_stored, manager, session_id, body.advice_index)
             assert stored is not None
             return _receipt(stored, body, manager.changes.version(session_id))

@@ -2,20 +2,21 @@
 
 A person's advice is built by the web process (`server/live/advising.py`) from the
 worker's request (which carries the step and the learner's greedy action) and the
-participant's answer, and written before it is forwarded, so it is durable as soon as the
-POST returns. A machine advisor's advice is built by the worker (`runs/worker/advisors.py`,
-`RecordingAdvisor`) and written in the recorder's batched flush. Both go through
-`write_advice`; no row is updated afterwards.
+participant's answer, and written before it is forwarded (`store_advice`, a transaction of
+its own), so it is durable as soon as the POST returns. A machine advisor's advice is built
+by the worker (`runs/worker/advisors.py`, `RecordingAdvisor`) and written in the recorder's
+batched flush (`write_advice`). No row is updated afterwards.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 
 from sqlalchemy import insert
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from study.db.models import Advice
@@ -56,3 +57,16 @@ def write_advice(db: Session, advice: Sequence[AdviceGiven]) -> None:
     repeated (session, advice_index) raises `IntegrityError`: advice is written once."""
     if advice:
         db.execute(insert(Advice), [dataclasses.asdict(a) for a in advice])
+
+
+def store_advice(factory: Callable[[], Session], advice: AdviceGiven) -> bool:
+    """Write one person's advice in a transaction of its own; False when its (session,
+    advice_index) is stored already (advice is written once: the first answer stands)."""
+    with factory() as db:
+        try:
+            db.execute(insert(Advice), [dataclasses.asdict(advice)])
+            db.commit()
+        except IntegrityError:
+            db.rollback()
+            return False
+    return True

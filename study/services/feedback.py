@@ -9,11 +9,12 @@ afterwards.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 
 from sqlalchemy import func, insert, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from study.db.models import Feedback
@@ -53,6 +54,19 @@ def write_feedback(db: Session, feedback: Sequence[FeedbackGiven]) -> None:
     (session, feedback_index) raises `IntegrityError`: a judgement is written once."""
     if feedback:
         db.execute(insert(Feedback), [dataclasses.asdict(f) for f in feedback])
+
+
+def store_feedback(factory: Callable[[], Session], given: FeedbackGiven) -> bool:
+    """Write one person's judgement in a transaction of its own; False when its (session,
+    feedback_index) is stored already (a judgement is written once: the first stands)."""
+    with factory() as db:
+        try:
+            db.execute(insert(Feedback), [dataclasses.asdict(given)])
+            db.commit()
+        except IntegrityError:
+            db.rollback()
+            return False
+    return True
 
 
 PERSON = "human"
