@@ -6,16 +6,17 @@ Long, one row per step and action, because a study may run tasks with different 
 `action_name` (`tasks.Task.action_names`) and `q`.
 
 What each version wrote: this one, a column `q_<action name>` per action of the session's
-task (`study.services.export`); older ones, the four columns `q_grab`, `q_move_right`,
-`q_move_left`, `q_drop` holding actions 0-3 of any task with four actions (the sorting
-robot's, but a grid world's too), and a task with another number of actions its values in
-`q_values` (a JSON list in action order).
+task (`study.services.export`), the names listed in the sessions table's `actions`; older
+ones, the four columns `q_grab`, `q_move_right`, `q_move_left`, `q_drop` holding actions
+0-3 of any task with four actions (the sorting robot's, but a grid world's too), and a task
+with another number of actions its values in `q_values` (a JSON list in action order).
+Their sessions have no `actions`: the names are the task's where this process can load it,
+else numbered (action_0, action_1, ...).
 """
 
 from __future__ import annotations
 
 import json
-import re
 import tempfile
 import zipfile
 from collections.abc import Collection
@@ -49,7 +50,13 @@ def read_q_values(export: str | Path, sessions: Collection[int] | None = None) -
         with tempfile.TemporaryDirectory() as tmp, zipfile.ZipFile(folder) as archive:
             archive.extractall(tmp)
             return read_q_values(Path(tmp), sessions)
-    runs = {int(row["session_id"]): run_of(row) for row in _rows(_table(folder, "sessions"))}
+    sessions_table = _rows(_table(folder, "sessions"))
+    runs = {int(row["session_id"]): run_of(row) for row in sessions_table}
+    declared = {
+        int(row["session_id"]): tuple(json.loads(row["actions"]))
+        for row in sessions_table
+        if isinstance(row.get("actions"), str) and row["actions"]
+    }
     steps = _with_stage(_table(folder, "steps"))
     if sessions is not None:
         steps = steps[steps["session_id"].isin(list(sessions))]
@@ -58,7 +65,7 @@ def read_q_values(export: str | Path, sessions: Collection[int] | None = None) -
         run = runs.get(int(session_id))
         if run is None:
             raise ExportError(f"steps of session {session_id}, which sessions does not have")
-        names, values = _session_q(rows, run.task, int(session_id))
+        names, values = _session_q(rows, run.task, int(session_id), declared.get(int(session_id)))
         long = pd.DataFrame(
             {
                 "session_id": rows["session_id"].repeat(len(names)).to_numpy(),
@@ -76,14 +83,17 @@ def read_q_values(export: str | Path, sessions: Collection[int] | None = None) -
 
 
 def _session_q(
-    rows: pd.DataFrame, task: str, session_id: int
+    rows: pd.DataFrame, task: str, session_id: int, actions: tuple[str, ...] | None
 ) -> tuple[tuple[str, ...], np.ndarray]:
-    """One session's action names and its steps' Q-values (steps x actions)."""
-    try:
-        names: tuple[str, ...] | None = get_task(task).action_names
-    except TaskError:  # a researcher's module this process cannot import: numbered
-        names = None
-    own = _numbered(rows) if names is None else tuple(f"q_{n}" for n in names)
+    """One session's action names (`actions`, as the export's sessions table lists them;
+    None: as its task names them) and its steps' Q-values (steps x actions)."""
+    names: tuple[str, ...] | None = actions
+    if names is None:
+        try:
+            names = get_task(task).action_names
+        except TaskError:  # a researcher's module this process cannot import: numbered
+            names = None
+    own = () if names is None else tuple(f"q_{n}" for n in names)
     if own and all(c in rows and rows[c].notna().all() for c in own):
         values = rows[list(own)].apply(pd.to_numeric)
         return tuple(c[2:] for c in own), values.to_numpy(dtype=float)
@@ -100,13 +110,3 @@ def _session_q(
         f"session {session_id} (task {task}): its steps have no Q-values for the task's "
         f"{len(names) if names else 'unknown'} actions"
     )
-
-
-def _numbered(rows: pd.DataFrame) -> tuple[str, ...]:
-    """The numbered Q-value columns (`q_action_0`, ...) that hold this session's values."""
-    found = sorted(
-        (int(m.group(1)), c)
-        for c in rows
-        if (m := re.fullmatch(r"q_action_(\d+)", str(c))) and rows[c].notna().all()
-    )
-    return tuple(c for _, c in found)

@@ -116,6 +116,13 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
         "timed_out; empty while it goes on, and outside an online study.",
     ),
     "outcome_at": ("datetime", "When the visit's outcome was recorded (UTC)."),
+    "actions": (
+        "string",
+        "The actions of the session's task in the learner's order (action i is the "
+        "network's output i), by the names its steps' Q-value columns have (q_<name>), as a "
+        "JSON list: a reader needs no task module to know them; action_0, action_1, ... "
+        "where the exporting process could not load the task.",
+    ),
     "run_spec": (
         "string",
         "The whole run as stored (learner.run.RunSpec's JSON document, with its version): "

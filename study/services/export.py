@@ -18,7 +18,8 @@ A step's Q-values are one column per action of its session's task, named by the 
 (`q_grab`, `q_move_right`, ... for the sorting robot; `q_up`, `q_right`, ... in the grid
 world). A study of several tasks keeps one steps table whose Q-value columns are the union
 of its tasks' (in the order its sessions first run them): each step fills its own task's
-and leaves the others empty, and tasks that name an action alike share its column.
+and leaves the others empty, and tasks that name an action alike share its column. The
+sessions table's `actions` lists each session's action names in order.
 """
 
 from __future__ import annotations
@@ -107,7 +108,9 @@ def _cell_value(value: Any) -> Any:
     return json.dumps(value, sort_keys=True) if isinstance(value, dict) else value
 
 
-def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
+def _session_rows(
+    sessions: list[StudySession], actions: dict[int, QActions]
+) -> Iterator[dict[str, Any]]:
     run_leaves = leaves(declared())
     advisors = advisor_sessions(sessions)
     for s in sessions:
@@ -140,6 +143,7 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "replay_source": json.dumps(s.replay_stream["source"], sort_keys=True)
             if s.replay_stream
             else None,
+            "actions": json.dumps(list(actions[s.id].names)),
             "run_spec": json.dumps(s.run, sort_keys=True),
         }
 
@@ -346,7 +350,7 @@ def export_study(
     q_of_session, q_of_task = _q_actions(db, sessions)
     columns = table_columns(q_of_task or None)
     rows = {
-        "sessions": _session_rows(sessions),
+        "sessions": _session_rows(sessions, q_of_session),
         "texts_versions": _texts_rows(db, study.id),
         "episodes": _records(db, Episode, sessions, Episode.first_global_step),
         "steps": _records(db, Step, sessions, Step.global_step, q_of_session),

@@ -86,7 +86,9 @@ def test_a_grid_world_sessions_q_values_are_exported_under_its_actions(
     header = list(steps[0])
     assert header[8:12] == list(GRID), header
     assert not set(ROBOT) & set(header) and "q_values" not in header
-    run_spec = _rows(folder / "sessions.csv")[0]["run_spec"]
+    exported = _rows(folder / "sessions.csv")[0]
+    assert json.loads(exported["actions"]) == ["up", "right", "down", "left"]
+    run_spec = exported["run_spec"]
     computed = _learner_q(run_spec)
     assert len(steps) == len(computed) > 0
     assert [[float(s[c]) for c in GRID] for s in steps] == computed
