@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -56,7 +58,8 @@ class StepRecord:
     episode_step: int
     """Step number within the episode, from 1."""
     action: int
-    """The action executed (0 grab, 1 move right, 2 move left, 3 drop)."""
+    """The action executed, its index in the run's task's actions (the sorting robot's: 0
+    grab, 1 move right, 2 move left, 3 drop; the export's q_ columns name each task's)."""
     action_source: ActionSource
     """Who chose the executed action: `random` (pretraining), `advisor` (advice is policy
     shaping: the advised action is executed), `greedy` (the learner's best action) or
@@ -64,18 +67,20 @@ class StepRecord:
     greedy_action: int
     """The learner's own greedy choice before this step (argmax of its Q-values)."""
     q_grab: float | None
-    """The learner's Q-value of grab (action 0) in the observed state; for a task with
-    four actions its actions 0-3 fill these four columns, else they are empty and
-    `q_values` holds them."""
+    """The learner's Q-value of action 0 in the observed state (the sorting robot's grab);
+    for a task with four actions its actions 0-3 fill these four fields, else they are
+    empty and `q_values` holds them. The export and `ideeprl train`'s steps.csv name them
+    by the task's actions instead (`named_q`: q_grab, q_move_right, ... for the sorting
+    robot; q_up, q_right, ... in the grid world)."""
     q_move_right: float | None
-    """The learner's Q-value of move right (action 1)."""
+    """The learner's Q-value of action 1 (the sorting robot's move right)."""
     q_move_left: float | None
-    """The learner's Q-value of move left (action 2)."""
+    """The learner's Q-value of action 2 (the sorting robot's move left)."""
     q_drop: float | None
-    """The learner's Q-value of drop (action 3)."""
+    """The learner's Q-value of action 3 (the sorting robot's drop)."""
     q_values: str | None
     """A task without four actions: the learner's Q-values in action order, as a JSON list
-    (empty for four actions: the four columns above hold them)."""
+    (empty for four actions: the four fields above hold them)."""
     advised_action: int | None
     """The advisor's action when advice was given at this step, else empty."""
     advice_remaining: int
@@ -146,6 +151,23 @@ class EpisodeRecord:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+
+STORED_Q = ("q_grab", "q_move_right", "q_move_left", "q_drop", "q_values")
+"""A `StepRecord`'s Q-value fields, by position: the first four hold a task's with four
+actions, `q_values` any other number. Files for people (the study export, `ideeprl train`'s
+steps.csv) name them by the task's actions instead: `named_q`."""
+
+
+def named_q(step: Mapping[str, Any], names: Sequence[str]) -> dict[str, Any]:
+    """A step's Q-values (a `StepRecord`'s, or a row stored from one) as one `q_<name>`
+    entry per action of its task, `names` in action order (`tasks.Task.action_names`);
+    `ValueError` where the step holds another number of them."""
+    listed = step.get("q_values")
+    values = [step.get(c) for c in STORED_Q[:4]] if listed in (None, "") else json.loads(listed)
+    if len(values) != len(names):
+        raise ValueError(f"the step holds {len(values)} Q-values for {len(names)} actions")
+    return {f"q_{name}": value for name, value in zip(names, values, strict=True)}
 
 
 def observation_hash(obs: Any) -> str:

@@ -151,6 +151,16 @@ class TaskAction:
     """The button's words, e.g. "move left"."""
     key: str = ""
     """The keyboard key that chooses it (one character, or an arrow's name), or none."""
+    name: str = ""
+    """Its name in records and exports (the export's `q_<name>` column): lowercase letters,
+    digits and _; empty: made from its words (`Task.action_names`)."""
+
+    def __post_init__(self) -> None:
+        if self.name and not re.fullmatch(r"[a-z0-9_]{1,40}", self.name):
+            raise TaskError(
+                f"action {self.word!r}: its name {self.name!r} takes 1 to 40 lowercase "
+                "letters, digits and _"
+            )
 
 
 @dataclass(frozen=True)
@@ -221,6 +231,18 @@ class Task:
     def action_words(self) -> tuple[str, ...]:
         return tuple(a.word for a in self.actions)
 
+    @property
+    def action_names(self) -> tuple[str, ...]:
+        """Each action's name in records and exports, in the learner's order (the export
+        names the Q-value of action `move right` `q_move_right`): its declared `name`, else
+        its words in lowercase with every run of other characters than a-z and 0-9 as one _.
+        Where they would not tell every action apart (two alike, one empty, or `values`),
+        the actions are named by their index: action_0, action_1, ..."""
+        names = tuple(a.name or _name_of(a.word) for a in self.actions)
+        if len(set(names)) == len(names) and all(n and n != "values" for n in names):
+            return names
+        return tuple(f"action_{i}" for i in range(len(names)))
+
     def checked_options(self, given: TaskOptions | None) -> dict[str, OptionValue]:
         """The run's task options with the task's defaults filled in; `TaskError` names an
         option the task does not have."""
@@ -272,6 +294,11 @@ class Task:
             return self.correct_action(info, self.checked_options(options))
         action = info.get("correct_action")
         return None if action is None else int(action)
+
+
+def _name_of(words: str) -> str:
+    """An action's name made from its words: "Move right!" -> move_right."""
+    return re.sub(r"[^a-z0-9]+", "_", words.lower()).strip("_")
 
 
 def _same_kind(value: Any, default: Any) -> bool:

@@ -1,8 +1,9 @@
 """`ideeprl train`: train one learner from the command line.
 
 Writes into --out: steps.csv and episodes.csv (the records, columns as documented in
-`learner.records`), learning_curve.png, config.json, and checkpoint.pt (every
---checkpoint-every training episodes, on Ctrl-C, and at the end). `--resume CHECKPOINT`
+`learner.records`, a step's Q-values under its task's action names: `q_grab`, ...),
+learning_curve.png, config.json, and checkpoint.pt (every --checkpoint-every training
+episodes, on Ctrl-C, and at the end). `--resume CHECKPOINT`
 continues a run exactly where its checkpoint left it, with the advisor and strategy
 stored in the checkpoint.
 """
@@ -78,7 +79,7 @@ def train(args: argparse.Namespace) -> int:
 
     config, settings = spec.config, spec.to_json()
     out = args.out or (args.resume.parent if args.resume else _default_out())
-    recorder = CsvRecorder(out, resume_from_step=resumed_step)
+    recorder = CsvRecorder(out, resume_from_step=resumed_step, actions=spec.the_task.action_names)
     # Bars only for a person at a terminal, never into a pipe or a log file.
     progress = Progress(config, resumed_step, disable=args.no_progress or not sys.stderr.isatty())
     trainer, _env = spec.build([recorder, progress])

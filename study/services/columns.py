@@ -2,20 +2,51 @@
 
 Step and episode columns are documented where they are made, in the docstrings under the
 learner's `StepRecord` and `EpisodeRecord` fields (their types come from the database
-model); the run's columns (method, seed, config_*, strategy_*, scenario options, ...) from
+model), but for the steps' Q-values: one `q_<action>` column per action of the exported
+sessions' tasks (`QActions`), named by the task (`tasks.Task.action_names`). The run's
+columns (method, seed, config_*, strategy_*, scenario options, ...) come from
 the run's declaration (`learner.run.RunSpec`, its docstrings and ranges); the rest are
 documented here."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from learner.docstrings import field_docstrings
 from learner.fields import leaves
-from learner.records import EpisodeRecord, StepRecord
+from learner.records import STORED_Q, EpisodeRecord, StepRecord
 from learner.run import declared
 from study.services.tables import Column, column
 from study.services.visit_export import VISIT_COLUMNS
+from tasks import Task, get_task
+
+
+@dataclass(frozen=True)
+class QActions:
+    """A task's actions as the export's Q-value columns name them."""
+
+    names: tuple[str, ...]
+    """Each action's name, in the learner's order (`tasks.Task.action_names`)."""
+    words: tuple[str, ...]
+    """Each action's words, as its task's page shows them."""
+
+    @classmethod
+    def of(cls, task: Task) -> QActions:
+        return cls(task.action_names, task.action_words)
+
+    @classmethod
+    def numbered(cls, count: int) -> QActions:
+        """A task the exporting process cannot load (a researcher's module it cannot
+        import): its actions by their index."""
+        names = tuple(f"action_{i}" for i in range(count))
+        return cls(names, names)
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        return tuple(f"q_{name}" for name in self.names)
+
 
 SESSION_COLUMNS: dict[str, tuple[str, str]] = {
     "session_id": ("integer", "Session id (unique in the database)."),
@@ -85,6 +116,13 @@ SESSION_COLUMNS: dict[str, tuple[str, str]] = {
         "timed_out; empty while it goes on, and outside an online study.",
     ),
     "outcome_at": ("datetime", "When the visit's outcome was recorded (UTC)."),
+    "actions": (
+        "string",
+        "The actions of the session's task in the learner's order (action i is the "
+        "network's output i), by the names its steps' Q-value columns have (q_<name>), as a "
+        "JSON list: a reader needs no task module to know them; action_0, action_1, ... "
+        "where the exporting process could not load the task.",
+    ),
     "run_spec": (
         "string",
         "The whole run as stored (learner.run.RunSpec's JSON document, with its version): "
@@ -279,9 +317,31 @@ def _sql_type(column: Any) -> str:
     return "datetime" if isinstance(kind, DateTime) else "string"
 
 
-def _record_columns(table: str) -> list[Column]:
+def q_columns(tasks: Mapping[str, QActions]) -> list[Column]:
+    """The steps' Q-value columns of these tasks (by name, in the order given): one per
+    action name, shared by the tasks that have an action so named (each step fills its own
+    task's, the others are empty: sessions.csv's `task` says which task a session ran)."""
+    owners: dict[str, list[str]] = {}
+    for task, actions in tasks.items():
+        for index, (name, words) in enumerate(zip(actions.names, actions.words, strict=True)):
+            owners.setdefault(name, []).append(f"action {index} of task {task} ({words})")
+    columns = []
+    for name, which in owners.items():
+        empty = "" if len(which) == len(tasks) else "; empty for a step of a task without it"
+        columns.append(
+            column(
+                f"q_{name}",
+                "number",
+                f"The learner's Q-value of {' or '.join(which)}, in the state the step's "
+                f"action was chosen in{empty}.",
+            )
+        )
+    return columns
+
+
+def _record_columns(table: str, q: Mapping[str, QActions] | None = None) -> list[Column]:
     """Step or episode columns: types from the database model, descriptions from the
-    docstrings under the learner's record fields."""
+    docstrings under the learner's record fields; a step's Q-values as `q` names them."""
     from study.db.models import Episode, Step
 
     model, record = (Step, StepRecord) if table == "steps" else (Episode, EpisodeRecord)
@@ -290,6 +350,10 @@ def _record_columns(table: str) -> list[Column]:
     columns = [column("session_id", "integer", "Session the record belongs to.")]
     for c in model.__table__.columns:
         if c.name in ("id", "session_id", "wall_time"):
+            continue
+        if c.name in STORED_Q:
+            if c.name == STORED_Q[0]:
+                columns += q_columns(q or {"sorting": QActions.of(get_task("sorting"))})
             continue
         description = docs.get(c.name) or "(not documented)"
         columns.append(column(c.name, _sql_type(c), description, UNITS.get(c.name)))
@@ -308,14 +372,15 @@ def run_columns() -> list[Column]:
     ]
 
 
-def table_columns() -> dict[str, list[Column]]:
-    """Every exported table's typed, documented columns."""
+def table_columns(q: Mapping[str, QActions] | None = None) -> dict[str, list[Column]]:
+    """Every exported table's typed, documented columns; the steps' Q-values those of the
+    tasks `q` names (None: the sorting robot's, the default task's)."""
     own = [column(name, *spec) for name, spec in SESSION_COLUMNS.items()]
     sessions = own[:3] + run_columns() + own[3:]
     return {
         "sessions": sessions,
         "episodes": _record_columns("episodes"),
-        "steps": _record_columns("steps"),
+        "steps": _record_columns("steps", q),
         "advice": [column(name, *spec) for name, spec in ADVICE_COLUMNS.items()],
         "feedback": [column(name, *spec) for name, spec in FEEDBACK_COLUMNS.items()],
         "texts_versions": [column(name, *spec) for name, spec in TEXTS_COLUMNS.items()],

@@ -13,6 +13,13 @@ columns (one per field of `learner.run.RunSpec`) and whole (`run_spec`, JSON: wh
 and `ideeprl batch` accept back). An online study adds its assignments and its
 participants' panel ids (pseudonymous unless asked for, for payment); a researcher's
 previews are never exported.
+
+A step's Q-values are one column per action of its session's task, named by the task
+(`q_grab`, `q_move_right`, ... for the sorting robot; `q_up`, `q_right`, ... in the grid
+world). A study of several tasks keeps one steps table whose Q-value columns are the union
+of its tasks' (in the order its sessions first run them): each step fills its own task's
+and leaves the others empty, and tasks that name an action alike share its column. The
+sessions table's `actions` lists each session's action names in order.
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ from sqlalchemy.orm import Session
 
 from analysis.settings import where
 from learner.fields import leaves
+from learner.records import STORED_Q, named_q
 from learner.run import RunSpecError, declared
 from sim.rules import SortRule
 from study.db.models import (
@@ -46,7 +54,7 @@ from study.db.models import (
     StudyTexts,
 )
 from study.services import visit_export
-from study.services.columns import TEXT_KEYS, table_columns
+from study.services.columns import TEXT_KEYS, QActions, table_columns
 from study.services.errors import Conflict
 from study.services.sessions import advisor_sessions
 from study.services.studies import get_study
@@ -100,7 +108,9 @@ def _cell_value(value: Any) -> Any:
     return json.dumps(value, sort_keys=True) if isinstance(value, dict) else value
 
 
-def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
+def _session_rows(
+    sessions: list[StudySession], actions: dict[int, QActions]
+) -> Iterator[dict[str, Any]]:
     run_leaves = leaves(declared())
     advisors = advisor_sessions(sessions)
     for s in sessions:
@@ -133,13 +143,20 @@ def _session_rows(sessions: list[StudySession]) -> Iterator[dict[str, Any]]:
             "replay_source": json.dumps(s.replay_stream["source"], sort_keys=True)
             if s.replay_stream
             else None,
+            "actions": json.dumps(list(actions[s.id].names)),
             "run_spec": json.dumps(s.run, sort_keys=True),
         }
 
 
 def _records(
-    db: Session, model: Any, sessions: list[StudySession], order: Any
+    db: Session,
+    model: Any,
+    sessions: list[StudySession],
+    order: Any,
+    q: dict[int, QActions] | None = None,
 ) -> Iterator[dict[str, Any]]:
+    """The session's records, in `order`; a step's Q-values named by `q`, its session's
+    task's actions."""
     from datetime import UTC, datetime
 
     columns = [c for c in model.__table__.columns if c.name != "id"]
@@ -158,7 +175,41 @@ def _records(
             row["elapsed_s"] = None if started is None else round(wall - started, 3)
             if model is Step:
                 row["advised"] = row["advised_action"] is not None
+                row |= _named_q(row, (q or {})[session.id], session)
             yield row
+
+
+def _named_q(row: dict[str, Any], actions: QActions, session: StudySession) -> dict[str, Any]:
+    """A stored step's Q-values (taken out of `row`) as its task's columns."""
+    stored = {name: row.pop(name) for name in STORED_Q}
+    try:
+        return named_q(stored, actions.names)
+    except ValueError as error:
+        raise Conflict(
+            f"session {session.id} (task {session.spec.task}): {error}; export it with the "
+            "task module it ran with"
+        ) from None
+
+
+def _q_actions(
+    db: Session, sessions: list[StudySession]
+) -> tuple[dict[int, QActions], dict[str, QActions]]:
+    """Each session's task's actions, by session id, and each task's, by name, in the order
+    of the sessions. A task this process cannot load (a researcher's module it cannot
+    import) has its actions numbered, as many as its first stored step has Q-values."""
+    tasks = {session.id: session.spec for session in sessions}
+    by_task: dict[str, QActions] = {}
+    for spec in tasks.values():
+        if spec.task in by_task:
+            continue
+        try:
+            by_task[spec.task] = QActions.of(spec.the_task)
+        except RunSpecError:
+            ids = [i for i, other in tasks.items() if other.task == spec.task]
+            query = select(Step.q_values).where(Step.session_id.in_(ids)).limit(1)
+            listed = db.scalars(query).first()  # None: four actions (or no step yet)
+            by_task[spec.task] = QActions.numbered(4 if listed is None else len(json.loads(listed)))
+    return {i: by_task[spec.task] for i, spec in tasks.items()}, by_task
 
 
 def _action_words(session: StudySession) -> tuple[str, ...]:
@@ -297,12 +348,13 @@ def export_study(
         StudySession.pooled.is_(False),
     )
     sessions = list(db.scalars(query.order_by(StudySession.id)))
-    columns = table_columns()
+    q_of_session, q_of_task = _q_actions(db, sessions)
+    columns = table_columns(q_of_task or None)
     rows = {
-        "sessions": _session_rows(sessions),
+        "sessions": _session_rows(sessions, q_of_session),
         "texts_versions": _texts_rows(db, study.id),
         "episodes": _records(db, Episode, sessions, Episode.first_global_step),
-        "steps": _records(db, Step, sessions, Step.global_step),
+        "steps": _records(db, Step, sessions, Step.global_step, q_of_session),
         "advice": _advice_rows(db, sessions, out),
         "feedback": _feedback_rows(db, sessions),
         "assignments": _assignment_rows(db, study.id),
