@@ -25,7 +25,8 @@ from tests.study.test_export_types import check_frictionless
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-BUDGET = 100
+BUDGET = 20
+"""Enough turns for the visit's whole course; the paper's 100 only lengthen the run."""
 PHONE = {"width": 390, "height": 844}
 RIGHT = {"blue_cube": "right", "red_disk": "left", "drop_at_centre": "keep"}
 """Under the default sort rule by colour: blue right, red left."""
@@ -45,7 +46,7 @@ CUSTOM = [
 
 
 def online_study(live: Live) -> dict[str, Any]:
-    """A study with one condition of 100 advice, the default check, the built-in
+    """A study with one condition of `BUDGET` advice, the default check, the built-in
     questionnaire with the researcher's own items, and Prolific's codes."""
     run = {
         **RUN,
@@ -86,7 +87,7 @@ def test_an_online_participant_passes_the_check_advises_and_answers_the_question
 ) -> None:
     """Through the study's link with Prolific's parameters: one participant fails the
     check on both tries (excluded: its code, back to Prolific); the next passes on the
-    second try, gives all 100 advice, answers the questionnaire and is sent back to
+    second try, gives all its advice, answers the questionnaire and is sent back to
     Prolific with the completed code; the export holds it all and validates."""
     study = online_study(live)
     arrivals = Arrivals(browser)
@@ -126,7 +127,7 @@ def test_an_online_participant_passes_the_check_advises_and_answers_the_question
 
 
 def complete_the_visit(live: Live, browser: Any, page: Any, token: str) -> None:
-    """Consent, induction, the check (wrong once), 100 advice, the questionnaire."""
+    """Consent, induction, the check (wrong once), all the advice, the questionnaire."""
     through_the_induction(page)
 
     expect(page).to_have_url(re.compile(r"/check$"))
