@@ -112,8 +112,7 @@ raise its file bound, never its hand-offs: the session manager's parts (`server/
 session.py`, `workers.py`), the learner's own first layer (`learner/conv_kernel.py`, a and
 c), a rating session's turns read at start (`study/services/feedback.py`, a) and the
 network that says what it observes (`learner/network.py`, b). Walk a enters the trainer
-slots (`server/live/trainers.py`) only where its worker is running by the time
-`start_session` shows the session, as on a loaded machine: 51 files or 52."""
+slots (`server/live/trainers.py`) where `start_session` shows the session's status."""
 CYCLE_CLIMBS = 0
 """The most climbs back over the worker's whole advice cycle (walk b): a bound that may only
 go down; the issue asks none."""

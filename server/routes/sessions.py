@@ -41,7 +41,9 @@ def shown_status(
     """A session's status as the API shows it, and its place in the trainer queue: a
     session whose advice is over and that waits for a trainer slot is `queued` (1: next
     to take a slot), not `running`, until it takes one; any other keeps its status."""
-    if manager is None or status != Status.running or not manager.trainers.queued(session_id):
+    # The seat is looked up whatever the status, so a request's path through the code does
+    # not depend on how far the worker got.
+    if manager is None or not manager.trainers.queued(session_id) or status != Status.running:
         return status, None
     return QUEUED, manager.trainers.place(session_id)
 
