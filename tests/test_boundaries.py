@@ -297,6 +297,8 @@ RECORDS_ALLOWED: dict[str, str] = {
     "(`FittedAdvisorPublic.summary`, a fitted evaluator's)",
     "learner.population.Population.save_checkpoint": "`metadata`: JSON the checkpoint keeps as-is",
     "learner.trainer.Trainer.save_checkpoint": "`metadata`: JSON the checkpoint keeps as-is",
+    "learner.records.named_q": "a steps table's row as stored or written (its columns by name), "
+    "of which only the Q-value columns are read",
     "analysis.exported.run_of": "a row of an exported CSV table, by column",
     "analysis.settings.where": "rows of an exported table, by column",
     "analysis.settings.settings_table": "`sessions.provenance` entries as read from an export",
