@@ -79,7 +79,9 @@ def wait_for_status(
         if session["status"] == "failed":
             raise AssertionError(f"session failed:\n{session['status_detail']}")
         time.sleep(0.2)
-    raise AssertionError(f"session {session_id} stayed {session['status']}")
+    raise AssertionError(
+        f"session {session_id} stayed {session['status']}: {session.get('status_detail')}"
+    )
 
 
 def export(api: httpx.Client, study_id: int) -> dict[str, Any]:
