@@ -256,17 +256,22 @@ def _optional(value: Any) -> float | None:
     return None if value is None else float(value)
 
 
-def read_model(path: str | Path) -> FittedModel:
-    """A fitted model's JSON file (what `ideeprl fit` writes)."""
+def read_model_json(path: str | Path) -> Any:
+    """A fitted model's JSON file (what `ideeprl fit` writes), of either kind, as JSON;
+    `ValueError` saying what is wrong where it is missing or unreadable."""
     try:
-        data = json.loads(Path(path).read_text())
+        return json.loads(Path(path).read_text())
     except FileNotFoundError:
         raise ValueError(
             f"no fitted model at {path}: `ideeprl fit --study ID` fits one and says where"
         ) from None
     except (OSError, json.JSONDecodeError) as error:
         raise ValueError(f"cannot read the fitted model at {path}: {error}") from None
-    return FittedModel.from_json(data)
+
+
+def read_model(path: str | Path) -> FittedModel:
+    """A fitted model's JSON file (what `ideeprl fit` writes)."""
+    return FittedModel.from_json(read_model_json(path))
 
 
 def fit(

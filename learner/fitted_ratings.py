@@ -21,7 +21,6 @@ rated episodes to recover each rating's situation and correct action, and calls
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -37,6 +36,7 @@ from learner.fitted import (
     FittedModel,
     Moment,
     log_normal_time,
+    read_model_json,
     situation,
     situation_key,
     vocabulary,
@@ -240,15 +240,7 @@ def model_from_json(data: Any) -> AnyFitted:
 
 def read_any_model(path: str | Path) -> AnyFitted:
     """A fitted model's JSON file (what `ideeprl fit` writes), of either kind."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise ValueError(
-            f"no fitted model at {path}: `ideeprl fit --study ID` fits one and says where"
-        ) from None
-    except (OSError, json.JSONDecodeError) as error:
-        raise ValueError(f"cannot read the fitted model at {path}: {error}") from None
-    return model_from_json(data)
+    return model_from_json(read_model_json(path))
 
 
 def read_evaluator_model(path: str | Path) -> FittedEvaluatorModel:
