@@ -13,7 +13,11 @@
    A second reference is the library's best plain path, what a careful user writes:
    the learner's own `QNetwork` in channels-last under `torch.autocast` (bfloat16 where
    the CPU has it natively, as the fast update), uint8 frames kept in one tensor on the
-   device and converted there after an `index_select` (`CarefulDQN`).
+   device and converted there after an `index_select` (`CarefulDQN`). Where the compiled
+   convolutions run here (`make kernels`, `learner.conv_kernel`), the learner with them for
+   all three layers is timed in the same blocks, against the learner's PyTorch update and
+   the plain reference, with the network's own FLOPs a second against the core's
+   matrix-multiply rate measured in the same run.
 2. A paper-scale run (300 episodes) on the fast simulator, extrapolated from measured
    pretraining and >= 2,000 training steps to 6,700 training steps: what 300 episodes
    took the autonomous agents of docs/results/ (6,637 to 6,731; their epsilon is still
@@ -167,7 +171,13 @@ def bench_update(threads: int, repeats: int, block: int, frames: list[np.ndarray
     random.seed(0)
     reference = ReferenceDQN()
     careful = CarefulDQN(frames)
-    agent = DQNAgent(DQNConfig(torch_threads=threads), torch.device("cpu"))
+    agent = DQNAgent(DQNConfig(torch_threads=threads, conv_kernel="none"), torch.device("cpu"))
+    kernel = kernel_name(agent.dtype)
+    compiled = (
+        DQNAgent(DQNConfig(torch_threads=threads, conv_kernel=kernel), torch.device("cpu"))
+        if kernel != "none"
+        else None
+    )
     memory = ReplayMemory(len(frames), agent.frame_shape)
     for t in range(len(frames) - 1):
         done = t % 40 == 39
@@ -178,9 +188,16 @@ def bench_update(threads: int, repeats: int, block: int, frames: list[np.ndarray
     def learner_update() -> float:
         return agent.update(memory.sample(BATCH, rng))
 
-    times: dict[str, list[float]] = {"reference": [], "careful": [], "learner": []}
-    ratios: dict[str, list[float]] = {"reference": [], "careful": []}
-    for update in (reference.update, careful.update, learner_update):
+    def compiled_update() -> float:
+        assert compiled is not None
+        return compiled.update(memory.sample(BATCH, rng))
+
+    times: dict[str, list[float]] = {"reference": [], "careful": [], "learner": [], "kernels": []}
+    ratios: dict[str, list[float]] = {"reference": [], "careful": [], "kernels": []}
+    contenders = [reference.update, careful.update, learner_update]
+    if compiled is not None:
+        contenders.append(compiled_update)
+    for update in contenders:
         for _ in range(3):
             update()  # warm-up: allocator, oneDNN kernels
     for _ in range(repeats):
@@ -192,7 +209,27 @@ def bench_update(threads: int, repeats: int, block: int, frames: list[np.ndarray
         times["learner"].append(fast)
         ratios["reference"].append(ref / fast)
         ratios["careful"].append(best_plain / fast)
-    return {
+        if compiled is not None:
+            own = _time_block(compiled_update, block)
+            times["kernels"].append(own)
+            ratios["kernels"].append(fast / own)
+    kernels = (
+        {
+            "kernel": kernel,
+            "kernels_ms": 1000 * statistics.median(times["kernels"]),
+            "speedup_kernels": statistics.median(ratios["kernels"]),
+            "speedup_kernels_range": (min(ratios["kernels"]), max(ratios["kernels"])),
+            "kernels_vs_reference": statistics.median(
+                r / k for r, k in zip(times["reference"], times["kernels"], strict=True)
+            ),
+            "kernels_gflops": update_flop(agent.network, BATCH)
+            / statistics.median(times["kernels"])
+            / 1e9,
+        }
+        if compiled is not None
+        else {"kernel": "none"}
+    )
+    return kernels | {
         "threads": threads,
         "reference_ms": 1000 * statistics.median(times["reference"]),
         "careful_ms": 1000 * statistics.median(times["careful"]),
@@ -203,6 +240,39 @@ def bench_update(threads: int, repeats: int, block: int, frames: list[np.ndarray
         "speedup_careful_range": (min(ratios["careful"]), max(ratios["careful"])),
         "conv_dtype": str(agent.dtype).replace("torch.", ""),
     }
+
+
+def update_flop(network: torch.nn.Module, batch: int) -> float:
+    """The network's own FLOPs in one update (`_conv_flop`'s count): each layer forward on
+    the batch and its next states, backward on the batch (the weights' gradient, and the
+    input's but for the first convolution); the dense layers the same."""
+    from learner.network import QNetwork
+
+    assert isinstance(network, QNetwork), "the paper's network for images"
+    side, _, _ = network.image_shape
+    flop = 0.0
+    for index, conv in enumerate(network.convs):
+        out_c, in_c, k, _ = conv.weight.shape
+        one = 2.0 * batch * side * side * out_c * in_c * k * k
+        flop += 2 * one + (one if index == 0 else 2 * one)
+        side //= 2
+    for dense in (network.dense, network.out):
+        one = 2.0 * batch * dense.in_features * dense.out_features
+        flop += 2 * one + 2 * one
+    return flop
+
+
+def kernel_name(dtype: torch.dtype) -> str:
+    """The compiled convolutions for all three layers in the precision of `dtype`, where
+    they run here (`make kernels`, the CPU's flags), else `none`."""
+    from learner import machine
+
+    precision = "bf16" if dtype == torch.bfloat16 else "fp32"
+    for variant, (_, variant_precision) in machine.CONV_KERNEL_VARIANTS.items():
+        name = machine.conv_kernel_name(variant, machine.CONV_KERNEL_LAYERS)
+        if variant_precision == precision and machine.conv_kernel_runs(name):
+            return name
+    return "none"
 
 
 EXPERIMENT_UPDATES = 140_739
@@ -449,8 +519,13 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(f"load average {os.getloadavg()[0]:.1f} at the end", flush=True)
         return
     print(f"\nupdate, batch {BATCH} (median of {args.repeats} pairs of {args.block}-update blocks)")
+    from learner.device import conv_dtype
+
+    kernel_rates = []
     for threads in args.threads:
         r = bench_update(threads, args.repeats, args.block, frames)
+        if r["kernel"] != "none":
+            kernel_rates.append((threads, r["kernels_gflops"]))
         low, high = r["speedup_range"]
         c_low, c_high = r["speedup_careful_range"]
         print(
@@ -461,6 +536,26 @@ def main(argv: Sequence[str] | None = None) -> None:
             f"(pairs {c_low:.2f}x-{c_high:.2f}x)",
             flush=True,
         )
+        if r["kernel"] != "none":
+            low, high = r["speedup_kernels_range"]
+            print(
+                f"    with the compiled convolutions ({r['kernel']}): {r['kernels_ms']:5.1f} ms, "
+                f"{r['speedup_kernels']:.2f}x the learner's PyTorch update (pairs {low:.2f}x-"
+                f"{high:.2f}x), {r['kernels_vs_reference']:.2f}x the plain reference; the "
+                f"network's own FLOPs at {r['kernels_gflops']:.0f} GFLOPS",
+                flush=True,
+            )
+    dtype = conv_dtype("auto", torch.device("cpu"))
+    rate = matmul_rate(dtype)
+    print(
+        f"  the core's {str(dtype).replace('torch.', '')} matrix-multiply rate (one thread, "
+        f"same run): {rate:.0f} GFLOPS"
+        + "".join(
+            f"; the compiled update reaches {gflops / rate:.0%} of it with {threads} thread(s)"
+            for threads, gflops in kernel_rates
+        ),
+        flush=True,
+    )
 
     print(f"\npaper-scale run: 1,000 pretraining + {PAPER_TRAINING_STEPS:,} training steps")
     for threads in args.threads:
