@@ -84,7 +84,8 @@ class Settings(BaseSettings):
 
     max_trainers: int = Field(default=0, ge=0)
     """Human sessions that train at once after their advice; the others wait in a queue
-    (status `running`, `queued: true`). 0: the number of cores."""
+    (shown as status `queued`, with `queue_place`; stored as `running`). 0: the number of
+    cores."""
 
     training_population: int = Field(default=0, ge=0)
     """Finished human sessions of one learner configuration that train together in one

@@ -22,6 +22,7 @@ from runs.worker.messages import AdviceAnswer, AdviceRequest
 from server.live import rating
 from server.live.manager import SessionManager
 from server.live.session import HistoryEntry
+from server.live.trainers import QUEUED, shown_status
 from study.db.models import Advice, Status, StudySession
 from study.schemas.participant import (
     AdviceCreate,
@@ -54,6 +55,8 @@ class ParticipantSession:
 
 
 MESSAGES = {
+    QUEUED: "Your turns are done. The rest of the practice waits in line for its turn; you "
+    "may close this page.",
     Status.created: "The session has not started yet.",
     Status.paused: "The session is paused by the researcher; please wait.",
     Status.finished: "The session has finished. Thank you!",
@@ -119,12 +122,13 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             row = db.get(StudySession, session.id)
             if row is None:
                 raise NotFound("this session no longer exists")
-            status, progress = row.status, row.progress
+            stored, progress = row.status, row.progress
             ready = row.ready_for_advice
+        status, place = shown_status(manager.trainers, session.id, stored)
         return ParticipantState(
             session_id=session.id,
             status=status,
-            message=MESSAGES.get(Status(status), ""),
+            message=MESSAGES.get(status, ""),
             version=version,
             advice_wanted=False,
             robot_moving=False,
@@ -134,17 +138,19 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
             episode=int(progress.get("episode", 0)),
             stage=progress.get("stage"),
             ready=ready,
-            queued=bool(progress.get("queued", False)) and status == Status.running,
+            queued=status == QUEUED,
+            queue_place=place,
             action_names=list(session.action_words),
         )
     request = live.show()
     wanted = request is not None and live.status == Status.running
     shown = live.progress
     given = len(live.given)
+    status, place = shown_status(manager.trainers, session.id, live.status)
     state = ParticipantState(
         session_id=session.id,
-        status=live.status,
-        message=MESSAGES.get(Status(live.status), ""),
+        status=status,
+        message=MESSAGES.get(status, ""),
         version=version,
         advice_wanted=wanted,
         advice_index=request.advice_index if request is not None else None,
@@ -161,7 +167,8 @@ def participant_state(manager: SessionManager, session: ParticipantSession) -> P
         episode=shown.episode if shown else 0,
         stage=shown.stage if shown else None,
         ready=live.ready,
-        queued=manager.trainers.queued(session.id),
+        queued=status == QUEUED,
+        queue_place=place,
         history=_history(list(live.history), session.action_words),
         action_names=list(session.action_words),
         frame_png=(

@@ -71,6 +71,25 @@ class Seat:
         return max(0, progress.episodes - progress.episode)
 
 
+QUEUED = "queued"
+"""The status shown for a running session that waits for a trainer slot (the database
+keeps it `running`): to the researcher and to its participant alike."""
+
+
+def shown_status(
+    trainers: TrainerSlots | None, session_id: int, status: str
+) -> tuple[str, int | None]:
+    """A session's status as the researcher's API, the dashboard and the participant's
+    pages show it, and its place in the trainer queue: a session whose advice is over and
+    that waits for a trainer slot is `queued` (1: next to take a slot), not `running`,
+    until it takes one; any other keeps its status."""
+    # The seat is looked up whatever the status, so a request's path through the code does
+    # not depend on how far the worker got.
+    if trainers is None or not trainers.queued(session_id) or status != Status.running:
+        return status, None
+    return QUEUED, trainers.place(session_id)
+
+
 Granted = Callable[[list[Seat], object | None], None]
 """Called with each group given a slot, and the slot (None: one session's own)."""
 

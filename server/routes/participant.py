@@ -10,6 +10,7 @@ from starlette.concurrency import run_in_threadpool
 
 from server.deps import ManagerDep, ParticipantDep
 from server.live import advising, rating
+from server.live.trainers import shown_status
 from server.live.visits import end_visit
 from server.routes.pages import check_state, visit_for_token
 from study.db.models import Outcome, StudySession
@@ -133,7 +134,7 @@ async def readiness(session: ParticipantDep, manager: ManagerDep) -> Readiness:
         return Readiness(status=state.status, steps_done=0, steps_before_first_turn=0, ready=False)
     progress = live.progress
     return Readiness(
-        status=live.status,
+        status=shown_status(manager.trainers, session.id, live.status)[0],
         steps_done=progress.global_step if progress is not None else 0,
         steps_before_first_turn=live.steps_before_first_turn,
         ready=live.at_first_turn,

@@ -11,6 +11,7 @@ from sqlalchemy import select
 from learner.run import declared
 from server.deps import DbDep, ManagerDep, ResearcherDep, SettingsDep
 from server.live.manager import SessionManager
+from server.live.trainers import QUEUED, shown_status
 from server.routes.paging import PageDep
 from server.routes.params import AdviceIndex, SessionId, StudyId
 from study.db.models import LIVE_STATUSES, Advice, Status, StudySession
@@ -31,23 +32,6 @@ from study.settings import Settings
 router = APIRouter(prefix="/api", tags=["sessions"], dependencies=[ResearcherDep])
 
 
-QUEUED = "queued"
-"""The status the API shows for a running session that waits for a trainer slot."""
-
-
-def shown_status(
-    manager: SessionManager | None, session_id: int, status: str
-) -> tuple[str, int | None]:
-    """A session's status as the API shows it, and its place in the trainer queue: a
-    session whose advice is over and that waits for a trainer slot is `queued` (1: next
-    to take a slot), not `running`, until it takes one; any other keeps its status."""
-    # The seat is looked up whatever the status, so a request's path through the code does
-    # not depend on how far the worker got.
-    if manager is None or not manager.trainers.queued(session_id) or status != Status.running:
-        return status, None
-    return QUEUED, manager.trainers.place(session_id)
-
-
 def session_public(
     session: StudySession, base_url: str, manager: SessionManager | None = None
 ) -> SessionPublic:
@@ -65,7 +49,8 @@ def session_public(
         data["participant"] = session.participant.pseudonym
     if session.participant_token:
         data["participant_url"] = sessions.participant_url(base_url, session.participant_token)
-    data["status"], data["queue_place"] = shown_status(manager, session.id, session.status)
+    trainers = manager.trainers if manager is not None else None
+    data["status"], data["queue_place"] = shown_status(trainers, session.id, session.status)
     return SessionPublic(**data)
 
 
@@ -220,7 +205,7 @@ def get_progress(db: DbDep, manager: ManagerDep, session_id: SessionId) -> Progr
     live = current.progress if current is not None and current.progress is not None else None
     data = vars(live) if live is not None else dict(session.progress)
     status, place = shown_status(
-        manager, session_id, current.status if current is not None else session.status
+        manager.trainers, session_id, current.status if current is not None else session.status
     )
     advice_given = int(data.get("advice_given", 0))
     spec = session.spec

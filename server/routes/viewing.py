@@ -5,6 +5,7 @@ from fastapi import APIRouter, Request
 from sqlalchemy import select
 
 from server.deps import DbDep, ManagerDep, ParticipantDep
+from server.live.trainers import QUEUED, shown_status
 from study.db.models import Episode, StudySession
 from study.schemas.participant import CurvePoint, LearningCurve, Playback
 
@@ -34,10 +35,11 @@ def learning_curve(session: ParticipantDep, db: DbDep, manager: ManagerDep) -> L
         .order_by(Episode.episode)
     ).all()
     wait = manager.trainers.wait_s(session.id)
+    status, place = shown_status(manager.trainers, session.id, manager.status(session.id))
     return LearningCurve(
-        status=manager.status(session.id),
-        queued=manager.trainers.queued(session.id),
-        queue_place=manager.trainers.place(session.id),
+        status=status,
+        queued=status == QUEUED,
+        queue_place=place,
         wait_s=round(wait, 1) if wait is not None else None,
         episodes=row.spec.config.episodes,
         curve=[CurvePoint(episode=e, collected_reward=r) for e, r in episodes],

@@ -52,7 +52,11 @@ class ParticipantState(BaseModel):
     """Everything the advising page shows; `version` grows with every change (long-poll)."""
 
     session_id: int
-    status: str
+    status: str = Field(
+        description="As the researcher's API shows it: created, running, queued (the "
+        "advice is over and the learner waits for a trainer slot), paused, finished, "
+        "stopped, interrupted, abandoned, failed, declined, excluded or timed_out."
+    )
     message: str = ""
     version: int
     advice_wanted: bool
@@ -82,7 +86,13 @@ class ParticipantState(BaseModel):
         default=False, description="Consent and induction done: advice may be asked."
     )
     queued: bool = Field(
-        default=False, description="Advice over; the learner waits for a free trainer slot."
+        default=False,
+        description="Advice over; the learner waits for a free trainer slot (status queued).",
+    )
+    queue_place: int | None = Field(
+        default=None,
+        description="While queued: 1 for the session next in line for a trainer slot, 2 for "
+        "the one after, ...; null otherwise.",
     )
     history: list[HistoryItem] = Field(default_factory=list)
     action_names: list[str] = Field(
@@ -179,7 +189,7 @@ class ConsentState(BaseModel):
 class Readiness(BaseModel):
     """How far the robot's random pretraining is before the first turn (the page polls)."""
 
-    status: str
+    status: str = Field(description="As in the participant's state (queued included).")
     steps_done: int = Field(description="Environment steps taken so far.")
     steps_before_first_turn: int = Field(description="Random steps before the first advice.")
     ready: bool = Field(description="The robot waits for (or already asks) the first advice.")
@@ -269,9 +279,13 @@ class CurvePoint(BaseModel):
 
 
 class LearningCurve(BaseModel):
-    status: str
+    status: str = Field(
+        description="As in the participant's state: queued while the learner waits for a "
+        "trainer slot, running while it trains, then finished (or how it ended)."
+    )
     queued: bool = Field(
-        default=False, description="Waiting in the server's queue for a free trainer slot."
+        default=False,
+        description="Waiting in the server's queue for a free trainer slot (status queued).",
     )
     queue_place: int | None = Field(
         default=None,

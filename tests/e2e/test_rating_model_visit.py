@@ -2,7 +2,8 @@
 person's ratings train the learner's model of the rating (feedback_method rating_model),
 whose state the finished run's checkpoint holds; and the rating page on a tablet, portrait
 (820x1180) and landscape (1180x820), keeps the 3-D view, the sentence that asks and the two
-buttons in view without scrolling, as the advice page does on a phone."""
+buttons in view without scrolling, as the advice page does on a phone, with the scene drawn
+in the view at each size."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from sqlalchemy import select
 from learner.checkpoint import read_checkpoint
 from study.db.models import Feedback, StudySession
 from tests.e2e.conftest import VIEWPORT, Live, save_screenshot
+from tests.e2e.scene import canvas_pixels, wait_for_scene
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -115,16 +117,43 @@ def assert_rating_in_view(page: Any) -> None:
     assert page.locator("#scene").bounding_box()["height"] >= SCENE_MIN_PX
 
 
+def assert_scene_drawn(live: Live, page: Any, session_id: int, timeout: float = 120) -> None:
+    """The 3-D view has built the scene (server side), the page no longer says it is
+    loading, viser's canvas fills the frame at its size, and its middle is drawn: not one
+    flat colour. Waits for that up to `timeout` (a software WebGL draws slowly)."""
+    wait_for_scene(live, session_id)
+    expect(page.locator("#scene-loading")).to_be_hidden(timeout=timeout * 1000)
+    canvas = page.frame_locator("#scene").locator("canvas").first
+    deadline = time.monotonic() + timeout
+    while True:
+        frame = page.locator("#scene").bounding_box()
+        drawn = canvas.bounding_box()
+        fills = (
+            drawn is not None
+            and abs(drawn["width"] - frame["width"]) <= 2
+            and abs(drawn["height"] - frame["height"]) <= 2
+        )
+        spread = float(canvas_pixels(page).std()) if fills else 0.0
+        if fills and spread > 12:
+            return
+        assert time.monotonic() < deadline, (
+            f"the 3-D view is not drawn: canvas {drawn} in frame {frame}, spread {spread:.1f}"
+        )
+        time.sleep(0.5)
+
+
 def test_the_rating_page_keeps_scene_sentence_and_buttons_in_view_on_a_tablet(
     live: Live, browser: Any
 ) -> None:
+    """Portrait, then the same page turned to landscape: at each size the 3-D view shows
+    the scene (drawn, at the frame's new size) before the screenshot."""
     session = live.human_session(
         "rating tablet",
         seed=5,
         motion="fast",
         feedback="evaluative",
         advice_budget=2,
-        rating_time_out_s=60,
+        rating_time_out_s=300,  # room to wait for the 3-D view at each size
         config={"pretraining_steps": 10, "batch_size": 8, "memory_size": 300},
     )
     live.begin(session)
@@ -140,6 +169,7 @@ def test_the_rating_page_keeps_scene_sentence_and_buttons_in_view_on_a_tablet(
             re.compile(r"chose “(Grab|Move right|Move left|Drop)”")
         )
         assert_rating_in_view(page)
+        assert_scene_drawn(live, page, session["id"])
         save_screenshot(page, f"evaluative-rating-tablet-{name}")
         _rate(page, turn, "good", tap=True)
     expect(page).to_have_url(re.compile(r"/thanks$"), timeout=60_000)

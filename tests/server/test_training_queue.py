@@ -1,8 +1,8 @@
 """Many participants on a small server: a human session trains after its advice only in
-one of the server's trainer slots; the others wait, shown as queued, and take a slot as
-one frees: alone (`training_population=1`), or those of one learner configuration
-together, as a population in one worker process. Also the dashboard's report over
-sessions of different lengths."""
+one of the server's trainer slots; the others wait, shown as queued to the researcher and
+to the participant alike, and take a slot as one frees: alone (`training_population=1`),
+or those of one learner configuration together, as a population in one worker process.
+Also the dashboard's report over sessions of different lengths."""
 
 from __future__ import annotations
 
@@ -91,8 +91,15 @@ def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveSe
             }
         row = rows[third["id"]]  # the page's badge shows the status, its progress the place
         assert (row["status"], row["progress"]["queue_place"]) == ("queued", 2)
-        assert b.client.get("/api/participant/learning-curve").json()["queued"] is True
-        assert b.state()["queued"] is True
+        # The participant's own endpoints show what the researcher's do: queued, in place 1
+        # (the flag kept for clients that read it).
+        own = b.state()
+        assert (own["status"], own["queued"], own["queue_place"]) == ("queued", True, 1)
+        assert "waits in line" in own["message"]
+        curve = _curve(b)
+        assert (curve["status"], curve["queued"], curve["queue_place"]) == ("queued", True, 1)
+        assert (_curve(c)["status"], c.state()["queue_place"]) == ("queued", 2)
+        assert a.state()["status"] == _curve(a)["status"] == "running", "a: in its slot"
         trained = _progress(api, first["id"])["global_step"]
         time.sleep(2.0)
         assert _progress(api, second["id"])["global_step"] == waiting["global_step"], (
@@ -105,6 +112,9 @@ def test_training_after_advice_waits_for_a_free_trainer_slot(one_trainer: LiveSe
         _until(lambda: not _progress(api, second["id"])["queued"])
         training = api.get(f"/api/sessions/{second['id']}").json()
         assert (training["status"], training["queue_place"]) == ("running", None), "its slot"
+        own, curve = b.state(), _curve(b)
+        assert (own["status"], own["queued"], own["queue_place"]) == ("running", False, None)
+        assert (curve["status"], curve["queued"], curve["queue_place"]) == ("running", False, None)
         assert _progress(api, third["id"])["queue_place"] == 1
         moved = _progress(api, second["id"])["global_step"]
         _until(lambda: _progress(api, second["id"])["global_step"] > moved + 5)

@@ -193,7 +193,9 @@
     showHistory(s);
     if (finished) return; // the last choice's result, which `finish` waits for
     const gen = ++generation;
-    if (s.advice_budget > 0 && s.advice_left === 0) return finish(gen);
+    // Advice over: every turn given, or the learner already waits in line to practise
+    // (the thank-you page shows its place).
+    if ((s.advice_budget > 0 && s.advice_left === 0) || s.status === "queued") return finish(gen);
     const ready =
       s.status === "running" && s.advice_wanted && !s.robot_moving && s.advice_index !== sentIndex;
     if (!ready) {

@@ -38,7 +38,7 @@
     if (!response.ok) throw new Error(String(response.status));
     const data = await response.json();
     const points = data.curve.map((p) => [p.episode, p.collected_reward]);
-    const queued = data.queued && !ENDED[data.status];
+    const queued = data.status === "queued"; // waiting for a trainer slot, as the researcher sees it
     $("queue").hidden = !queued;
     if (queued) showQueue(data);
     const plotted = !queued && points.length > 0;
@@ -64,8 +64,9 @@
       : data.status === "running"
       ? `Practising: round ${Math.min(points.length + 1, data.episodes)} of ${data.episodes}`
       : data.status === "paused" ? "Paused by the researcher" : "Not practising now");
-    status.dataset.mood = data.status === "running" ? "busy" : "done";
-    return data.status !== "running" && data.status !== "paused";
+    const going = ["queued", "running"].includes(data.status);
+    status.dataset.mood = going ? "busy" : "done";
+    return !going && data.status !== "paused";
   }
 
   async function loop() {
