@@ -120,14 +120,18 @@ async def delete_study(
 
 
 def _live_pooled(db: DbDep, manager: ManagerDep, study_id: int) -> list[int]:
-    """The study's pooled sessions (kept for the next arrival) whose worker runs."""
+    """The study's pooled sessions (kept for the next arrival) whose worker runs, here or
+    on the Ray cluster."""
     pooled = db.scalars(
         select(StudySession.id).where(
             StudySession.study_id == study_id, StudySession.pooled.is_(True)
         )
     )
     return [
-        i for i in pooled if (live := manager.live(i)) is not None and live.status in LIVE_STATUSES
+        i
+        for i in pooled
+        if ((live := manager.live(i)) is not None and live.status in LIVE_STATUSES)
+        or manager.practising_elsewhere(i)
     ]
 
 
