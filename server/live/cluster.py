@@ -9,7 +9,8 @@ process's own workers, next to the participant.
 
 A machine session started on the server (a replay, a fitted advisor's or an oracle's run:
 no person advises it) goes to the cluster from its start, one task of its own
-(`SessionManager.start`), with the records it would have in a local worker. A
+(`SessionManager.start`), with the records it would have in a local worker; its seat holds
+one of the trainer slots from then until its task ends, so the queue counts its CPU. A
 pool's session practises there too (`WorkerOptions.practice_only`): its task ends at the
 step boundary before its first turn, checkpointed, and a worker of the web process takes
 it on from that checkpoint to wait for its participant next to them (`take_back`).
@@ -41,6 +42,7 @@ from sqlalchemy import select, update
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
+from learner.run import RunSpec
 from runs.worker.cluster import Handed, train_handed
 from runs.worker.link import SHUTTING_DOWN
 from runs.worker.messages import Command, Progress, StatusChanged
@@ -279,6 +281,27 @@ class TrainingCluster:
             with self._lock:
                 self._tasks[ref] = _Task(ours, attempt, practice)
         return [h.session_id for h in ours]
+
+    def train(self, handed: Handed, seat: Seat, spec: RunSpec) -> None:
+        """Train a machine session (a replay, a fitted advisor's or an oracle's run) on the
+        cluster from its start, its `seat` holding one of the trainer slots until its task
+        ends: the CPU it takes there is one the queue's place and wait count, from the
+        episodes it has left."""
+        seat.live.receive(self._stored_progress(handed.session_id, spec))
+        seat.take_slot(None)
+        with self._lock:
+            self._seats[handed.session_id] = seat
+        if not self.submit([handed]):
+            self._free(handed.session_id)
+
+    def _stored_progress(self, session_id: int, spec: RunSpec) -> Progress:
+        """The session's progress as stored (a resumed one's), else none of its run done."""
+        with self.factory() as db:
+            stored = db.scalar(select(StudySession.progress).where(StudySession.id == session_id))
+        with contextlib.suppress(TypeError):
+            return Progress(**(stored or {}))
+        episodes = spec.config.episodes
+        return Progress("pretraining", 0, 0, episodes, 1.0, 0.0, None, 0, spec.advice_budget)
 
     def practising(self) -> set[int]:
         """The sessions whose practice a task of this process runs or waits a node for,

@@ -294,7 +294,8 @@ class SessionManager:
         with self.factory() as db:
             human = get_session(db, session_id).method == "human"
         if self.cluster is not None and not human:  # a replay, a fitted or an oracle's run
-            await run_in_threadpool(self.cluster.submit, [Handed(session_id, token)])
+            seat = Seat(LiveSession(session_id, spec.advice_budget, [], self.changes))
+            await run_in_threadpool(self.cluster.train, Handed(session_id, token), seat, spec)
         elif self.cluster is not None and pooled:
             await run_in_threadpool(self.cluster.submit, [Handed(session_id, token)], 1, True)
         else:
