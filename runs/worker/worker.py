@@ -171,6 +171,9 @@ class _Run:
         self.live_view = self.spec.the_task.live_view
         """Whether the task has the live 3-D view (else the page shows its frames)."""
         spec = self.spec.validate()
+        if spec.method == "agent" and spec.advisor_checkpoint:  # kept relative to the root
+            advisor = located(spec.advisor_checkpoint, options.data_dir)
+            spec = spec.replace(advisor_checkpoint=str(advisor))
         # The run's parts, each wrapped here: the worker calls into `learner/`, never back.
         env = self._broadcast(spec.make_env(record_motion=isinstance(conn, Connection)))
         self.reporter = Reporter(

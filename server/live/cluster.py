@@ -28,7 +28,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import os
 import tempfile
 import threading
 import time
@@ -533,8 +532,3 @@ class TrainingCluster:
                 return False
             time.sleep(0.2)
         return True
-
-
-def storage_root(data_dir: Path, configured: Path | None) -> Path:
-    """The folder every node sees: the configured one, else the data folder."""
-    return Path(os.path.abspath(configured or data_dir))

@@ -99,7 +99,9 @@ class Pools:
     def _clear_stale(self) -> None:
         with self.manager.factory() as db:
             for session_id in assignment.stale_pooled(db):
-                storage.delete_session(db, self.data_dir, session_id, live_here=False)
+                storage.delete_session(
+                    db, self.data_dir, session_id, False, self.manager.options.data_dir
+                )
 
     def _make(self, at_most: int) -> list[int]:
         made: list[int] = []

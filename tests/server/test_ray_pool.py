@@ -2,7 +2,8 @@
 PostgreSQL and a storage root apart from the data folder: an online study's pooled session
 practises as a Ray task, with the records of the same practice on a server that runs it
 itself, and comes back to a worker of the web server at its first turn, from its
-checkpoint under the storage root, to wait there for an arrival."""
+checkpoint under the storage root, to wait there for an arrival. Deleting the study
+deletes that checkpoint."""
 
 from __future__ import annotations
 
@@ -37,8 +38,8 @@ FIRST_TURN = 15
 
 def practised(data_dir: Path, storage: Path, **settings: Any) -> tuple[StudySession, Any, bool]:
     """The pooled session of a one-condition study on a server with `settings`, once it
-    waits at its first turn: its row, its records, and whether its checkpoint folder is
-    under `storage`."""
+    waits at its first turn: its row, its records, and whether its checkpoint folder under
+    `storage` was there before the study was deleted and gone after."""
     data_dir.mkdir()
     storage.mkdir()
     pools = {"pool_limit": 1, "pool_every_s": 0.5, "pool_practising": 1}
@@ -70,7 +71,11 @@ def practised(data_dir: Path, storage: Path, **settings: Any) -> tuple[StudySess
             row = db.get(StudySession, session["id"])
         rows = records(factory, session["id"])
         engine.dispose()
-        return row, rows, session_dir(storage, session["id"]).is_dir()
+        folder = session_dir(storage, session["id"])
+        there = folder.is_dir()
+        gone = api.delete(f"/api/studies/{study['id']}")
+        assert gone.status_code == 204, gone.text
+        return row, rows, there and not folder.exists()
 
 
 def test_a_pool_s_practice_runs_on_the_cluster_and_its_advice_here(tmp_path: Path) -> None:
@@ -81,7 +86,7 @@ def test_a_pool_s_practice_runs_on_the_cluster_and_its_advice_here(tmp_path: Pat
     cluster.add_node(num_cpus=1)
     cluster.wait_for_nodes()
     try:
-        there, there_records, stored = practised(
+        there, there_records, deleted = practised(
             tmp_path / "there", tmp_path / "shared", ray_address=cluster.address
         )
     finally:
@@ -95,5 +100,5 @@ def test_a_pool_s_practice_runs_on_the_cluster_and_its_advice_here(tmp_path: Pat
     assert there.checkpoint_step == FIRST_TURN
     assert there.checkpoint_path.startswith(f"checkpoints/session-{there.id}/")
     assert not (tmp_path / "there" / "checkpoints").exists(), "under the storage root only"
-    assert stored, "its checkpoint under the storage root"
+    assert deleted, "its checkpoint under the storage root went with its study"
     assert there_records and there_records == here_records
