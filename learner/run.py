@@ -757,6 +757,13 @@ class RunSpec:
             return None
         return make_strategy(self.strategy, self.advice_budget, **self.strategy_options.given())
 
+    def steps_before_first_turn(self) -> int:
+        """Random practice steps before the earliest step its feedback may be asked at (a
+        run advised by none counts as early advising with no budget): where a person's
+        session waits for them, and where a pool's practice on a cluster node ends."""
+        strategy = self.make_strategy() or make_strategy("early", 0)
+        return strategy.first_advice_step(self.config.pretraining_steps) - 1
+
     def build(
         self, callbacks: Sequence[Any] = (), *, record_motion: bool = False
     ) -> tuple[Trainer | SB3DQNTrainer, Any]:

@@ -31,7 +31,7 @@ from server.guard import (
 )
 from server.limits import WindowLimit
 from server.live import rating
-from server.live.cluster import TrainingCluster, cluster_refusal, storage_root
+from server.live.cluster import TrainingCluster, cluster_refusal
 from server.live.hub import Hub
 from server.live.manager import SessionManager
 from server.live.playbacks import Playbacks
@@ -73,12 +73,9 @@ class ClusterRefused(Exception):
 
 def worker_options(settings: Settings) -> WorkerOptions:
     """With a Ray cluster, checkpoints go to the storage root that every node sees."""
-    shared = settings.ray_address is not None
     return WorkerOptions(
-        data_dir=storage_root(settings.data_dir, settings.storage_root)
-        if shared
-        else settings.data_dir,
-        shared_storage=shared,
+        data_dir=settings.checkpoint_root,
+        shared_storage=settings.shared_root is not None,
         checkpoint_every_episodes=settings.checkpoint_every_episodes,
         flush_every_steps=settings.flush_every_steps,
         heartbeat_s=settings.heartbeat_s,
@@ -148,9 +145,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     rating.install(manager)
     if settings.ray_address:
-        refusal = cluster_refusal(
-            settings.db_url, storage_root(settings.data_dir, settings.storage_root)
-        )
+        refusal = cluster_refusal(settings.db_url, settings.checkpoint_root)
         if refusal is not None:
             raise ClusterRefused(refusal)
         manager.cluster = TrainingCluster(

@@ -149,8 +149,10 @@ class Settings(BaseSettings):
     (PostgreSQL) and `storage_root`."""
 
     storage_root: Path | None = None
-    """The folder every node of the Ray cluster sees at this same path, where checkpoints
-    go; default `data_dir` (then it must be the shared folder)."""
+    """The folder every node of the Ray cluster sees, where checkpoints go (a node may
+    mount it elsewhere: `IDEEPRL_STORAGE_ROOT` in its `ray start`'s environment); default
+    `data_dir` (then it must be the shared folder). Without `ray_address` checkpoints stay
+    in `data_dir`."""
 
     keep_replay_memory: bool = False
     """Keep the replay memory in a finished session's final checkpoint (a session's own
@@ -172,8 +174,21 @@ class Settings(BaseSettings):
         return f"sqlite:///{self.data_dir / 'ideeprl.sqlite3'}"
 
     @property
-    def checkpoint_dir(self) -> Path:
-        return self.data_dir / "checkpoints"
+    def checkpoint_root(self) -> Path:
+        """Where sessions' checkpoints lie (`checkpoints/session-ID/`): with a Ray cluster
+        the storage root its nodes share (`storage_root`, else `data_dir`), else `data_dir`.
+        Workers write there; deletion removes them there; `session:ID` advisors read them
+        there."""
+        if self.ray_address is None:
+            return self.data_dir
+        return Path(os.path.abspath(self.storage_root or self.data_dir))
+
+    @property
+    def shared_root(self) -> Path | None:
+        """The storage root a Ray cluster's nodes share, which stored checkpoint paths are
+        relative to (each node may mount it elsewhere); None: one machine, whose stored
+        paths are absolute."""
+        return self.checkpoint_root if self.ray_address is not None else None
 
     @property
     def export_dir(self) -> Path:

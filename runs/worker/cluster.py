@@ -137,8 +137,9 @@ def adopt(factory: sessionmaker[Session], handed: Sequence[Handed], node: str) -
 def train_handed(
     handed: Sequence[Handed], database_url: str, options: WorkerOptions
 ) -> dict[int, str]:
-    """The Ray task: train the handed sessions to their end on this node; each one's final
-    status (as `run_session` gives it)."""
+    """The Ray task: train the handed sessions to their end on this node (a pool's session
+    with `options.practice_only` to its first turn, still `running`); each one's status
+    then (as `run_session` gives it)."""
     factory = make_session_factory(make_engine(database_url))
     adopted = adopt(factory, handed, node_name())
     if not adopted:

@@ -86,6 +86,11 @@ class WorkerOptions:
     the participants still advising keep the CPU."""
     train_idle: bool = False
     """And SCHED_IDLE then (Linux), as `idle`."""
+    practice_only: bool = False
+    """Run the random practice only: at the step boundary before the earliest step its
+    feedback may be asked at (`RunSpec.steps_before_first_turn`), checkpoint and exit,
+    still `running` under its token. A pool's practice on a cluster node, whose advice goes
+    on next to the web process from that checkpoint (`server.live.cluster`)."""
 
 
 class _Run:
@@ -166,6 +171,9 @@ class _Run:
         self.live_view = self.spec.the_task.live_view
         """Whether the task has the live 3-D view (else the page shows its frames)."""
         spec = self.spec.validate()
+        if spec.method == "agent" and spec.advisor_checkpoint:  # kept relative to the root
+            advisor = located(spec.advisor_checkpoint, options.data_dir)
+            spec = spec.replace(advisor_checkpoint=str(advisor))
         # The run's parts, each wrapped here: the worker calls into `learner/`, never back.
         env = self._broadcast(spec.make_env(record_motion=isinstance(conn, Connection)))
         self.reporter = Reporter(
@@ -359,6 +367,8 @@ class _Run:
                     if self.link is not None:
                         self.link.poll()
                     self.between_steps()
+                    if self.practised():
+                        raise HandOver("practised up to its first turn")
                 except WorkerExit as exit_:
                     return self.exit(exit_, at_step_boundary=True)
                 try:
@@ -379,6 +389,15 @@ class _Run:
             self._wait_for_training_slot()
         if self.recorder.episodes_since_checkpoint >= self.options.checkpoint_every_episodes:
             self.checkpoint()
+
+    def practised(self) -> bool:
+        """A practice-only run (`WorkerOptions.practice_only`) has reached its first turn."""
+        return self.options.practice_only and self.recorder.steps >= self.first_turn
+
+    @functools.cached_property
+    def first_turn(self) -> int:
+        """Random practice steps before its earliest feedback."""
+        return self.spec.steps_before_first_turn()
 
     def finish(self) -> Status:
         """The trainer is done: the final checkpoint, then the session is finished."""

@@ -9,7 +9,11 @@ process's own workers, next to the participant.
 
 A machine session started on the server (a replay, a fitted advisor's or an oracle's run:
 no person advises it) goes to the cluster from its start, one task of its own
-(`SessionManager.start`), with the records it would have in a local worker.
+(`SessionManager.start`), with the records it would have in a local worker; its seat holds
+one of the trainer slots from then until its task ends, so the queue counts its CPU. A
+pool's session practises there too (`WorkerOptions.practice_only`): its task ends at the
+step boundary before its first turn, checkpointed, and a worker of the web process takes
+it on from that checkpoint to wait for its participant next to them (`take_back`).
 
 The database is the channel both ways: the task writes records, progress, checkpoints and
 status, and reads the researcher's stop and pause from the session's row; the web process
@@ -24,13 +28,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import os
 import tempfile
 import threading
 import time
 import uuid
 from collections.abc import Callable, MutableMapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -38,6 +41,7 @@ from sqlalchemy import select, update
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
+from learner.run import RunSpec
 from runs.worker.cluster import Handed, train_handed
 from runs.worker.link import SHUTTING_DOWN
 from runs.worker.messages import Command, Progress, StatusChanged
@@ -47,6 +51,7 @@ from server.live.reaping import join
 from server.live.trainers import Seat
 from study.db.models import Status, StudySession, utcnow
 from study.services.errors import Conflict
+from study.services.ownership import HOST
 from study.services.sessions import set_status
 
 log = logging.getLogger(__name__)
@@ -101,6 +106,8 @@ class HandedHandle(Protocol):
 class _Task:
     handed: list[Handed]
     attempt: int = 1
+    practice: bool = False
+    """A pool's random practice: it ends at its session's first turn."""
 
 
 class TrainingCluster:
@@ -130,6 +137,9 @@ class TrainingCluster:
         self._notify: Callable[[int], None] = lambda session_id: None
         self._release: Callable[[Seat], None] = lambda seat: None
         self._set_slots: Callable[[int], None] = lambda slots: None
+        self._practised: Callable[[Handed], None] = lambda handed: None
+        self._returning: set[int] = set()
+        """Sessions whose practice ended, until a worker of the web process takes them."""
         self._capacity = 0
         self._capacity_read_at = 0.0
         self._closing = threading.Event()
@@ -174,12 +184,15 @@ class TrainingCluster:
         notify: Callable[[int], None],
         release: Callable[[Seat], None],
         set_slots: Callable[[int], None],
+        practised: Callable[[Handed], None] = lambda handed: None,
     ) -> None:
         """The trainer slots' side, called on this event loop (the caller's thread): whom
         an ended task's sessions are told to (`notify`), who frees their seats (`release`),
-        and who takes the cluster's capacity as the number of trainer slots (`set_slots`)."""
+        who takes the cluster's capacity as the number of trainer slots (`set_slots`), and
+        who goes on with a session whose practice ended at its first turn (`practised`)."""
         self._loop = asyncio.get_running_loop()
         self._notify, self._release, self._set_slots = notify, release, set_slots
+        self._practised = practised
         if self._capacity:
             set_slots(self._capacity)
 
@@ -253,16 +266,77 @@ class TrainingCluster:
             self._notify(handle.session_id)
 
     # --- tasks ----------------------------------------------------------------------------
-    def submit(self, handed: Sequence[Handed], attempt: int = 1) -> list[int]:
+    def submit(
+        self, handed: Sequence[Handed], attempt: int = 1, practice: bool = False
+    ) -> list[int]:
         """Send the sessions still `running` (or `paused`) under their tokens to the cluster
         as one task, each under a new token of this process until the task takes it; the
-        sessions sent."""
+        sessions sent. `practice`: a pool's session, whose task ends at its first turn
+        (`WorkerOptions.practice_only`); `bind`'s `practised` then takes it back."""
         ours = self._retoken(handed)
         if ours:
-            ref = self._remote.remote(ours, self.database_url, self.options)
+            options = replace(self.options, practice_only=practice)
+            ref = self._remote.remote(ours, self.database_url, options)
             with self._lock:
-                self._tasks[ref] = _Task(ours, attempt)
+                self._tasks[ref] = _Task(ours, attempt, practice)
         return [h.session_id for h in ours]
+
+    def train(self, handed: Handed, seat: Seat, spec: RunSpec) -> None:
+        """Train a machine session (a replay, a fitted advisor's or an oracle's run) on the
+        cluster from its start, its `seat` holding one of the trainer slots until its task
+        ends: the CPU it takes there is one the queue's place and wait count, from the
+        episodes it has left."""
+        seat.live.receive(self._stored_progress(handed.session_id, spec))
+        seat.take_slot(None)
+        with self._lock:
+            self._seats[handed.session_id] = seat
+        if not self.submit([handed]):
+            self._free(handed.session_id)
+
+    def _stored_progress(self, session_id: int, spec: RunSpec) -> Progress:
+        """The session's progress as stored (a resumed one's), else none of its run done."""
+        with self.factory() as db:
+            stored = db.scalar(select(StudySession.progress).where(StudySession.id == session_id))
+        with contextlib.suppress(TypeError):
+            return Progress(**(stored or {}))
+        episodes = spec.config.episodes
+        return Progress("pretraining", 0, 0, episodes, 1.0, 0.0, None, 0, spec.advice_budget)
+
+    def practising(self) -> set[int]:
+        """The sessions whose practice a task of this process runs or waits a node for,
+        or that a worker of the web process is about to take back."""
+        with self._lock:
+            tasks = {h.session_id for t in self._tasks.values() if t.practice for h in t.handed}
+            return tasks | self._returning
+
+    def returned(self, session_id: int) -> None:
+        """The web process is done taking the practised session back."""
+        with self._lock:
+            self._returning.discard(session_id)
+
+    def take_back(self, handed: Handed) -> str | None:
+        """A session whose practice ended, for a worker of this process: a new token, this
+        machine its host; None when its row is not under its task's token (stopped, ended or
+        deleted meanwhile)."""
+        token = uuid.uuid4().hex
+        with self.factory() as db:
+            result = db.execute(
+                update(StudySession)
+                .where(
+                    StudySession.id == handed.session_id,
+                    StudySession.worker_token == handed.token,
+                    StudySession.status == Status.running.value,
+                )
+                .values(
+                    worker_token=token,
+                    worker_host=HOST,
+                    worker_pid=None,
+                    heartbeat_at=utcnow(),
+                    status_detail="",
+                )
+            )
+            db.commit()
+        return token if result.rowcount == 1 else None  # type: ignore[attr-defined]
 
     def _retoken(self, handed: Sequence[Handed]) -> list[Handed]:
         ours = []
@@ -332,17 +406,38 @@ class TrainingCluster:
         ready, _ = ray.wait(refs, num_returns=len(refs), timeout=0)
         for ref in ready:
             with self._lock:
-                task = self._tasks.pop(ref)
-            try:
-                statuses = ray.get(ref)
-            except ray.exceptions.RayTaskError as error:  # the task's own code raised
-                self._fail(task, str(error))
-                continue
-            except ray.exceptions.RayError as error:  # its node or worker died
-                self._again(task, error)
-                continue
-            for session_id, status in statuses.items():
-                self._ended(session_id, status)
+                task = self._tasks.get(ref)
+            if task is None:  # closing
+                return
+            try:  # it stays among the tasks until handled: its sessions are never between
+                self._handle(task, ref)
+            finally:
+                with self._lock:
+                    self._tasks.pop(ref, None)
+
+    def _handle(self, task: _Task, ref: Any) -> None:
+        """An ended task: its sessions' ends, a practice's return, or a start again."""
+        import ray
+
+        try:
+            statuses = ray.get(ref)
+        except ray.exceptions.RayTaskError as error:  # the task's own code raised
+            self._fail(task, str(error))
+            return
+        except ray.exceptions.RayError as error:  # its node or worker died
+            self._again(task, error)
+            return
+        for h in task.handed:
+            status = statuses.get(h.session_id)
+            if task.practice and status == Status.running.value:
+                with self._lock:
+                    self._returning.add(h.session_id)
+                self._on_loop(self._practised, h)
+            elif status is not None:
+                self._ended(h.session_id, status)
+            else:  # stopped or ended before the task took it: its seat frees
+                self._free(h.session_id)
+                self._on_loop(self._notify, h.session_id)
 
     def _again(self, task: _Task, error: Exception) -> None:
         """The task's node (or its worker) died: its sessions start again on another node
@@ -351,8 +446,12 @@ class TrainingCluster:
             "a Ray task of sessions %s died: %s", [h.session_id for h in task.handed], error
         )
         if task.attempt < ATTEMPTS:
-            again = self.submit(task.handed, task.attempt + 1)
+            again = self.submit(task.handed, task.attempt + 1, task.practice)
             log.info("sessions %s start again on the cluster", again)
+            for h in task.handed:
+                if h.session_id not in again:  # stopped or ended meanwhile
+                    self._free(h.session_id)
+                    self._on_loop(self._notify, h.session_id)
             return
         detail = f"its node of the Ray cluster died {ATTEMPTS} times; resume it"
         with self.factory() as db:
@@ -433,8 +532,3 @@ class TrainingCluster:
                 return False
             time.sleep(0.2)
         return True
-
-
-def storage_root(data_dir: Path, configured: Path | None) -> Path:
-    """The folder every node sees: the configured one, else the data folder."""
-    return Path(os.path.abspath(configured or data_dir))

@@ -32,7 +32,6 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from learner.run import RunSpec
-from learner.strategies import make_strategy
 from runs.worker.cluster import Handed
 from runs.worker.link import SHUTTING_DOWN, WAITED_FOR_PARTICIPANT
 from runs.worker.messages import AdviceRequest, Command, StatusChanged, TrainingWanted
@@ -139,7 +138,12 @@ class SessionManager:
     async def open(self) -> None:
         self._loop = asyncio.get_running_loop()
         if self.cluster is not None:  # its capacity is the number of trainer slots
-            self.cluster.bind(self.changes.notify, self.trainers.release, self.trainers.set_slots)
+            self.cluster.bind(
+                self.changes.notify,
+                self.trainers.release,
+                self.trainers.set_slots,
+                self._practised,
+            )
         self.workers.warm()
         await run_in_threadpool(self._reap)
         self._reaper = asyncio.create_task(self._reap_forever())
@@ -284,8 +288,24 @@ class SessionManager:
     ) -> None:
         """Start (or resume) the session's worker; `pooled`: it waits in its condition's
         pool for an arrival, its idle limit off until `assign`. With a Ray cluster a machine
-        session (no person advises it) trains there, as a human one does after its advice."""
+        session (no person advises it) trains there, as a human one does after its advice,
+        and a pool's session practises there (`_practised` takes it back at its first turn)."""
         token, spec = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
+        with self.factory() as db:
+            human = get_session(db, session_id).method == "human"
+        if self.cluster is not None and not human:  # a replay, a fitted or an oracle's run
+            seat = Seat(LiveSession(session_id, spec.advice_budget, [], self.changes))
+            await run_in_threadpool(self.cluster.train, Handed(session_id, token), seat, spec)
+        elif self.cluster is not None and pooled:
+            await run_in_threadpool(self.cluster.submit, [Handed(session_id, token)], 1, True)
+        else:
+            self._start_here(session_id, token, spec, pooled)
+            return
+        self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
+        self.changes.notify(session_id)
+
+    def _start_here(self, session_id: int, token: str, spec: RunSpec, pooled: bool) -> None:
+        """The session's worker in a process of this machine, under `token`."""
         with self.factory() as db:
             session = get_session(db, session_id)
             advice = db.scalars(
@@ -294,15 +314,8 @@ class SessionManager:
             human = session.method == "human"
             rated = rated_turns(db, session_id) if human else []  # a rating session's turns
             ready = human and session.ready_for_advice
-            strategy = spec.make_strategy() or make_strategy("early", 0)
-            first_turn = strategy.first_advice_step(spec.config.pretraining_steps) - 1
+            first_turn = spec.steps_before_first_turn()
             run = spec if human else None
-        if self.cluster is not None and not human:  # a replay, a fitted or an oracle's run:
-            # it trains on the cluster from its start
-            await run_in_threadpool(self.cluster.submit, [Handed(session_id, token)])
-            self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
-            self.changes.notify(session_id)
-            return
         # People wait on human sessions; machine sessions yield the CPU to them, and so
         # does a human session once its advice is over.
         options = (
@@ -320,7 +333,7 @@ class SessionManager:
         try:
             process, parent = self.workers.start(session_id, options, token)
         except Exception as error:
-            await run_in_threadpool(self._set_status, session_id, Status.failed, str(error), token)
+            self._set_status(session_id, Status.failed, str(error), token)
             raise
         # (an advice row without an action is a replay's request past its recorded stream:
         # nothing was given there)
@@ -339,6 +352,42 @@ class SessionManager:
             self.set_ready(session_id)
         self.hub.publish(session_id, "status", StatusChanged(Status.running.value))
         self.changes.notify(session_id)
+
+    def _practised(self, handed: Handed) -> None:
+        """A pool's session practised on the cluster up to its first turn: its advice goes
+        on in a worker here, from the checkpoint there (on the event loop's thread)."""
+        assert self._loop is not None
+        task = self._loop.create_task(self._back_from_practice(handed))
+        self._handovers.add(task)
+        task.add_done_callback(self._handovers.discard)
+
+    async def _back_from_practice(self, handed: Handed) -> None:
+        assert self.cluster is not None
+        session_id = handed.session_id
+        try:
+            token = await run_in_threadpool(self.cluster.take_back, handed)
+            if token is None:  # stopped, ended or deleted meanwhile
+                return
+            if self._closing:
+                detail = f"{SHUTTING_DOWN} as its practice ended"
+                await run_in_threadpool(
+                    self._set_status, session_id, Status.interrupted, detail, token
+                )
+                return
+            with self.factory() as db:
+                session = get_session(db, session_id)
+                spec = numerics.settle(db, session, session.spec, False)
+                pooled = session.pooled  # not once an arrival has taken it meanwhile
+            self._start_here(session_id, token, spec, pooled)
+        except Exception:
+            log.exception("session %s: its worker did not start after its practice", session_id)
+        finally:
+            self.cluster.returned(session_id)
+            self.changes.notify(session_id)
+
+    def practising_elsewhere(self, session_id: int) -> bool:
+        """Its practice runs on the cluster, or is coming back to a worker here."""
+        return self.cluster is not None and session_id in self.cluster.practising()
 
     def assign(self, session_id: int) -> None:
         """A pooled session was given to an arrival: its idle limit runs from now."""

@@ -10,7 +10,8 @@ randomization gives its condition takes the oldest ready one (`assignment.arrive
 idle limit runs from then (`SessionManager.assign`), and the pool is topped up again.
 At most `practising` pooled sessions practise at once (one fewer than the cores by
 default): a practice takes a core for several seconds, and the participants advising
-meanwhile keep the rest.
+meanwhile keep the rest. With a Ray cluster the practice runs there, and the session comes
+back to a worker of this machine at its first turn (`SessionManager.start`).
 A pooled session whose worker stopped (a restart, a failure) holds nobody's data: it is
 deleted and made again.
 """
@@ -88,6 +89,8 @@ class Pools:
     def practising(self) -> int:
         """Pooled sessions this server started that are not at their first turn yet."""
         for session_id in list(self._started):
+            if self.manager.practising_elsewhere(session_id):  # on the Ray cluster
+                continue
             live = self.manager.live(session_id)
             if live is None or live.status != Status.running.value or live.at_first_turn:
                 self._started.discard(session_id)
@@ -96,7 +99,9 @@ class Pools:
     def _clear_stale(self) -> None:
         with self.manager.factory() as db:
             for session_id in assignment.stale_pooled(db):
-                storage.delete_session(db, self.data_dir, session_id, live_here=False)
+                storage.delete_session(
+                    db, self.data_dir, session_id, False, self.manager.options.data_dir
+                )
 
     def _make(self, at_most: int) -> list[int]:
         made: list[int] = []

@@ -10,7 +10,9 @@ What a caller needs: `request` a slot for a session's `Seat`, `release` it when 
 ends, `place` and `wait_s` for its page. What granting a slot does to the worker (train on,
 or hand over to a population's worker) is the caller's `granted` callback, so the slots can
 be placed elsewhere without the queue changing: on a Ray cluster (`server.live.cluster`)
-they are the cluster's CPUs, and its sessions' seats hold them until their tasks end.
+they are the cluster's CPUs, and its sessions' seats hold them until their tasks end; a
+machine session there takes its seat at its start, without queueing, so the sessions
+queued behind count the CPU it takes.
 """
 
 from __future__ import annotations
@@ -214,6 +216,11 @@ class TrainerSlots:
                 max(s.episodes_left() * rates.get(s.session_id, typical * live) for s in members)
             )
         frees.sort()
+        while len(frees) > self.slots:  # more train than there are slots (a cluster's
+            # machine sessions start without a queue): the extra wait for the first to free
+            extra = frees.pop()
+            frees[0] += extra
+            frees.sort()
         for group in self._plan()[: place - 1]:
             longest = max(s.episodes_left() for s in group)
             frees[0] += longest * typical * len(group)

@@ -91,9 +91,16 @@ def creation_router() -> APIRouter:
             spec = assignment.numbered_seed(db, study_id, spec)
         options = SessionOptions(**values)
         session = sessions.create_session(
-            db, study_id, spec, options, settings.data_dir, settings.worker_threads
+            db,
+            study_id,
+            spec,
+            options,
+            settings.data_dir,
+            settings.worker_threads,
+            shared_root=settings.shared_root,
         )
-        storage.remove_session_files(settings.data_dir, session.id, None)  # see delete_session
+        # see delete_session
+        storage.remove_session_files(settings.checkpoint_root, session.id, None)
         public = session_public(session, settings.base_url)
         practise = settings.pretrain_on_create if pretrain is None else pretrain
         if practise and session.participant_token:
@@ -135,7 +142,7 @@ def delete_session(
     (built from them); refused while it runs. How a participant's data is deleted."""
     current = manager.live(session_id)
     live = current is not None and current.status in LIVE_STATUSES
-    storage.delete_session(db, settings.data_dir, session_id, live)
+    storage.delete_session(db, settings.data_dir, session_id, live, settings.checkpoint_root)
     request.app.state.participant_tokens.clear()
     request.app.state.playbacks.close_deleted(db)
     return Response(status_code=204)

@@ -108,7 +108,10 @@ async def delete_study(
         db.expire_all()
         live = {i for i in manager.handles if manager.status(i) in LIVE_STATUSES}
         try:
-            await run_in_threadpool(storage.delete_study, db, settings.data_dir, study_id, live)
+            checkpoints = settings.checkpoint_root
+            await run_in_threadpool(
+                storage.delete_study, db, settings.data_dir, study_id, live, checkpoints
+            )
             break
         except Conflict:
             db.rollback()
@@ -120,21 +123,26 @@ async def delete_study(
 
 
 def _live_pooled(db: DbDep, manager: ManagerDep, study_id: int) -> list[int]:
-    """The study's pooled sessions (kept for the next arrival) whose worker runs."""
+    """The study's pooled sessions (kept for the next arrival) whose worker runs, here or
+    on the Ray cluster."""
     pooled = db.scalars(
         select(StudySession.id).where(
             StudySession.study_id == study_id, StudySession.pooled.is_(True)
         )
     )
     return [
-        i for i in pooled if (live := manager.live(i)) is not None and live.status in LIVE_STATUSES
+        i
+        for i in pooled
+        if ((live := manager.live(i)) is not None and live.status in LIVE_STATUSES)
+        or manager.practising_elsewhere(i)
     ]
 
 
 @router.get("/{study_id}/disk")
 def study_disk(db: DbDep, settings: SettingsDep, study_id: StudyId) -> StudyDisk:
     """Bytes the study keeps on disk (checkpoints per session, report), beside its rows."""
-    return disk_public(storage.study_disk(db, settings.data_dir, study_id))
+    found = storage.study_disk(db, settings.data_dir, study_id, settings.checkpoint_root)
+    return disk_public(found)
 
 
 @router.get("/{study_id}/fitted")
@@ -217,7 +225,10 @@ async def _delete_sessions(
         if live is not None and live.status in LIVE_STATUSES:
             await manager.end(session_id, Status.stopped, "deleted by the researcher")
         db.expire_all()
-        await run_in_threadpool(storage.delete_session, db, settings.data_dir, session_id, False)
+        checkpoints = settings.checkpoint_root
+        await run_in_threadpool(
+            storage.delete_session, db, settings.data_dir, session_id, False, checkpoints
+        )
     request.app.state.participant_tokens.clear()
     request.app.state.playbacks.close_deleted(db)
 

@@ -17,6 +17,7 @@ from study.db.models import (
     Participant,
     StudySession,
     located,
+    stored_path,
 )
 from study.schemas.sessions import SessionOptions
 from study.services.errors import Invalid, NotFound
@@ -63,14 +64,20 @@ def participant_url(base_url: str, token: str) -> str:
     return f"{base_url}/p/{token}"
 
 
-def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
+def advisor_path(
+    db: Session, spec: str, data_dir: Path | None, shared_root: Path | None = None
+) -> str:
     """The checkpoint file an `agent` session's advisor names: `session:ID` (a session of
     this installation with a checkpoint), or a path that must lie under `data_dir` (the
-    API's rule; the batch runner and the command line, run by the researcher, pass None)."""
+    API's rule; the batch runner and the command line, run by the researcher, pass None).
+    `shared_root`: the storage root a Ray cluster's nodes share (`Settings.shared_root`),
+    where the sessions' checkpoints lie: a session's is found there and kept relative to
+    it, as its own row keeps it, so each node reads it where it mounts the root."""
     if spec.startswith("session:"):
         number = spec.removeprefix("session:")
         found = db.get(StudySession, int(number)) if number.isdigit() and len(number) < 10 else None
-        file = located(found.checkpoint_path, data_dir or Path()) if found is not None else None
+        root = shared_root or data_dir or Path()
+        file = located(found.checkpoint_path, root) if found is not None else None
         if found is None or file is None or not file.is_file():
             raise Invalid(
                 "run.advisor_checkpoint",
@@ -83,6 +90,8 @@ def advisor_path(db: Session, spec: str, data_dir: Path | None) -> str:
                 "run.advisor_checkpoint names an sb3-dqn session: its checkpoint is "
                 "Stable-Baselines3's, which cannot advise; name a session of the paper's learner",
             )
+        if shared_root is not None:
+            return stored_path(file.absolute(), shared_root)
         return str(file.resolve())
     try:
         path = Path(spec).resolve()
@@ -109,13 +118,15 @@ def create_session(
     data_dir: Path | None = None,
     threads: int | None = None,
     replay: Replay | None = None,
+    shared_root: Path | None = None,
 ) -> StudySession:
     """A new session in `created` state, its run validated and pinned on this machine and
     stored whole; a human one gets its participant and token. `data_dir`: where an advisor's
     checkpoint file must lie (see `advisor_path`; None: anywhere, for the researcher's own
     command line); `threads`: torch threads of a run that leaves them open; `replay`: a
     replayed run's source session (None: not in this database) and its recorded stream
-    (`study.services.replays`, the only maker of replays)."""
+    (`study.services.replays`, the only maker of replays); `shared_root`: a Ray cluster's
+    storage root, where a `session:ID` advisor's checkpoint lies (`advisor_path`)."""
     options = options or SessionOptions()
     if (spec.method == "replayed") != (replay is not None):
         raise Invalid(
@@ -125,7 +136,8 @@ def create_session(
         )
     get_study(db, study_id)
     if spec.advisor_checkpoint and spec.method == "agent":
-        spec = spec.replace(advisor_checkpoint=advisor_path(db, spec.advisor_checkpoint, data_dir))
+        checkpoint = advisor_path(db, spec.advisor_checkpoint, data_dir, shared_root)
+        spec = spec.replace(advisor_checkpoint=checkpoint)
     if spec.fitted_model and spec.method == "fitted":
         spec = spec.replace(fitted_model=resolve(db, spec.fitted_model, data_dir))
     spec = spec.validate().pinned(threads)

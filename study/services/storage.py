@@ -10,6 +10,11 @@ pseudonym once no session of theirs remains. Rows go
 first, in one transaction; files after, so a failure leaves files of a deleted session
 (removed again when the id would be used, which it never is: ids are not reused), never
 rows without their files.
+
+Reports, exports and fitted models lie in the data folder (`data_dir`); checkpoints under
+the checkpoint root (`checkpoints`), which is the data folder too unless a Ray cluster's
+nodes share a storage root apart from it (`Settings.checkpoint_root`), where a row's
+relative checkpoint path starts.
 """
 
 from __future__ import annotations
@@ -40,9 +45,10 @@ log = logging.getLogger(__name__)
 LIVE = [s.value for s in LIVE_STATUSES]
 
 
-def session_dir(data_dir: Path, session_id: int) -> Path:
-    """A session's checkpoint folder (the worker's `data_dir/checkpoints/session-ID`)."""
-    return data_dir / "checkpoints" / f"session-{session_id}"
+def session_dir(checkpoints: Path, session_id: int) -> Path:
+    """A session's checkpoint folder under the checkpoint root (the worker's
+    `data_dir/checkpoints/session-ID`)."""
+    return checkpoints / "checkpoints" / f"session-{session_id}"
 
 
 def _report_paths(data_dir: Path, study_id: int) -> list[Path]:
@@ -72,10 +78,11 @@ def _inside(path: Path, folder: Path) -> bool:
         return False
 
 
-def remove_session_files(data_dir: Path, session_id: int, checkpoint: str | None) -> None:
-    _remove(session_dir(data_dir, session_id))
-    file = located(checkpoint, data_dir)
-    if file is not None and _inside(file, data_dir):
+def remove_session_files(checkpoints: Path, session_id: int, checkpoint: str | None) -> None:
+    """A session's checkpoint folder and its stored checkpoint, under the checkpoint root."""
+    _remove(session_dir(checkpoints, session_id))
+    file = located(checkpoint, checkpoints)
+    if file is not None and _inside(file, checkpoints):
         _remove(file)
 
 
@@ -135,23 +142,39 @@ def _refuse_live(session: StudySession, live_here: bool) -> None:
         )
 
 
-def _advised_by(db: Session, sessions: list[StudySession]) -> list[int]:
-    """Unfinished sessions elsewhere whose advisor is one of these sessions' checkpoints."""
-    paths = [s.checkpoint_path for s in sessions if s.checkpoint_path]
-    if not paths:
+def _file(path: str | None, checkpoints: Path) -> Path | None:
+    """The file a stored path names (relative: under the checkpoint root), resolved."""
+    found = located(path, checkpoints)
+    return found.resolve() if found is not None else None
+
+
+def _advised_by(db: Session, sessions: list[StudySession], checkpoints: Path) -> list[int]:
+    """Unfinished sessions elsewhere whose advisor is one of these sessions' checkpoints
+    (each path stored relative to the checkpoint root or absolute, as the database was
+    written)."""
+    files = {_file(s.checkpoint_path, checkpoints) for s in sessions if s.checkpoint_path}
+    if not files:
         return []
     ids = {s.id for s in sessions}
     query = select(StudySession).where(StudySession.status != Status.finished.value)
     return [
         s.id
         for s in db.scalars(query)
-        if s.id not in ids and s.run.get("advisor_checkpoint") in paths
+        if s.id not in ids and _file(s.run.get("advisor_checkpoint"), checkpoints) in files
     ]
 
 
-def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool) -> None:
+def delete_session(
+    db: Session,
+    data_dir: Path,
+    session_id: int,
+    live_here: bool,
+    checkpoints: Path | None = None,
+) -> None:
     """Delete one session: rows, checkpoints, the study's report, and what was made from its
-    data (`_made_from`); refused while any of them runs."""
+    data (`_made_from`); refused while any of them runs. `checkpoints`: the checkpoint root
+    (None: the data folder)."""
+    checkpoints = checkpoints or data_dir
     session = db.get(StudySession, session_id)
     if session is None:
         raise NotFound(f"no session with id {session_id}")
@@ -159,7 +182,7 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
     made, models = _made_from(db, data_dir, {session_id})
     for other in made:
         _refuse_live(other, False)
-    advised = _advised_by(db, [session, *made])
+    advised = _advised_by(db, [session, *made], checkpoints)
     if advised:
         raise Conflict(
             f"session {session_id}'s checkpoint advises unfinished session(s) "
@@ -185,17 +208,21 @@ def delete_session(db: Session, data_dir: Path, session_id: int, live_here: bool
         if participant is not None:
             db.delete(participant)
     db.commit()
-    remove_session_files(data_dir, session_id, checkpoint)
+    remove_session_files(checkpoints, session_id, checkpoint)
     remove_fitted_files(data_dir, fitted)
     remove_study_files(data_dir, study_id)  # its report was built from this session's data
     for made_id, made_checkpoint, made_study in derived:
-        remove_session_files(data_dir, made_id, made_checkpoint)
+        remove_session_files(checkpoints, made_id, made_checkpoint)
         remove_study_files(data_dir, made_study)
 
 
-def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> None:
+def delete_study(
+    db: Session, data_dir: Path, study_id: int, live: set[int], checkpoints: Path | None = None
+) -> None:
     """Delete a study with its sessions, participants, checkpoints, report and exports, its
-    fitted models, and what was made from its sessions' data and models elsewhere."""
+    fitted models, and what was made from its sessions' data and models elsewhere.
+    `checkpoints`: the checkpoint root (None: the data folder)."""
+    checkpoints = checkpoints or data_dir
     study = get_study(db, study_id)
     sessions = list(study.sessions)
     running = [s.id for s in sessions if s.status in LIVE or s.id in live]
@@ -215,7 +242,7 @@ def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> 
             f"study {study_id}'s sessions have running replay(s) or fitted run(s) in other "
             f"studies ({', '.join(map(str, running))}); stop them first"
         )
-    advised = _advised_by(db, [*sessions, *made])
+    advised = _advised_by(db, [*sessions, *made], checkpoints)
     if advised:
         raise Conflict(
             f"study {study_id}'s sessions advise unfinished session(s) "
@@ -231,7 +258,7 @@ def delete_study(db: Session, data_dir: Path, study_id: int, live: set[int]) -> 
     db.commit()
     remove_fitted_files(data_dir, fitted)
     for session_id, checkpoint in files:
-        remove_session_files(data_dir, session_id, checkpoint)
+        remove_session_files(checkpoints, session_id, checkpoint)
     for other in {study_id, *(r.study_id for r in elsewhere)}:
         remove_study_files(data_dir, other)
 
@@ -258,13 +285,18 @@ class DiskUse:
     """Its report and any export being packed."""
 
 
-def study_disk(db: Session, data_dir: Path, study_id: int) -> DiskUse:
+def study_disk(
+    db: Session, data_dir: Path, study_id: int, checkpoints: Path | None = None
+) -> DiskUse:
+    """`checkpoints`: the checkpoint root (None: the data folder)."""
+    checkpoints = checkpoints or data_dir
     study = get_study(db, study_id)
     found = {}
     for session in sorted(study.sessions, key=lambda s: s.id):
-        size = _size(session_dir(data_dir, session.id))
-        checkpoint = located(session.checkpoint_path, data_dir)
-        if checkpoint is not None and not _inside(checkpoint, session_dir(data_dir, session.id)):
+        folder = session_dir(checkpoints, session.id)
+        size = _size(folder)
+        checkpoint = located(session.checkpoint_path, checkpoints)
+        if checkpoint is not None and not _inside(checkpoint, folder):
             size += _size(checkpoint)
         found[session.id] = size
     reports = sum(_size(p) for p in _report_paths(data_dir, study_id))

@@ -1,12 +1,15 @@
 """Checkpoint paths kept relative to the storage root a Ray cluster's nodes share
 (`study.db.models.stored_path`, `located`): a session trained with the root at one path resumes
 from its checkpoint with the same folder mounted at another, with the records of an
-uninterrupted run; a path stored absolute still reads."""
+uninterrupted run; a path stored absolute still reads. A root apart from the data folder
+holds the checkpoints that `session:ID` advisors read (their path kept relative to it too)
+and that deletion removes."""
 
 from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -17,9 +20,12 @@ from runs.worker.cluster import STORAGE_ROOT_VARIABLE, DatabaseChannel, Handed, 
 from runs.worker.worker import WorkerOptions, run_session
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
-from study.db.models import Status, StudySession, located, stored_path
+from study.db.models import Advice, Status, StudySession, located, stored_path
+from study.services import storage
+from study.services.errors import Conflict
 from study.services.sessions import claim, create_session, set_status
 from study.services.studies import create_study
+from study.settings import Settings
 from tests.server.live import fresh_database
 from tests.server.scale import records, session_body
 
@@ -119,3 +125,69 @@ def test_a_node_reads_the_storage_root_where_it_mounts_it(
     assert node_storage_root(web) == web
     monkeypatch.setenv(STORAGE_ROOT_VARIABLE, str(tmp_path / "mnt"))  # `ray start`'s here
     assert node_storage_root(web) == tmp_path / "mnt"
+
+
+def test_the_checkpoint_root_is_the_storage_root_only_with_a_cluster(tmp_path: Path) -> None:
+    data, root = tmp_path / "data", tmp_path / "shared"
+    alone = Settings(data_dir=data, storage_root=root)
+    assert (alone.checkpoint_root, alone.shared_root) == (data, None)
+    clustered = Settings(data_dir=data, storage_root=root, ray_address="10.0.0.1:6379")
+    assert clustered.checkpoint_root == clustered.shared_root == root
+    assert Settings(data_dir=data, ray_address="auto").checkpoint_root == data.absolute()
+
+
+def test_advisors_and_deletion_find_checkpoints_under_a_root_apart(tmp_path: Path) -> None:
+    data, root = tmp_path / "data", tmp_path / "shared"  # the web server's, the nodes'
+    data.mkdir()
+    with fresh_database(tmp_path) as url:
+        engine = make_engine(url)
+        upgrade(engine)
+        factory = make_session_factory(engine)
+        shared = WorkerOptions(data_dir=root, shared_storage=True)
+        with factory() as db:
+            study_id = create_study(db, "apart").id
+            body = session_body("autonomous", episodes=2)
+            advisor = create_session(db, study_id, RunSpec.from_json(body["run"])).id
+        assert run_session(advisor, url, shared) == Status.finished
+
+        def agent() -> int:
+            body = session_body(
+                "agent", advice_budget=10, episodes=2, advisor_checkpoint=f"session:{advisor}"
+            )
+            with factory() as db:
+                spec = RunSpec.from_json(body["run"])
+                return create_session(db, study_id, spec, data_dir=data, shared_root=root).id
+
+        advised, waiting = agent(), agent()
+        with factory() as db:
+            stored = db.get(StudySession, advised)
+            assert stored is not None
+            kept = stored.run["advisor_checkpoint"]
+        assert kept == f"checkpoints/session-{advisor}/final.pt", "relative, as its own row's"
+        mounted = tmp_path / "node" / "mnt"  # a node mounts the root elsewhere
+        mounted.parent.mkdir()
+        root.rename(mounted)
+        assert run_session(advised, url, replace(shared, data_dir=mounted)) == Status.finished
+        mounted.rename(root)
+        with factory() as db:
+            given = db.query(Advice).filter_by(session_id=advised).count()
+            assert given == 10, "advised by the checkpoint under the root"
+            disk = storage.study_disk(db, data, study_id, root)
+            assert disk.session_bytes[advisor] > 0 and disk.session_bytes[advised] > 0
+            with pytest.raises(Conflict, match="advises"):  # `waiting` has not run yet
+                storage.delete_session(db, data, advisor, False, root)
+            db.rollback()
+            older = db.get(StudySession, waiting)  # an older database's absolute path
+            assert older is not None
+            older.run = {**older.run, "advisor_checkpoint": str(root / kept)}
+            db.commit()
+            with pytest.raises(Conflict, match="advises"):
+                storage.delete_session(db, data, advisor, False, root)
+            db.rollback()
+            storage.delete_session(db, data, waiting, False, root)
+            storage.delete_session(db, data, advised, False, root)
+            storage.delete_session(db, data, advisor, False, root)
+        for session_id in (advisor, advised):
+            assert not storage.session_dir(root, session_id).exists(), "deleted under the root"
+        assert not (data / "checkpoints").exists(), "nothing was ever in the data folder"
+        engine.dispose()

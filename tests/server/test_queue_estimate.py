@@ -118,3 +118,27 @@ def test_a_freed_slot_goes_to_the_longest_queued_with_its_population(slots: Slot
     assert slots.granted == [[2, 4]], "the longest queued, with the one it trains with"
     assert slots.seats[2].slot is slots.seats[4].slot is not None
     assert trainers.place(3) == 1 and not trainers.queued(2)
+
+
+def test_machine_sessions_on_a_cluster_hold_slots_the_queue_counts(slots: Slots) -> None:
+    """A machine session on a Ray cluster takes its slot at its start, without queueing
+    (`TrainingCluster.train`): a participant queued behind waits for it, and one started
+    while every slot was taken waits for the first slot to free before it runs."""
+    running, waiting = _seat(1, 5), _seat(2, 0)
+    for seat in (running, waiting):  # machine sessions: no run, no queue
+        seat.take_slot(None)
+    running.training_since = time.monotonic() - 10.0  # 5 episodes in 10 s: 2 s each
+    running.episodes_at_slot = 0
+    slots.hold(running, waiting)
+    trainers = slots.trainers
+    person = _seat(3, 0)
+    slots.seats[3] = person
+    trainers.request(person)
+    assert slots.granted == [], "both machine sessions hold the one slot"
+    assert trainers.place(3) == 1
+    # the slot frees after 15 x 2 s, then the waiting one runs its 20 episodes at 2 s each
+    assert trainers.wait_s(3) == pytest.approx(30.0 + 40.0, abs=0.5)
+    trainers.release(running)
+    assert slots.granted == [], "the waiting machine session takes the slot that freed"
+    trainers.release(waiting)
+    assert slots.granted == [[3]]

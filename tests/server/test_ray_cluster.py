@@ -2,7 +2,8 @@
 PostgreSQL and a shared folder: their records are those of training on this machine with
 the same seeds, and a session whose node is killed mid-run finishes on the other node
 from its last checkpoint, with the records of an uninterrupted run. The trainer slots
-(and so the queue's place and wait) are the cluster's CPUs, as its nodes come and go."""
+(and so the queue's place and wait) are the cluster's CPUs, as its nodes come and go, and
+the machine sessions it trains hold theirs, so a participant queued behind them waits."""
 
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ from runs.worker.link import SHUTTING_DOWN
 from runs.worker.worker import WorkerOptions, run_session
 from server.live.cluster import SHUT_DOWN, TrainingCluster, cluster_refusal
 from server.live.hub import Hub
-from server.live.trainers import TrainerSlots
+from server.live.session import Changes, LiveSession
+from server.live.trainers import Seat, TrainerSlots
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Status, StudySession
@@ -129,19 +131,37 @@ def test_sessions_train_on_two_nodes_as_here_and_survive_a_node_killed(
     trainer = TrainingCluster(cluster.address, factory, url, options, Hub())
     loop = asyncio.new_event_loop()  # the web process's, where the trainer slots live
     threading.Thread(target=loop.run_forever, daemon=True).start()
-    slots = TrainerSlots(7, 1, trainer.seats, lambda seats, slot: None)
+    person = Seat(LiveSession(999, 10, [], Changes()))  # a participant queued for training
+    queued: dict[int, Seat] = {}
+    granted: list[list[int]] = []
+    slots = TrainerSlots(
+        7,
+        1,
+        lambda: {**trainer.seats(), **queued},
+        lambda seats, slot: granted.append([s.session_id for s in seats]),
+    )
 
     async def bind() -> None:
         trainer.bind(lambda session_id: None, slots.release, slots.set_slots)
+
+    async def queue() -> None:
+        queued[person.session_id] = person
+        slots.request(person)
 
     try:
         asyncio.run_coroutine_threadsafe(bind(), loop).result(10)
         trainer.open()
         assert trainer.capacity() == 2
         until_true(lambda: slots.slots == 2, "the queue counts the cluster's two CPUs")
-        for seed in (11, 12):  # one CPU each: one on each node
-            trainer.submit([handed(factory, there[seed])])
+        for seed in (11, 12):  # machine sessions, one CPU each: one on each node
+            seat = Seat(LiveSession(there[seed], 10, [], Changes()))
+            trainer.train(handed(factory, there[seed]), seat, row(factory, there[seed]).spec)
+        assert set(trainer.seats()) == {there[11], there[12]}
+        asyncio.run_coroutine_threadsafe(queue(), loop).result(10)
+        assert granted == [] and slots.place(person.session_id) == 1, "they hold both slots"
         assert trainer.wait(300), "trained within 5 minutes"
+        until_true(lambda: granted == [[person.session_id]], "their slots free as they end")
+        assert trainer.seats() == {}
         nodes = {row(factory, there[seed]).worker_host for seed in (11, 12)}
         assert len(nodes) == 2, f"trained on both nodes: {nodes}"
         for seed in (11, 12):
