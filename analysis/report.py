@@ -48,8 +48,8 @@ from analysis.power import DEFAULT_DRAWS, MIN_AGENTS, PowerAnalysis, power_analy
 from analysis.preregistration import Preregistered
 from analysis.primary import primary_lines
 from analysis.reference import REFERENCES, authors_totals, overlay_authors
+from analysis.rescoring import Plans, rescored_by_task, rescored_schemes, rescoring_table
 from analysis.rescoring import plan as rescoring_plan
-from analysis.rescoring import rescored_schemes, rescored_totals, rescoring_table
 from analysis.stats import AGENT_TOTALS, EPISODE_MEANS
 from analysis.summary import Analysis, analyze
 from tasks import RescoreError
@@ -692,22 +692,16 @@ def write_report(
         else:
             methods = dict(zip(settings["session_id"], settings["method"], strict=True))
             kept_steps = steps[steps["session_id"].isin(analysis.episodes["session_id"])]
-            totals = rescored_totals(
-                kept_steps, planned.schemes, analysis.n_episodes, planned.task, planned.options
-            )
-            rescored = rescoring_table(totals, methods, baseline)
-            if checked is not None and not allow_mismatch:
-                rescored = _withhold_rescored(rescored, checked, baseline)
-            rescored_agents = totals.assign(method=totals["session_id"].map(methods))
-            declared = planned.task.reward_schemes
-            reasons = [r for r in dict.fromkeys(totals["not_rescored"]) if r]
-            rescoring = _Rescoring(
-                about=declared.about if declared is not None else "",
-                not_rescored="; ".join(reasons),
-                by_outcomes=(int(totals["by_outcomes"].sum()), len(totals))
-                if planned.task.outcomes
-                else None,
-            )
+            totals = rescored_by_task(kept_steps, planned, analysis.n_episodes)
+            if totals.empty:  # none of the rescored tasks' sessions logged a training step
+                why = [*planned.not_rescored.values(), "no training steps were logged"]
+                rescoring = _Rescoring(not_rescored="; ".join(why))
+            else:
+                rescored = rescoring_table(totals, methods, baseline)
+                if checked is not None and not allow_mismatch:
+                    rescored = _withhold_rescored(rescored, checked, baseline, kept)
+                rescored_agents = totals.assign(method=totals["session_id"].map(methods))
+                rescoring = _rescoring(planned, totals)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise EpisodeTableError(f"{out} is a file; pass a folder for the report")
@@ -897,11 +891,53 @@ class _Rescoring:
     """What the report says of its rescoring beside the table."""
 
     about: str = ""
-    """How the task rescores a step (`tasks.RewardSchemes.about`)."""
+    """How the task rescores a step (`tasks.RewardSchemes.about`; each task's, named, where
+    the study ran several)."""
     not_rescored: str = ""
     """Why the sessions, or some schemes, were not rescored ("": all were)."""
     by_outcomes: tuple[int, int] | None = None
     """Sessions rescored by their steps' outcomes, of all rescored (a task with outcomes)."""
+    tasks: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    """Each rescored task and the schemes its sessions were rescored under."""
+    skipped: tuple[tuple[str, str], ...] = ()
+    """Each task whose sessions were not rescored, and why."""
+
+
+def _rescoring(planned: Plans, totals: pd.DataFrame) -> _Rescoring:
+    """What the report says of the rescoring of these tasks' sessions (`totals`)."""
+    declared = [(p.task, p.task.reward_schemes) for p in planned.tasks]
+    abouts = [(task.name, s.about) for task, s in declared if s is not None and s.about]
+    several = len(declared) + len(planned.not_rescored) > 1
+    with_outcomes = totals["task"].isin([task.name for task, _ in declared if task.outcomes])
+    return _Rescoring(
+        about=" ".join(f"{name}: {about}" if several else about for name, about in abouts),
+        not_rescored="; ".join(r for r in dict.fromkeys(totals["not_rescored"]) if r),
+        by_outcomes=(int(totals.loc[with_outcomes, "by_outcomes"].sum()), int(with_outcomes.sum()))
+        if with_outcomes.any()
+        else None,
+        tasks=tuple((task.name, s.names) for task, s in declared if s is not None),
+        skipped=tuple(planned.not_rescored.items()),
+    )
+
+
+def _by_task_note(rescoring: _Rescoring) -> str:
+    """Which tasks were rescored under which schemes, and which were not and why, where
+    the study ran several tasks ("" for one)."""
+    if len(rescoring.tasks) + len(rescoring.skipped) < 2:
+        return ""
+    under = "; ".join(f"{name} under {', '.join(schemes)}" for name, schemes in rescoring.tasks)
+    note = (
+        " The sessions ran several tasks, and a task's schemes score only its own runs: each "
+        f"session is rescored under its own task's schemes ({under}) and compared with its "
+        "own task's baseline. A task's row is left empty under the schemes it does not declare."
+    )
+    if rescoring.skipped:
+        note += (
+            " Not rescored: "
+            + "; ".join(f"the sessions of task {name} ({why})" for name, why in rescoring.skipped)
+            + "."
+        )
+    return note
 
 
 @dataclass(frozen=True)
@@ -977,21 +1013,47 @@ def _without_sorting_settings(settings: pd.DataFrame) -> pd.DataFrame:
     return settings.drop(columns=[c for c in SORTING_OPTIONS if c in settings])
 
 
-def _withhold_rescored(table: pd.DataFrame, checked: Audit, baseline: str | None) -> pd.DataFrame:
+def _withhold_rescored(
+    table: pd.DataFrame, checked: Audit, baseline: str | None, settings: pd.DataFrame
+) -> pd.DataFrame:
     """The rescoring table with Welch's p left empty for the methods that differ from the
     baseline in more than their reward scheme (the reason in `withheld`): scoring every run
-    under one scheme removes that difference and no other."""
+    under one scheme removes that difference and no other. Where the sessions ran several
+    tasks, each task's methods are compared within that task, so the audit of that task's
+    sessions (`settings`) says how they differ."""
     tested = [c for c in table.columns if c.startswith("p_welch_")]
     if baseline is None or not tested:
         return table
+    by_task = {}
+    if "task" in table and "task" in settings and settings["task"].nunique() > 1:
+        by_task = {t: audit(group, baseline) for t, group in settings.groupby("task")}
     scheme = label("reward_scheme")
     reasons = []
-    for method in table["method"]:
-        other = [what for what in checked.differ(method, baseline) if what != scheme]
+    for row in table.to_dict("records"):
+        differ = by_task.get(row.get("task"), checked).differ(row["method"], baseline)
+        other = [what for what in differ if what != scheme]
         reasons.append("the methods differ in " + " and ".join(other) if other else "")
     table = table.assign(withheld=reasons)
     table.loc[table["withheld"] != "", tested] = np.nan
     return table
+
+
+def _rescored_versus(
+    table: pd.DataFrame, schemes: Sequence[str], baseline: str
+) -> dict[str, list[str]]:
+    """Each row's R_T under each scheme against its own task's baseline row (`vs_<scheme>`
+    columns; a dash where its task has no baseline row or no R_T under the scheme)."""
+    rows = table.to_dict("records")
+    bases = {row.get("task"): row for row in rows if row["method"] == baseline}
+    return {
+        f"vs_{scheme}": [
+            md.versus(row[f"R_T_{scheme}"], bases[row.get("task")][f"R_T_{scheme}"])
+            if row.get("task") in bases
+            else "–"
+            for row in rows
+        ]
+        for scheme in schemes
+    }
 
 
 def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
@@ -1038,16 +1100,10 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
                 columns[f"p_welch_{scheme}"] = f"Welch's p under {scheme}"
                 formats[f"p_welch_{scheme}"] = md.p_value
         rescored, withheld = extra.rescored, ""
-        if baseline is not None and f"improvement_{schemes[0]}" in rescored:
-            base = rescored.set_index("method").loc[baseline]
-            rescored = rescored.assign(
-                **{
-                    f"vs_{scheme}": [
-                        md.versus(v, base[f"R_T_{scheme}"]) for v in rescored[f"R_T_{scheme}"]
-                    ]
-                    for scheme in schemes
-                }
-            )
+        if len(extra.rescoring.tasks) > 1:
+            columns = {"task": "task", **columns}
+        if baseline is not None and any(f"improvement_{s}" in rescored for s in schemes):
+            rescored = rescored.assign(**_rescored_versus(rescored, schemes, baseline))
         if "withheld" in rescored and (rescored["withheld"] != "").any():
             rescored = rescored.assign(
                 withheld=[f"withheld: {w}" if w else "" for w in rescored["withheld"]]
@@ -1063,7 +1119,12 @@ def _comparability(extra: _Extras, baseline: str | None) -> list[str]:
             "",
             "The same logged behaviour scored under each of the task's reward schemes. "
             + (f"{extra.rescoring.about} " if extra.rescoring.about else "")
-            + "Compare methods within one column."
+            + (
+                "Compare methods within one task and one column."
+                if len(extra.rescoring.tasks) > 1
+                else "Compare methods within one column."
+            )
+            + _by_task_note(extra.rescoring)
             + _outcomes_note(extra.rescoring.by_outcomes)
             + withheld
             + (

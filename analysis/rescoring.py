@@ -5,14 +5,16 @@ The same behaviour scores differently under different accountings: what a method
 step under every reward scheme its task declares (`tasks.RewardSchemes`: for the sorting
 robot a placement keeps its reward, every other step costs what the scheme says, see
 `sim.rewards.rescore`) shows each method's R_T under every scheme, so methods run under
-different schemes can still be compared under one. A task that declares no schemes, or a
-scheme whose count is not in the record, is not rescored: `tasks.RescoreError` says why.
-"""
+different schemes can still be compared under one. A study that ran several tasks is
+rescored task by task: a task's schemes score only its own runs, so each session is
+rescored under its own task's schemes and compared with its own task's baseline. A task
+that declares no schemes, or a scheme whose count is not in the record, is not rescored:
+`tasks.RescoreError` says why."""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import pandas as pd
@@ -36,25 +38,52 @@ kept): an episode whose steps all have one is rescored by them, else by its rewa
 
 @dataclass(frozen=True)
 class Plan:
-    """What rescoring a report's sessions needs: their one task, and per session the
-    scheme it was scored under and its task options."""
+    """How one task's sessions are rescored: the task, and per session the scheme it was
+    scored under and its task options."""
 
     task: Task
     schemes: dict[int, str]
     options: Mapping[int, TaskOptions]
 
 
-def plan(settings: pd.DataFrame) -> Plan:
+@dataclass(frozen=True)
+class Plans:
+    """The rescoring of a study's sessions task by task: a task's reward schemes score
+    only its own runs, so each task's sessions are rescored under that task's schemes."""
+
+    tasks: tuple[Plan, ...]
+    """The tasks whose sessions are rescored, by name."""
+    not_rescored: Mapping[str, str]
+    """Each task whose sessions are not rescored, by name, and why."""
+
+    @property
+    def schemes(self) -> tuple[str, ...]:
+        """Every rescored task's schemes, task by task, each once."""
+        names = [p.task.reward_schemes.names for p in self.tasks if p.task.reward_schemes]
+        return tuple(dict.fromkeys(n for each in names for n in each))
+
+
+def plan(settings: pd.DataFrame) -> Plans:
     """The rescoring of the sessions of a settings table (`analysis.settings`: `task`,
     `task_options` and a task's own options as columns; a table without `task` ran the
-    sorting robot); `RescoreError` says why they cannot be rescored together."""
-    tasks = sorted(set(settings["task"])) if "task" in settings else ["sorting"]
-    if len(tasks) != 1:
-        raise RescoreError(
-            f"the sessions ran different tasks ({', '.join(tasks)}): a task's reward schemes "
-            "score only its own runs (report each task on its own)"
-        )
-    task = get_task(tasks[0])
+    sorting robot), task by task. A task that declares no schemes, or whose settings do not
+    say a session's scheme, is not rescored (`Plans.not_rescored` says why);
+    `RescoreError` says why when no task's sessions can be rescored."""
+    names = sorted(set(settings["task"])) if "task" in settings else ["sorting"]
+    planned, skipped = [], {}
+    for name in names:
+        rows = settings[settings["task"] == name] if "task" in settings else settings
+        try:
+            planned.append(_task_plan(get_task(name), rows))
+        except RescoreError as error:
+            skipped[name] = str(error)
+    if not planned:
+        raise RescoreError("; ".join(skipped.values()))
+    return Plans(tuple(planned), skipped)
+
+
+def _task_plan(task: Task, settings: pd.DataFrame) -> Plan:
+    """The rescoring of one task's sessions; `RescoreError` says why they cannot be."""
     declared = task.reward_schemes
     if declared is None:
         raise RescoreError(
@@ -70,10 +99,27 @@ def plan(settings: pd.DataFrame) -> Plan:
         if declared.option and declared.option not in options[session]:
             raise RescoreError(
                 f"the settings do not say which reward scheme (`{declared.option}`) session "
-                f"{session} was scored under"
+                f"{session} of task {task.name} was scored under"
             )
         schemes[session] = declared.logged(options[session])
     return Plan(task, schemes, options)
+
+
+def rescored_by_task(
+    steps: pd.DataFrame, plans: Plans, n_episodes: int | None = None
+) -> pd.DataFrame:
+    """`rescored_totals` of each task's sessions under every rescored task's schemes
+    (`Plans.schemes`), one table: a scheme a session's task does not declare leaves its
+    R_T empty, the scheme named in `undeclared`. Sessions of tasks not rescored are left
+    out."""
+    tables = [
+        rescored_totals(
+            steps[steps["session_id"].isin(list(p.schemes))], p.schemes, n_episodes, p.task,
+            p.options, plans.schemes,
+        )
+        for p in plans.tasks
+    ]  # fmt: skip
+    return pd.concat(tables, ignore_index=True)
 
 
 def _task_options(value: object) -> dict[str, object]:
@@ -89,19 +135,23 @@ def rescored_totals(
     n_episodes: int | None = None,
     task: Task | str = "sorting",
     options: Mapping[int, TaskOptions] | None = None,
+    targets: Sequence[str] | None = None,
 ) -> pd.DataFrame:
-    """Per session: R_T as logged and under each of the task's schemes (`R_T_<scheme>`
-    columns), over its first `n_episodes` episodes (all when None). `schemes` maps a
-    session to the scheme its steps were scored under, `options` to its task options (the
-    task's defaults when absent). A scheme the task cannot rescore a session's steps
-    under leaves its R_T empty (NaN), the reason in `not_rescored`. `RescoreError` when the
-    task declares no schemes."""
+    """Per session of one task: R_T as logged and under each of `targets` (`R_T_<scheme>`
+    columns; the task's schemes when None), over its first `n_episodes` episodes (all when
+    None). `schemes` maps a session to the scheme its steps were scored under, `options`
+    to its task options (the task's defaults when absent). A scheme the task declares but
+    cannot rescore a session's steps under leaves its R_T empty (NaN), the reason in
+    `not_rescored`; a target the task does not declare leaves it empty too, named in
+    `undeclared`. `RescoreError` when the task declares no schemes."""
     task = get_task(task) if isinstance(task, str) else task
-    if task.reward_schemes is None:
+    declared = task.reward_schemes
+    if declared is None:
         raise RescoreError(
             f"task {task.name} declares no reward schemes: its runs' rewards are reported "
             "as logged, not rescored"
         )
+    wanted = tuple(targets) if targets is not None else declared.names
     table = steps
     if n_episodes is not None:
         table = table[table["episode"] <= n_episodes]
@@ -112,6 +162,7 @@ def rescored_totals(
         given = (options or {}).get(int(session_id), {})
         row: dict[str, object] = {
             "session_id": int(session_id),
+            "task": task.name,
             "scheme": scheme,
             "R_T_logged": float(group["reward"].sum()),
         }
@@ -125,15 +176,18 @@ def rescored_totals(
         ]
         row["by_outcomes"] = all(e.outcomes is not None for e in episodes)
         reasons = []
-        for target in task.reward_schemes.names:
+        for target in wanted:
+            row[f"R_T_{target}"] = float("nan")
+            if target not in declared.names:
+                continue
             try:
                 row[f"R_T_{target}"] = sum(
                     sum(task.rescore(e, scheme, target, given)) for e in episodes
                 )
             except RescoreError as error:
-                row[f"R_T_{target}"] = float("nan")
                 reasons.append(f"{target}: {error}")
         row["not_rescored"] = "; ".join(dict.fromkeys(reasons))
+        row["undeclared"] = ", ".join(t for t in wanted if t not in declared.names)
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -158,12 +212,29 @@ def _outcomes(episode: pd.DataFrame) -> tuple[str, ...] | None:
 def rescoring_table(
     totals: pd.DataFrame, methods: dict[int, str], baseline: str | None = None
 ) -> pd.DataFrame:
-    """Per method: the schemes its sessions were scored under, mean R_T as logged and under
-    each scheme, and (with a baseline) the improvement in percent under each scheme and,
-    under each scheme, Welch's p for the agents' R_T against the baseline's (NaN with
-    fewer than two agents on a side)."""
+    """Per method (per task and method where the totals name their tasks, each task's
+    methods against that task's baseline, under that task's schemes): the schemes its
+    sessions were scored under, mean R_T as logged and under each scheme, and (with a
+    baseline) the improvement in percent under each scheme and, under each scheme, Welch's
+    p for the agents' R_T against the baseline's (NaN with fewer than two agents on a
+    side)."""
+    if "task" not in totals:
+        return _method_table(totals, methods, baseline, rescored_schemes(totals))
+    tables = []
+    for name, group in totals.groupby("task", sort=True):
+        declared = get_task(str(name)).reward_schemes
+        own = declared.names if declared is not None else ()
+        schemes = [s for s in rescored_schemes(totals) if s in own]
+        table = _method_table(group, methods, baseline, schemes)
+        tables.append(table.assign(task=name)[["task", *table.columns]])
+    return pd.concat(tables, ignore_index=True)
+
+
+def _method_table(
+    totals: pd.DataFrame, methods: dict[int, str], baseline: str | None, schemes: list[str]
+) -> pd.DataFrame:
+    """`rescoring_table` of sessions of one task, under `schemes`."""
     frame = totals.assign(method=totals["session_id"].map(methods))
-    schemes = rescored_schemes(totals)
     out = []
     for method in order_methods(frame["method"], baseline):
         group = frame[frame["method"] == method]

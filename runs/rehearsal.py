@@ -21,18 +21,22 @@ server's HTTP API only: it runs anywhere the participant links reach.
 
 Through an online study's link (`join`) a simulated participant arrives as a panel's
 would, with its own panel id, and goes through the whole visit: the comprehension check
-(answered from what the induction tells a person: the task's own answers, the sort rule,
-what to do when asked, and the study's own questions' answers where the rehearsal is given
-its design (`design_check`); a question it cannot know it guesses, and guesses again where
-the check says it was wrong) and, after its turns, the questionnaire (each item answered
-in the middle of its scale). A participant drawn to fail the check (`fail_check`) answers
-every question it knows wrong on every try, and the check excludes it as it would a person.
+and, after its turns, the questionnaire (each item answered in the middle of its scale).
+It answers the check only where it knows the right answers: the built-in questions (the
+task's own, the sorting robot's under the sort rule, what to do when asked for a rating),
+each known only where it is asked word for word, and the study's own questions where the
+rehearsal is given the study's check (`design_check`: from the design's file, or read
+through the researcher API, `study_check`). It never guesses: a check that asks a
+question it does not know stops it before it answers (`UnknownCheck`, naming the
+questions). A participant drawn to fail the check (`fail_check`) answers every question
+wrong on every try, and the check excludes it as it would a person.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlsplit
@@ -43,11 +47,16 @@ from learner.fitted import FittedAdvisor
 from learner.fitted_ratings import AnyFitted, FittedEvaluator, FittedEvaluatorModel
 from learner.records import TRAINING, stage_of
 from sim.rules import SortRule
-from study.schemas.visit import CheckSpec
-from study.services.visit import expected_answer, task_questions
+from study.schemas.design import StudyDesign
+from study.schemas.visit import CheckQuestion, CheckSpec, default_questions
+from study.services.visit import expected_answer, rating_question, task_questions
 from tasks import Task, get_task
 
 ENDED = ("finished", "stopped", "interrupted", "abandoned", "failed")
+PAGE = 1000
+"""Items asked for at once from the researcher API's lists."""
+Shown = tuple[str, str, tuple[tuple[str, str], ...]]
+"""A check question as the participant sees it: id, text, (value, label) of each choice."""
 
 
 @dataclass(frozen=True)
@@ -70,9 +79,6 @@ class Rehearsed:
     """Rating turns left without an answer (their time-out passed first)."""
     check_tries: int = 0
     """Tries at an online study's comprehension check (0: none asked)."""
-    check_guessed: int = 0
-    """The check's questions it was never taught (neither the task's nor, with the study's
-    design, the study's own), and so guessed."""
     questionnaire: bool = False
     """It submitted an online study's questionnaire (which completes the visit)."""
 
@@ -136,14 +142,18 @@ def rehearse(
     viewer: bool = True,
     design_check: CheckSpec | None = None,
     fail_check: bool = False,
+    on_check: Callable[[], None] | None = None,
 ) -> Rehearsed:
     """One simulated participant through the session of `token`, until its advice is
     over, it leaves early, or the session ends. `speed` > 1 divides the waits (a quick
     rehearsal); the decision time sent is the drawn one. `viewer`: keep the 3-D view's
     websocket open meanwhile, as the page does (a task with a live 3-D view). A model
     fitted to ratings rates; one fitted to advice advises, and rates as it would advise.
-    `design_check`: the study design's check, whose own questions it then answers right;
-    `fail_check`: it answers the check wrong on every try (and is excluded)."""
+    `design_check`: the study design's check, whose own questions it then answers right
+    (without it, a check asking any question other than the built-in ones raises
+    `UnknownCheck` before it is answered); `fail_check`: it answers the check wrong on
+    every try (and is excluded); `on_check` is called once the check is answered (or
+    none is asked)."""
     task = get_task(model.task)
     advisor: FittedAdvisor | FittedEvaluator
     if isinstance(model, FittedEvaluatorModel):
@@ -163,14 +173,12 @@ def rehearse(
                         "texts_version": shown["texts_version"]}))  # fmt: skip
         check = _ok(client.get("/api/participant/check"))
         asked = check["required"] and not check["passed"]  # (passed: a participant back)
-        taught = _taught(task, sort_rule, design_check)
-        tries, passed, guessed = (
-            _take_check(client, check, taught, fail_check) if asked else (0, True, 0)
-        )
+        known = _known(task, sort_rule, design_check)
+        tries, passed = _take_check(client, check, known, fail_check) if asked else (0, True)
+        if on_check is not None:
+            on_check()
         if not passed:  # every try wrong: the visit ended `excluded`
-            return Rehearsed(
-                token[-4:], 0, [], False, "excluded", check_tries=tries, check_guessed=guessed
-            )
+            return Rehearsed(token[-4:], 0, [], False, "excluded", check_tries=tries)
         state = _ok(client.post("/api/participant/start"))
         if view is not None:
             view.start()
@@ -224,17 +232,35 @@ def rehearse(
         feedback=kind,
         lapsed=lapsed,
         check_tries=tries,
-        check_guessed=guessed,
         questionnaire=answered,
     )
+
+
+class UnknownCheck(RuntimeError):
+    """A comprehension check that asks questions the rehearsal is not told the answers to:
+    it stops there rather than guess them."""
+
+    def __init__(self, questions: list[tuple[str, str]]) -> None:
+        self.questions = questions
+        """(id, text) of each question it cannot answer."""
+        asked = "; ".join(f"{id} ({text!r})" for id, text in questions)
+        super().__init__(
+            f"the study's comprehension check asks {len(questions)} question(s) this "
+            f"rehearsal is not told the right answers to, and it does not guess them: {asked}"
+        )
+
+
+def _base(link: str, marker: str) -> tuple[str, str]:
+    """(the server's base URL, what follows `marker` in the link's path)."""
+    parts = urlsplit(link)
+    prefix, _, rest = parts.path.rpartition(marker)
+    return f"{parts.scheme}://{parts.netloc}{prefix}", rest
 
 
 def join(link: str, panel_id: str, panel_param: str = "PROLIFIC_PID") -> tuple[str, str]:
     """Arrive through an online study's link as the panel's participant `panel_id`: (the
     server's base URL, the session's token), as the link's redirect gives them."""
-    parts = urlsplit(link)
-    prefix = parts.path.rpartition("/join/")[0]
-    base = f"{parts.scheme}://{parts.netloc}{prefix}"
+    base, _ = _base(link, "/join/")
     query = {panel_param: panel_id, "STUDY_ID": "rehearsal", "SESSION_ID": f"r-{panel_id}"}
     with httpx.Client(timeout=60) as client:
         response = client.get(link, params=query)
@@ -247,50 +273,98 @@ def join(link: str, panel_id: str, panel_param: str = "PROLIFIC_PID") -> tuple[s
     return base, target.rpartition("/p/")[2]
 
 
-def _taught(task: Task, sort_rule: Any, design_check: CheckSpec | None) -> dict[str, str]:
-    """The check's right answers as the induction teaches them, by question id: the task's
-    own questions', the rating question's, the sorting robot's under the sort rule, and the
-    study design's own questions' (a side of the table under the sort rule where the
-    question asks one)."""
-    taught: dict[str, str] = {q.id: str(q.answer) for q in task_questions(task)}
-    taught["rating"] = "a"
+def study_check(link: str, api_key: str) -> CheckSpec | None:
+    """The comprehension check of the study a link belongs to (an online study's join link,
+    or a participant link `.../p/TOKEN`), read from its design through the researcher API
+    with the researcher's key: None where that study asks none (a lab study, or a design
+    without a check). `RuntimeError` says why it cannot be read (the key refused, no study
+    with that join link)."""
+    joining = "/join/" in urlsplit(link).path
+    base, key = _base(link, "/join/" if joining else "/p/")
+    with httpx.Client(base_url=base, headers={"X-API-Key": api_key}, timeout=60) as client:
+        for study in _every(client, "/api/studies"):
+            design = study.get("design")
+            if design is None:
+                continue  # a lab study: its sessions ask no check
+            if joining:
+                found = (study.get("join_url") or "").rpartition("/join/")[2] == key
+            else:
+                found = any(
+                    (s.get("participant_url") or "").rpartition("/p/")[2] == key
+                    for s in _every(client, f"/api/studies/{study['id']}/sessions")
+                )
+            if found:
+                return StudyDesign.model_validate(design).check
+    if joining:
+        raise RuntimeError(f"no online study on {base} has the join link {link}")
+    return None  # the session is no online study's: no check
+
+
+def _every(client: httpx.Client, path: str) -> list[dict[str, Any]]:
+    """Every item of a paged list of the researcher API."""
+    items: list[dict[str, Any]] = []
+    while True:
+        response = client.get(path, params={"limit": PAGE, "offset": len(items)})
+        if response.status_code in (401, 403):
+            raise RuntimeError(
+                f"the server refused the researcher key ({response.status_code}): give the "
+                "key it was started with (--api-key, or IDEEPRL_API_KEY)"
+            )
+        _ok(response)  # a status other than 200 raises, saying what the server answered
+        page: list[dict[str, Any]] = response.json()
+        items += page
+        if len(page) < PAGE:
+            return items
+
+
+def _shown(q: CheckQuestion) -> Shown:
+    """A question as the participant's check shows it (never its answer)."""
+    return q.id, q.text, tuple((c.value, c.label) for c in q.choices)
+
+
+def _asked(q: dict[str, Any]) -> Shown:
+    """A question of `GET /api/participant/check`, as `_shown` gives one."""
+    return q["id"], q["text"], tuple((c["value"], c["label"]) for c in q["choices"])
+
+
+def _known(task: Task, sort_rule: Any, design_check: CheckSpec | None) -> dict[Shown, str]:
+    """The check's questions whose right answers the rehearsal knows, as the participant
+    sees them: the task's own questions, the rating question, the sorting robot's under
+    the sort rule, and the study's own (`design_check`: a side of the table under the sort
+    rule where the question asks one)."""
+    built_in = [*task_questions(task), rating_question(task.agent)]
     if task.name == "sorting":
-        rule = SortRule.parse(sort_rule)
-        taught.update({"blue_cube": rule.side("cube", "blue"),
-                       "red_disk": rule.side("disk", "red"), "drop_at_centre": "keep"})  # fmt: skip
-    if design_check is not None:
-        rule = SortRule.parse(sort_rule)
-        taught.update({q.id: expected_answer(q, rule) for q in design_check.questions})
-    return taught
+        built_in += default_questions()
+    questions = [*built_in, *(design_check.questions if design_check is not None else [])]
+    rule = SortRule.parse(sort_rule)
+    return {_shown(q): expected_answer(q, rule) for q in questions}
 
 
 def _take_check(
-    client: httpx.Client, check: dict[str, Any], taught: dict[str, str], fail: bool
-) -> tuple[int, bool, int]:
-    """The comprehension check, answered as the induction taught (other questions guessed,
-    each wrong one guessed again), or, to `fail` it, every known answer wrong on every try:
-    the tries it took, whether it passed, and how many questions it had to guess."""
-    guess = {q["id"]: 0 for q in check["questions"]}
-    unknown = {q["id"] for q in check["questions"]
-               if taught.get(q["id"]) not in [c["value"] for c in q["choices"]]}  # fmt: skip
+    client: httpx.Client, check: dict[str, Any], known: dict[Shown, str], fail: bool
+) -> tuple[int, bool]:
+    """The comprehension check, answered right, or, to `fail` it, wrong on every try: the
+    tries it took and whether it passed. `UnknownCheck`, before any answer, where it asks a
+    question whose answer is not known."""
+    unknown = [q for q in check["questions"] if _asked(q) not in known]
+    if unknown:
+        raise UnknownCheck([(q["id"], q["text"]) for q in unknown])
     tries = 0
     while True:
         answers = {}
         for q in check["questions"]:
+            right = known[_asked(q)]
             values = [c["value"] for c in q["choices"]]
-            known = taught.get(q["id"])
-            if q["id"] in unknown:
-                answers[q["id"]] = values[guess[q["id"]] % len(values)]
-            elif fail:
-                answers[q["id"]] = next(v for v in values if v != known)
-            else:
-                answers[q["id"]] = str(known)
+            answers[q["id"]] = next(v for v in values if v != right) if fail else right
         result = _ok(client.post("/api/participant/check", json={"answers": answers}))
         tries += 1
         if result["passed"] or result["excluded"]:
-            return tries, bool(result["passed"]), len(unknown)
-        for wrong in result["wrong"]:
-            guess[wrong] += 1
+            return tries, bool(result["passed"])
+        if not fail:
+            raise RuntimeError(
+                "the check marked wrong the answers the rehearsal knows as right: "
+                f"{', '.join(result['wrong'])} (is the sort rule the study's?)"
+            )
 
 
 def fails_check(index: int, share: float) -> bool:

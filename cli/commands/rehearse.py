@@ -8,14 +8,20 @@ people did (`runs.rehearsal`); a summary per kind of feedback.
 Create the human sessions first (dashboard, or POST /api/studies/ID/sessions) and pass
 their links; each simulated participant runs in its own thread. The model's task is the
 sessions' (the grid world's people are rehearsed with a model fitted to a grid world study).
-An online study's comprehension check is answered as its induction teaches: the task's
-questions, and the study's own (`--design`, the file `ideeprl study create --from` read)
-right; `--check-failures SHARE` of the participants answer it wrong on every try and are
-excluded as the check says."""
+An online study's comprehension check is answered right where the rehearsal knows the
+answers: the task's built-in questions, and the study's own, read from the study's design
+(`--design`, the file `ideeprl study create --from` read, or else through the researcher
+API with the researcher's key: `--api-key`, or IDEEPRL_API_KEY). It never guesses: given
+neither, a check with questions of the study's own stops the rehearsal at its first
+participant, before anyone answers, naming the questions. `--check-failures SHARE` of the
+participants answer it wrong on every try and are excluded as the check says."""
 
 from __future__ import annotations
 
 import argparse
+import os
+import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
@@ -61,7 +67,13 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--design", type=Path, metavar="FILE",
         help="the study's YAML file (as `ideeprl study create --from`): its own check "
-        "questions are answered right (without it they are guessed)",
+        "questions are answered right",
+    )  # fmt: skip
+    parser.add_argument(
+        "--api-key", default=os.environ.get("IDEEPRL_API_KEY"), metavar="KEY",
+        help="the researcher key (default: IDEEPRL_API_KEY, which keeps it out of the "
+        "process list): without --design, the study's check is read from its design "
+        "through the researcher API",
     )  # fmt: skip
     parser.add_argument(
         "--check-failures", type=float, default=0.0, metavar="SHARE",
@@ -81,18 +93,12 @@ def rehearse_command(args: argparse.Namespace) -> int:
     import httpx
 
     from learner.fitted_ratings import read_any_model
-    from runs.rehearsal import fails_check, join, rehearse
+    from runs.rehearsal import UnknownCheck, fails_check, join, rehearse, study_check
 
     if not args.speed > 0:
         raise CommandError("--speed must be above 0", code=2)
     if not 0 <= args.check_failures <= 1:
         raise CommandError("--check-failures takes a share from 0 to 1", code=2)
-    check = None
-    if args.design is not None:
-        from cli.commands.study import read_body
-
-        design = read_body(args.design, None).design
-        check = None if design is None else design.check
     if bool(args.study_link) != (args.participants > 0) or (args.links and args.study_link):
         raise CommandError(
             "pass participant links (--link URL ...), or an online study's link with how "
@@ -103,20 +109,52 @@ def rehearse_command(args: argparse.Namespace) -> int:
         model = read_any_model(args.model)
     except ValueError as error:
         raise CommandError(str(error), code=2) from None
+    check, known = None, False
+    try:
+        if args.design is not None:
+            from cli.commands.study import read_body
 
-    def one(i: int) -> Any:
+            design = read_body(args.design, None).design
+            check, known = (None if design is None else design.check), True
+        elif args.api_key:
+            link = args.study_link or "{}/p/{}".format(*args.links[0])
+            check, known = study_check(link, args.api_key), True
+    except (RuntimeError, OSError, httpx.HTTPError) as error:
+        raise CommandError(f"the study's check could not be read: {error}") from None
+
+    def one(i: int, on_check: Callable[[], None] | None = None) -> Any:
         if args.study_link:
             base, token = join(args.study_link, f"rehearsal-{args.seed + i}", args.panel_param)
         else:
             base, token = args.links[i]
         fail = fails_check(i, args.check_failures)
         return rehearse(base, token, model, args.sort_rule, args.seed + i, args.speed,
-                        design_check=check, fail_check=fail)  # fmt: skip
+                        design_check=check, fail_check=fail, on_check=on_check)  # fmt: skip
 
     count = args.participants or len(args.links)
     try:
         with ThreadPoolExecutor(max_workers=count) as pool:
-            done = list(pool.map(one, range(count)))
+            if known:
+                futures = [pool.submit(one, i) for i in range(count)]
+            else:  # the first alone through the check, which may ask what it cannot answer
+                checked = threading.Event()
+                first = pool.submit(one, 0, checked.set)
+                first.add_done_callback(lambda _: checked.set())
+                checked.wait()
+                if first.done() and first.exception() is not None:
+                    first.result()
+                futures = [first, *(pool.submit(one, i) for i in range(1, count))]
+            done = [f.result() for f in futures]
+    except UnknownCheck as error:
+        if known:
+            how = "the design it was given does not hold them: is it this study's?"
+        else:
+            how = (
+                "give the study's design (--design FILE) or the researcher key (--api-key "
+                "KEY, or IDEEPRL_API_KEY) to read it from the server; the first participant "
+                "stopped at the check without answering, and no other arrived"
+            )
+        raise CommandError(f"{error}. {how}", code=2) from None
     except (RuntimeError, OSError, httpx.HTTPError) as error:
         raise CommandError(f"the rehearsal stopped: {error}") from None
     if args.json:
@@ -129,11 +167,8 @@ def rehearse_command(args: argparse.Namespace) -> int:
         else:
             given = f"{r.advice} advice"
         visit = f", check in {r.check_tries}" if r.check_tries else ""
-        visit += f" ({r.check_guessed} questions guessed)" if r.check_guessed else ""
         visit += ", questionnaire" if r.questionnaire else ""
         print(f"participant ...{r.token_tail}: {given}{left}{visit}; session {r.status}")
-    if any(r.check_guessed for r in done) and args.design is None:
-        print("some check questions were the study's own: --design FILE answers them right")
     for kind in sorted({r.feedback for r in done}):
         these = [r for r in done if r.feedback == kind]
         times = sorted(t for r in these for t in r.decision_times_s)

@@ -236,8 +236,9 @@ def test_a_study_of_another_task_is_audited_without_the_sorting_robots_settings(
 ) -> None:
     """No session ran the sorting robot: its motion, rule and reward scheme are not audited
     (they mean nothing to the task), and R_T is rescored under the grid world's own schemes,
-    never the robot's; a study that mixes tasks keeps the robot's settings and is not
-    rescored (no one task's schemes score both), with the reason in the report."""
+    never the robot's; a study that mixes tasks keeps the robot's settings and is rescored
+    task by task (a task's schemes score only its own runs), the report saying which task
+    was rescored under which schemes."""
     episodes = study_episodes()
     settings = settings_for(episodes).assign(task="gridworld")
     result = write_report(
@@ -262,5 +263,29 @@ def test_a_study_of_another_task_is_audited_without_the_sorting_robots_settings(
         episodes, tmp_path / "mixed", settings=mixed, steps=_steps(episodes, mixed),
         power_draws=200,
     )  # fmt: skip
-    assert kept.rescored is None and "sort_rule" in kept.audit.methods.columns
-    assert "Not rescored: the sessions ran different tasks" in kept.report.read_text()
+    assert kept.rescored is not None and "sort_rule" in kept.audit.methods.columns
+    table = kept.rescored
+    robot = table[table["task"] == "sorting"].set_index("method")
+    grid = table[table["task"] == "gridworld"].set_index("method")
+    assert list(robot.index) == ["autonomous"] and robot.loc["autonomous", "agents"] == 1
+    assert list(grid.index) == ["autonomous", "agent", "human"]
+    assert grid["agents"].sum() == len(settings) - 1
+    # each task's sessions under its own schemes; the other task's left empty
+    assert robot.loc["autonomous", "R_T_paper"] == pytest.approx(
+        robot.loc["autonomous", "R_T_logged"]
+    )
+    assert grid["R_T_paper"].isna().all() and robot["R_T_sparse"].isna().all()
+    assert grid["R_T_sparse"].to_dict() == pytest.approx(per_method.to_dict())
+    assert grid["improvement_sparse"].notna().all()  # against the grid world's baseline
+    # within the grid world the methods differ in nothing: its tests are kept
+    assert (grid["withheld"] == "").all() and grid["p_welch_minigrid"].notna()["agent"]
+    agents_csv = pd.read_csv(kept.tables["rescored_agents"])
+    assert set(agents_csv["undeclared"].dropna()) == {
+        "minigrid, sparse, step-cost",
+        ", ".join(REWARD_SCHEMES),
+    }
+    text = kept.report.read_text()
+    rescoring = text.split("## R_T rescored under each reward scheme")[1].split("\n## ")[0]
+    assert "different tasks" not in text and "| sorting |" in rescoring
+    assert "gridworld under minigrid, sparse, step-cost" in rescoring, rescoring
+    assert f"sorting under {', '.join(REWARD_SCHEMES)}" in rescoring

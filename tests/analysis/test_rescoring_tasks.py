@@ -1,6 +1,7 @@
 """Rescoring goes through the task: the grid world's and the reach task's recorded runs are
-rescored under their own schemes, checked against sums done by hand; a task without
-schemes, or a scheme the record cannot give, is refused with the reason, never a number."""
+rescored under their own schemes, checked against sums done by hand, and a study of two
+tasks task by task; a task without schemes, or a scheme the record cannot give, is refused
+with the reason, never a number."""
 
 from __future__ import annotations
 
@@ -9,7 +10,14 @@ import json
 import pandas as pd
 import pytest
 
-from analysis.rescoring import STEP_COLUMNS, plan, rescored_totals
+from analysis.rescoring import (
+    STEP_COLUMNS,
+    plan,
+    rescored_by_task,
+    rescored_totals,
+    rescoring_table,
+)
+from sim.rewards import REWARD_SCHEMES, step_penalty
 from tasks import RecordedEpisode, RescoreError, get_task
 
 GRID = {"size": 6, "max_steps": 40}
@@ -81,7 +89,7 @@ def test_a_settings_table_plans_each_sessions_scheme_and_options() -> None:
             "task_options": [json.dumps(GRID), json.dumps({"size": 8, "max_steps": 64})],
         }
     )
-    planned = plan(settings)
+    (planned,) = plan(settings).tasks
     assert planned.task.name == "gridworld"
     assert planned.schemes == {1: "minigrid", 2: "minigrid"}
     assert planned.options[2] == {"size": 8, "max_steps": 64}
@@ -95,11 +103,76 @@ def test_a_settings_table_plans_each_sessions_scheme_and_options() -> None:
             "reward_scheme": ["authors-interactive"],
         }
     )
-    assert plan(sorting).schemes == {3: "authors-interactive"}
+    assert plan(sorting).tasks[0].schemes == {3: "authors-interactive"}
     with pytest.raises(RescoreError, match="which reward scheme"):
         plan(sorting.drop(columns=["reward_scheme"]))
-    with pytest.raises(RescoreError, match="different tasks \\(gridworld, sorting\\)"):
-        plan(pd.concat([settings, sorting]))
+
+    mixed = plan(pd.concat([settings, sorting]))
+    assert [(p.task.name, p.schemes) for p in mixed.tasks] == [
+        ("gridworld", {1: "minigrid", 2: "minigrid"}),
+        ("sorting", {3: "authors-interactive"}),
+    ]
+    assert mixed.not_rescored == {}
+    assert mixed.schemes == ("minigrid", "sparse", "step-cost", *REWARD_SCHEMES)
+    # the grid world is rescored, the sorting robot's sessions (scheme unsaid) are not
+    unsaid = plan(pd.concat([settings, sorting.drop(columns=["reward_scheme"])]))
+    assert [p.task.name for p in unsaid.tasks] == ["gridworld"]
+    assert "session 3 of task sorting" in unsaid.not_rescored["sorting"]
+
+
+def recorded_sorting_run() -> pd.DataFrame:
+    """Session 8 of the sorting robot, one 25-step episode scored under the authors'
+    interactive scheme: placements at steps 3, 6 and 24 (0.4 each), a misplacement at 25
+    (-1, which ends it), every other step costing what the scheme says (as in
+    tests/sim/test_rewards.py); the steps' outcomes recorded."""
+    placed = {3: 0.4, 6: 0.4, 24: 0.4, 25: -1.0}
+    outcome = {3: "placed", 6: "placed", 24: "placed", 25: "misplaced"}
+    rows = [
+        (8, 1, n, placed.get(n, step_penalty("authors-interactive", n)), n == 25,
+         outcome.get(n, "none"))
+        for n in range(1, 26)
+    ]  # fmt: skip
+    return pd.DataFrame(rows, columns=[*STEP_COLUMNS, "outcome"])
+
+
+def test_a_study_of_two_tasks_is_rescored_task_by_task() -> None:
+    """The grid world's session under the grid world's schemes, the sorting robot's under
+    the robot's, as each is counted alone; a scheme a session's task does not declare is
+    left empty and named, never refused for the study."""
+    steps = pd.concat([recorded_grid_run(), recorded_sorting_run()], ignore_index=True)
+    settings = pd.DataFrame(
+        {
+            "session_id": [7, 8],
+            "method": ["autonomous", "autonomous"],
+            "task": ["gridworld", "sorting"],
+            "task_options": [json.dumps(GRID), "{}"],
+            "reward_scheme": [None, "authors-interactive"],
+        }
+    )
+    totals = rescored_by_task(steps, plan(settings)).set_index("session_id")
+    grid = totals.loc[7]
+    assert grid["task"] == "gridworld" and grid["scheme"] == "minigrid"
+    assert grid["R_T_sparse"] == pytest.approx(2)
+    assert grid["R_T_step-cost"] == pytest.approx((1 - 0.05) + (1 - 0.04) - 0.30)
+    assert all(grid[f"R_T_{s}"] != grid[f"R_T_{s}"] for s in REWARD_SCHEMES)  # NaN
+    assert grid["undeclared"] == ", ".join(REWARD_SCHEMES) and grid["not_rescored"] == ""
+    robot = totals.loc[8]
+    assert robot["task"] == "sorting" and robot["scheme"] == "authors-interactive"
+    # by hand (tests/sim/test_rewards.py): paper 0.15, autonomous 0.10, interactive -0.01
+    assert robot["R_T_paper"] == pytest.approx(0.15)
+    assert robot["R_T_authors-autonomous"] == pytest.approx(0.10)
+    assert robot["R_T_authors-interactive"] == pytest.approx(-0.01)
+    assert robot["undeclared"] == "minigrid, sparse, step-cost" and robot["not_rescored"] == ""
+    assert all(robot[f"R_T_{s}"] != robot[f"R_T_{s}"] for s in ("minigrid", "sparse"))
+    alone = rescored_totals(recorded_sorting_run(), {8: "authors-interactive"})
+    assert alone["R_T_paper"].item() == pytest.approx(robot["R_T_paper"])
+
+    table = rescoring_table(totals.reset_index(), {7: "autonomous", 8: "autonomous"})
+    assert list(table["task"]) == ["gridworld", "sorting"]
+    rows = table.set_index("task")
+    assert rows.loc["gridworld", "R_T_sparse"] == pytest.approx(2)
+    assert rows.loc["sorting", "R_T_paper"] == pytest.approx(0.15)
+    assert rows.loc["sorting", "R_T_sparse"] != rows.loc["sorting", "R_T_sparse"]  # NaN
 
 
 def test_a_task_without_schemes_is_not_rescored_and_says_so() -> None:

@@ -1,6 +1,7 @@
 """A grid world batch, recorded by the platform, is rescored by `ideeprl report` under the
 grid world's own schemes (never the sorting robot's), each agent's R_T as counted by hand
-from the exported steps: where each training episode reached the goal."""
+from the exported steps: where each training episode reached the goal; a study of the grid
+world and the sorting robot is rescored task by task."""
 
 from __future__ import annotations
 
@@ -13,11 +14,14 @@ from pathlib import Path
 
 import pytest
 
+from sim.rewards import REWARD_SCHEMES, step_penalty
+
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[2]
 OPTIONS = {"size": 5, "max_steps": 30}
 """A room of 3 x 3 open squares, whose MiniGrid score counts 30 steps."""
+GRID_SCHEMES = ("minigrid", "sparse", "step-cost")
 SCALE = ["--episodes", "4", "--pretraining-steps", "40", "--advice-budget", "10",
          "--max-episode-steps", "30", "--set", "batch_size=8", "--set", "memory_size=200",
          "--torch-threads", "1"]  # fmt: skip
@@ -80,3 +84,73 @@ def test_a_grid_world_batch_is_rescored_under_its_own_schemes(tmp_path: Path) ->
             assert float(row[f"R_T_{scheme}"]) == pytest.approx(value), (session, scheme)
     text = (tmp_path / "report" / "report.md").read_text()
     assert "R_T under step-cost" in text and "authors-interactive" not in text
+
+
+def robot_by_hand(steps: list[dict[str, str]]) -> dict[int, dict[str, float]]:
+    """Each sorting session's R_T under the robot's three schemes, from its exported
+    training steps: a step that placed an object (right or wrong) keeps its reward, every
+    other step costs what the scheme says at its number in the episode."""
+    totals: dict[int, dict[str, float]] = {}
+    for step in steps:
+        if step["stage"] != "train":
+            continue
+        total = totals.setdefault(int(step["session_id"]), dict.fromkeys(REWARD_SCHEMES, 0.0))
+        for scheme in REWARD_SCHEMES:
+            if step["outcome"] in ("placed", "misplaced"):
+                total[scheme] += float(step["reward"])
+            else:
+                total[scheme] += step_penalty(scheme, int(step["episode_step"]))
+    return totals
+
+
+def test_a_study_of_the_grid_world_and_the_sorting_robot_is_rescored_task_by_task(
+    tmp_path: Path,
+) -> None:
+    """One study, two batches: the grid world's and the sorting robot's. The report (from
+    the database, and from the study's export) rescores each session under its own task's
+    schemes, as counted by hand from the exported steps, leaves the other task's schemes
+    empty and named, and says which task was rescored under which schemes."""
+    data = tmp_path / "data"
+    grid = ideeprl("batch", "--study", "mixed", "--task", "gridworld",
+                   "--task-options", json.dumps(OPTIONS), "--methods", "autonomous",
+                   "oracle", "--agents", "1", "--no-progress", *SCALE, data=data)  # fmt: skip
+    assert grid.returncode == 0, grid.stderr
+    robot = ideeprl("batch", "--study", "mixed", "--methods", "autonomous", "--agents", "1",
+                    "--no-progress", *SCALE, data=data)  # fmt: skip
+    assert robot.returncode == 0, robot.stderr
+    exported = ideeprl("export", "--study", "mixed", "--out", str(tmp_path / "out"), data=data)
+    assert exported.returncode == 0, exported.stderr
+    with open(tmp_path / "out" / "steps.csv") as f:
+        steps = list(csv.DictReader(f))
+    with open(tmp_path / "out" / "sessions.csv") as f:
+        runs = {int(r["session_id"]): json.loads(r["run_spec"]) for r in csv.DictReader(f)}
+    tasks = {session: run.get("task", "sorting") for session, run in runs.items()}
+    grid_hand = by_hand([s for s in steps if tasks[int(s["session_id"])] == "gridworld"])
+    robot_hand = robot_by_hand([s for s in steps if tasks[int(s["session_id"])] == "sorting"])
+    assert len(grid_hand) == 2 and len(robot_hand) == 1
+
+    report = ideeprl("report", "--study", "mixed", "--out", str(tmp_path / "db"), data=data)
+    assert report.returncode == 0, report.stderr
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    from_files = subprocess.run(
+        [sys.executable, "-m", "analysis", str(tmp_path / "out"), str(tmp_path / "files")],
+        capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
+    )  # fmt: skip
+    assert from_files.returncode == 0, from_files.stderr
+    for folder in ("db", "files"):
+        with open(tmp_path / folder / "r_t_rescored_per_agent.csv") as f:
+            rescored = {int(r["session_id"]): r for r in csv.DictReader(f)}
+        assert set(rescored) == set(grid_hand) | set(robot_hand)
+        for session, hand in [*grid_hand.items(), *robot_hand.items()]:
+            row = rescored[session]
+            assert row["task"] == tasks[session] and row["not_rescored"] == ""
+            for scheme, value in hand.items():
+                assert float(row[f"R_T_{scheme}"]) == pytest.approx(value), (folder, session)
+            others = [s for s in (*REWARD_SCHEMES, *GRID_SCHEMES) if s not in hand]
+            assert all(row[f"R_T_{s}"] == "" for s in others), row
+            assert row["undeclared"] == ", ".join(others)
+        text = (tmp_path / folder / "report.md").read_text()
+        rescoring = text.split("## R_T rescored under each reward scheme")[1].split("\n## ")[0]
+        assert "gridworld under minigrid, sparse, step-cost" in rescoring, rescoring
+        assert f"sorting under {', '.join(REWARD_SCHEMES)}" in rescoring
+        assert "| gridworld |" in rescoring and "| sorting |" in rescoring

@@ -8,6 +8,7 @@ import csv
 import io
 import json
 from pathlib import Path
+from typing import Any
 from urllib.parse import urlsplit
 
 import httpx
@@ -16,12 +17,12 @@ import pytest
 from cli.main import main
 from learner.fitted import Count, FittedModel, fit
 from learner.fitted_ratings import RatingSeen, SessionRatings, fit_ratings
-from runs.rehearsal import fails_check
+from runs.rehearsal import fails_check, study_check
 from study.schemas.design import Condition, StudyDesign
 from tasks import get_task
 from tasks.sorting import HELD
 from tests.learner.test_fitted_tasks import recorded
-from tests.server.live import LiveServer
+from tests.server.live import API_KEY, LiveServer
 from tests.server.scale import export, session_body, wait_for_status
 from tests.study.test_visit import set_design
 
@@ -212,6 +213,22 @@ GRID_CHECK = {
 so a participant who guessed would not pass at its first try."""
 
 
+def grid_study_with_own_check(api: httpx.Client, name: str, target: int) -> dict[str, Any]:
+    """An online grid world study `name` asking `GRID_CHECK`, with `target` places: its
+    create body and the created study."""
+    run = {"method": "human", "task": "gridworld", "seed": 3, "config": {
+        "pretraining_steps": 16, "batch_size": 8, "memory_size": 500, "episodes": 1,
+        "max_episode_steps": 20, "advice_budget": BUDGET}}  # fmt: skip
+    body = {
+        "name": name,
+        "design": {"conditions": {"a": {"run": run, "target": target}}, "check": GRID_CHECK,
+                   "panel": {"kind": "prolific", "codes": {"completed": "C-DONE"}}},
+    }  # fmt: skip
+    made = api.post("/api/studies", json=body)
+    assert made.status_code == 201, made.text
+    return {"body": body, "study": made.json()}
+
+
 def test_a_study_s_own_check_is_passed_by_rehearsed_people_and_failed_by_their_share(
     server: LiveServer, api: httpx.Client, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -222,19 +239,10 @@ def test_a_study_s_own_check_is_passed_by_rehearsed_people_and_failed_by_their_s
     model = fit(recorded("gridworld", 300), task=get_task("gridworld"))
     path = tmp_path / "grid.json"
     path.write_text(json.dumps(model.to_json()))
-    run = {"method": "human", "task": "gridworld", "seed": 3, "config": {
-        "pretraining_steps": 16, "batch_size": 8, "memory_size": 500, "episodes": 1,
-        "max_episode_steps": 20, "advice_budget": BUDGET}}  # fmt: skip
-    study = {
-        "name": "grid world, own check",
-        "design": {"conditions": {"a": {"run": run, "target": 2}}, "check": GRID_CHECK,
-                   "panel": {"kind": "prolific", "codes": {"completed": "C-DONE"}}},
-    }  # fmt: skip
-    made = api.post("/api/studies", json=study)
-    assert made.status_code == 201, made.text
+    made = grid_study_with_own_check(api, "grid world, own check", 2)
     design_file = tmp_path / "study.yaml"
-    design_file.write_text(json.dumps(study))  # JSON is YAML
-    link = server.url + urlsplit(made.json()["join_url"]).path
+    design_file.write_text(json.dumps(made["body"]))  # JSON is YAML
+    link = server.url + urlsplit(made["study"]["join_url"]).path
 
     argv = ["rehearse", "--model", str(path), "--speed", "8", "--study-link", link]
     code = main([*argv, "--participants", "2", "--design", str(design_file),
@@ -242,14 +250,72 @@ def test_a_study_s_own_check_is_passed_by_rehearsed_people_and_failed_by_their_s
     out, err = capsys.readouterr()
     assert code == 0, err
     passed, failed = json.loads(out)["participants"]
-    assert passed["check_tries"] == 1 and passed["check_guessed"] == 0
+    assert passed["check_tries"] == 1
     assert passed["advice"] == BUDGET and passed["questionnaire"]
     assert failed["status"] == "excluded" and failed["check_tries"] == GRID_CHECK["tries"]
     assert failed["advice"] == 0 and not failed["questionnaire"]
 
-    files = export(api, made.json()["id"])
+    files = export(api, made["study"]["id"])
     sessions = list(csv.DictReader(io.StringIO(files["sessions.csv"].decode())))
     assert sorted(r["outcome"] for r in sessions) == ["completed", "excluded"]
+
+
+def arrivals(api: httpx.Client, study_id: int) -> list[dict[str, Any]]:
+    """The study's sessions that participants took (not its pools' waiting ones)."""
+    found = api.get(f"/api/studies/{study_id}/sessions").json()
+    return [s for s in found if not s["pooled"] and not s["preview"]]
+
+
+def test_a_study_s_own_check_is_read_with_the_researcher_key_and_never_guessed(
+    server: LiveServer,
+    api: httpx.Client,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Without the study's design or the researcher key, a rehearsal of a study with its
+    own check stops at the first participant's check, before any answer, naming the
+    questions it cannot answer (no other participant arrives); a key the server does not
+    hold is refused before anyone arrives; with the key, the rehearsal reads the check
+    from the study's design through the researcher API and passes it at its first try."""
+    monkeypatch.delenv("IDEEPRL_API_KEY", raising=False)
+    model = fit(recorded("gridworld", 300), task=get_task("gridworld"))
+    path = tmp_path / "grid.json"
+    path.write_text(json.dumps(model.to_json()))
+    study = grid_study_with_own_check(api, "grid world, own check read", 2)["study"]
+    link = server.url + urlsplit(study["join_url"]).path
+    argv = ["rehearse", "--model", str(path), "--speed", "8", "--study-link", link, "--json"]
+
+    code = main([*argv, "--participants", "3"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert "goal_colour ('What colour is the square the triangle must reach?')" in err, err
+    assert "into_a_wall" in err and "does not guess" in err and "--api-key" in err
+    (arrived,) = arrivals(api, study["id"])  # the first alone
+    token = arrived["participant_url"].rpartition("/p/")[2]
+    with server.client(key=None, token=token) as participant:
+        check = participant.get("/api/participant/check").json()
+    assert check["required"] and check["tries_used"] == 0 and not check["passed"]
+    # the key finds a participant link's study too; a lab study's link asks no check
+    read = study_check(f"{server.url}/p/{token}", API_KEY)
+    assert read is not None and [q.id for q in read.questions] == ["goal_colour", "into_a_wall"]
+    lab = api.post("/api/studies", json={"name": "lab, no check"}).json()
+    body = session_body("human", advice_budget=BUDGET, pretraining_steps=16, episodes=1,
+                        max_episode_steps=20)  # fmt: skip
+    response = api.post(f"/api/studies/{lab['id']}/sessions", json=body)
+    assert response.status_code == 201, response.text
+    lab_link = f"{server.url}/p/{response.json()['participant_token']}"
+    assert study_check(lab_link, API_KEY) is None
+
+    assert main([*argv, "--participants", "1", "--api-key", "not-the-key"]) == 1
+    assert "the server refused the researcher key (403)" in capsys.readouterr().err
+    assert len(arrivals(api, study["id"])) == 1
+
+    code = main([*argv, "--participants", "1", "--seed", "5", "--api-key", API_KEY])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    (passed,) = json.loads(out)["participants"]
+    assert passed["check_tries"] == 1 and passed["advice"] == BUDGET and passed["questionnaire"]
 
 
 def test_the_failure_share_is_spread_evenly_and_bounded(
