@@ -18,6 +18,7 @@ the side (lower half), so that every axis of a move shows. People see the scene 
 from __future__ import annotations
 
 import contextlib
+import functools
 from typing import Any
 
 import gymnasium as gym
@@ -73,6 +74,13 @@ def lattice_point(index: tuple[int, ...]) -> np.ndarray:
     return np.array([start + STEP * i for (start, _), i in zip(LATTICE, index, strict=True)])
 
 
+@functools.cache
+def lattice_distance(a: tuple[int, ...], b: tuple[int, ...]) -> float:
+    """Metres between two lattice points; a step asks it three times, of at most 175 x 175
+    pairs."""
+    return float(np.linalg.norm(lattice_point(a) - lattice_point(b)))
+
+
 class ReachEnv(gym.Env[np.ndarray, int]):
     """Reach the red ball with the iiwa's hand."""
 
@@ -97,6 +105,11 @@ class ReachEnv(gym.Env[np.ndarray, int]):
                 for link in range(meshes.ARM_LINKS)
             },
         )
+        self._moving = frozenset(spec.name for spec in self.scene.specs if spec.moving)
+        self._poses: dict[str, Pose] | None = None
+        """Every shape's pose in the scene as it is, read from PyBullet once after each
+        change: a step's motion starts where the last one ended, and the view's poses are
+        the motion's end."""
         self.top = Camera(world, TOP_VIEW, 64, 32)
         self.side = Camera(world, SIDE_VIEW, 64, 32)
         self.people = Camera(world, PEOPLE_VIEW, 256)
@@ -127,6 +140,7 @@ class ReachEnv(gym.Env[np.ndarray, int]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
+        self._poses = None
         sizes = [n for _, n in LATTICE]
         self.hand = tuple(int(self.np_random.integers(n)) for n in sizes)
         self.goal = self.hand
@@ -171,7 +185,7 @@ class ReachEnv(gym.Env[np.ndarray, int]):
     # --- the state -----------------------------------------------------------------------
     def distance(self) -> float:
         """Metres from the hand's lattice point to the ball's."""
-        return float(np.linalg.norm(lattice_point(self.hand) - lattice_point(self.goal)))
+        return lattice_distance(self.hand, self.goal)
 
     def correct_action(self) -> int | None:
         """The move that brings the hand nearest the ball (the first such in action order);
@@ -204,6 +218,7 @@ class ReachEnv(gym.Env[np.ndarray, int]):
             )  # fmt: skip
             for joint, angle in enumerate(q):
                 self.p.resetJointState(self.arm, joint, angle)
+        self._poses = None
 
     def _observation(self) -> np.ndarray:
         return np.concatenate([self.top.image(), self.side.image()], axis=0)
@@ -213,8 +228,9 @@ class ReachEnv(gym.Env[np.ndarray, int]):
         return list(self.scene.specs)
 
     def body_poses(self) -> dict[str, Pose]:
-        return self.scene.poses()
+        if self._poses is None:
+            self._poses = self.scene.poses()
+        return dict(self._poses)
 
     def _moving_poses(self) -> dict[str, Pose]:
-        moving = {spec.name for spec in self.scene.specs if spec.moving}
-        return {name: pose for name, pose in self.scene.poses().items() if name in moving}
+        return {name: pose for name, pose in self.body_poses().items() if name in self._moving}

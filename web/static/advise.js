@@ -19,6 +19,7 @@
   const AGENT = config.agent || "robot"; // what the page calls the learner
   const LAST_MOVE_MS = 4000;
   const FIRST_VIEW_WAIT_MS = 2000; // the longest a turn waits for the 3-D view's first frame
+  const VIEW_POLL_MS = 100; // how often a turn waiting for that frame asks for it
   const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
   const capital = (name) => name.charAt(0).toUpperCase() + name.slice(1); // as on the buttons
 
@@ -159,7 +160,8 @@
     for (let i = 0; i < 600 && gen === generation; i++) {
       const response = await api("/api/participant/playback").catch(() => null);
       if (!response || !response.ok) return;
-      const { remaining_s: left } = await response.json();
+      const { remaining_s: left, scene_shown: shown } = await response.json();
+      if (shown === true) sceneShown = true;
       if (left <= 0) return;
       await sleep(Math.min(1000, left * 1000 + 20));
     }
@@ -178,10 +180,16 @@
   }
 
   // A turn waits a moment for that first frame, never long: the camera image and the
-  // sentence say where the robot is meanwhile.
+  // sentence say where the robot is meanwhile. It asks the server itself every
+  // VIEW_POLL_MS: `watchView`'s slower polls would keep the buttons off up to 500 ms
+  // after the view has drawn.
   async function waitForView(gen) {
     const until = performance.now() + FIRST_VIEW_WAIT_MS;
-    while (!sceneShown && gen === generation && performance.now() < until) await sleep(100);
+    while (!sceneShown && gen === generation && performance.now() < until) {
+      const response = await api("/api/participant/playback").catch(() => null);
+      if (response && response.ok && (await response.json()).scene_shown === true) sceneShown = true;
+      if (!sceneShown) await sleep(VIEW_POLL_MS);
+    }
   }
 
   const VISIT_ENDED = ["declined", "excluded", "timed_out"];
