@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import gc
 import logging
-import multiprocessing
 import os
 import signal
 from dataclasses import dataclass, field, replace
@@ -25,6 +24,7 @@ from learner.machine import usable_cores
 from runs.worker.messages import Command
 from runs.worker.population import NOT_RUN, run_population
 from runs.worker.priority import lower_priority
+from runs.worker.processes import WORKER_PRELOAD, worker_context
 from runs.worker.worker import WorkerOptions, run_session
 
 ROOT = Path(__file__).absolute().parents[2]
@@ -135,8 +135,9 @@ class _Worker:
 
 
 class LocalBackend:
-    """Worker processes on this machine (spawned: each owns its PyBullet and torch), each
-    running one session after another.
+    """Worker processes on this machine (forked from a fork server that has loaded torch,
+    PyBullet and this module, `runs.worker.processes`: each owns its PyBullet and torch),
+    each running one session after another.
 
     Each worker has a pipe: the runner hands it sessions and asks it to shut down through
     it (the running session checkpoints and becomes `interrupted`); a worker whose runner
@@ -146,7 +147,7 @@ class LocalBackend:
         self.database_url = database_url
         self.options = options
         self.capacity = workers
-        self._context = multiprocessing.get_context("spawn")
+        self._context = worker_context((*WORKER_PRELOAD, __name__))
         self._workers: list[_Worker] = []
         self._ended: dict[int, str] = {}
 

@@ -32,6 +32,7 @@ from runs.worker.messages import (
     Tagged,
 )
 from runs.worker.population import population_main
+from runs.worker.processes import worker_context
 from runs.worker.worker import WorkerOptions, worker_main
 from server.live.hub import Hub
 from server.live.reaping import join
@@ -79,26 +80,6 @@ class WorkerHandle:
                 return True
             except (BrokenPipeError, EOFError, OSError):
                 return False
-
-
-WORKER_PRELOAD = ("torch", "pybullet", "learner.trainer", "sim.env", "runs.worker.worker")
-"""What every session worker imports, loaded once in the fork server: `import torch` alone
-leaves about 140 MB of private memory in a process; forked from a server that holds it,
-the workers share those pages (copy on write) instead of each making its own."""
-
-
-def worker_context() -> (
-    multiprocessing.context.ForkServerContext | multiprocessing.context.SpawnContext
-):
-    """Session workers are forked from a fork server that has loaded `WORKER_PRELOAD`
-    (a clean single-threaded process started for the purpose, never the web process with
-    its threads), or spawned where the platform has no fork server. Each worker still
-    owns its PyBullet client, torch threads and everything it makes after the fork."""
-    if "forkserver" not in multiprocessing.get_all_start_methods():
-        return multiprocessing.get_context("spawn")
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(list(WORKER_PRELOAD))
-    return context
 
 
 Deliver = Callable[[WorkerHandle, Any], None]
