@@ -24,8 +24,7 @@ from learner.machine import usable_cores
 from runs.worker.messages import Command
 from runs.worker.population import NOT_RUN, run_population
 from runs.worker.priority import lower_priority
-from runs.worker.processes import WORKER_PRELOAD, worker_context
-from runs.worker.worker import WorkerOptions, run_session
+from runs.worker.worker import WORKER_PRELOAD, WorkerOptions, run_session, worker_context
 
 ROOT = Path(__file__).absolute().parents[2]
 STOP_WAIT_S = 60.0
@@ -136,8 +135,8 @@ class _Worker:
 
 class LocalBackend:
     """Worker processes on this machine (forked from a fork server that has loaded torch,
-    PyBullet and this module, `runs.worker.processes`: each owns its PyBullet and torch),
-    each running one session after another.
+    PyBullet and this module, `worker_context`: each owns its PyBullet and torch), each
+    running one session after another.
 
     Each worker has a pipe: the runner hands it sessions and asks it to shut down through
     it (the running session checkpoints and becomes `interrupted`); a worker whose runner

@@ -32,8 +32,7 @@ from runs.worker.messages import (
     Tagged,
 )
 from runs.worker.population import population_main
-from runs.worker.processes import worker_context
-from runs.worker.worker import WorkerOptions, worker_main
+from runs.worker.worker import WorkerOptions, worker_context, worker_main
 from server.live.hub import Hub
 from server.live.reaping import join
 from server.live.session import LiveSession
