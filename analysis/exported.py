@@ -163,16 +163,21 @@ VISIT_COLUMNS = {
     "sessions": {"session_id": int, "condition": str, "outcome": str, "consented_at": str,
                  "status": str},
     "advice": {"session_id": int, "advisor": str, "action": float, "decision_time_s": float,
-               "correct_action": float},
+               "correct_action": float, "correct_actions": str},
     "feedback": {"session_id": int, "evaluator": str, "action": float, "judgement": float,
-                 "decision_time_s": float, "correct_action": float},
+                 "decision_time_s": float, "correct_action": float, "correct_actions": str},
     "check": {"session_id": int, "attempt": int, "question": str, "correct": bool},
     "questionnaire": {"session_id": int, "instrument": str, "item": str,
                       "value_number": float},
     "scales": {"session_id": int, "scale": str, "score": float},
 }  # fmt: skip
 """The columns of each table `analysis.human.Visits` reads, typed as the database's are
-(a missing cell None, or NaN for a number); `correct_action` only where the export has it."""
+(a missing cell None, or NaN for a number); `correct_action` and `correct_actions` only where
+the export has them."""
+
+
+CORRECT_COLUMNS = ("correct_action", "correct_actions")
+"""The visit tables' columns an export written before they were recorded lacks."""
 
 
 def read_visits(path: Path, sessions: pd.DataFrame | None = None) -> Visits:
@@ -191,7 +196,7 @@ def read_visits(path: Path, sessions: pd.DataFrame | None = None) -> Visits:
         typed = {}
         for column, kind in columns.items():
             if column not in table:
-                if column == "correct_action":
+                if column in CORRECT_COLUMNS:
                     continue
                 table = table.assign(**{column: None})
             typed[column] = table[column].map(lambda v, k=kind: _cell(v, k))

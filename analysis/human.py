@@ -14,9 +14,10 @@ finished its episodes.
   (`feedback`: Good and Bad on the learner's own actions), else their advice. Their
   measures are those of a completed visit: the turns they answered (advice given, or
   ratings given), the accuracy of those answers against the task's correct action where
-  the table records one (`correct_action`: advice is right when it names it; a rating is
-  right when it says good of the correct action or bad of another; where none is
-  recorded there is no accuracy, and the report says so), the median of their decision
+  the table records one (`correct_action`, and `correct_actions` where other actions are
+  as right, as the grid world's equally short moves are: advice is right when it names
+  one of them; a rating is right when it says good of one of them or bad of another; where
+  none is recorded there is no accuracy, and the report says so), the median of their decision
   times, their questionnaire's scales (`scales`: NASA-TLX raw, trust), and every numeric
   item (NASA-TLX subscales, trust items, the researcher's own).
 - The check's rates are over every participant who took it: passed at the first try, and
@@ -34,6 +35,7 @@ import pandas as pd
 
 from analysis.between import Tested, fisher, holm, mann_whitney, welch
 from analysis.finished import is_finished
+from tasks import actions_of_text
 
 FLOW = ("arrived", "declined", "consented", "excluded", "timed_out", "completed", "under_way")
 """The flow's counts per condition, in the order a CONSORT diagram reads them."""
@@ -43,7 +45,8 @@ PERSON = "human"
 """The advisor or evaluator of a participant's own advice or ratings (as the server
 stores it: `study.services.feedback.PERSON`)."""
 FEEDBACK_COLUMNS = ["session_id", "evaluator", "action", "judgement", "decision_time_s"]
-"""The feedback table's columns the section reads (and `correct_action` where recorded)."""
+"""The feedback table's columns the section reads (and `correct_action`, `correct_actions`
+where recorded)."""
 TURN_COLUMNS = ["session_id", "gave", "answered", "decision_time_s", "correct"]
 """One row per turn (`turns`): `gave` advice or ratings, `answered` (an answer was
 given), its decision time, `correct` 1.0 or 0.0 (NaN: not known)."""
@@ -56,7 +59,7 @@ class Visits:
     sessions: pd.DataFrame
     """session_id, condition, outcome, consented_at, status (every visit, any outcome)."""
     advice: pd.DataFrame
-    """session_id, advisor, action, decision_time_s, [correct_action]."""
+    """session_id, advisor, action, decision_time_s, [correct_action, correct_actions]."""
     check: pd.DataFrame
     """session_id, attempt, question, correct."""
     questionnaire: pd.DataFrame
@@ -65,7 +68,7 @@ class Visits:
     """session_id, scale, score."""
     feedback: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=FEEDBACK_COLUMNS))
     """session_id, evaluator, action, judgement (+1 good, -1 bad, NaN no answer),
-    decision_time_s, [correct_action]: the ratings of evaluative feedback."""
+    decision_time_s, [correct_action, correct_actions]: the ratings of evaluative feedback."""
 
     @property
     def visits(self) -> pd.DataFrame:
@@ -164,12 +167,21 @@ def items(visits: Visits) -> pd.DataFrame:
     return wide.astype(float)
 
 
-def _correct(table: pd.DataFrame, right: pd.Series) -> pd.Series:
-    """1.0 where `right`, 0.0 where not, NaN where the row records no correct action."""
+def _right(table: pd.DataFrame) -> pd.Series:
+    """1.0 where the row's action is right, 0.0 where not, NaN where the row records no
+    correct action: one of its `correct_actions` where it lists them (the grid world's moves
+    equally near the goal), else its `correct_action`."""
     if "correct_action" not in table:
         return pd.Series(np.nan, index=table.index)
-    known = table["correct_action"].notna()
-    return right.astype(float).where(known)
+    action = table["action"].astype(float)
+    right = (action == table["correct_action"].astype(float)).astype(float)
+    if "correct_actions" in table:
+        listed = table["correct_actions"].map(lambda t: t if isinstance(t, str) and t else None)
+        sets = listed.dropna().map(actions_of_text)
+        right.loc[sets.index] = [
+            float(a in s) for a, s in zip(action[sets.index], sets, strict=True)
+        ]
+    return right.where(table["correct_action"].notna())
 
 
 def turns(visits: Visits) -> pd.DataFrame:
@@ -184,21 +196,14 @@ def turns(visits: Visits) -> pd.DataFrame:
             "gave": "advice",
             "answered": action.notna(),
             "decision_time_s": advice["decision_time_s"].astype(float),
-            "correct": (
-                _correct(advice, action == advice["correct_action"].astype(float))
-                if "correct_action" in advice
-                else np.nan
-            ),
+            "correct": _right(advice),
         }
     )
     feedback = visits.feedback
     judgement = feedback["judgement"].astype(float)
-    if "correct_action" in feedback:
-        same = feedback["action"].astype(float) == feedback["correct_action"].astype(float)
-        scored = judgement.notna() & (judgement != 0)
-        correct = _correct(feedback, (judgement > 0) == same).where(scored)
-    else:
-        correct = pd.Series(np.nan, index=feedback.index)
+    right = _right(feedback)
+    scored = judgement.notna() & (judgement != 0) & right.notna()
+    correct = ((judgement > 0) == (right == 1)).astype(float).where(scored)
     rated = pd.DataFrame(
         {
             "session_id": feedback["session_id"],

@@ -124,14 +124,15 @@ def _accuracy_note(people: pd.DataFrame) -> str:
         (
             "advice",
             "Accuracy of advice is the share of a participant's advice that named the "
-            "task's correct action.",
+            "task's correct action, or an action as right where the task records several "
+            "(the grid world's moves equally near the goal).",
             "No accuracy for advice: no correct action is recorded beside it (the task "
             "cannot say, or the advice was stored before it was recorded).",
         ),
         (
             "ratings",
             "Accuracy of ratings is the share of a participant's ratings that were right: "
-            "good of the task's correct action, bad of another.",
+            "good of the task's correct action (or an action as right), bad of another.",
             "No accuracy for ratings: the feedback table records no correct action beside "
             "a rating (the task cannot say, or the ratings were stored before it was "
             "recorded), so whether a good or a bad was right is not available.",

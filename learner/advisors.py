@@ -17,7 +17,7 @@ from learner.fitted import FittedAdvisor, log_normal_time, read_model
 from learner.no_advice import NO_ADVICE as NO_ADVICE
 from learner.no_advice import NoAdvice as NoAdvice
 from sim.rules import SortRule
-from tasks import Task, TaskOptions, get_task
+from tasks import CorrectActions, Task, TaskOptions, get_task
 
 ADVISOR_KINDS = ("agent", "fitted", "oracle", "random")
 
@@ -98,21 +98,30 @@ class OracleAdvisor:
         self.last_decision_time_s: float | None = None
 
     def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
-        action = self.task.correct(info, self.task_options)
-        if action is None:
-            raise ValueError(
-                f"the oracle was asked where task {self.task.name} names no correct action"
-            )
-        correct = int(action)
+        right = self.right_actions(info)
+        correct = right.action
+        assert correct is not None  # right_actions refuses a state without one
         wrong = self.rng.random() < self.error_rate
-        other = int(self.rng.integers(self.n_actions - 1))
+        # a mistake is an action that is not right (where another move is as right, as the
+        # grid world's equally short ones are, naming it would be no mistake)
+        others = [a for a in range(self.n_actions) if a not in right.actions]
+        other = int(self.rng.integers(max(len(others), 1)))
         if self.decision_time_median_s is not None:
             self.last_decision_time_s = log_normal_time(
                 self.time_rng, self.decision_time_median_s, self.decision_time_sigma
             )
-        if not wrong:
+        if not wrong or not others:
             return correct
-        return other if other < correct else other + 1
+        return others[other]
+
+    def right_actions(self, info: dict[str, Any]) -> CorrectActions:
+        """The correct action in the state `info` describes, and every action as right."""
+        right = self.task.correct_actions(info, self.task_options)
+        if right.action is None:
+            raise ValueError(
+                f"the oracle was asked where task {self.task.name} names no correct action"
+            )
+        return right
 
     def state_dict(self) -> dict[str, Any]:
         return {"rng": self.rng.bit_generator.state, "time_rng": self.time_rng.bit_generator.state}

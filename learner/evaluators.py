@@ -57,7 +57,8 @@ def judge(evaluator: AnyEvaluator, moment: AdviceMoment) -> float | None:
 
 class AdvisorEvaluator:
     """Judges as an advisor would advise: good when the action taken is the one `advisor`
-    names (the oracle's correct action, a trained agent's greedy one), else bad; each
+    names (a trained agent's greedy one) or, for the oracle, one as right as its correct
+    action (the grid world's equally short moves), else bad; each
     judgement turned into its opposite with probability `error_rate` (an evaluator of
     known reliability, as the oracle advisor is one of advice). A simulated decision time
     of the advisor's (`last_decision_time_s`) is the judgement's."""
@@ -78,7 +79,8 @@ class AdvisorEvaluator:
     def judge(self, obs: np.ndarray, info: dict[str, Any], action: int) -> float:
         named = self.advisor.advise(obs, info)
         assert named is not NO_ADVICE, "a machine advisor always names an action"
-        right = int(named) == int(action)
+        rights = getattr(self.advisor, "right_actions", None)  # the oracle's: all as right
+        right = int(action) in rights(info).actions if rights else int(named) == int(action)
         if self.rng.random() < self.error_rate:
             right = not right
         return GOOD if right else BAD

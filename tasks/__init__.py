@@ -13,7 +13,10 @@ A task is named in a run (`RunSpec.task`) by one of:
 
 The ground truth an advisor may look at travels in the environment's `info`: a task whose
 advisor can name the right action puts it in `info["correct_action"]` (the oracle advisor
-reads it), or gives `correct_action` a function of `info` and the task's options. An
+reads it), or gives `correct_action` a function of `info` and the task's options; where
+other actions are as right (two moves equally short), it lists them all in
+`info["correct_actions"]`, the correct action among them, for the accuracy of advice and
+ratings (`Task.correct_actions`). An
 episode's success is Gymnasium's `info["is_success"]` at its end where the task states it
 (else: it terminated without a misplacement, as the sorting robot's does).
 
@@ -26,7 +29,7 @@ from __future__ import annotations
 import importlib
 import re
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -174,6 +177,35 @@ class ViewCamera:
 
 
 @dataclass(frozen=True)
+class CorrectActions:
+    """A step's correct action (the oracle's) and every action as right as it, which the
+    accuracy of advice and ratings counts as right (the grid world's moves equally near
+    the goal); none where the task cannot say."""
+
+    action: int | None
+    actions: tuple[int, ...]
+    """Sorted; empty where `action` is None."""
+
+    @property
+    def stored(self) -> list[int] | None:
+        """The right actions as stored beside an advice or a rating (None: none known)."""
+        return list(self.actions) or None
+
+
+NO_CORRECT_ACTION = CorrectActions(None, ())
+
+
+def actions_text(actions: Sequence[int] | None) -> str | None:
+    """Action indices as the export writes them, in one cell: "1 2" (None: none)."""
+    return " ".join(str(int(a)) for a in actions) if actions else None
+
+
+def actions_of_text(text: str | None) -> frozenset[int]:
+    """The action indices of an `actions_text` cell (empty where it is empty)."""
+    return frozenset(int(a) for a in text.split()) if text else frozenset()
+
+
+@dataclass(frozen=True)
 class Task:
     """A task: how to make its environment, and what people see of it."""
 
@@ -294,6 +326,17 @@ class Task:
             return self.correct_action(info, self.checked_options(options))
         action = info.get("correct_action")
         return None if action is None else int(action)
+
+    def correct_actions(self, info: GymInfo, options: TaskOptions) -> CorrectActions:
+        """The correct action in the state `info` describes (`correct`, what the oracle
+        advises) and every action as right as it: the environment's
+        `info["correct_actions"]` where it lists them, else the correct action alone."""
+        action = self.correct(info, options)
+        if action is None:
+            return NO_CORRECT_ACTION
+        listed = info.get("correct_actions")
+        actions = {action} if listed is None else {int(a) for a in listed} | {action}
+        return CorrectActions(action, tuple(sorted(actions)))
 
 
 def _name_of(words: str) -> str:

@@ -19,11 +19,18 @@ from runs.worker.recorder import Reporter
 from study.services.advice import AdviceGiven
 from study.services.feedback import FeedbackGiven
 from study.services.observations import encode_observation, encode_png
+from tasks import NO_CORRECT_ACTION, CorrectActions
 
 log = logging.getLogger(__name__)
-Correct = Callable[[dict[str, Any]], int | None]
-"""The task's correct action in the state an `info` describes (`tasks.Task.correct` with the
-run's options), stored beside each advice for its accuracy."""
+Correct = Callable[[dict[str, Any]], CorrectActions]
+"""The task's correct action in the state an `info` describes and every action as right
+(`tasks.Task.correct_actions` with the run's options), stored beside each advice and rating
+for its accuracy."""
+
+
+def correct_at(correct: Correct | None, info: dict[str, Any]) -> CorrectActions:
+    """What `correct` says of the state `info` describes; none known without it."""
+    return NO_CORRECT_ACTION if correct is None else correct(info)
 
 
 class HumanAdvisor:
@@ -88,7 +95,7 @@ class HumanAdvisor:
                 info=dict(moment.info),
                 advice_budget=self._budget,
                 frame_png=encode_png(self._frames()) if self._frames is not None else None,
-                correct_action=self._correct(moment.info) if self._correct else None,
+                correct=correct_at(self._correct, moment.info),
             )
             self._until_participant_ready()
             # The request first: the flush of the steps before it then overlaps the
@@ -169,6 +176,7 @@ class RecordingAdvisor:
         answer = ask(self._inner, moment)
         action = None if answer is NO_ADVICE else int(answer)
         elapsed = time.perf_counter() - started
+        correct = correct_at(self._correct, moment.info)
         self._log.add_advice(
             AdviceGiven(
                 session_id=self._session_id,
@@ -183,7 +191,8 @@ class RecordingAdvisor:
                 requested_at=requested_at,
                 answered_at=requested_at + timedelta(seconds=elapsed),
                 same_observation=getattr(self._inner, "same_observation", None),
-                correct_action=self._correct(moment.info) if self._correct else None,
+                correct_action=correct.action,
+                correct_actions=correct.stored,
             )
         )
         self.count += 1
@@ -240,6 +249,7 @@ class RecordingEvaluator:
         requested_at = datetime.now(UTC)
         judgement = judge(self._inner, moment)
         elapsed = time.perf_counter() - started
+        correct = correct_at(self._correct, moment.info)
         self._log.add_feedback(
             FeedbackGiven(
                 session_id=self._session_id,
@@ -255,7 +265,8 @@ class RecordingEvaluator:
                 decision_time_s=getattr(self._inner, "last_decision_time_s", None),
                 requested_at=requested_at,
                 answered_at=requested_at + timedelta(seconds=elapsed),
-                correct_action=self._correct(moment.info) if self._correct else None,
+                correct_action=correct.action,
+                correct_actions=correct.stored,
             )
         )
         self.count += 1

@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
+from tasks import NO_CORRECT_ACTION, CorrectActions
+
 if TYPE_CHECKING:  # the web process reads these without loading the simulator
     from learner.records import EpisodeRecord
     from sim.bodies import BodySpec, MotionFrame, Pose
@@ -62,9 +64,10 @@ class AdviceRequest:
     """Advice the strategy may ask for in all."""
     frame_png: bytes | None = None
     """A task without a live 3-D view: what people see at this step, PNG."""
-    correct_action: int | None = None
-    """The task's correct action at this step (stored with the advice or the rating for its
-    accuracy; never shown to the participant); None where the task cannot say."""
+    correct: CorrectActions = NO_CORRECT_ACTION
+    """The task's correct action at this step and every action as right (stored with the
+    advice or the rating for its accuracy; never shown to the participant); none where the
+    task cannot say."""
     rated_action: int | None = None
     """Evaluative feedback: the action the learner took at this step, for the person to rate
     (good, bad, or no answer); None: advice is asked for (`runs.worker.rating`)."""

@@ -14,7 +14,7 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from learner.strategies import AdviceMoment
-from runs.worker.advisors import Correct, until_participant_ready
+from runs.worker.advisors import Correct, correct_at, until_participant_ready
 from runs.worker.link import SessionAbandoned, WorkerLink
 from runs.worker.messages import AdviceRequest
 from runs.worker.recorder import Reporter
@@ -102,7 +102,7 @@ class HumanEvaluator:
                 rated_action=moment.intended_action,
                 rated_reward=self._reward,
                 rating_time_out_s=self._time_out_s,
-                correct_action=self._correct(moment.info) if self._correct else None,
+                correct=correct_at(self._correct, moment.info),
             )
             until_participant_ready(self._link, self._reporter, self._idle_limit_s)
             self._link.send(request)

@@ -205,7 +205,7 @@ class _Run:
             self.link, self.recorder, env, spec.config.episodes, self.advice_budget
         )
         task, task_options = spec.the_task, spec.env_options()
-        self.correct: Correct = functools.partial(task.correct, options=task_options)
+        self.correct: Correct = functools.partial(task.correct_actions, options=task_options)
         """The task's correct action at a step, stored beside each advice and judgement."""
         advisor = self._advisor(spec.make_advisor())  # None for sb3-dqn, which takes none
         evaluator = self._evaluator(spec.make_evaluator())  # evaluative feedback's, or None

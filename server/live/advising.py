@@ -285,7 +285,8 @@ async def submit_advice(
             decision_time_s=body.decision_time_s,
             requested_at=answered_at - timedelta(seconds=response_time),
             answered_at=answered_at,
-            correct_action=request.correct_action,
+            correct_action=request.correct.action,
+            correct_actions=request.correct.stored,
         )
         if not await run_in_threadpool(store_advice, manager.factory, advice):
             stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)

@@ -123,7 +123,8 @@ def _given(
         decision_time_s=decision_time_s,
         requested_at=answered_at - timedelta(seconds=response_time_s),
         answered_at=answered_at,
-        correct_action=request.correct_action,
+        correct_action=request.correct.action,
+        correct_actions=request.correct.stored,
     )
 
 

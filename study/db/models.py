@@ -388,6 +388,11 @@ class Advice(Base):
     correct_action: Mapped[int | None] = mapped_column(Integer)
     """The task's correct action at the advised step (`tasks.Task.correct`), for the advice's
     accuracy; NULL where the task cannot say, and in rows stored before 0018."""
+    correct_actions: Mapped[list[Any] | None] = mapped_column(JSON)
+    """Every action as right as the correct one at that step, the correct one among them
+    (`tasks.Task.correct_actions`: the grid world's moves equally near the goal), for the
+    advice's accuracy; NULL where the task cannot say, and in rows stored before 0020 (their
+    accuracy reads `correct_action` alone)."""
 
 
 class Feedback(Base):
@@ -422,6 +427,10 @@ class Feedback(Base):
     correct_action: Mapped[int | None] = mapped_column(Integer)
     """The task's correct action at the rated step (`tasks.Task.correct`), for the rating's
     accuracy; NULL where the task cannot say, and in rows stored before 0019."""
+    correct_actions: Mapped[list[Any] | None] = mapped_column(JSON)
+    """Every action as right as the correct one at the rated step, the correct one among
+    them, for the rating's accuracy; NULL where the task cannot say, and in rows stored
+    before 0020."""
 
 
 class CheckAttempt(Base):

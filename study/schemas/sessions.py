@@ -280,5 +280,11 @@ class AdvicePublic(BaseModel):
     correct_action: int | None = Field(
         default=None,
         description="The task's correct action at the advised step (the advice is accurate "
-        "when action equals it); null where the task cannot say.",
+        "when action equals it, or is one of correct_actions); null where the task cannot say.",
+    )
+    correct_actions: list[int] | None = Field(
+        default=None,
+        description="Every action as right as correct_action there, it among them (the grid "
+        "world's moves equally near the goal); null where the task cannot say, and for advice "
+        "stored before it was recorded.",
     )

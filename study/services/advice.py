@@ -50,6 +50,10 @@ class AdviceGiven:
     correct_action: int | None = None
     """The task's correct action at the advised step (`tasks.Task.correct`); None where the
     task cannot say."""
+    correct_actions: list[int] | None = None
+    """Every action as right as the correct one there, the correct one among them
+    (`tasks.Task.correct_actions`: the grid world's moves equally near the goal); None where
+    the task cannot say."""
 
 
 def write_advice(db: Session, advice: Sequence[AdviceGiven]) -> None:

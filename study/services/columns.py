@@ -198,8 +198,16 @@ ADVICE_COLUMNS: dict[str, tuple[str, str]] = {
         "integer",
         "The task's correct action at the advised step, its index as in action (the sorting "
         "rule's for the sorting robot, the shortest path's in the grid world): the advice is "
-        "accurate when action equals it; empty where the task cannot say, and for advice "
-        "stored before it was recorded.",
+        "accurate when action equals it, or is one of correct_actions; empty where the task "
+        "cannot say, and for advice stored before it was recorded.",
+    ),
+    "correct_actions": (
+        "string",
+        "Every action as right as correct_action at the advised step, it among them, their "
+        'indices separated by spaces ("1 2": the grid world\'s moves that bring the agent '
+        "equally near the goal): the advice is accurate when action is one of them; empty "
+        "where the task cannot say, and for advice stored before it was recorded (its "
+        "accuracy reads correct_action alone).",
     ),
 }
 FEEDBACK_COLUMNS: dict[str, tuple[str, str]] = {
@@ -247,8 +255,16 @@ FEEDBACK_COLUMNS: dict[str, tuple[str, str]] = {
         "integer",
         "The task's correct action at the judged step, its index as in action (the sorting "
         "rule's for the sorting robot, the shortest path's in the grid world): a judgement "
-        "is right when it is good and action equals it, or bad and action differs; empty "
-        "where the task cannot say, and for judgements stored before it was recorded.",
+        "is right when it is good and action equals it (or is one of correct_actions), or "
+        "bad and action is none of them; empty where the task cannot say, and for judgements "
+        "stored before it was recorded.",
+    ),
+    "correct_actions": (
+        "string",
+        "Every action as right as correct_action at the judged step, it among them, their "
+        'indices separated by spaces ("1 2"); empty where the task cannot say, and for '
+        "judgements stored before it was recorded (their rightness reads correct_action "
+        "alone).",
     ),
 }
 ASSIGNMENT_COLUMNS: dict[str, tuple[str, str]] = {

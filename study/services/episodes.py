@@ -19,6 +19,7 @@ from analysis.rescoring import STEP_COLUMNS
 from analysis.settings import settings_table
 from learner.records import TRAINING, stage_of
 from study.db.models import Advice, Episode, Feedback, Step, StudySession
+from tasks import actions_text
 
 if TYPE_CHECKING:
     from analysis.human import Visits
@@ -117,14 +118,16 @@ def load_visits(db: Session, sessions: Sequence[StudySession]) -> Visits:
             Advice.action,
             Advice.decision_time_s,
             Advice.correct_action,
+            Advice.correct_actions,
         )
         .where(Advice.session_id.in_([s.id for s in sessions]))
         .order_by(Advice.session_id, Advice.advice_index)
     )
     advice = pd.DataFrame(
-        [tuple(row) for row in db.execute(query)],
-        columns=["session_id", "advisor", "action", "decision_time_s", "correct_action"],
-    )
+        [(*row[:-1], actions_text(row[-1])) for row in db.execute(query)],
+        columns=["session_id", "advisor", "action", "decision_time_s", "correct_action",
+                 "correct_actions"],
+    )  # fmt: skip
     rated = (
         select(
             Feedback.session_id,
@@ -133,14 +136,15 @@ def load_visits(db: Session, sessions: Sequence[StudySession]) -> Visits:
             Feedback.judgement,
             Feedback.decision_time_s,
             Feedback.correct_action,
+            Feedback.correct_actions,
         )
         .where(Feedback.session_id.in_([s.id for s in sessions]))
         .order_by(Feedback.session_id, Feedback.feedback_index)
     )
     feedback = pd.DataFrame(
-        [tuple(row) for row in db.execute(rated)],
+        [(*row[:-1], actions_text(row[-1])) for row in db.execute(rated)],
         columns=["session_id", "evaluator", "action", "judgement", "decision_time_s",
-                 "correct_action"],
+                 "correct_action", "correct_actions"],
     )  # fmt: skip
     check = pd.DataFrame(
         list(check_rows(db, list(sessions))),

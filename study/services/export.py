@@ -59,6 +59,7 @@ from study.services.errors import Conflict
 from study.services.sessions import advisor_sessions
 from study.services.studies import get_study
 from study.services.tables import column, resource, write_csv, write_parquet
+from tasks import actions_text
 
 FORMATS = ("csv", "parquet")
 TABLES = (
@@ -248,6 +249,7 @@ def _advice_rows(db: Session, sessions: list[StudySession], out: Path) -> Iterat
                 "observation_file": f"advice/{name}",
                 "same_observation": a.same_observation,
                 "correct_action": a.correct_action,
+                "correct_actions": actions_text(a.correct_actions),
             }
 
 
@@ -274,6 +276,7 @@ def _feedback_rows(db: Session, sessions: list[StudySession]) -> Iterator[dict[s
                 "requested_at": f.requested_at,
                 "answered_at": f.answered_at,
                 "correct_action": f.correct_action,
+                "correct_actions": actions_text(f.correct_actions),
             }
 
 

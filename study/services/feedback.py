@@ -47,6 +47,9 @@ class FeedbackGiven:
     correct_action: int | None = None
     """The task's correct action at the rated step (`tasks.Task.correct`), for the rating's
     accuracy; None where the task cannot say."""
+    correct_actions: list[int] | None = None
+    """Every action as right as the correct one there, the correct one among them
+    (`tasks.Task.correct_actions`); None where the task cannot say."""
 
 
 def write_feedback(db: Session, feedback: Sequence[FeedbackGiven]) -> None:

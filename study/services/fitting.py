@@ -94,8 +94,10 @@ def session_advice(db: Session, session: StudySession) -> tuple[SessionAdvice, i
     seen: list[AdviceSeen] = []
     for a in advice:
         if a.action is not None and a.global_step in placed:
-            place, group, correct = placed[a.global_step]
-            seen.append(AdviceSeen(place, group, correct, a.action, a.decision_time_s))
+            place, group, correct, rights = placed[a.global_step]
+            # advice naming another right action (a move as short) is no error
+            named = a.action if a.action in rights else correct
+            seen.append(AdviceSeen(place, group, named, a.action, a.decision_time_s))
     found = SessionAdvice(session.id, seen, spec.advice_budget, given=len(advice))
     return found, len(advice) - len(seen)
 
@@ -109,14 +111,15 @@ def session_ratings(db: Session, session: StudySession) -> tuple[SessionRatings,
     seen: list[RatingSeen] = []
     for f in turns:
         if f.global_step in placed:
-            place, group, correct = placed[f.global_step]
-            right = f.action == correct
+            place, group, _, rights = placed[f.global_step]
+            right = f.action in rights
             seen.append(RatingSeen(place, group, right, f.judgement, f.decision_time_s))
     return SessionRatings(session.id, seen), len(turns) - len(seen)
 
 
-Placed = tuple[str, str, int]
-"""A step's situation (place, group) and the task's correct action there."""
+Placed = tuple[str, str, int, tuple[int, ...]]
+"""A step's situation (place, group), the task's correct action there and every action as
+right (`tasks.Task.correct_actions`)."""
 
 
 def _placed(db: Session, session: StudySession, wanted: set[int]) -> dict[int, Placed]:
@@ -169,10 +172,10 @@ def _replay(
     _, info = env.reset(seed=reset_seed)
     placed = {}
     for step in steps:
-        correct = task.correct(info, options) if step.global_step in wanted else None
-        if correct is not None:
-            place, group = situation(task, info, stage_of(step.stage), correct)
-            placed[step.global_step] = (place, group, correct)
+        correct = task.correct_actions(info, options) if step.global_step in wanted else None
+        if correct is not None and correct.action is not None:
+            place, group = situation(task, info, stage_of(step.stage), correct.action)
+            placed[step.global_step] = (place, group, correct.action, correct.actions)
         _, reward, _, _, info = env.step(step.action)
         if abs(float(reward) - step.reward) > 1e-9:
             raise ReplayMismatch(

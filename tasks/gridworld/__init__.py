@@ -3,10 +3,13 @@ square. Four moves, seen from above (up, right, down, left), so a person names a
 they see it; the learner sees the whole room from above, 8 pixels a square.
 
 The correct action is a shortest path's next move (a breadth-first search over the room,
-done once an episode), stated in `info["correct_action"]`. The reward is MiniGrid's: on
-reaching the goal, 1 - 0.9 x (steps taken / the step limit); nothing otherwise. Recorded
-runs are rescored under the other schemes (`SCHEMES`) from where each episode reached the
-goal (the step that ended it: the room ends an episode nowhere else).
+done once an episode), stated in `info["correct_action"]`: the first in action order of
+the moves that bring the agent a step nearer the goal, all of which
+`info["correct_actions"]` lists (above and left of the goal, right and down both do;
+advice naming either is right). The reward is MiniGrid's: on reaching the goal, 1 - 0.9 x
+(steps taken / the step limit); nothing otherwise. Recorded runs are rescored under the
+other schemes (`SCHEMES`) from where each episode reached the goal (the step that ended
+it: the room ends an episode nowhere else).
 """
 
 from __future__ import annotations
@@ -108,10 +111,12 @@ class GridWorldEnv(gym.Env[np.ndarray, int]):
 
     def _info(self) -> dict[str, Any]:
         position = self._position()
+        nearer = self._moves_nearer(position)
         return {
             "position": position,
             "distance": self._distance.get(position),
-            "correct_action": self._next_move(position),
+            "correct_action": nearer[0] if nearer else None,
+            "correct_actions": nearer,
             "is_success": self._distance.get(position) == 0,
         }
 
@@ -139,15 +144,17 @@ class GridWorldEnv(gym.Env[np.ndarray, int]):
                     queue.append(near)
         return distance
 
-    def _next_move(self, position: tuple[int, int]) -> int | None:
-        """The first move (in action order) that brings the agent a step nearer the goal."""
+    def _moves_nearer(self, position: tuple[int, int]) -> list[int]:
+        """The moves (in action order) that bring the agent a step nearer the goal; none at
+        the goal."""
         here = self._distance.get(position)
         if not here:
-            return None
-        for action, (dx, dy) in enumerate(MOVES):
-            if self._distance.get((position[0] + dx, position[1] + dy), here) < here:
-                return action
-        return None
+            return []
+        return [
+            action
+            for action, (dx, dy) in enumerate(MOVES)
+            if self._distance.get((position[0] + dx, position[1] + dy), here) < here
+        ]
 
 
 def goal_reward(scheme: str, n: int, max_steps: int) -> float:

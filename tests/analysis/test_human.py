@@ -79,6 +79,38 @@ def test_ratings_without_a_correct_action_have_no_accuracy(tmp_path: Path) -> No
     assert "| late | 2 | ratings | 2.50 | – | 2.00 |" in text
 
 
+def test_an_action_as_right_as_the_correct_one_counts_as_right() -> None:
+    """Where a row lists every right action (`correct_actions`: the grid world's moves
+    equally near the goal), advice naming any of them is accurate and a rating is right
+    when it says good of one of them or bad of another; a row without the list (stored
+    before it was recorded) reads its `correct_action` alone."""
+    visits = rated_visits()
+    advice = visits.advice.assign(correct_actions=None)
+    # session 1's third advice names 2 where 3 is the correct action and 2 is as right
+    advice.loc[(advice["session_id"] == 1) & (advice["action"] == 2), "correct_actions"] = "2 3"
+    # session 3's advice of 1 where 2 is correct and 1 is not among the right ones
+    advice.loc[(advice["session_id"] == 3) & (advice["action"] == 1), "correct_actions"] = "2 3"
+    feedback = visits.feedback.assign(correct_actions=None)
+    feedback.loc[1, "correct_actions"] = "1 2"  # 6's good of 1 (correct 2): 1 is as right
+    people = _people(visits, advice, feedback)
+    assert people["accuracy"].to_dict() == pytest.approx({1: 1.0, 2: 1.0, 3: 0.0, 6: 1.0, 7: 0.0})
+    feedback.loc[1, "correct_actions"] = None
+    feedback.loc[2, "correct_actions"] = "0 2"  # 6's bad of 2 (correct 0): 2 is as right
+    people = _people(visits, advice, feedback)
+    assert people["accuracy"].loc[6] == pytest.approx(1 / 3)
+    before = participants(visits).set_index("session_id")
+    assert before["accuracy"].to_dict() == pytest.approx(
+        {1: 2 / 3, 2: 1.0, 3: 0.0, 6: 2 / 3, 7: 0.0}
+    )
+
+
+def _people(visits, advice, feedback):
+    listed = type(visits)(
+        visits.sessions, advice, visits.check, visits.questionnaire, visits.scales, feedback
+    )
+    return participants(listed).set_index("session_id")
+
+
 def test_the_checks_pass_rates_count_everyone_who_took_it() -> None:
     rates = check_rates(hand_visits()).set_index("condition")
     assert rates.loc["early"].to_dict() == {"took": 4, "first_try": 2, "passed": 3}

@@ -106,6 +106,26 @@ def test_the_oracle_evaluator_judges_good_the_correct_action_only() -> None:
     assert abs(flipped - 0.25) < 0.03
 
 
+def test_the_grid_worlds_oracle_judges_every_move_nearer_good_and_errs_only_off_them() -> None:
+    """Where right and down both bring the agent nearer the goal, the oracle evaluator calls
+    both good and the others bad; the oracle advisor, erring, names a move that is not
+    right (a move as short would be no mistake)."""
+    from tasks import get_task
+
+    task = get_task("gridworld")
+    env = task.env({}, 250, False)
+    obs = np.zeros((64, 64, 3), np.uint8)
+    states = [env.reset(seed=seed)[1] for seed in range(8)]
+    both = [info for info in states if info["correct_actions"] == [1, 2]]
+    assert both, "some start is above and left of the goal"
+    judge = AdvisorEvaluator(OracleAdvisor(task=task), seed=1)
+    for info in both:
+        assert [judge.judge(obs, info, a) for a in range(4)] == [-1.0, 1.0, 1.0, -1.0]
+    erring = OracleAdvisor(task=task, error_rate=1.0, seed=3)
+    named = [erring.advise(obs, info) for info in both for _ in range(50)]
+    assert set(named) == {0, 3}, "every mistake is a move away from the goal"
+
+
 def test_an_oracle_run_judges_the_correct_action_good(make_env) -> None:
     oracle = OracleAdvisor()
     judgements: list[tuple[bool, float | None]] = []

@@ -12,7 +12,7 @@ from learner.strategies import AdviceMoment
 from runs.worker.advisors import HumanAdvisor, RecordingAdvisor
 from runs.worker.messages import AdviceRequest
 from study.services.advice import AdviceGiven
-from tasks import get_task
+from tasks import CorrectActions, get_task
 
 STATES = [
     ({"held": "", "station": "center"}, 0),  # nothing held: grab
@@ -24,8 +24,8 @@ STATES = [
 correct action worked out by hand (0 grab, 1 move right, 2 move left, 3 drop)."""
 
 
-def _correct(info: dict[str, Any]) -> int | None:
-    return get_task("sorting").correct(info, {"sort_rule": "color"})
+def _correct(info: dict[str, Any]) -> CorrectActions:
+    return get_task("sorting").correct_actions(info, {"sort_rule": "color"})
 
 
 def _moment(info: dict[str, Any], step: int) -> AdviceMoment:
@@ -62,7 +62,7 @@ def test_a_persons_advice_request_carries_the_correct_action() -> None:
     answers = [advisor.advise_at(_moment(info, i + 1)) for i, (info, _) in enumerate(STATES)]
     requests = [m for m in link.sent if isinstance(m, AdviceRequest)]
     assert answers == [1, 1, 1, 1]
-    assert [r.correct_action for r in requests] == [right for _, right in STATES]
+    assert [r.correct for r in requests] == [CorrectActions(a, (a,)) for _, a in STATES]
     # one of the four answers was right: the report's accuracy for this person is 1/4
 
 
@@ -81,6 +81,7 @@ def test_a_machine_advisors_advice_is_logged_with_the_correct_action() -> None:
     for i, (info, _) in enumerate(STATES):
         advisor.advise_at(_moment(info, i + 1))
     assert [a.correct_action for a in logged] == [right for _, right in STATES]
+    assert [a.correct_actions for a in logged] == [[right] for _, right in STATES]
     assert [a.action for a in logged] == [2, 2, 2, 2]
 
 
@@ -97,4 +98,30 @@ def test_without_a_correct_action_none_is_stored() -> None:
 
     advisor = RecordingAdvisor(Zero(), 1, "random", 0, Log())  # type: ignore[arg-type]
     advisor.advise_at(_moment(STATES[0][0], 1))
-    assert logged[0].correct_action is None
+    assert logged[0].correct_action is None and logged[0].correct_actions is None
+
+
+def test_the_grid_worlds_equally_short_moves_are_stored_beside_its_advice() -> None:
+    """Above and left of the goal, right and down both bring the agent nearer: the advice
+    is stored with both (its accuracy counts either), the oracle's own move first."""
+    task = get_task("gridworld")
+    env = task.env({}, 250, False)
+    logged: list[AdviceGiven] = []
+
+    class Log:
+        def add_advice(self, advice: AdviceGiven) -> None:
+            logged.append(advice)
+
+    class Down:
+        def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+            return 2
+
+    advisor = RecordingAdvisor(
+        Down(), 1, "human", 0, Log(), lambda info: task.correct_actions(info, {})
+    )  # type: ignore[arg-type]
+    infos = [env.reset(seed=seed)[1] for seed in range(8)]
+    for i, info in enumerate(infos):
+        advisor.advise_at(_moment(info, i + 1))
+    both = [a for a, info in zip(logged, infos, strict=True) if info["correct_actions"] == [1, 2]]
+    assert both and all(a.correct_action == 1 and a.correct_actions == [1, 2] for a in both)
+    assert [a.correct_actions for a in logged] == [info["correct_actions"] for info in infos]

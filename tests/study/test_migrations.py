@@ -15,7 +15,8 @@ from learner.config import DQNConfig
 from learner.run import RunSpec
 from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import alembic_config, upgrade
-from study.db.models import Base, Feedback, Step, StudySession
+from study.db.models import Advice, Base, Feedback, Step, StudySession
+from study.services.advice import AdviceGiven, write_advice
 from study.services.episodes import load_visits
 from study.services.feedback import FeedbackGiven, write_feedback
 from study.services.sessions import create_session
@@ -203,5 +204,54 @@ def test_migration_0019_adds_the_feedbacks_correct_action_and_keeps_older_rows(
             feedback = Table("feedback", MetaData(), autoload_with=c)
             assert "correct_action" not in feedback.c
             kept = c.execute(select(feedback.c.session_id).order_by(feedback.c.session_id))
+            assert [row[0] for row in kept] == ids
+        engine.dispose()
+
+
+def test_migration_0020_adds_every_right_action_and_keeps_older_rows(tmp_path: Path) -> None:
+    """Advice stored under 0019 keeps its one correct action (its accuracy reads it alone:
+    advice of an action as right is scored wrong, as it was stored); advice stored after
+    carries the list, and naming any action of it is accurate; the downgrade keeps the
+    advice without the column."""
+    now = datetime(2026, 12, 8, tzinfo=UTC)
+    given = {"advice_index": 0, "global_step": 5, "advisor": "human", "action": 2,
+             "greedy_action": 0, "observation_png": b"", "response_time_s": 1.0,
+             "decision_time_s": 0.5, "requested_at": now, "answered_at": now,
+             "correct_action": 1}  # fmt: skip
+    with fresh_database(tmp_path) as url:
+        engine = make_engine(url)
+        command.upgrade(alembic_config(engine), "0019")
+        factory = make_session_factory(engine)
+        with factory() as db:
+            study = create_study(db, "advice before 0020")
+            sessions = [
+                create_session(db, study.id, RunSpec(method="human", seed=seed)) for seed in (1, 2)
+            ]
+            for s in sessions:
+                s.condition, s.outcome, s.consented_at = "advice", "completed", now
+            db.commit()
+            ids = [s.id for s in sessions]
+        with engine.begin() as c:
+            advice = Table("advice", MetaData(), autoload_with=c)
+            assert "correct_actions" not in advice.c
+            c.execute(advice.insert().values(session_id=ids[0], **given))
+        upgrade(engine)
+        with factory() as db:
+            write_advice(db, [AdviceGiven(session_id=ids[1], **given, correct_actions=[1, 2])])
+            db.commit()
+            stored = list(db.scalars(select(Advice).order_by(Advice.session_id)))
+            assert [(a.session_id, a.correct_actions) for a in stored] == [
+                (ids[0], None),
+                (ids[1], [1, 2]),
+            ]
+            made = list(db.scalars(select(StudySession).order_by(StudySession.id)))
+            people = participants(load_visits(db, made)).set_index("session_id")
+        assert people.loc[ids[0], "accuracy"] == 0.0, "stored with its one correct action"
+        assert people.loc[ids[1], "accuracy"] == 1.0, "2 is as right as 1"
+        command.downgrade(alembic_config(engine), "0019")
+        with engine.connect() as c:
+            advice = Table("advice", MetaData(), autoload_with=c)
+            assert "correct_actions" not in advice.c
+            kept = c.execute(select(advice.c.session_id).order_by(advice.c.session_id))
             assert [row[0] for row in kept] == ids
         engine.dispose()

@@ -47,6 +47,30 @@ def test_the_grid_world_is_a_gymnasium_env_whose_correct_moves_reach_the_goal() 
         assert terminated and not truncated and steps == distance and reward > 0.5
 
 
+def test_the_grid_worlds_correct_actions_are_every_move_nearer_the_goal() -> None:
+    """Where two moves are equally short (above and left of the goal: right and down), both
+    are right; the correct action, the oracle's, is the first of them in action order."""
+    task = get_task("gridworld")
+    env = task.env({}, 250, False)
+    both = 0
+    for seed in range(8):
+        _, info = env.reset(seed=seed)
+        distance = info["distance"]
+        right = task.correct_actions(info, {})
+        assert right.action == info["correct_action"] == right.actions[0]
+        assert list(right.actions) == info["correct_actions"] and right.stored == list(
+            right.actions
+        )
+        for action in range(4):
+            env.reset(seed=seed)
+            _, _, _, _, after = env.step(action)
+            nearer = after["distance"] == distance - 1
+            assert nearer == (action in right.actions), (seed, action)
+        both += right.actions == (1, 2)
+    assert both, "some start is above and left of the goal, where right and down both are right"
+    assert task.correct_actions({"correct_action": None}, {}).stored is None
+
+
 def test_the_grid_world_is_the_same_for_the_same_seed_and_moves_as_people_see_them() -> None:
     env = get_task("gridworld").env({"size": 6}, 250, False)
     first, info = env.reset(seed=7)
