@@ -24,8 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from learner.advisors import NoAdvice
-from learner.strategies import AdviceMoment, AdvisingStrategy, AnyAdvisor, ask
+from learner.strategies import AdviceMoment, AdvisingStrategy
 
 SCHEDULE_VERSION = 1
 
@@ -133,10 +132,8 @@ class ScheduledAdvising(AdvisingStrategy):
         super().__init__(len(schedule.asked))
         self.schedule = schedule
 
-    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
-        if moment.global_step not in self.schedule.asked:
-            return None
-        return ask(advisor, moment)
+    def _asks(self, moment: AdviceMoment, advisor: Any) -> bool:
+        return moment.global_step in self.schedule.asked
 
     def check(self, pretraining_steps: int, advisor: object) -> None:
         if pretraining_steps != self.schedule.pretraining_steps:

@@ -78,7 +78,7 @@ def ask(advisor: AnyAdvisor, moment: AdviceMoment) -> int | NoAdvice:
 
 
 class AdvisingStrategy:
-    """Base: budget bookkeeping; subclasses decide in `_advise`."""
+    """Base: asks the advisor and keeps the budget; subclasses say when to ask (`_asks`)."""
 
     name: ClassVar[str] = ""
     needs_values: ClassVar[bool] = False
@@ -86,6 +86,9 @@ class AdvisingStrategy:
     judges: ClassVar[bool] = True
     """Whether its window is decided without the advisor's action, so that an evaluator can
     judge in it (evaluative feedback: `in_window`)."""
+    corrects_only: ClassVar[bool] = False
+    """Whether an advice the learner would have followed anyway (the advisor's action is
+    the learner's intended one) is dropped, uncounted (mistake correcting)."""
 
     def __init__(self, budget: int = 100) -> None:
         if isinstance(budget, bool) or not isinstance(budget, int) or budget < 0:
@@ -99,12 +102,17 @@ class AdvisingStrategy:
 
     def advise(self, moment: AdviceMoment, advisor: AnyAdvisor, n_actions: int = 4) -> int | None:
         """The advised action to execute, or None; counts the advice against the budget.
-        An advisor that answers `NO_ADVICE` (a replayed stream that ran out) was asked all
-        the same: the request is counted, and the learner acts on its own."""
-        if self.remaining <= 0:
+        Where the strategy asks (`_asks`), the advisor is shown the moment if it takes one
+        (a `MomentAdvisor`), else the image and the ground truth. An advisor that answers
+        `NO_ADVICE` (a replayed stream that ran out) was asked all the same: the request is
+        counted, and the learner acts on its own."""
+        if self.remaining <= 0 or not self._asks(moment, advisor):
             return None
-        action = self._advise(moment, advisor)
-        if action is None:
+        if isinstance(advisor, MomentAdvisor):
+            action = advisor.advise_at(moment)
+        else:
+            action = advisor.advise(moment.obs, moment.info)
+        if self.corrects_only and action == moment.intended_action:
             return None
         if action is NO_ADVICE:
             self.used += 1
@@ -123,15 +131,21 @@ class AdvisingStrategy:
     def in_window(self, moment: AdviceMoment, evaluator: Any) -> bool:
         """Whether this step is one the strategy gives its advisor, counted against the
         budget: evaluative feedback's window (`learner.evaluators`), decided by the very
-        rule that gives advice its steps, so both kinds of feedback get the same ones. The
-        strategy is shown `evaluator` (its values, for importance) in the advisor's place,
-        and never an action of its."""
-        if self.remaining <= 0 or self._advise(moment, _Window(evaluator)) is None:
+        rule that gives advice its steps (`_asks`), so both kinds of feedback get the same
+        ones. The strategy is shown `evaluator` (its values, for importance) in the
+        advisor's place; an evaluator with `window_opens` (a person's) is told the step is
+        in it."""
+        if self.remaining <= 0 or not self._asks(moment, evaluator):
             return False
+        opens = getattr(evaluator, "window_opens", None)
+        if opens is not None:
+            opens(moment)
         self.used += 1
         return True
 
-    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
+    def _asks(self, moment: AdviceMoment, advisor: Any) -> bool:
+        """Whether the advisor is asked at this moment (the budget aside): each strategy's
+        rule. `advisor` is the advisor, or the evaluator in its place (`in_window`)."""
         raise NotImplementedError
 
     def first_advice_step(self, pretraining_steps: int) -> int:
@@ -168,36 +182,15 @@ class AdvisingStrategy:
         return f"{type(self).__name__}(budget={self.budget}{options}, used={self.used})"
 
 
-class _Window:
-    """The advisor's stand-in when a strategy is asked only whether a step is in its
-    window: it would answer (`NO_ADVICE`: no action of its is taken), and shows the
-    strategy the evaluator's Q-values."""
-
-    def __init__(self, evaluator: Any) -> None:
-        self._evaluator = evaluator
-
-    def advise_at(self, moment: AdviceMoment) -> NoAdvice:
-        opens = getattr(self._evaluator, "window_opens", None)  # a person's: shows the step
-        if opens is not None:
-            opens(moment)
-        return NO_ADVICE
-
-    def q_values(self, obs: np.ndarray) -> np.ndarray:
-        return np.asarray(self._evaluator.q_values(obs))
-
-
 class EarlyAdvising(AdvisingStrategy):
     """The paper's: the advisor takes the last `budget` steps of pretraining, consecutively
     (global steps 901..1000 with the defaults)."""
 
     name = "early"
 
-    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
-        if moment.stage != "pretrain":
-            return None
-        if moment.global_step < self.first_advice_step(moment.pretraining_steps):
-            return None
-        return ask(advisor, moment)
+    def _asks(self, moment: AdviceMoment, advisor: Any) -> bool:
+        first = self.first_advice_step(moment.pretraining_steps)
+        return moment.stage == "pretrain" and moment.global_step >= first
 
     def first_advice_step(self, pretraining_steps: int) -> int:
         return max(1, pretraining_steps - self.budget + 1)
@@ -221,10 +214,8 @@ class AlternatingAdvising(AdvisingStrategy):
             raise ValueError(f"interval must be a whole number >= 1, got {interval!r}")
         self.interval = interval
 
-    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
-        if moment.stage != "train" or (moment.training_step - 1) % self.interval:
-            return None
-        return ask(advisor, moment)
+    def _asks(self, moment: AdviceMoment, advisor: Any) -> bool:
+        return moment.stage == "train" and (moment.training_step - 1) % self.interval == 0
 
     def options(self) -> dict[str, Any]:
         return {"interval": self.interval}
@@ -243,16 +234,11 @@ class ImportanceAdvising(AdvisingStrategy):
             raise ValueError(f"threshold must be a number >= 0, got {threshold!r}")
         self.threshold = float(threshold)
 
-    def _important(self, moment: AdviceMoment, advisor: AnyAdvisor) -> bool:
+    def _asks(self, moment: AdviceMoment, advisor: Any) -> bool:
         if moment.stage != "train":
             return False
-        values = np.asarray(advisor.q_values(moment.obs))  # type: ignore[union-attr]
+        values = np.asarray(advisor.q_values(moment.obs))
         return float(values.max() - values.min()) >= self.threshold
-
-    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
-        if not self._important(moment, advisor):
-            return None
-        return ask(advisor, moment)
 
     def options(self) -> dict[str, Any]:
         return {"threshold": self.threshold}
@@ -264,12 +250,7 @@ class MistakeCorrecting(ImportanceAdvising):
 
     name = "mistake_correcting"
     judges = False
-
-    def _advise(self, moment: AdviceMoment, advisor: AnyAdvisor) -> int | NoAdvice | None:
-        if not self._important(moment, advisor):
-            return None
-        action = ask(advisor, moment)
-        return None if action == moment.intended_action else action
+    corrects_only = True
 
 
 _STRATEGIES: dict[str, type[AdvisingStrategy]] = {

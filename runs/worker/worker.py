@@ -467,27 +467,15 @@ def run_session(
         spec = None
         if worker_token is None:
             worker_token, spec = claim_session(factory, session_id, options, human=conn is not None)
-        return _run_to_end(session_id, database_url, options, worker_token, conn, spec, factory)
-
-
-def _run_to_end(
-    session_id: int,
-    database_url: str,
-    options: WorkerOptions,
-    worker_token: str,
-    conn: Connection | None,
-    spec: RunSpec | None,
-    factory: sessionmaker[Session],
-) -> str:
-    try:
-        run = _Run(session_id, database_url, options, worker_token, conn, spec)
-        return run.run().value
-    except LeaseLost as error:
-        log.warning("%s", error)
-        return "lost"
-    except Exception as error:
-        fail_session(factory, session_id, worker_token, error, conn)
-        return Status.failed.value
+        try:
+            run = _Run(session_id, database_url, options, worker_token, conn, spec)
+            return run.run().value
+        except LeaseLost as error:
+            log.warning("%s", error)
+            return "lost"
+        except Exception as error:
+            fail_session(factory, session_id, worker_token, error, conn)
+            return Status.failed.value
 
 
 def claim_session(

@@ -288,9 +288,8 @@ async def submit_advice(
             correct_action=request.correct.action,
             correct_actions=request.correct.stored,
         )
-        if not await run_in_threadpool(store_advice, manager.factory, advice):
-            stored = await run_in_threadpool(_stored, manager, session.id, body.advice_index)
-            assert stored is not None
+        stored = await run_in_threadpool(store_advice, manager.factory, advice)
+        if stored is not None:
             return _receipt(stored, body, manager.changes.version(session.id), words)
         live.take_advice(HistoryEntry(body.advice_index, body.action, request.global_step))
         handle.send(AdviceAnswer(body.advice_index, body.action))

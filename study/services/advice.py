@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 
-from sqlalchemy import insert
+from sqlalchemy import insert, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -63,14 +63,23 @@ def write_advice(db: Session, advice: Sequence[AdviceGiven]) -> None:
         db.execute(insert(Advice), [dataclasses.asdict(a) for a in advice])
 
 
-def store_advice(factory: Callable[[], Session], advice: AdviceGiven) -> bool:
-    """Write one person's advice in a transaction of its own; False when its (session,
-    advice_index) is stored already (advice is written once: the first answer stands)."""
+def store_advice(factory: Callable[[], Session], advice: AdviceGiven) -> Advice | None:
+    """Write one person's advice in a transaction of its own; None when written, or the row
+    its (session, advice_index) has already (advice is written once: the first answer
+    stands, and the caller answers with it)."""
     with factory() as db:
         try:
             db.execute(insert(Advice), [dataclasses.asdict(advice)])
             db.commit()
         except IntegrityError:
             db.rollback()
-            return False
-    return True
+            stored = db.scalar(
+                select(Advice).where(
+                    Advice.session_id == advice.session_id,
+                    Advice.advice_index == advice.advice_index,
+                )
+            )
+            if stored is None:
+                raise  # not a repeated advice: another integrity error
+            return stored
+    return None
