@@ -11,9 +11,10 @@ A machine session started on the server (a replay, a fitted advisor's or an orac
 no person advises it) goes to the cluster from its start, one task of its own
 (`SessionManager.start`), with the records it would have in a local worker; its seat holds
 one of the trainer slots from then until its task ends, so the queue counts its CPU. A
-pool's session practises there too (`WorkerOptions.practice_only`): its task ends at the
-step boundary before its first turn, checkpointed, and a worker of the web process takes
-it on from that checkpoint to wait for its participant next to them (`take_back`).
+pool's session practises there too (`WorkerOptions.practice_only`), its seat held by the
+same rule: its task ends at the step boundary before its first turn, checkpointed, and a
+worker of the web process takes it on from that checkpoint to wait for its participant
+next to them (`take_back`).
 
 The database is the channel both ways: the task writes records, progress, checkpoints and
 status, and reads the researcher's stop and pause from the session's row; the web process
@@ -281,16 +282,18 @@ class TrainingCluster:
                 self._tasks[ref] = _Task(ours, attempt, practice)
         return [h.session_id for h in ours]
 
-    def train(self, handed: Handed, seat: Seat, spec: RunSpec) -> None:
+    def train(self, handed: Handed, seat: Seat, spec: RunSpec, practice: bool = False) -> None:
         """Train a machine session (a replay, a fitted advisor's or an oracle's run) on the
-        cluster from its start, its `seat` holding one of the trainer slots until its task
-        ends: the CPU it takes there is one the queue's place and wait count, from the
-        episodes it has left."""
+        cluster from its start, or a pool's session up to its first turn (`practice`), its
+        `seat` holding one of the trainer slots until its task ends: the CPU it takes there
+        is one the queue's place and wait count, from the episodes (a practice: the steps)
+        it has left."""
+        seat.practice = practice
         seat.live.receive(self._stored_progress(handed.session_id, spec))
         seat.take_slot(None)
         with self._lock:
             self._seats[handed.session_id] = seat
-        if not self.submit([handed]):
+        if not self.submit([handed], practice=practice):
             self._free(handed.session_id)
 
     def _stored_progress(self, session_id: int, spec: RunSpec) -> Progress:
@@ -432,6 +435,7 @@ class TrainingCluster:
             if task.practice and status == Status.running.value:
                 with self._lock:
                     self._returning.add(h.session_id)
+                self._free(h.session_id)  # a worker here waits for its participant
                 self._on_loop(self._practised, h)
             elif status is not None:
                 self._ended(h.session_id, status)

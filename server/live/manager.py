@@ -289,15 +289,17 @@ class SessionManager:
         """Start (or resume) the session's worker; `pooled`: it waits in its condition's
         pool for an arrival, its idle limit off until `assign`. With a Ray cluster a machine
         session (no person advises it) trains there, as a human one does after its advice,
-        and a pool's session practises there (`_practised` takes it back at its first turn)."""
+        and a pool's session practises there (`_practised` takes it back at its first turn);
+        either holds one of the cluster's trainer slots until its task ends."""
         token, spec = await run_in_threadpool(self._claim, session_id, resume, override_numerics)
         with self.factory() as db:
             human = get_session(db, session_id).method == "human"
-        if self.cluster is not None and not human:  # a replay, a fitted or an oracle's run
-            seat = Seat(LiveSession(session_id, spec.advice_budget, [], self.changes))
-            await run_in_threadpool(self.cluster.train, Handed(session_id, token), seat, spec)
-        elif self.cluster is not None and pooled:
-            await run_in_threadpool(self.cluster.submit, [Handed(session_id, token)], 1, True)
+        if self.cluster is not None and (not human or pooled):
+            # a replay, a fitted or an oracle's run; or a pool's practice
+            first_turn = spec.steps_before_first_turn() if human else 0
+            live = LiveSession(session_id, spec.advice_budget, [], self.changes, first_turn)
+            handed = Handed(session_id, token)
+            await run_in_threadpool(self.cluster.train, handed, Seat(live), spec, human)
         else:
             self._start_here(session_id, token, spec, pooled)
             return

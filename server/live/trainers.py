@@ -11,8 +11,8 @@ ends, `place` and `wait_s` for its page. What granting a slot does to the worker
 or hand over to a population's worker) is the caller's `granted` callback, so the slots can
 be placed elsewhere without the queue changing: on a Ray cluster (`server.live.cluster`)
 they are the cluster's CPUs, and its sessions' seats hold them until their tasks end; a
-machine session there takes its seat at its start, without queueing, so the sessions
-queued behind count the CPU it takes.
+machine session there, and a pool's practice, takes its seat at its start, without
+queueing, so the sessions queued behind count the CPU it takes.
 """
 
 from __future__ import annotations
@@ -45,6 +45,12 @@ class Seat:
     """`time.monotonic()` when it took its slot, and the episodes done then: how fast it
     trains, for the queue's time estimate."""
     episodes_at_slot: int = 0
+    steps_at_slot: int = 0
+    """The steps done when it took its slot: how fast a practice steps."""
+    practice: bool = False
+    """A pool's random practice on the Ray cluster: it leaves its slot at its first turn
+    (`live.steps_before_first_turn`), before any training episode, so its wait is counted
+    in the practice steps it has left."""
     population_key: Any = None
     """What it must share with other sessions to train with them in one population once its
     advice is over (`population_key`); None: it trains alone."""
@@ -63,6 +69,7 @@ class Seat:
         self.training = True
         self.training_since = time.monotonic()
         self.episodes_at_slot = self.live.progress.episode if self.live.progress else 0
+        self.steps_at_slot = self.live.progress.global_step if self.live.progress else 0
         self.slot = slot
 
     def episodes_left(self) -> int:
@@ -71,6 +78,18 @@ class Seat:
         if progress is None or self.live.status not in LIVE_STATUSES:
             return 0
         return max(0, progress.episodes - progress.episode)
+
+    def practice_left_s(self, now: float) -> float | None:
+        """Seconds a practice has left before its first turn, at the pace of its steps since
+        it took its slot (`now`: `time.monotonic()`); None before it has taken one."""
+        progress = self.live.progress
+        if progress is None or self.training_since is None:
+            return None
+        left = max(0, self.live.steps_before_first_turn - progress.global_step)
+        if not left or self.live.status not in LIVE_STATUSES:
+            return 0.0
+        done = progress.global_step - self.steps_at_slot
+        return left * (now - self.training_since) / done if done > 0 else None
 
 
 QUEUED = "queued"
@@ -90,6 +109,22 @@ def shown_status(
     if trainers is None or not trainers.queued(session_id) or status != Status.running:
         return status, None
     return QUEUED, trainers.place(session_id)
+
+
+def _left_s(
+    seat: Seat, rate: float | None, typical: float | None, live: int, now: float
+) -> float | None:
+    """Seconds `seat` holds its slot yet: a practice's steps left at its pace, else its
+    episodes left at its own `rate` (seconds an episode), or at the `typical` agent-episode's
+    with `live` sessions side by side in its slot; None: nothing to estimate it from."""
+    if seat.practice:
+        return seat.practice_left_s(now)
+    episodes = seat.episodes_left()
+    if not episodes:
+        return 0.0
+    if rate is None and typical is not None:
+        rate = typical * live
+    return episodes * rate if rate is not None else None
 
 
 Granted = Callable[[list[Seat], object | None], None]
@@ -186,8 +221,11 @@ class TrainerSlots:
         (a population, or one alone) each take r seconds an episode runs one agent-episode
         every r / n seconds. A slot frees when its slowest session has run its remaining
         episodes; each group ahead in the queue (`_plan`) then holds the earliest free slot
-        while its m sessions run theirs, m side by side at the typical speed. None while no
-        session in a slot has finished an episode there (nothing to estimate from)."""
+        while its m sessions run theirs, m side by side at the typical speed. A practice
+        (`Seat.practice`) frees its slot once its practice steps left are run, at its pace so
+        far. None while something it needs is not measured yet: a slot's session that has
+        not finished an episode there (and no other has), a practice that has taken no step,
+        or the typical speed for the groups ahead."""
         place = self.place(session_id)
         if place is None or self.slots <= 0:
             return None
@@ -206,22 +244,24 @@ class TrainerSlots:
                 if s.training_since is not None and done > 0:
                     rates[s.session_id] = (now - s.training_since) / done
                     costs.append(rates[s.session_id] / live)
-        if not costs:
-            return None
-        typical = sum(costs) / len(costs)
+        typical = sum(costs) / len(costs) if costs else None
         frees = [0.0] * max(0, self.slots - len(slots))
         for members in slots.values():
             live = max(1, sum(1 for s in members if s.episodes_left()))
-            frees.append(
-                max(s.episodes_left() * rates.get(s.session_id, typical * live) for s in members)
-            )
+            left = [_left_s(s, rates.get(s.session_id), typical, live, now) for s in members]
+            if None in left:
+                return None
+            frees.append(max(x for x in left if x is not None))
         frees.sort()
         while len(frees) > self.slots:  # more train than there are slots (a cluster's
-            # machine sessions start without a queue): the extra wait for the first to free
+            # machine sessions and practices start without a queue): the extra wait for the
+            # first to free
             extra = frees.pop()
             frees[0] += extra
             frees.sort()
         for group in self._plan()[: place - 1]:
+            if typical is None:
+                return None
             longest = max(s.episodes_left() for s in group)
             frees[0] += longest * typical * len(group)
             frees.sort()

@@ -130,14 +130,31 @@ async def readiness(session: ParticipantDep, manager: ManagerDep) -> Readiness:
     await manager.welcome(session.id)
     live = manager.live(session.id)
     if live is None:
-        state = await advising.current_state(manager, session)
-        return Readiness(status=state.status, steps_done=0, steps_before_first_turn=0, ready=False)
+        return await run_in_threadpool(_stored_readiness, manager, session.id)
     progress = live.progress
     return Readiness(
         status=shown_status(manager.trainers, session.id, live.status)[0],
         steps_done=progress.global_step if progress is not None else 0,
         steps_before_first_turn=live.steps_before_first_turn,
         ready=live.at_first_turn,
+    )
+
+
+def _stored_readiness(manager: ManagerDep, session_id: int) -> Readiness:
+    """The readiness of a session without a worker here, from its row: a pool's practice on
+    the Ray cluster stores its progress there as it goes. It is ready once a worker here
+    waits at its first turn."""
+    with manager.factory() as db:
+        row = db.get(StudySession, session_id)
+        if row is None:
+            raise NotFound("this session no longer exists")
+        status, progress = row.status, row.progress or {}
+        first_turn = row.spec.steps_before_first_turn()
+    return Readiness(
+        status=shown_status(manager.trainers, session_id, status)[0],
+        steps_done=int(progress.get("global_step", 0)),
+        steps_before_first_turn=first_turn,
+        ready=False,
     )
 
 

@@ -142,3 +142,42 @@ def test_machine_sessions_on_a_cluster_hold_slots_the_queue_counts(slots: Slots)
     assert slots.granted == [], "the waiting machine session takes the slot that freed"
     trainers.release(waiting)
     assert slots.granted == [[3]]
+
+
+def _practice(session_id: int, steps: int, first_turn: int) -> Seat:
+    """A pool's practice on a Ray cluster, `steps` of its `first_turn` random steps done."""
+    live = LiveSession(session_id, 1, [], Changes(), first_turn)
+    live.receive(Progress("pretrain", steps, 0, 20, 1.0, 0.0, None, 0, 1))
+    return Seat(live, practice=True)
+
+
+def test_a_practice_on_a_cluster_holds_its_slot_until_its_first_turn(slots: Slots) -> None:
+    """A pool's practice on a Ray cluster takes its slot at its start, without queueing
+    (`TrainingCluster.train`), and frees it at its first turn: the participants queued
+    behind wait for the practice steps it has left at its pace, not for the episodes of
+    the run it practises for."""
+    machine, practice = _seat(1, 5), _practice(2, 0, 40)
+    for seat in (machine, practice):  # no run, no queue
+        seat.take_slot(None)
+    machine.training_since = time.monotonic() - 10.0  # 5 episodes in 10 s: 2 s each
+    machine.episodes_at_slot = 0
+    slots.hold(machine, practice)
+    trainers = slots.trainers
+    trainers.slots = 2
+    first, second = _seat(3, 0), _seat(4, 0)
+    for seat in (first, second):
+        slots.seats[seat.session_id] = seat
+        trainers.request(seat)
+    assert slots.granted == [], "the practice holds the second slot"
+    assert [trainers.place(3), trainers.place(4)] == [1, 2]
+    assert trainers.wait_s(3) is None, "no practice step taken yet: nothing to estimate from"
+    practice.live.receive(Progress("pretrain", 10, 0, 20, 1.0, 0.0, None, 0, 1))
+    practice.training_since = time.monotonic() - 5.0  # 10 steps in 5 s: 0.5 s each
+    # the practice's slot frees after its 30 steps left (15 s), the machine session's after
+    # its 15 episodes left (30 s); the first queued then trains 20 episodes at 2 s each
+    assert trainers.wait_s(3) == pytest.approx(30 * 0.5, abs=0.5)
+    assert trainers.wait_s(4) == pytest.approx(15 * 2.0, abs=0.5)
+    practice.live.receive(Progress("pretrain", 40, 0, 20, 1.0, 0.0, None, 0, 1))
+    assert trainers.wait_s(3) == pytest.approx(0.0), "at its first turn: its slot frees"
+    trainers.release(practice)  # its task ended; a worker here takes it back
+    assert slots.granted == [[3]]
