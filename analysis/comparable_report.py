@@ -5,7 +5,7 @@ participant's learner as the unit."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from itertools import combinations
 from pathlib import Path
 
@@ -68,9 +68,11 @@ def comparable_section(
     out: Path,
     alpha: float,
     exploratory: bool = False,
+    figure_formats: Sequence[str] | None = None,
 ) -> tuple[list[str], list[Path]]:
-    """Write the section's tables and figure into `out`; its Markdown lines and files.
-    `exploratory`: a primary test leads the report, and these tests say they are not it."""
+    """Write the section's tables and figure (in `figure_formats`, `save_figure`'s) into `out`;
+    its Markdown lines and files (the figure by its PNG). `exploratory`: a primary test
+    leads the report, and these tests say they are not it."""
     used = sorted({strategies.get(int(i)) or "" for i in found.scores["session_id"]})
     rules = [f"- {s or 'no advice'}: {rule(s or None)}." for s in used]
     files = [out / COMPARABLE_FILES["timing"]]
@@ -108,7 +110,9 @@ def comparable_section(
         path = out / COMPARABLE_FILES[name]
         safe_frame(frame).to_csv(path, index=False)
         files.append(path)
-    files.append(save_figure(plot_curves(found), out / COMPARABLE_FILES["curves"]))
+    files.append(
+        save_figure(plot_curves(found), out / COMPARABLE_FILES["curves"], formats=figure_formats)
+    )
     by_condition = found.scores.groupby("condition", sort=False).agg(
         learners=("score", "size"), score=("score", "mean"), sd=("score", "std"),
         advised_steps=("advised_steps", "mean"), advised_reward=("advised_reward", "mean"),

@@ -9,6 +9,7 @@ to the statistics.
 
 from __future__ import annotations
 
+import os
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
@@ -132,30 +133,65 @@ def fit_titles(figure: Figure, suptitle: Text | None = None) -> Figure:
     return figure
 
 
-VECTOR_FORMATS = ("svg", "pdf")
-"""Besides each PNG: the formats a paper's figures are set in."""
+FIGURE_FORMATS = ("png", "svg", "pdf")
+"""The formats a figure is written in: the PNG the report links and the dashboard shows,
+and the SVG and PDF a paper's figures are set in."""
+FIGURE_FORMATS_VARIABLE = "IDEEPRL_FIGURE_FORMATS"
+"""The environment variable naming the formats to write, comma-separated (`png`: the PNGs
+alone, as the tests write them); unset or empty: all of `FIGURE_FORMATS`."""
 
 
-def save_figure(figure: Figure, path: str | Path, *, dpi: int = 150) -> Path:
-    """Write a figure as PNG (and as SVG and PDF beside it, same name) and return the PNG's
-    path (`vector_paths` gives the others). SVG and PDF carry no date, and SVG a fixed id
-    salt, so the same figure gives the same files."""
+_UNDATED = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}
+"""The metadata each vector format is saved with: no date, so a figure's files repeat."""
+
+
+def figure_formats(formats: str | Sequence[str] | None = None) -> tuple[str, ...]:
+    """The formats a figure is written in, in `FIGURE_FORMATS`' order: `formats` (names,
+    or one comma-separated text), else `FIGURE_FORMATS_VARIABLE`'s, else all. The PNG is
+    always among them: the report links it and the dashboard shows it."""
+    if formats is None:
+        formats = os.environ.get(FIGURE_FORMATS_VARIABLE, "").strip() or FIGURE_FORMATS
+    if isinstance(formats, str):
+        formats = formats.split(",")
+    named = {f.strip().lower() for f in formats} - {""}
+    unknown = named - set(FIGURE_FORMATS)
+    if unknown:
+        raise ValueError(
+            f"unknown figure format(s) {', '.join(sorted(unknown))}: the formats are "
+            f"{', '.join(FIGURE_FORMATS)} ({FIGURE_FORMATS_VARIABLE}, comma-separated)"
+        )
+    return tuple(f for f in FIGURE_FORMATS if f == "png" or f in named)
+
+
+def save_figure(
+    figure: Figure,
+    path: str | Path,
+    *,
+    dpi: int = 150,
+    formats: str | Sequence[str] | None = None,
+) -> Path:
+    """Write a figure as PNG, and in the other `formats` (`figure_formats`: by default SVG
+    and PDF) beside it under the same name, and return the PNG's path (`vector_paths`
+    gives the others). SVG and PDF carry no date, and SVG a fixed id salt, so the same
+    figure gives the same files."""
     path = Path(path)
+    vectors = vector_paths(path, formats)
     figure.savefig(path, dpi=dpi, format="png")
     # the layout the PNG was drawn with, kept for the vector files: constrained layout
     # would lay the same figure out again for each (a sixth of a figure's saving time)
-    if figure.get_layout_engine() is not None:
+    if vectors and figure.get_layout_engine() is not None:
         figure.set_layout_engine("none")
-    svg, pdf = vector_paths(path)
     with matplotlib.rc_context({"svg.hashsalt": "ideeprl"}):
-        figure.savefig(svg, format="svg", metadata={"Date": None})
-    figure.savefig(pdf, format="pdf", metadata={"CreationDate": None})
+        for vector in vectors:
+            kind = vector.suffix.removeprefix(".")
+            figure.savefig(vector, format=kind, metadata=_UNDATED[kind])
     return path
 
 
-def vector_paths(png: Path) -> tuple[Path, ...]:
-    """The SVG and PDF written beside a figure's PNG."""
-    return tuple(png.with_suffix(f".{kind}") for kind in VECTOR_FORMATS)
+def vector_paths(png: Path, formats: str | Sequence[str] | None = None) -> tuple[Path, ...]:
+    """The other files `save_figure` writes beside a figure's PNG in these `formats`
+    (`figure_formats`)."""
+    return tuple(png.with_suffix(f".{kind}") for kind in figure_formats(formats) if kind != "png")
 
 
 def plot_method_curves(

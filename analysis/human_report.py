@@ -4,6 +4,7 @@ written with the learners' analysis, or alone while the learners still train."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -151,10 +152,15 @@ def _interval(row: pd.Series) -> str:
 
 
 def human_section(
-    visits: Visits, out: Path, alpha: float, exploratory: bool = False
+    visits: Visits,
+    out: Path,
+    alpha: float,
+    exploratory: bool = False,
+    figure_formats: Sequence[str] | None = None,
 ) -> tuple[list[str], list[Path]]:
-    """Write the section's tables and figures into `out`; its Markdown lines and files.
-    `exploratory`: a primary test leads the report, and these tests say they are not it."""
+    """Write the section's tables and figures (in `figure_formats`, `save_figure`'s) into `out`;
+    its Markdown lines and files (each figure by its PNG). `exploratory`: a primary test
+    leads the report, and these tests say they are not it."""
     counts = flow(visits)
     people = participants(visits)
     tests = between_conditions(visits, alpha)
@@ -165,8 +171,11 @@ def human_section(
         path = out / TABLE_FILES[name]
         safe_frame(frame).to_csv(path, index=False)
         files.append(path)
-    files.append(save_figure(plot_flow(counts), out / FIGURE_FILES["flow"]))
-    files.append(save_figure(plot_decision_times(visits), out / FIGURE_FILES["decision_times"]))
+    for name, figure in (
+        ("flow", plot_flow(counts)),
+        ("decision_times", plot_decision_times(visits)),
+    ):
+        files.append(save_figure(figure, out / FIGURE_FILES[name], formats=figure_formats))
     summary = _by_condition(visits)
     gave = set(people["gave"])
     columns = {"condition": "condition", "participants": "completed", "gave": "gave",

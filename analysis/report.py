@@ -27,8 +27,10 @@ from analysis.comparisons import compare
 from analysis.csvsafe import safe_frame
 from analysis.episodes import PLACEMENTS, EpisodeTableError, agents_of, method_name
 from analysis.figures import (
+    FIGURE_FORMATS,
     bands_window,
     example_agents,
+    figure_formats,
     pick_reference_agent,
     plot_confidence_bands,
     plot_correlation,
@@ -95,8 +97,9 @@ REPORT_FILES = (
     *TABLE_FILES.values(),
     *OPTIONAL_TABLE_FILES.values(),
 )
-"""Every file a report may write: a new report into the same folder removes an earlier
-one's first, so a table or figure this report has no input for is not the earlier one's."""
+"""Every file a report may write, each figure by its PNG (its other formats lie beside it):
+a new report into the same folder removes an earlier one's first (`_remove_earlier`), so a
+table or figure this report has no input for is not the earlier one's."""
 MAX_HEATMAP_AGENTS = 24
 """Above this many agents Figure 7 shows the paper's selection; the CSV keeps them all."""
 
@@ -124,11 +127,14 @@ class ReportResult:
     """R_T per method under each reward scheme (None without step logs)."""
     power: PowerAnalysis | None = None
     """Agents per arm a future study needs (None without a baseline)."""
+    formats: tuple[str, ...] = FIGURE_FORMATS
+    """The formats each figure was written in (`analysis.figures.figure_formats`)."""
 
     @property
     def vector_figures(self) -> list[Path]:
-        """Each figure as SVG and PDF, beside its PNG."""
-        return [v for png in self.figures.values() for v in vector_paths(png)]
+        """Each figure in its other formats (SVG and PDF unless fewer were asked for),
+        beside its PNG."""
+        return [v for png in self.figures.values() for v in vector_paths(png, self.formats)]
 
     @property
     def files(self) -> list[Path]:
@@ -636,6 +642,7 @@ def write_report(
     visits: Visits | None = None,
     strategies: Mapping[int, str | None] | None = None,
     preregistered: Preregistered | None = None,
+    formats: str | Sequence[str] | None = None,
 ) -> ReportResult:
     """Write Figures 5-7, the CSV tables and `report.md` for these episodes into `out_dir`.
 
@@ -664,8 +671,10 @@ def write_report(
     and with `advice` and each session's strategy (`strategies`, None: no advice) the
     learning outcomes that compare like with like (`analysis.comparable`); `preregistered`
     (the design's primary measure and test) leads the report (`analysis.primary`) and
-    makes every other test exploratory.
+    makes every other test exploratory. `formats` are the figures' (`figure_formats`: by
+    default `IDEEPRL_FIGURE_FORMATS`, else PNG, SVG and PDF).
     """
+    formats = figure_formats(formats)
     if reference is not None and reference not in REFERENCES:
         raise EpisodeTableError(
             f"unknown reference {reference!r}; available: {', '.join(REFERENCES)}"
@@ -713,8 +722,7 @@ def write_report(
     report_notes = [*plan_notes, *heatmap_notes, *_bands_notes(analysis)]
     power = _power(analysis, alpha, power_draws, power_seed)
     out.mkdir(parents=True, exist_ok=True)
-    for name in REPORT_FILES:  # an earlier report's: none of its files may outlive it
-        (out / name).unlink(missing_ok=True)
+    _remove_earlier(out)  # an earlier report's: none of its files may outlive it
 
     tables = {
         "methods": analysis.methods,
@@ -786,7 +794,7 @@ def write_report(
     if power is not None and power.comparisons:
         figures["power"] = plot_power(power)
     figure_paths = {
-        name: save_figure(figures[name], out / FIGURE_FILES[name])
+        name: save_figure(figures[name], out / FIGURE_FILES[name], formats=formats)
         for name in FIGURE_FILES
         if name in figures
     }
@@ -794,16 +802,16 @@ def write_report(
     report = out / REPORT_FILE
     extra = _Extras(
         checked, rescored, tables.get("reference"), allow_mismatch, rescoring, quality,
-        tables.get("advice_correlations"), tables.get("comparisons"), power, humans,
+        tables.get("advice_correlations"), tables.get("comparisons"), power, humans, formats,
     )  # fmt: skip
     text = _markdown(analysis, title, notes, plan, report_notes, alpha, smoothing, equal_var, extra)
     if visits is not None:
         marked = preregistered is not None
-        lines, files = human_section(visits, out, alpha, marked)
+        lines, files = human_section(visits, out, alpha, marked, formats)
         scores = None
         if advice is not None and strategies is not None:
             found = comparable(analysis.episodes, advice, strategies)
-            learning, more = comparable_section(found, strategies, out, alpha, marked)
+            learning, more = comparable_section(found, strategies, out, alpha, marked, formats)
             lines, files = [*learning, *lines], [*more, *files]
             scores = None if found.empty else found.scores
         text = text.rstrip("\n") + "\n\n" + "\n".join(lines)
@@ -815,7 +823,7 @@ def write_report(
     warnings = tuple(checked.warnings()) if checked is not None else ()
     return ReportResult(
         out, report, figure_paths, table_paths, (*warnings, *report_notes), analysis,
-        checked, rescored, power,
+        checked, rescored, power, formats,
     )  # fmt: skip
 
 
@@ -827,15 +835,16 @@ def write_human_report(
     notes: Sequence[str] = (),
     alpha: float = 0.05,
     preregistered: Preregistered | None = None,
+    formats: str | Sequence[str] | None = None,
 ) -> ReportResult:
     """The report of the participants alone, while no learner has finished: the section
     of `analysis.human_report` under the title and `notes`, led by the primary test where
-    the design fixed one."""
+    the design fixed one; its figures in `formats` (`write_report`'s)."""
+    formats = figure_formats(formats)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    for name in REPORT_FILES:
-        (out / name).unlink(missing_ok=True)
-    lines, files = human_section(visits, out, alpha, preregistered is not None)
+    _remove_earlier(out)
+    lines, files = human_section(visits, out, alpha, preregistered is not None, formats)
     report = out / REPORT_FILE
     head = [f"# {title}", "", *(f"- {n}" for n in notes), ""]
     if preregistered is not None:
@@ -843,8 +852,19 @@ def write_human_report(
     report.write_text("\n".join([*head, *lines]), encoding="utf-8")
     return ReportResult(
         out, report, {p.stem: p for p in files if p.suffix == ".png"},
-        {p.stem: p for p in files if p.suffix == ".csv"}, (), None,
+        {p.stem: p for p in files if p.suffix == ".csv"}, (), None, formats=formats,
     )  # fmt: skip
+
+
+def _remove_earlier(out: Path) -> None:
+    """Remove an earlier report's files from `out` (`REPORT_FILES`, and each figure in
+    every format, whichever this report writes)."""
+    for name in REPORT_FILES:
+        path = out / name
+        path.unlink(missing_ok=True)
+        if path.suffix == ".png":
+            for vector in vector_paths(path, FIGURE_FORMATS):
+                vector.unlink(missing_ok=True)
 
 
 def leading(text: str, lines: Sequence[str]) -> str:
@@ -955,6 +975,8 @@ class _Extras:
     power: PowerAnalysis | None = None
     humans: Sequence[str] = ()
     """The methods whose sessions participants advised or rated (`human_methods`)."""
+    formats: tuple[str, ...] = FIGURE_FORMATS
+    """The formats the figures are written in (`figure_formats`)."""
 
 
 def _outcomes_note(by_outcomes: tuple[int, int] | None) -> str:
@@ -1333,7 +1355,7 @@ def _markdown(
         _tests_table(analysis, alpha),
         "",
         *_intervals_section(analysis),
-        *_power_section(extra.power, extra.audit),
+        *_power_section(extra.power, extra.audit, extra.formats),
         "## Correlation between agents (the paper's Figure 7)",
         "",
         f"![Figure 7: Pearson's correlation between agents]({FIGURE_FILES['correlation']})",
@@ -1451,9 +1473,14 @@ def _power_rows(power: PowerAnalysis) -> pd.DataFrame:
     )
 
 
-def _power_section(power: PowerAnalysis | None, checked: Audit | None = None) -> list[str]:
+def _power_section(
+    power: PowerAnalysis | None,
+    checked: Audit | None = None,
+    formats: tuple[str, ...] = FIGURE_FORMATS,
+) -> list[str]:
     """Planning information: the agents per arm a future study needs, or why it is left out;
-    a caution for each arm whose baseline ran under other settings (`checked`)."""
+    a caution for each arm whose baseline ran under other settings (`checked`); the figure
+    linked in each of its `formats`."""
     head = ["## Power: how many participants a study needs (planning, not a test)", ""]
     if power is None:
         why = "power compares each method with a baseline, and this report has none"
@@ -1492,11 +1519,18 @@ def _power_section(power: PowerAnalysis | None, checked: Audit | None = None) ->
         *_power_cautions(power, checked),
         *(f"Left out: {s}." for s in power.skipped),
         *([""] if power.skipped else []),
-        f"![Power against agents per arm]({FIGURE_FILES['power']}) "
-        f"([SVG]({Path(FIGURE_FILES['power']).with_suffix('.svg')}), "
-        f"[PDF]({Path(FIGURE_FILES['power']).with_suffix('.pdf')}))",
+        f"![Power against agents per arm]({FIGURE_FILES['power']})" + _other_formats(formats),
         "",
     ]
+
+
+def _other_formats(formats: tuple[str, ...]) -> str:
+    """Links to the power figure's other formats, after its PNG: " ([SVG](power.svg), ...)",
+    or nothing where the PNG is the only one."""
+    links = [
+        f"[{p.suffix[1:].upper()}]({p})" for p in vector_paths(Path(FIGURE_FILES["power"]), formats)
+    ]
+    return f" ({', '.join(links)})" if links else ""
 
 
 def _power_cautions(power: PowerAnalysis, checked: Audit | None) -> list[str]:

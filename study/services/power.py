@@ -24,7 +24,7 @@ from analysis.episodes import (
     order_methods,
     validate_episodes,
 )
-from analysis.figures import plot_power, save_figure, vector_paths
+from analysis.figures import figure_formats, plot_power, save_figure, vector_paths
 from analysis.power import (
     DEFAULT_DRAWS,
     DEFAULT_MAX_N,
@@ -186,7 +186,8 @@ def study_power(
         figure = plot_power(analysis)
         csv = out_dir / OPTIONAL_TABLE_FILES["power"]
         safe_frame(_table(analysis)).to_csv(csv, index=False)
-        png = save_figure(figure, out_dir / FIGURE_FILES["power"])
-        files = (png, *vector_paths(png), csv)
+        formats = figure_formats()
+        png = save_figure(figure, out_dir / FIGURE_FILES["power"], formats=formats)
+        files = (png, *vector_paths(png, formats), csv)
     ids = tuple(int(i) for i in table["session_id"].unique())
     return StudyPower(study_id, ids, int(table["episode"].max()), tuple(notes), analysis, files)

@@ -22,9 +22,11 @@ from analysis import (
     save_figure,
 )
 from analysis.figures import (
+    FIGURE_FORMATS_VARIABLE,
     bands_window,
     epsilon_reaches,
     example_agents,
+    figure_formats,
     pick_reference_agent,
     plot_confidence_bands,
     plot_cumulative_reward,
@@ -134,6 +136,28 @@ def test_save_figure_writes_a_png(tmp_path: Path) -> None:
     with Image.open(path) as image:
         assert image.format == "PNG"
         assert image.size == (450, 250)  # 9 x 5 inches at 50 dpi
+
+
+def test_a_figure_is_written_in_the_formats_asked_for_and_always_as_png(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    figure = plot_method_curves(episodes_from_curves(HAND_CASE))
+    monkeypatch.delenv(FIGURE_FORMATS_VARIABLE, raising=False)
+    assert figure_formats() == ("png", "svg", "pdf")  # unset: every format
+    monkeypatch.setenv(FIGURE_FORMATS_VARIABLE, " PDF, png ")
+    assert figure_formats() == ("png", "pdf")
+    assert figure_formats(["svg"]) == ("png", "svg")  # the argument before the environment
+    save_figure(figure, tmp_path / "f.png", dpi=50)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.pdf", "f.png"]
+    save_figure(figure, tmp_path / "g.png", dpi=50, formats="svg")
+    assert sorted(p.name for p in tmp_path.glob("g.*")) == ["g.png", "g.svg"]
+
+    with pytest.raises(ValueError, match=r"format\(s\) eps: the formats are png, svg, pdf"):
+        figure_formats("png,eps")
+    monkeypatch.setenv(FIGURE_FORMATS_VARIABLE, "jpg")
+    with pytest.raises(ValueError, match="jpg"):
+        save_figure(figure, tmp_path / "h.png")
+    assert not list(tmp_path.glob("h.*")), "nothing is written in a mistaken format's stead"
 
 
 def short_run() -> pd.DataFrame:

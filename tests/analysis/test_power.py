@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 from scipy import stats
 
+from analysis.figures import FIGURE_FORMATS_VARIABLE
 from analysis.power import (
     normal_power,
     normal_sample_size,
@@ -198,8 +199,12 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 
 
 def test_the_command_prints_the_table_and_writes_the_figure(
-    data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    data_dir: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    monkeypatch.delenv(FIGURE_FORMATS_VARIABLE, raising=False)  # every format, by default
     flags = ["--data-dir", str(data_dir)]
     out = tmp_path / "power"
     assert main(["power", "--study", "pilot", "--out", str(out), "--seed", "7", *flags]) == 0

@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import html
 import re
+import unicodedata
+import zlib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from fontTools.agl import toUnicode
 from PIL import Image
 
 from analysis import EpisodeTableError, ReportResult, write_report
 from analysis import markdown as md
 from analysis.__main__ import main
+from analysis.figures import FIGURE_FORMATS_VARIABLE
 from analysis.power import normal_sample_size
 from analysis.report import FIGURE_FILES, TABLE_FILES
 from tests.analysis.helpers import HAND_CASE, episodes_from_curves
@@ -38,11 +43,16 @@ def study_episodes() -> pd.DataFrame:
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory: pytest.TempPathFactory) -> tuple[pd.DataFrame, ReportResult]:
+    """The report as a researcher gets it: every figure in every format (the environment
+    of the tests asks for PNGs alone, tests/conftest.py)."""
     episodes = study_episodes()
     out = tmp_path_factory.mktemp("report") / "nested" / "study-1"
-    return episodes, write_report(
-        episodes, out, title="Pilot study", notes=["command: ideeprl batch --demo"]
-    )
+    with pytest.MonkeyPatch.context() as patch:
+        patch.delenv(FIGURE_FORMATS_VARIABLE, raising=False)
+        written = write_report(
+            episodes, out, title="Pilot study", notes=["command: ideeprl batch --demo"]
+        )
+    return episodes, written
 
 
 @pytest.mark.slow
@@ -52,11 +62,79 @@ def test_every_file_is_written_and_listed(report: tuple[pd.DataFrame, ReportResu
     assert set(result.figures) == set(FIGURE_FILES)
     assert set(result.tables) == {*TABLE_FILES, "comparisons", "power"}  # against a baseline
     assert sorted(p.name for p in result.out_dir.iterdir()) == sorted(p.name for p in result.files)
+    assert result.formats == ("png", "svg", "pdf")
     for path in result.figures.values():
         with Image.open(path) as image:
             assert image.format == "PNG" and min(image.size) > 300
-        assert path.with_suffix(".svg").read_text().lstrip().startswith("<?xml")
-        assert path.with_suffix(".pdf").read_bytes().startswith(b"%PDF")
+            size = (image.size[0] / DPI * 72, image.size[1] / DPI * 72)  # in points
+        svg = path.with_suffix(".svg").read_text()
+        pdf = path.with_suffix(".pdf").read_bytes()
+        assert svg.lstrip().startswith("<?xml") and pdf.startswith(b"%PDF")
+        # the same figure: the same page, and the same words on it
+        assert svg_size(svg) == pytest.approx(size) and pdf_size(pdf) == pytest.approx(size)
+        words = svg_words(svg)
+        assert words and words == pdf_words(pdf), path.name
+
+
+DPI = 150
+"""`save_figure`'s resolution: a PNG's pixels per inch of the figure (72 points)."""
+
+
+def svg_size(svg: str) -> tuple[float, float]:
+    found = re.search(r'<svg [^>]*width="([\d.]+)pt" height="([\d.]+)pt"', svg)
+    assert found, svg[:400]
+    return float(found[1]), float(found[2])
+
+
+def pdf_size(pdf: bytes) -> tuple[float, float]:
+    found = re.search(rb"/MediaBox \[ *0 0 ([\d.]+) ([\d.]+) *\]", pdf)
+    assert found, pdf[:400]
+    return float(found[1]), float(found[2])
+
+
+def svg_words(svg: str) -> set[str]:
+    """The words (of three letters or more) of a figure's texts in its SVG: matplotlib
+    draws each text as paths, under a comment holding the text."""
+    texts = re.findall(r"<!-- (.*?) -->", svg, re.S)
+    return {w for text in texts for w in re.findall(r"[A-Za-z]{3,}", html.unescape(text))}
+
+
+PDF_STRING = rb"\((?:[^()\\]|\\.)*\)"
+"""A PDF string, (text), its parentheses and backslashes escaped by a backslash."""
+
+
+def pdf_words(pdf: bytes) -> set[str]:
+    """The words of a figure's texts in its PDF: the strings each text object (BT ... ET)
+    shows, each byte read through its font's encoding (matplotlib's fonts name each glyph
+    they hold, a ligature such as "ff" one of its own) and the text's pieces joined."""
+    objects = dict(re.findall(rb"(\d+) 0 obj(.*?)endobj", pdf, re.S))
+    fonts: dict[bytes, dict[int, str]] = {}
+    for name, number in re.findall(rb"/(F\d+) (\d+) 0 R", pdf):
+        listed = re.search(rb"/Differences \[(.*?)\]", objects[number], re.S)
+        assert listed, objects[number][:400]
+        glyphs, code = {}, 0
+        for token in listed[1].split():
+            if token.isdigit():
+                code = int(token)
+            else:
+                glyphs[code], code = toUnicode(token[1:].decode()), code + 1
+        fonts[name] = glyphs
+    words: set[str] = set()
+    for stream in re.findall(rb"stream\r?\n(.*?)\r?\nendstream", pdf, re.S):
+        try:
+            content = zlib.decompress(stream)
+        except zlib.error:
+            continue
+        for shown in re.findall(rb"\bBT\b(.*?)\bET\b", content, re.S):
+            glyphs, text = {}, ""
+            for font, string in re.findall(rb"/(F\d+) [\d.]+ Tf|(" + PDF_STRING + rb")", shown):
+                if font:
+                    glyphs = fonts[font]
+                else:
+                    raw = re.sub(rb"\\(.)", rb"\1", string[1:-1], flags=re.S)
+                    text += "".join(glyphs.get(byte, " ") for byte in raw)
+            words |= set(re.findall(r"[A-Za-z]{3,}", unicodedata.normalize("NFKC", text)))
+    return words
 
 
 @pytest.mark.slow
@@ -143,6 +221,26 @@ def test_the_power_section_plans_from_the_agents_r_t(
         f"{row['n_fitted']} | {row['n_closed_form']} |"
     ) in section
     assert "(power.png)" in section and "(power.svg)" in section
+
+
+@pytest.mark.slow
+def test_a_report_in_fewer_formats_lists_and_links_those_and_keeps_no_earlier_ones(
+    tmp_path: Path,
+) -> None:
+    """The tests' environment asks for PNGs alone (tests/conftest.py): a report written so
+    into a folder that holds one in every format leaves none of the earlier SVG and PDF
+    files, lists only what it wrote and links only that."""
+    episodes = episodes_from_curves(HAND_CASE)
+    out = tmp_path / "report"
+    every = write_report(episodes, out, formats="png,svg,pdf")
+    assert {p.suffix for p in every.files} == {".md", ".png", ".svg", ".pdf", ".csv"}
+    assert "(power.svg)" in every.report.read_text(encoding="utf-8")
+    fewer = write_report(episodes, out)
+    assert fewer.formats == ("png",) and fewer.vector_figures == []
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in fewer.files)
+    text = fewer.report.read_text(encoding="utf-8")
+    assert "(power.png)" in text and ".svg" not in text and ".pdf" not in text
+    assert all((out / link).is_file() for link in re.findall(r"\]\(([^)]+)\)", text))
 
 
 @pytest.mark.slow

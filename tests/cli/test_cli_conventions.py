@@ -23,6 +23,7 @@ from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.services.export import TABLES
 from study.services.studies import create_study
+from tests import in_process
 from tests.server.live import free_port
 
 ROOT = Path(__file__).absolute().parents[2]
@@ -39,6 +40,7 @@ def environment(**extra: str) -> dict[str, str]:
 
 
 def ideeprl(*args: str, cwd: Path, **env: str) -> subprocess.CompletedProcess[str]:
+    """`ideeprl ARGS` in a process of its own, in `cwd`, in `environment(**env)`."""
     return subprocess.run(
         [sys.executable, "-m", "cli", *args],
         cwd=cwd,
@@ -47,6 +49,13 @@ def ideeprl(*args: str, cwd: Path, **env: str) -> subprocess.CompletedProcess[st
         text=True,
         timeout=300,
     )
+
+
+def here(*args: str, cwd: Path, **env: str) -> subprocess.CompletedProcess[str]:
+    """`ideeprl ARGS` in the test's process, in `cwd`, with the variables `environment`
+    gives a process: none of IDEEPRL_ or DATABASE_URL but `env`'s."""
+    unset: dict[str, str | None] = {k: None for k in os.environ if k.startswith("IDEEPRL_")}
+    return in_process.ideeprl(*args, cwd=cwd, env={**unset, "DATABASE_URL": None, **env})
 
 
 @pytest.fixture
@@ -79,22 +88,20 @@ def test_export_by_name_or_id_finds_the_data_folder_as_serve_does(
 ) -> None:
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    by_name = ideeprl(
+    by_name = here(
         "export", "--study", "pilot study", "--out", str(tmp_path / "a"),
         cwd=elsewhere, IDEEPRL_DATA_DIR=str(data_dir),
     )  # fmt: skip
     assert by_name.returncode == 0, by_name.stderr
     assert (tmp_path / "a" / "sessions.csv").is_file()
-    by_id = ideeprl(
+    by_id = here(
         "export", "--study", "1", "--out", str(tmp_path / "b"), "--data-dir", str(data_dir),
         cwd=elsewhere,
     )  # fmt: skip
     assert by_id.returncode == 0, by_id.stderr
     # Like serve, a `.env` in the working folder names the data folder too.
     (elsewhere / ".env").write_text(f"IDEEPRL_DATA_DIR={data_dir}\n")
-    dotenv = ideeprl(
-        "export", "--study", "pilot study", "--out", str(tmp_path / "c"), cwd=elsewhere
-    )
+    dotenv = here("export", "--study", "pilot study", "--out", str(tmp_path / "c"), cwd=elsewhere)
     assert dotenv.returncode == 0, dotenv.stderr
     assert list(elsewhere.iterdir()) == [elsewhere / ".env"]
 
@@ -102,7 +109,7 @@ def test_export_by_name_or_id_finds_the_data_folder_as_serve_does(
 @pytest.mark.slow
 def test_reading_commands_never_create_an_empty_database(tmp_path: Path) -> None:
     for command in (["export"], ["report"]):
-        done = ideeprl(*command, "--study", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
+        done = here(*command, "--study", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
         assert done.returncode == 1, done.stderr
         assert "error: no database at" in done.stderr and "--data-dir" in done.stderr
     assert list(tmp_path.iterdir()) == [], "no study_data folder, no database, no output"
@@ -222,10 +229,10 @@ def test_printed_database_urls_hide_the_password(tmp_path: Path) -> None:
     assert f"researcher key:  in {tmp_path / 'data' / 'api_key'}" in served.stdout
     commands = [
         served,
-        ideeprl("batch", "--study", "pilot", "--methods", "autonomous", "--dry-run", "--json",
-                "--database-url", url, cwd=tmp_path),
-        ideeprl("export", "--study", "1", "--out", str(tmp_path / "out"), "--database-url", url,
-                cwd=tmp_path),
+        here("batch", "--study", "pilot", "--methods", "autonomous", "--dry-run", "--json",
+             "--database-url", url, cwd=tmp_path),
+        here("export", "--study", "1", "--out", str(tmp_path / "out"), "--database-url", url,
+             cwd=tmp_path),
     ]  # fmt: skip
     for done in commands:
         assert "s3cret" not in done.stdout + done.stderr

@@ -7,18 +7,16 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from sim.rewards import REWARD_SCHEMES, step_penalty
+from tests import in_process
 
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
 OPTIONS = {"size": 5, "max_steps": 30}
 """A room of 3 x 3 open squares, whose MiniGrid score counts 30 steps."""
 GRID_SCHEMES = ("minigrid", "sparse", "step-cost")
@@ -28,11 +26,9 @@ SCALE = ["--episodes", "4", "--pretraining-steps", "40", "--advice-budget", "10"
 
 
 def ideeprl(*args: str, data: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    return subprocess.run(
-        [sys.executable, "-m", "cli", *args, "--data-dir", str(data)],
-        capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
-    )  # fmt: skip
+    """`ideeprl ARGS --data-dir DATA` in the test's process (its batch's workers are
+    processes all the same)."""
+    return in_process.ideeprl(*args, "--data-dir", str(data))
 
 
 def by_hand(steps: list[dict[str, str]]) -> dict[int, dict[str, float]]:
@@ -131,11 +127,7 @@ def test_a_study_of_the_grid_world_and_the_sorting_robot_is_rescored_task_by_tas
 
     report = ideeprl("report", "--study", "mixed", "--out", str(tmp_path / "db"), data=data)
     assert report.returncode == 0, report.stderr
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    from_files = subprocess.run(
-        [sys.executable, "-m", "analysis", str(tmp_path / "out"), str(tmp_path / "files")],
-        capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
-    )  # fmt: skip
+    from_files = in_process.analysis(str(tmp_path / "out"), str(tmp_path / "files"))
     assert from_files.returncode == 0, from_files.stderr
     for folder in ("db", "files"):
         with open(tmp_path / folder / "r_t_rescored_per_agent.csv") as f:

@@ -6,9 +6,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
-import subprocess
-import sys
 import time
 import zipfile
 from pathlib import Path
@@ -18,6 +15,7 @@ import httpx
 import pyarrow.parquet as pq
 import pytest
 
+from tests import in_process
 from tests.server.live import LiveServer
 from tests.server.scale import EPISODES, MAX_EPISODE_STEPS, SMALL_CONFIG, export, session_body
 
@@ -109,9 +107,10 @@ def test_oracle_session_runs_to_the_end_and_exports_the_learners_records(
     assert all(files[r["observation_file"]].startswith(b"\x89PNG") for r in advice)
 
     out = tmp_path / "export"
-    command = [sys.executable, "-m", "cli", "export", "--study", str(study["id"]), "--out"]
-    env = {**os.environ, "IDEEPRL_DATABASE_URL": server.database_url}
-    done = subprocess.run([*command, str(out)], env=env, capture_output=True, text=True)
+    done = in_process.ideeprl(
+        "export", "--study", str(study["id"]), "--out", str(out),
+        env={"IDEEPRL_DATABASE_URL": server.database_url},
+    )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert f"steps.csv: {len(steps)} rows" in done.stdout
     for name in ("sessions.csv", "episodes.csv", "steps.csv", "advice.csv", "columns.csv"):

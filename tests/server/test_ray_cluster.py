@@ -8,7 +8,6 @@ the machine sessions it trains hold theirs, so a participant queued behind them 
 from __future__ import annotations
 
 import asyncio
-import os
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -30,17 +29,12 @@ from study.db.migrate import upgrade
 from study.db.models import Status, StudySession
 from study.services.sessions import claim, create_session
 from study.services.studies import create_study
+from tests.server.cluster import ON_POSTGRES
 from tests.server.live import fresh_database
 from tests.server.scale import records, session_body
 
 ray = pytest.importorskip("ray")
-pytestmark = [
-    pytest.mark.postgres,
-    pytest.mark.skipif(
-        not os.environ.get("DATABASE_URL", "").startswith("postgres"),
-        reason="a cluster needs a database every node reaches: set DATABASE_URL to PostgreSQL",
-    ),
-]
+pytestmark = ON_POSTGRES
 
 
 CONTROLLED_EPISODES = 60

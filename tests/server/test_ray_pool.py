@@ -9,7 +9,6 @@ steps its task has stored."""
 
 from __future__ import annotations
 
-import os
 import socket
 from pathlib import Path
 from typing import Any
@@ -22,6 +21,7 @@ from runs.worker.cluster import TRAINS_ON
 from study.db.engine import make_engine, make_session_factory
 from study.db.models import Step, StudySession
 from study.services.storage import session_dir
+from tests.server.cluster import ON_POSTGRES
 from tests.server.live import serving
 from tests.server.participant import SimulatedParticipant
 from tests.server.scale import records, session_body, wait_for_status
@@ -29,14 +29,7 @@ from tests.server.test_online_study import TINY_RUN, sessions_of
 from tests.server.test_pools import ready, wait_for
 
 ray = pytest.importorskip("ray")
-pytestmark = [
-    pytest.mark.postgres,
-    pytest.mark.live,
-    pytest.mark.skipif(
-        not os.environ.get("DATABASE_URL", "").startswith("postgres"),
-        reason="a cluster needs a database every node reaches: set DATABASE_URL to PostgreSQL",
-    ),
-]
+pytestmark = [*ON_POSTGRES, pytest.mark.live]
 FIRST_TURN = 15
 """TINY_RUN's random steps before its first advice (20 pretraining steps, 5 advised)."""
 LONG_PRACTICE = {**TINY_RUN, "config": {**TINY_RUN["config"], "pretraining_steps": 3000}}

@@ -8,7 +8,6 @@ replay trained on the server itself. The dashboard names the node each trained o
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
@@ -20,18 +19,12 @@ from learner.fitted import Count, FittedModel
 from study.db.engine import make_engine, make_session_factory
 from study.db.models import Advice, StudySession
 from tasks.sorting import HELD
+from tests.server.cluster import ON_POSTGRES
 from tests.server.live import API_KEY, serving
 from tests.server.scale import records, session_body, wait_for_status
 
 ray = pytest.importorskip("ray")
-pytestmark = [
-    pytest.mark.postgres,
-    pytest.mark.live,
-    pytest.mark.skipif(
-        not os.environ.get("DATABASE_URL", "").startswith("postgres"),
-        reason="a cluster needs a database every node reaches: set DATABASE_URL to PostgreSQL",
-    ),
-]
+pytestmark = [*ON_POSTGRES, pytest.mark.live]
 BUDGET = 5
 SEEDS = (21, 22)
 

@@ -5,9 +5,7 @@ autonomous and oracle-advised agents runs it through `ideeprl batch`."""
 from __future__ import annotations
 
 import csv
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +14,7 @@ from gymnasium.utils.env_checker import check_env
 
 from tasks import get_task
 from tasks.reach.env import LATTICE, STEP, ReachEnv, lattice_point
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests import in_process
 
 
 @pytest.fixture(scope="module")
@@ -102,11 +99,7 @@ def test_the_same_seed_and_moves_give_the_same_images() -> None:
 @pytest.mark.slow
 def test_the_reach_task_runs_a_batch_of_autonomous_and_advised_agents(tmp_path: Path) -> None:
     def ideeprl(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
-            [sys.executable, "-m", "cli", *args, "--data-dir", str(tmp_path / "data")],
-            capture_output=True, text=True, cwd=ROOT, timeout=600,
-            env={**os.environ, "PYTHONPATH": str(ROOT)},
-        )  # fmt: skip
+        return in_process.ideeprl(*args, "--data-dir", str(tmp_path / "data"))
 
     batch = ideeprl("batch", "--study", "reach", "--task", "reach", "--methods", "autonomous",
                     "oracle", "--agents", "1", "--no-progress", "--episodes", "2",

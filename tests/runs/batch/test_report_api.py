@@ -17,7 +17,9 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def api(place: Place, baselines: str) -> Iterator[httpx.Client]:
-    server = LiveServer(place.data_dir, place.url).start()
+    """The server writes its reports' figures in every format, as a researcher's does (the
+    tests' environment asks for PNGs alone, tests/conftest.py)."""
+    server = LiveServer(place.data_dir, place.url, figure_formats="png,svg,pdf").start()
     try:
         with server.client() as client:
             yield client
@@ -47,6 +49,9 @@ def test_a_researcher_builds_and_downloads_a_studys_report(place: Place, api: ht
 
     kinds = {f["kind"] for f in report["files"]}
     assert kinds == {"report", "figure", "table"}
+    figures = {f["name"] for f in report["files"] if f["kind"] == "figure"}
+    pngs = {name.removesuffix(".png") for name in figures if name.endswith(".png")}
+    assert pngs and figures == {f"{stem}.{kind}" for stem in pngs for kind in ("png", "svg", "pdf")}
     for file in report["files"]:
         got = api.get(file["url"])
         assert got.status_code == 200, file
