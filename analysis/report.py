@@ -27,10 +27,8 @@ from analysis.comparisons import compare
 from analysis.csvsafe import safe_frame
 from analysis.episodes import PLACEMENTS, EpisodeTableError, agents_of, method_name
 from analysis.figures import (
-    FIGURE_FORMATS,
     bands_window,
     example_agents,
-    figure_formats,
     pick_reference_agent,
     plot_confidence_bands,
     plot_correlation,
@@ -42,6 +40,7 @@ from analysis.figures import (
     save_figure,
     vector_paths,
 )
+from analysis.formats import FIGURE_FORMATS, figure_formats
 from analysis.human import Visits
 from analysis.human_report import HUMAN_FILES, human_section
 from analysis.markdown import REPORT_FILE

@@ -15,6 +15,7 @@ from fastapi.responses import JSONResponse, Response
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from analysis.formats import figure_formats
 from learner.fields import FieldError, leaves
 from learner.run import declared
 from runs.worker.rerun import Rerun
@@ -67,8 +68,9 @@ pose updates viser itself sends uncompressed ("compression can be too slow"); de
 again in the web process would cost that process the CPU its participants' requests need."""
 
 
-class ClusterRefused(Exception):
-    """The server cannot hand training to its Ray cluster (the message says why)."""
+class StartRefused(Exception):
+    """The server cannot start as it is set up (the message says why): a Ray cluster it
+    cannot store distributed work for, or figure formats it does not write."""
 
 
 def worker_options(settings: Settings) -> WorkerOptions:
@@ -130,6 +132,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """The web app. The body that creates a session, its schema and the exports are made
     from the run's declaration in force when it is created (`learner.run.declared`)."""
     settings = settings or Settings()
+    try:  # checked here, not when a researcher's report is first drawn
+        figure_formats()
+    except ValueError as error:
+        raise StartRefused(str(error)) from None
     settings.ensure_api_key()
     engine = make_engine(settings.db_url)
     hub = Hub()
@@ -147,7 +153,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     if settings.ray_address:
         refusal = cluster_refusal(settings.db_url, settings.checkpoint_root)
         if refusal is not None:
-            raise ClusterRefused(refusal)
+            raise StartRefused(refusal)
         manager.cluster = TrainingCluster(
             settings.ray_address, factory, settings.db_url, manager.options, hub
         )

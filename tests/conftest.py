@@ -19,7 +19,7 @@ from tests.server.live import LiveServer, serving
 # servers the tests start, in this process or another, read this.
 os.environ.setdefault("IDEEPRL_PRETRAIN_ON_CREATE", "false")
 # The reports the tests write, here and in the servers and commands they start, save each
-# figure as PNG alone (analysis.figures.FIGURE_FORMATS_VARIABLE): the tests read the PNGs,
+# figure as PNG alone (analysis.formats.FIGURE_FORMATS_VARIABLE): the tests read the PNGs,
 # and the SVG and PDF are about half of a figure's saving time. The tests of those formats
 # ask for them (tests/analysis/test_report.py, test_figures.py and test_power.py,
 # tests/runs/batch/test_report_api.py).

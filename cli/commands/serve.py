@@ -35,7 +35,7 @@ def serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from cli.commands.common import CommandError, check_database, shown_url
-    from server.main import UVICORN_OPTIONS, ClusterRefused, create_app
+    from server.main import UVICORN_OPTIONS, StartRefused, create_app
     from study.settings import Settings
 
     overrides = {
@@ -53,7 +53,7 @@ def serve(args: argparse.Namespace) -> int:
     key, new = settings.ensure_api_key()
     try:
         app = create_app(settings)
-    except ClusterRefused as error:
+    except StartRefused as error:
         raise CommandError(f"the server does not start: {error}", code=2) from None
     base = settings.base_url
     where = settings.data_dir / "api_key"

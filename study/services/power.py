@@ -24,7 +24,8 @@ from analysis.episodes import (
     order_methods,
     validate_episodes,
 )
-from analysis.figures import figure_formats, plot_power, save_figure, vector_paths
+from analysis.figures import plot_power, save_figure, vector_paths
+from analysis.formats import figure_formats
 from analysis.power import (
     DEFAULT_DRAWS,
     DEFAULT_MAX_N,

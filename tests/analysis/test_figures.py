@@ -22,17 +22,16 @@ from analysis import (
     save_figure,
 )
 from analysis.figures import (
-    FIGURE_FORMATS_VARIABLE,
     bands_window,
     epsilon_reaches,
     example_agents,
-    figure_formats,
     pick_reference_agent,
     plot_confidence_bands,
     plot_cumulative_reward,
     plot_power,
     smooth,
 )
+from analysis.formats import FIGURE_FORMATS_VARIABLE, figure_formats
 from analysis.power import power_analysis
 from tests.analysis.helpers import HAND_CASE, episodes_from_curves
 

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 from scipy import stats
 
-from analysis.figures import FIGURE_FORMATS_VARIABLE
+from analysis.formats import FIGURE_FORMATS_VARIABLE
 from analysis.power import (
     normal_power,
     normal_sample_size,

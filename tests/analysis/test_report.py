@@ -17,7 +17,7 @@ from PIL import Image
 from analysis import EpisodeTableError, ReportResult, write_report
 from analysis import markdown as md
 from analysis.__main__ import main
-from analysis.figures import FIGURE_FORMATS_VARIABLE
+from analysis.formats import FIGURE_FORMATS_VARIABLE
 from analysis.power import normal_sample_size
 from analysis.report import FIGURE_FILES, TABLE_FILES
 from tests.analysis.helpers import HAND_CASE, episodes_from_curves

@@ -338,3 +338,16 @@ def test_a_usage_error_is_the_error_and_where_the_usage_is(
     flags = ["--set", "batch_size=abc", "--dry-run", *db]
     assert main(["batch", "--study", "s", "--methods", "autonomous", *flags]) == 2
     assert "(given: 'abc')" in capsys.readouterr().err
+
+
+def test_serve_refuses_to_start_with_figure_formats_it_does_not_write(tmp_path: Path) -> None:
+    """A figure format the report cannot write stops the server at its start, saying which
+    and what the formats are, instead of failing each report a researcher asks for later."""
+    done = here(
+        "serve", "--data-dir", str(tmp_path), "--port", "1", cwd=tmp_path,
+        IDEEPRL_FIGURE_FORMATS="png,jpg",
+    )  # fmt: skip
+    assert done.returncode == 2, done
+    assert "the server does not start: unknown figure format(s) jpg" in done.stderr
+    assert "png, svg, pdf" in done.stderr
+    assert not (tmp_path / "ideeprl.sqlite3").exists(), "refused before it touched the data"
