@@ -12,3 +12,10 @@ SCALE=(--episodes 30 --pretraining-steps 500 --advice-budget 100 --max-episode-s
 "$IDEEPRL" batch --study reach --label R --task reach --methods autonomous oracle \
   --agents 5 --seed 0 --data-dir "$DATA" --no-progress --workers "${WORKERS:-1}" "${SCALE[@]}"
 "$IDEEPRL" report --study reach --data-dir "$DATA" --out "$HERE/report"
+
+# A scale at which both learn: 150 episodes, epsilon down to 1 % by about episode 90
+LONGER=(--episodes 150 --pretraining-steps 500 --advice-budget 100 --max-episode-steps 30
+        --set batch_size=32 --set memory_size=5000 --set epsilon_decay=0.998 --torch-threads 1)
+"$IDEEPRL" batch --study reach-150 --label R150 --task reach --methods autonomous oracle \
+  --agents 5 --seed 0 --data-dir "$DATA" --no-progress --workers "${WORKERS:-1}" "${LONGER[@]}"
+"$IDEEPRL" report --study reach-150 --data-dir "$DATA" --out "$HERE/report-150"
