@@ -71,8 +71,9 @@ def advisor_path(
     this installation with a checkpoint), or a path that must lie under `data_dir` (the
     API's rule; the batch runner and the command line, run by the researcher, pass None).
     `shared_root`: the storage root a Ray cluster's nodes share (`Settings.shared_root`),
-    where the sessions' checkpoints lie: a session's is found there and kept relative to
-    it, as its own row keeps it, so each node reads it where it mounts the root."""
+    where the sessions' checkpoints lie: a session's is found there, and a file must lie
+    there; either is kept relative to it, as a session's own row keeps its checkpoint, so
+    each node reads it where it mounts the root."""
     if spec.startswith("session:"):
         number = spec.removeprefix("session:")
         found = db.get(StudySession, int(number)) if number.isdigit() and len(number) < 10 else None
@@ -93,20 +94,29 @@ def advisor_path(
         if shared_root is not None:
             return stored_path(file.absolute(), shared_root)
         return str(file.resolve())
+    # a file every node reads: under the cluster's storage root, kept relative to it
+    root = shared_root if shared_root is not None else data_dir
     try:
         path = Path(spec).resolve()
-        inside = data_dir is None or path.is_relative_to(data_dir.resolve())
+        inside = root is None or path.is_relative_to(root.resolve())
         present = inside and path.is_file()
     except (OSError, ValueError):
         inside = present = False
     if not inside:
+        where = (
+            "the storage root the cluster's nodes share (IDEEPRL_STORAGE_ROOT)"
+            if shared_root is not None
+            else "the server's data folder"
+        )
         raise Invalid(
             "run.advisor_checkpoint",
             "run.advisor_checkpoint must be session:ID (a session of this installation) or a "
-            "checkpoint file under the server's data folder",
+            f"checkpoint file under {where}",
         )
     if not present:
         raise Invalid("run.advisor_checkpoint", "run.advisor_checkpoint: no such file")
+    if shared_root is not None:
+        return str(path.relative_to(shared_root.resolve()))
     return str(path)
 
 

@@ -22,7 +22,7 @@ from study.db.engine import make_engine, make_session_factory
 from study.db.migrate import upgrade
 from study.db.models import Advice, Status, StudySession, located, stored_path
 from study.services import storage
-from study.services.errors import Conflict
+from study.services.errors import Conflict, Invalid
 from study.services.sessions import claim, create_session, set_status
 from study.services.studies import create_study
 from study.settings import Settings
@@ -190,4 +190,49 @@ def test_advisors_and_deletion_find_checkpoints_under_a_root_apart(tmp_path: Pat
         for session_id in (advisor, advised):
             assert not storage.session_dir(root, session_id).exists(), "deleted under the root"
         assert not (data / "checkpoints").exists(), "nothing was ever in the data folder"
+        engine.dispose()
+
+
+def test_an_advisors_file_lies_under_the_storage_root_and_is_kept_relative(tmp_path: Path) -> None:
+    """With a cluster, an advisor named by its file must lie where every node reads it (the
+    storage root, not the web server's data folder), and is kept relative to the root, so a
+    node that mounts the root elsewhere finds it."""
+    data, root = tmp_path / "data", tmp_path / "shared"
+    data.mkdir()
+    with fresh_database(tmp_path) as url:
+        engine = make_engine(url)
+        upgrade(engine)
+        factory = make_session_factory(engine)
+        shared = WorkerOptions(data_dir=root, shared_storage=True)
+        with factory() as db:
+            study_id = create_study(db, "a file apart").id
+            body = session_body("autonomous", episodes=2)
+            advisor = create_session(db, study_id, RunSpec.from_json(body["run"])).id
+        assert run_session(advisor, url, shared) == Status.finished
+        trained = root / f"checkpoints/session-{advisor}/final.pt"
+        in_data = data / "advisors" / "final.pt"
+        in_root = root / "advisors" / "final.pt"
+        for copy in (in_data, in_root):
+            copy.parent.mkdir(parents=True)
+            copy.write_bytes(trained.read_bytes())
+
+        def agent(path: Path) -> int:
+            body = session_body("agent", advice_budget=10, episodes=2, advisor_checkpoint=str(path))
+            with factory() as db:
+                spec = RunSpec.from_json(body["run"])
+                return create_session(db, study_id, spec, data_dir=data, shared_root=root).id
+
+        with pytest.raises(Invalid, match="under the storage root the cluster's nodes share"):
+            agent(in_data)
+        advised = agent(in_root)
+        with factory() as db:
+            stored = db.get(StudySession, advised)
+            assert stored is not None
+            assert stored.run["advisor_checkpoint"] == "advisors/final.pt"
+        mounted = tmp_path / "node" / "mnt"  # a node mounts the root elsewhere
+        mounted.parent.mkdir()
+        root.rename(mounted)
+        assert run_session(advised, url, replace(shared, data_dir=mounted)) == Status.finished
+        with factory() as db:
+            assert db.query(Advice).filter_by(session_id=advised).count() == 10
         engine.dispose()
