@@ -95,10 +95,10 @@ def advisor_path(
             return stored_path(file.absolute(), shared_root)
         return str(file.resolve())
     # a file every node reads: under the cluster's storage root, kept relative to it
-    root = shared_root if shared_root is not None else data_dir
+    under = shared_root if shared_root is not None else data_dir
     try:
         path = Path(spec).resolve()
-        inside = root is None or path.is_relative_to(root.resolve())
+        inside = under is None or path.is_relative_to(under.resolve())
         present = inside and path.is_file()
     except (OSError, ValueError):
         inside = present = False
