@@ -127,7 +127,7 @@ class ReportResult:
     power: PowerAnalysis | None = None
     """Agents per arm a future study needs (None without a baseline)."""
     formats: tuple[str, ...] = FIGURE_FORMATS
-    """The formats each figure was written in (`analysis.figures.figure_formats`)."""
+    """The formats each figure was written in (`analysis.formats.figure_formats`)."""
 
     @property
     def vector_figures(self) -> list[Path]:

@@ -295,11 +295,11 @@ class SessionManager:
         with self.factory() as db:
             human = get_session(db, session_id).method == "human"
         if self.cluster is not None and (not human or pooled):
-            # a replay, a fitted or an oracle's run; or a pool's practice
-            first_turn = spec.steps_before_first_turn() if human else 0
+            practice = human  # a pool's practice; else a replay, a fitted or an oracle's run
+            first_turn = spec.steps_before_first_turn() if practice else 0
             live = LiveSession(session_id, spec.advice_budget, [], self.changes, first_turn)
             handed = Handed(session_id, token)
-            await run_in_threadpool(self.cluster.train, handed, Seat(live), spec, human)
+            await run_in_threadpool(self.cluster.train, handed, Seat(live), spec, practice)
         else:
             self._start_here(session_id, token, spec, pooled)
             return

@@ -50,6 +50,16 @@ class _Link:
         return 1
 
 
+class _Log:
+    """Where a machine advisor logs its advice: kept here, in order."""
+
+    def __init__(self) -> None:
+        self.logged: list[AdviceGiven] = []
+
+    def add_advice(self, advice: AdviceGiven) -> None:
+        self.logged.append(advice)
+
+
 class _Reporter:
     def before_waiting(self) -> None:
         pass
@@ -71,13 +81,10 @@ def test_a_machine_advisors_advice_is_logged_with_the_correct_action() -> None:
         def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
             return 2
 
-    logged: list[AdviceGiven] = []
+    log = _Log()
+    logged = log.logged
 
-    class Log:
-        def add_advice(self, advice: AdviceGiven) -> None:
-            logged.append(advice)
-
-    advisor = RecordingAdvisor(Left(), 1, "oracle", 0, Log(), _correct)  # type: ignore[arg-type]
+    advisor = RecordingAdvisor(Left(), 1, "oracle", 0, log, _correct)  # type: ignore[arg-type]
     for i, (info, _) in enumerate(STATES):
         advisor.advise_at(_moment(info, i + 1))
     assert [a.correct_action for a in logged] == [right for _, right in STATES]
@@ -86,17 +93,14 @@ def test_a_machine_advisors_advice_is_logged_with_the_correct_action() -> None:
 
 
 def test_without_a_correct_action_none_is_stored() -> None:
-    logged: list[AdviceGiven] = []
-
-    class Log:
-        def add_advice(self, advice: AdviceGiven) -> None:
-            logged.append(advice)
+    log = _Log()
+    logged = log.logged
 
     class Zero:
         def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
             return 0
 
-    advisor = RecordingAdvisor(Zero(), 1, "random", 0, Log())  # type: ignore[arg-type]
+    advisor = RecordingAdvisor(Zero(), 1, "random", 0, log)  # type: ignore[arg-type]
     advisor.advise_at(_moment(STATES[0][0], 1))
     assert logged[0].correct_action is None and logged[0].correct_actions is None
 
@@ -106,18 +110,15 @@ def test_the_grid_worlds_equally_short_moves_are_stored_beside_its_advice() -> N
     is stored with both (its accuracy counts either), the oracle's own move first."""
     task = get_task("gridworld")
     env = task.env({}, 250, False)
-    logged: list[AdviceGiven] = []
-
-    class Log:
-        def add_advice(self, advice: AdviceGiven) -> None:
-            logged.append(advice)
+    log = _Log()
+    logged = log.logged
 
     class Down:
         def advise(self, obs: np.ndarray, info: dict[str, Any]) -> int:
             return 2
 
     advisor = RecordingAdvisor(
-        Down(), 1, "human", 0, Log(), lambda info: task.correct_actions(info, {})
+        Down(), 1, "human", 0, log, lambda info: task.correct_actions(info, {})
     )  # type: ignore[arg-type]
     infos = [env.reset(seed=seed)[1] for seed in range(8)]
     for i, info in enumerate(infos):

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from sqlalchemy import update
+from sqlalchemy.orm import Session
 
 from learner.run import RunSpec
 from runs.worker.cluster import STORAGE_ROOT_VARIABLE, DatabaseChannel, Handed, node_storage_root
@@ -136,6 +138,20 @@ def test_the_checkpoint_root_is_the_storage_root_only_with_a_cluster(tmp_path: P
     assert Settings(data_dir=data, ray_address="auto").checkpoint_root == data.absolute()
 
 
+def _trained_advisor(
+    url: str, factory: Callable[[], Session], root: Path, study: str
+) -> tuple[int, int, WorkerOptions]:
+    """A new study with an autonomous run trained to its end, its checkpoints under the
+    storage `root`: the study, the run, and the options its worker had."""
+    shared = WorkerOptions(data_dir=root, shared_storage=True)
+    with factory() as db:
+        study_id = create_study(db, study).id
+        body = session_body("autonomous", episodes=2)
+        advisor = create_session(db, study_id, RunSpec.from_json(body["run"])).id
+    assert run_session(advisor, url, shared) == Status.finished
+    return study_id, advisor, shared
+
+
 def test_advisors_and_deletion_find_checkpoints_under_a_root_apart(tmp_path: Path) -> None:
     data, root = tmp_path / "data", tmp_path / "shared"  # the web server's, the nodes'
     data.mkdir()
@@ -143,12 +159,7 @@ def test_advisors_and_deletion_find_checkpoints_under_a_root_apart(tmp_path: Pat
         engine = make_engine(url)
         upgrade(engine)
         factory = make_session_factory(engine)
-        shared = WorkerOptions(data_dir=root, shared_storage=True)
-        with factory() as db:
-            study_id = create_study(db, "apart").id
-            body = session_body("autonomous", episodes=2)
-            advisor = create_session(db, study_id, RunSpec.from_json(body["run"])).id
-        assert run_session(advisor, url, shared) == Status.finished
+        study_id, advisor, shared = _trained_advisor(url, factory, root, "apart")
 
         def agent() -> int:
             body = session_body(
@@ -203,12 +214,7 @@ def test_an_advisors_file_lies_under_the_storage_root_and_is_kept_relative(tmp_p
         engine = make_engine(url)
         upgrade(engine)
         factory = make_session_factory(engine)
-        shared = WorkerOptions(data_dir=root, shared_storage=True)
-        with factory() as db:
-            study_id = create_study(db, "a file apart").id
-            body = session_body("autonomous", episodes=2)
-            advisor = create_session(db, study_id, RunSpec.from_json(body["run"])).id
-        assert run_session(advisor, url, shared) == Status.finished
+        study_id, advisor, shared = _trained_advisor(url, factory, root, "a file apart")
         trained = root / f"checkpoints/session-{advisor}/final.pt"
         in_data = data / "advisors" / "final.pt"
         in_root = root / "advisors" / "final.pt"

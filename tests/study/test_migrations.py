@@ -2,6 +2,7 @@ import gzip
 import json
 import math
 import shutil
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -9,6 +10,7 @@ from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import MetaData, Table, func, inspect, select, text
+from sqlalchemy.orm import Session
 
 from analysis.human import participants
 from learner.config import DQNConfig
@@ -157,6 +159,21 @@ def test_the_committed_replication_database_migrates(tmp_path: Path) -> None:
     assert len(after) == 35
 
 
+def _two_completed_visits(
+    factory: Callable[[], Session], study: str, method: str, condition: str, now: datetime
+) -> list[int]:
+    """Two completed visits of one condition in a new study (seeds 1 and 2): their ids."""
+    with factory() as db:
+        made = create_study(db, study)
+        sessions = [
+            create_session(db, made.id, RunSpec(method=method, seed=seed)) for seed in (1, 2)
+        ]
+        for s in sessions:
+            s.condition, s.outcome, s.consented_at = condition, "completed", now
+        db.commit()
+        return [s.id for s in sessions]
+
+
 def test_migration_0019_adds_the_feedbacks_correct_action_and_keeps_older_rows(
     tmp_path: Path,
 ) -> None:
@@ -172,16 +189,7 @@ def test_migration_0019_adds_the_feedbacks_correct_action_and_keeps_older_rows(
         engine = make_engine(url)
         command.upgrade(alembic_config(engine), "0018")
         factory = make_session_factory(engine)
-        with factory() as db:
-            study = create_study(db, "ratings before 0019")
-            sessions = [
-                create_session(db, study.id, RunSpec(method="autonomous", seed=seed))
-                for seed in (1, 2)
-            ]
-            for s in sessions:
-                s.condition, s.outcome, s.consented_at = "rating", "completed", now
-            db.commit()
-            ids = [s.id for s in sessions]
+        ids = _two_completed_visits(factory, "ratings before 0019", "autonomous", "rating", now)
         with engine.begin() as c:
             feedback = Table("feedback", MetaData(), autoload_with=c)
             assert "correct_action" not in feedback.c
@@ -222,15 +230,7 @@ def test_migration_0020_adds_every_right_action_and_keeps_older_rows(tmp_path: P
         engine = make_engine(url)
         command.upgrade(alembic_config(engine), "0019")
         factory = make_session_factory(engine)
-        with factory() as db:
-            study = create_study(db, "advice before 0020")
-            sessions = [
-                create_session(db, study.id, RunSpec(method="human", seed=seed)) for seed in (1, 2)
-            ]
-            for s in sessions:
-                s.condition, s.outcome, s.consented_at = "advice", "completed", now
-            db.commit()
-            ids = [s.id for s in sessions]
+        ids = _two_completed_visits(factory, "advice before 0020", "human", "advice", now)
         with engine.begin() as c:
             advice = Table("advice", MetaData(), autoload_with=c)
             assert "correct_actions" not in advice.c
